@@ -1,0 +1,92 @@
+"""Every pluggy hook of monoplane, typed and documented.
+
+A plugin is any module or object with functions marked ``@monoplane.hookimpl`` whose names
+match the specs below. Built-in stages register through exactly these hooks (see
+``monoplane.plugin_manager.DEFAULT_PLUGINS``); third-party packages are found through the
+``monoplane`` entry-point group::
+
+    [project.entry-points.monoplane]
+    my_stages = "my_package.stages"
+
+Registration hooks return a list of stage classes (subclasses of
+:class:`monoplane.stages.base.Stage`). Observation hooks are called while a pipeline runs and
+must not change the data they see.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import pluggy
+
+if TYPE_CHECKING:
+    from monoplane.stages.base import Stage
+
+PROJECT_NAME = "monoplane"
+
+hookspec = pluggy.HookspecMarker(PROJECT_NAME)
+hookimpl = pluggy.HookimplMarker(PROJECT_NAME)
+
+
+@hookspec
+def monoplane_register_cue_providers() -> list[type[Stage]]:
+    """Cue providers: fill a :class:`~monoplane.types.Frame`'s depth, normals and intrinsics.
+
+    Config table ``[cues]``. Contract: :class:`monoplane.stages.base.CueProvider`.
+    """
+
+
+@hookspec
+def monoplane_register_samplers() -> list[type[Stage]]:
+    """Minimal-sample generators for plane RANSAC (3 point indices per sample).
+
+    Config table ``[sampler]``. Contract: :class:`monoplane.stages.base.Sampler`.
+    """
+
+
+@hookspec
+def monoplane_register_scorers() -> list[type[Stage]]:
+    """Hypothesis scorers (lower cost is better), vectorised over many planes.
+
+    Config table ``[scorer]``. Contract: :class:`monoplane.stages.base.Scorer`.
+    """
+
+
+@hookspec
+def monoplane_register_labelers() -> list[type[Stage]]:
+    """Binary inlier labelers for one plane hypothesis (threshold, graph cuts).
+
+    Config table ``[labeler]``. Contract: :class:`monoplane.stages.base.Labeler`.
+    """
+
+
+@hookspec
+def monoplane_register_refiners() -> list[type[Stage]]:
+    """Image-level refiners of the multi-plane label map (e.g. dense CRF).
+
+    Config table ``[refiner]``. Contract: :class:`monoplane.stages.base.Refiner`.
+    """
+
+
+@hookspec
+def monoplane_register_matchers() -> list[type[Stage]]:
+    """Multi-view matchers giving cameras, sparse points and keypoint matches (SfM).
+
+    Config table ``[matcher]``. Contract: :class:`monoplane.stages.base.Matcher`.
+    """
+
+
+@hookspec
+def monoplane_register_fusers() -> list[type[Stage]]:
+    """Fusers of per-view planes into a global planar :class:`~monoplane.types.Scene`.
+
+    Config table ``[fuser]``. Contract: :class:`monoplane.stages.base.Fuser`.
+    """
+
+
+@hookspec
+def monoplane_stage_finished(kind: str, name: str, seconds: float, frame_name: str) -> None:
+    """Observe a stage call finishing: its kind, plugin name, wall time and the frame name.
+
+    Used by ``monoplane bench`` for per-stage timings; plugins may log or profile with it.
+    """

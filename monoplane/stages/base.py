@@ -1,0 +1,248 @@
+"""Stage contracts: one small base class per stage kind.
+
+A stage is a class with
+
+* ``kind``: which slot of the pipeline it fills (one of :data:`STAGE_KINDS`);
+* ``name``: the plugin name users write in configs (``plugin = "msac-normal"``);
+* ``Config``: a dataclass of its parameters, each with a default and a ``doc`` in its field
+  metadata (use :func:`param`);
+* one method that takes and returns typed data objects.
+
+Stages never import one another; they only see the objects the driver hands them. The RANSAC
+stages (sampler, scorer, labeler) work on a :class:`~monoplane.geometry.cloud.PlaneCloud`, an
+oriented point cloud normalised into the unit sphere, so thresholds are in unit-sphere units as
+in the paper.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, ClassVar
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from monoplane.geometry.cloud import PlaneCloud
+    from monoplane.geometry.graph import NeighbourGraph
+    from monoplane.types import Frame, Reconstruction, Scene, SfmResult
+
+#: Stage kinds, in pipeline order; each is also the name of its config table.
+STAGE_KINDS: tuple[str, ...] = (
+    "cues", "sampler", "scorer", "labeler", "refiner", "matcher", "fuser",
+)
+
+
+def param(default: Any, doc: str, **kwargs: Any) -> Any:
+    """A config field with a default and a one-line description shown by ``monoplane plugins``.
+
+    Mutable defaults (lists) are copied per instance.
+    """
+    if isinstance(default, (list, dict)):
+        return field(default_factory=lambda: type(default)(default), metadata={"doc": doc},
+                     **kwargs)
+    return field(default=default, metadata={"doc": doc}, **kwargs)
+
+
+@dataclass
+class NoConfig:
+    """A stage without parameters."""
+
+
+@dataclass(frozen=True)
+class RansacParams:
+    """Parameters the sequential driver shares with every sampler, scorer and labeler.
+
+    Attributes
+    ----------
+    epsilon : float
+        Point-to-plane inlier threshold ε in unit-sphere units (paper: 0.02).
+    epsilon_n_deg : float
+        Normal-angle threshold ε_n in degrees (paper: 10).
+    """
+
+    epsilon: float = 0.02
+    epsilon_n_deg: float = 10.0
+
+    @property
+    def epsilon_n(self) -> float:
+        """ε_n in radians."""
+        return float(np.deg2rad(self.epsilon_n_deg))
+
+
+@dataclass
+class Labeling:
+    """Result of labelling the remaining points for one plane hypothesis.
+
+    Attributes
+    ----------
+    inliers : numpy.ndarray
+        (M,) bool over the ``pool`` passed to the labeler.
+    energy : float
+        Value of the labeler's energy at this labelling (lower is better); the driver's local
+        optimisation keeps a refit only while this decreases.
+    """
+
+    inliers: np.ndarray
+    energy: float
+
+
+class Stage:
+    """Base of every stage. Subclasses set ``kind``, ``name`` and usually ``Config``."""
+
+    kind: ClassVar[str] = ""
+    name: ClassVar[str] = ""
+    Config: ClassVar[type] = NoConfig
+
+    def __init__(self, config: Any | None = None) -> None:
+        self.config = self.Config() if config is None else config
+
+    @classmethod
+    def parameters(cls) -> list[tuple[str, str, Any, str]]:
+        """``(name, type, default, doc)`` for each config field, for listings and docs."""
+        rows = []
+        for f in dataclasses.fields(cls.Config):
+            if f.default is not dataclasses.MISSING:
+                default = f.default
+            elif f.default_factory is not dataclasses.MISSING:
+                default = f.default_factory()
+            else:
+                default = None
+            type_name = f.type if isinstance(f.type, str) else getattr(f.type, "__name__", "")
+            rows.append((f.name, type_name, default, f.metadata.get("doc", "")))
+        return rows
+
+
+class CueProvider(Stage):
+    """Fills depth, normals (and possibly intrinsics) of a frame."""
+
+    kind = "cues"
+
+    def provide(self, frame: Frame) -> Frame:
+        """Return a frame with ``depth`` and ``normals`` set.
+
+        Parameters
+        ----------
+        frame : Frame
+            Input frame; ``rgb`` and ``K`` are set, ``depth``/``normals`` may already be set
+            (given by the user).
+        """
+        raise NotImplementedError
+
+
+class Sampler(Stage):
+    """Draws minimal samples (3 points) for plane hypotheses."""
+
+    kind = "sampler"
+
+    def sample(self, cloud: PlaneCloud, pool: np.ndarray, count: int,
+               rng: np.random.Generator, params: RansacParams) -> np.ndarray:
+        """Draw up to ``count`` minimal samples from the points in ``pool``.
+
+        Parameters
+        ----------
+        cloud : PlaneCloud
+            The frame's normalised oriented point cloud (N points).
+        pool : numpy.ndarray
+            (M,) int64 indices into the cloud of the points still unassigned.
+        count : int
+            Number of samples wanted.
+        rng : numpy.random.Generator
+            The driver's seeded generator; the only source of randomness allowed.
+        params : RansacParams
+            Shared thresholds.
+
+        Returns
+        -------
+        numpy.ndarray
+            (S, 3) int64 indices into the cloud, ``S <= count``; rejected samples are dropped.
+        """
+        raise NotImplementedError
+
+
+class Scorer(Stage):
+    """Scores plane hypotheses on the remaining points; lower cost is better."""
+
+    kind = "scorer"
+
+    def score(self, cloud: PlaneCloud, pool: np.ndarray, planes: np.ndarray,
+              model_normals: np.ndarray, params: RansacParams) -> np.ndarray:
+        """Cost of each hypothesis.
+
+        Parameters
+        ----------
+        cloud : PlaneCloud
+            Normalised point cloud.
+        pool : numpy.ndarray
+            (M,) int64 indices of the points to score on.
+        planes : numpy.ndarray
+            (H, 4) hypotheses ``(n, d)`` in the cloud's normalised frame, unit normals.
+        model_normals : numpy.ndarray
+            (H, 3) model normal θ_n of each hypothesis: the mean predicted normal of its sample.
+        params : RansacParams
+            Shared thresholds.
+
+        Returns
+        -------
+        numpy.ndarray
+            (H,) float64 costs, lower is better.
+        """
+        raise NotImplementedError
+
+
+class Labeler(Stage):
+    """Labels the remaining points as inliers/outliers of one plane."""
+
+    kind = "labeler"
+
+    def label(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray,
+              plane: np.ndarray, model_normal: np.ndarray, params: RansacParams) -> Labeling:
+        """Binary labelling of ``pool`` for the plane ``plane``.
+
+        Parameters
+        ----------
+        cloud : PlaneCloud
+            Normalised point cloud.
+        graph : NeighbourGraph
+            kNN graph over the whole cloud, built once per frame; use only edges whose both
+            ends are in ``pool``.
+        pool : numpy.ndarray
+            (M,) int64 indices of the points still unassigned.
+        plane : numpy.ndarray
+            (4,) hypothesis in the normalised frame, unit normal.
+        model_normal : numpy.ndarray
+            (3,) unit model normal θ_n.
+        params : RansacParams
+            Shared thresholds.
+        """
+        raise NotImplementedError
+
+
+class Refiner(Stage):
+    """Refines the multi-plane label map at image level."""
+
+    kind = "refiner"
+
+    def refine(self, rec: Reconstruction) -> Reconstruction:
+        """Return a refined reconstruction (labels, and params refit on the final masks)."""
+        raise NotImplementedError
+
+
+class Matcher(Stage):
+    """Structure from motion over several frames."""
+
+    kind = "matcher"
+
+    def match(self, frames: list[Frame]) -> SfmResult:
+        """Cameras, sparse points and pairwise keypoint matches for ``frames``."""
+        raise NotImplementedError
+
+
+class Fuser(Stage):
+    """Matches per-view planes and fuses them into global planes."""
+
+    kind = "fuser"
+
+    def fuse(self, views: list[Reconstruction], sfm: SfmResult) -> Scene:
+        """Fuse scale-aligned per-view reconstructions into a :class:`~monoplane.types.Scene`."""
+        raise NotImplementedError
