@@ -369,6 +369,32 @@ class Reconstruction:
             out[:, c] = np.where(counts > 0, sums / np.maximum(counts, 1), 128).astype(np.uint8)
         return out
 
+    def save(self, out_dir: str, overwrite: bool = False, report: bool = False) -> None:
+        """Write the on-disk outputs atomically (see :func:`monoplane.io.save_reconstruction`)."""
+        # Imported here so that the data model itself depends on nothing else of the project.
+        from monoplane.io import save_reconstruction
+
+        save_reconstruction(self, out_dir, overwrite=overwrite, report=report)
+
+    def to_open3d(self, step: int = 2):  # -> open3d.geometry.TriangleMesh
+        """Planar mesh (camera frame, depth units) coloured by the image, as an Open3D mesh.
+
+        Parameters
+        ----------
+        step : int
+            Pixel stride of the triangulated grid.
+        """
+        import open3d as o3d
+
+        from monoplane.geometry.mesh import planar_mesh
+
+        vertices, triangles, colors, _ = planar_mesh(self, step=step)
+        mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(vertices),
+                                         o3d.utility.Vector3iVector(triangles))
+        mesh.vertex_colors = o3d.utility.Vector3dVector(colors)
+        mesh.compute_vertex_normals()
+        return mesh
+
     def planar_depth(self) -> np.ndarray:
         """Depth implied by each pixel's plane along that pixel's ray.
 
@@ -504,3 +530,113 @@ class Scene:
             for local, glob in table.items():
                 if not 1 <= local <= self.views[v].num_planes or not 0 <= glob < g:
                     raise InvalidInput(f"view {v}: bad link {local} -> {glob}")
+
+
+@dataclass
+class SfmResult:
+    """Structure from motion over several views: what a matcher hands to the fuser.
+
+    All pixel coordinates follow this module's convention (pixel centres at integers) and refer
+    to the frames' native resolution, whatever resolution the matcher worked at internally.
+
+    Attributes
+    ----------
+    cameras : list of Camera
+        One per input frame, in input order; world-to-camera poses ``x_cam = R x_world + t``
+        (OpenCV axes) in the SfM model's frame and (arbitrary) scale.
+    points : numpy.ndarray
+        (M, 3) float64 sparse 3D points in world coordinates.
+    keypoints : list of numpy.ndarray
+        ``keypoints[i]`` is (k_i, 2) float64 pixel coordinates ``(u, v)`` of view ``i``'s
+        keypoints.
+    point_ids : list of numpy.ndarray
+        ``point_ids[i]`` is (k_i,) int64: the row of ``points`` each keypoint observes, or -1.
+    matches : dict
+        ``matches[(i, j)]`` with ``i < j`` is (m, 2) int64 pairs of keypoint indices
+        ``(index in view i, index in view j)`` of geometrically verified matches.
+    colors : numpy.ndarray or None
+        (M, 3) uint8 RGB colour of each point.
+    notes : list of str
+        Provenance remarks (e.g. whether intrinsics were fixed or estimated).
+    """
+
+    cameras: list[Camera]
+    points: np.ndarray
+    keypoints: list[np.ndarray]
+    point_ids: list[np.ndarray]
+    matches: dict[tuple[int, int], np.ndarray] = field(default_factory=dict)
+    colors: np.ndarray | None = None
+    notes: list[str] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        n = len(self.cameras)
+        if len(self.keypoints) != n or len(self.point_ids) != n:
+            raise InvalidInput(
+                f"SfM result: {n} cameras but {len(self.keypoints)} keypoint sets and "
+                f"{len(self.point_ids)} point-id sets"
+            )
+        self.points = np.asarray(self.points, dtype=np.float64).reshape(-1, 3)
+        if not np.all(np.isfinite(self.points)):
+            raise InvalidInput("SfM result: points contain NaN or inf")
+        m = self.points.shape[0]
+        if self.colors is not None:
+            self.colors = np.asarray(self.colors, dtype=np.uint8).reshape(-1, 3)
+            if self.colors.shape[0] != m:
+                raise InvalidInput(f"SfM result: {m} points but {self.colors.shape[0]} colours")
+        kps, ids = [], []
+        for i, (kp, pid) in enumerate(zip(self.keypoints, self.point_ids)):
+            kp = np.asarray(kp, dtype=np.float64).reshape(-1, 2)
+            pid = np.asarray(pid, dtype=np.int64).reshape(-1)
+            if pid.shape[0] != kp.shape[0]:
+                raise InvalidInput(
+                    f"SfM result: view {i} has {kp.shape[0]} keypoints but {pid.shape[0]} ids"
+                )
+            if not np.all(np.isfinite(kp)):
+                raise InvalidInput(f"SfM result: view {i} keypoints contain NaN or inf")
+            if pid.size and (pid.min() < -1 or pid.max() >= m):
+                raise InvalidInput(f"SfM result: view {i} point ids must lie in -1..{m - 1}")
+            kps.append(kp)
+            ids.append(pid)
+        self.keypoints, self.point_ids = kps, ids
+        checked: dict[tuple[int, int], np.ndarray] = {}
+        for key, pairs in self.matches.items():
+            i, j = (int(key[0]), int(key[1]))
+            if not 0 <= i < j < n:
+                raise InvalidInput(f"SfM result: match key {key} must be (i, j) with i < j < {n}")
+            pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+            if pairs.size and (
+                pairs.min() < 0
+                or pairs[:, 0].max() >= len(kps[i])
+                or pairs[:, 1].max() >= len(kps[j])
+            ):
+                raise InvalidInput(f"SfM result: matches {key} index missing keypoints")
+            checked[(i, j)] = pairs
+        self.matches = checked
+
+    @property
+    def num_views(self) -> int:
+        """Number of views N."""
+        return len(self.cameras)
+
+    def sparse_depth(self, view: int) -> tuple[np.ndarray, np.ndarray]:
+        """Depths of the 3D points observed by one view, at their keypoints.
+
+        Parameters
+        ----------
+        view : int
+            View index.
+
+        Returns
+        -------
+        pixels : numpy.ndarray
+            (k, 2) float64 keypoint coordinates ``(u, v)`` of the observations.
+        depth : numpy.ndarray
+            (k,) float64 z-depth of the observed points in that camera, in SfM units; only
+            observations in front of the camera are returned.
+        """
+        cam = self.cameras[view]
+        has = self.point_ids[view] >= 0
+        pix = self.keypoints[view][has]
+        x_cam = self.points[self.point_ids[view][has]] @ cam.R.T + cam.t
+        front = x_cam[:, 2] > 0
+        return pix[front], x_cam[front, 2]

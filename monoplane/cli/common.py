@@ -1,0 +1,56 @@
+"""Argument groups shared by several subcommands."""
+
+from __future__ import annotations
+
+import argparse
+
+from monoplane.pipeline import Pipeline
+
+
+def add_pipeline_args(parser: argparse.ArgumentParser) -> None:
+    """``--preset``, ``--config`` and repeatable ``--set table.key=value``."""
+    group = parser.add_argument_group("pipeline configuration")
+    group.add_argument("--preset", metavar="NAME",
+                       help="start from a shipped preset (default: monoplane); "
+                            "see 'monoplane presets'")
+    group.add_argument("--config", metavar="FILE.toml",
+                       help="TOML config: one table per stage with plugin = \"name\" and its "
+                            "parameters; may set preset = \"name\"")
+    group.add_argument("--set", dest="overrides", action="append", default=[],
+                       metavar="TABLE.KEY=VALUE",
+                       help="override one parameter, e.g. --set labeler.lambda=0.9 or "
+                            "--set cues.profile=zerodepth (repeatable)")
+
+
+def pipeline_from_args(args: argparse.Namespace) -> Pipeline:
+    """Build the pipeline the user asked for (validates the whole config)."""
+    return Pipeline.from_config(args.config, preset=args.preset, overrides=args.overrides)
+
+
+def add_input_args(parser: argparse.ArgumentParser) -> None:
+    """Cue files and intrinsics of one view."""
+    group = parser.add_argument_group("inputs")
+    group.add_argument("--depth", metavar="FILE",
+                       help="depth map: .npy float (any unit) or 16-bit PNG with --depth-scale")
+    group.add_argument("--depth-scale", type=float, metavar="S",
+                       help="divide PNG depth by S (1000 for millimetres, 5000 for TUM)")
+    group.add_argument("--normals", metavar="FILE",
+                       help="normals: .npy (H, W, 3) in the camera frame (x right, y down, "
+                            "z forward), or 8-bit PNG storing (n+1)/2*255")
+    group.add_argument("--intrinsics", metavar="fx,fy,cx,cy|FILE.json",
+                       help="pinhole intrinsics in pixels; default: 60 degree horizontal FOV")
+    group.add_argument("--relative-depth", action="store_true",
+                       help="the given depth is correct only up to scale (e.g. a network output)")
+    group.add_argument("--nan-as-invalid", action="store_true",
+                       help="treat NaN/inf depth as invalid pixels instead of rejecting the file")
+
+
+def add_output_args(parser: argparse.ArgumentParser) -> None:
+    """``--out`` (required), ``--overwrite`` and ``--report``."""
+    group = parser.add_argument_group("outputs")
+    group.add_argument("--out", required=True, metavar="DIR",
+                       help="output folder (written atomically: nothing is left on failure)")
+    group.add_argument("--overwrite", action="store_true",
+                       help="replace DIR if it exists")
+    group.add_argument("--report", action="store_true",
+                       help="also write report.html with 2D figures and off-screen 3D renders")

@@ -1,0 +1,46 @@
+"""``monoplane run``: planes from one image."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from monoplane.cli.common import (
+    add_input_args, add_output_args, add_pipeline_args, pipeline_from_args,
+)
+from monoplane.io import load_frame, save_reconstruction
+
+DESCRIPTION = """Recover the planes of one image and write labels.png (uint16, 0 = non-planar),
+planes.json (normal . X + offset = 0 in the camera frame and the depth's units), planes.ply,
+depth_planar.npy and config.toml into --out.
+
+Depth and normals come from --depth/--normals (RGB-D, precomputed network outputs) or from the
+configured cue provider (e.g. --set cues.plugin=onnx with model files). IMAGE may be omitted for
+depth-only range images."""
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("run", help="recover planes from one image",
+                       description=DESCRIPTION,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("image", nargs="?", metavar="IMAGE", help="colour image (PNG, JPEG, ...)")
+    add_input_args(p)
+    add_pipeline_args(p)
+    add_output_args(p)
+    p.add_argument("--quiet", action="store_true", help="print nothing on success")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    pipe = pipeline_from_args(args)
+    frame = load_frame(args.image, depth=args.depth, normals=args.normals,
+                       intrinsics=args.intrinsics, depth_scale=args.depth_scale,
+                       nan_as_invalid=args.nan_as_invalid,
+                       depth_kind="relative" if args.relative_depth else "metric")
+    for note in frame.notes:
+        print(f"monoplane: note: {note}", file=sys.stderr)
+    rec = pipe.run(frame)
+    out = save_reconstruction(rec, args.out, overwrite=args.overwrite, report=args.report)
+    if not args.quiet:
+        print(f"{rec.num_planes} planes in {rec.timings.get('total', 0.0):.2f} s -> {out}")
+    return 0

@@ -1,0 +1,331 @@
+"""Pipeline configuration: TOML files, shipped presets, ``--set`` overrides, strict validation.
+
+A config is TOML with one table per stage kind (``[cues]``, ``[sampler]``, ``[scorer]``,
+``[labeler]``, ``[refiner]``, ``[matcher]``, ``[fuser]``), each holding ``plugin = "name"`` and
+that plugin's parameters, plus the host's ``[ransac]`` table for the sequential driver. A config
+may start from a preset with a top-level ``preset = "name"``; without one it starts from the
+default preset :data:`DEFAULT_PRESET`. Overrides are ``table.key=value`` strings (values in TOML
+syntax; bare words are taken as strings).
+
+Merging rule: an override that changes a table's ``plugin`` replaces that whole table, because
+the old plugin's parameters mean nothing to the new one.
+
+Every key is checked against the plugin's ``Config`` dataclass: unknown tables, plugins, keys and
+ill-typed values raise :class:`~monoplane.errors.ConfigError` listing the valid choices.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+import types
+import typing
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from monoplane.errors import ConfigError
+from monoplane.plugin_manager import Registry, get_registry
+from monoplane.stages.base import STAGE_KINDS
+
+DEFAULT_PRESET = "monoplane"
+#: Host tables (not stages) and the import path of their config dataclass.
+HOST_TABLES: dict[str, str] = {"ransac": "monoplane.ransac:RansacConfig"}
+
+
+def list_presets() -> list[str]:
+    """Names of the presets shipped in ``monoplane/presets``."""
+    folder = resources.files("monoplane") / "presets"
+    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
+
+
+def _parse_toml(text: str, where: str) -> dict[str, Any]:
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{where}: invalid TOML: {exc}") from None
+
+
+def load_preset(name: str) -> dict[str, Any]:
+    """The raw tables of a shipped preset.
+
+    Raises
+    ------
+    ConfigError
+        If no preset has that name (the message lists the valid ones).
+    """
+    presets = list_presets()
+    if name not in presets:
+        raise ConfigError(f"unknown preset '{name}'; valid presets: {', '.join(presets)}")
+    text = (resources.files("monoplane") / "presets" / f"{name}.toml").read_text()
+    return _parse_toml(text, f"preset '{name}'")
+
+
+def load_config_file(path: str | Path) -> dict[str, Any]:
+    """Read a TOML config file into raw tables (not yet validated)."""
+    p = Path(path)
+    if not p.is_file():
+        raise ConfigError(f"config file not found: {p}")
+    return _parse_toml(p.read_text(), str(p))
+
+
+def parse_override(expr: str) -> tuple[str, str, Any]:
+    """Parse ``table.key=value`` into its parts.
+
+    The value is read as a TOML value (``0.9``, ``true``, ``[1, 2]``, ``"text"``); anything that
+    is not valid TOML is taken as a bare string, so ``cues.profile=zerodepth`` works unquoted.
+    """
+    if "=" not in expr:
+        raise ConfigError(f"override '{expr}' must look like table.key=value")
+    lhs, rhs = expr.split("=", 1)
+    if lhs.count(".") != 1 or not all(lhs.split(".")):
+        raise ConfigError(f"override '{expr}': the key must be table.key, e.g. labeler.lambda")
+    table, key = (s.strip() for s in lhs.split("."))
+    rhs = rhs.strip()
+    try:
+        value = tomllib.loads(f"v = {rhs}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = rhs
+    return table, key, value
+
+
+def merge(base: dict[str, Any], override: dict[str, Any]) -> dict[str, Any]:
+    """Merge raw config tables (see the module docstring for the ``plugin`` rule)."""
+    out = {k: dict(v) if isinstance(v, dict) else v for k, v in base.items()}
+    for table, values in override.items():
+        if not isinstance(values, dict):
+            out[table] = values
+            continue
+        current = out.get(table)
+        if not isinstance(current, dict) or (
+            "plugin" in values and values["plugin"] != current.get("plugin")
+        ):
+            out[table] = dict(values)
+        else:
+            current.update(values)
+    return out
+
+
+def overrides_to_tables(overrides: dict[str, Any] | list[str] | None) -> dict[str, Any]:
+    """Normalise overrides given as ``["t.k=v", ...]`` or ``{"t.k": v}`` or ``{"t": {k: v}}``."""
+    tables: dict[str, dict[str, Any]] = {}
+    if not overrides:
+        return tables
+    items: list[tuple[str, str, Any]]
+    if isinstance(overrides, dict):
+        items = []
+        for key, value in overrides.items():
+            if isinstance(value, dict):
+                items += [(key, k, v) for k, v in value.items()]
+            else:
+                table, _, field = key.partition(".")
+                if not table or not field or "." in field:
+                    raise ConfigError(f"override key '{key}' must be table.key")
+                items.append((table, field, value))
+    else:
+        items = [parse_override(e) for e in overrides]
+    for table, key, value in items:
+        tables.setdefault(table, {})[key] = value
+    return tables
+
+
+def _field_key(field: dataclasses.Field) -> str:
+    """User-facing key of a config field: Python keywords carry a trailing underscore."""
+    return field.name[:-1] if field.name.endswith("_") else field.name
+
+
+def _type_name(tp: Any) -> str:
+    return getattr(tp, "__name__", None) or str(tp).replace("typing.", "")
+
+
+def _coerce(value: Any, tp: Any, where: str) -> Any:
+    """Check (and gently convert) a TOML value to a dataclass field type."""
+    origin = typing.get_origin(tp)
+    if origin in (typing.Union, types.UnionType):
+        args = typing.get_args(tp)
+        if value is None and type(None) in args:
+            return None
+        errors = []
+        for arg in args:
+            if arg is type(None):
+                continue
+            try:
+                return _coerce(value, arg, where)
+            except ConfigError as exc:
+                errors.append(str(exc))
+        raise ConfigError(errors[0] if errors else f"{where}: invalid value {value!r}")
+    if typing.get_origin(tp) is typing.Literal:
+        choices = typing.get_args(tp)
+        if value not in choices:
+            raise ConfigError(f"{where} must be one of {', '.join(map(str, choices))}, "
+                              f"got {value!r}")
+        return value
+    if origin in (list, tuple):
+        if not isinstance(value, (list, tuple)):
+            raise ConfigError(f"{where} must be a list, got {value!r}")
+        args = typing.get_args(tp)
+        item_tp = args[0] if args else Any
+        items = [_coerce(v, item_tp, f"{where}[{i}]") for i, v in enumerate(value)]
+        return items if origin is list else tuple(items)
+    if tp is Any:
+        return value
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"{where} must be true or false, got {value!r}")
+        return value
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(f"{where} must be a number, got {value!r}")
+        return float(value)
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"{where} must be an integer, got {value!r}")
+        return value
+    if tp is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"{where} must be a string, got {value!r}")
+        return value
+    if not isinstance(value, tp):
+        raise ConfigError(f"{where} must be {_type_name(tp)}, got {value!r}")
+    return value
+
+
+def build_dataclass(cls: type, values: dict[str, Any], where: str) -> Any:
+    """Instantiate a config dataclass from user keys, rejecting unknown or ill-typed ones."""
+    fields = {_field_key(f): f for f in dataclasses.fields(cls)}
+    hints = typing.get_type_hints(cls)
+    kwargs = {}
+    for key, value in values.items():
+        if key not in fields:
+            valid = ", ".join(sorted(fields)) or "(none)"
+            raise ConfigError(f"unknown key '{key}' in {where}; valid keys: {valid}")
+        f = fields[key]
+        kwargs[f.name] = _coerce(value, hints[f.name], f"{where}.{key}")
+    try:
+        return cls(**kwargs)
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f"{where}: {exc}") from None
+
+
+def _host_config_class(table: str) -> type:
+    module, _, attr = HOST_TABLES[table].partition(":")
+    return getattr(__import__(module, fromlist=[attr]), attr)
+
+
+def config_values(obj: Any) -> dict[str, Any]:
+    """User-facing ``{key: value}`` of a config dataclass instance (keywords unescaped)."""
+    return {_field_key(f): getattr(obj, f.name) for f in dataclasses.fields(obj)}
+
+
+@dataclass
+class ResolvedConfig:
+    """A validated pipeline configuration.
+
+    Attributes
+    ----------
+    stages : dict
+        ``kind -> (plugin name, Config instance)`` for every stage kind.
+    host : dict
+        ``table -> config instance`` for host tables (``ransac``).
+    preset : str
+        The preset it started from.
+    """
+
+    stages: dict[str, tuple[str, Any]]
+    host: dict[str, Any]
+    preset: str
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain nested dict with every parameter, defaults included."""
+        out: dict[str, Any] = {"preset": self.preset}
+        for kind, (name, cfg) in self.stages.items():
+            out[kind] = {"plugin": name, **config_values(cfg)}
+        for table, cfg in self.host.items():
+            out[table] = config_values(cfg)
+        return out
+
+    def to_toml(self) -> str:
+        """The resolved config as TOML, loadable again with ``--config``."""
+        return dumps_toml(self.to_dict())
+
+
+def resolve(raw: dict[str, Any], registry: Registry | None = None) -> ResolvedConfig:
+    """Validate raw tables (already merged) against the registered stages.
+
+    Parameters
+    ----------
+    raw : dict
+        Tables as read from TOML; may hold a top-level ``preset`` key.
+    registry : Registry, optional
+        Stage registry to validate plugin names against; a fresh default one if omitted.
+    """
+    registry = registry or get_registry()
+    raw = dict(raw)
+    preset = raw.pop("preset", DEFAULT_PRESET)
+    if not isinstance(preset, str):
+        raise ConfigError(f"'preset' must be a string naming a preset, got {preset!r}")
+    tables = merge(load_preset(preset), raw)
+    tables.pop("preset", None)
+    valid_tables = list(STAGE_KINDS) + list(HOST_TABLES)
+    for table, values in tables.items():
+        if table not in valid_tables:
+            raise ConfigError(f"unknown config table '{table}'; valid tables: "
+                              f"{', '.join(valid_tables)}")
+        if not isinstance(values, dict):
+            raise ConfigError(f"'{table}' must be a table, e.g. [{table}]")
+    stages: dict[str, tuple[str, Any]] = {}
+    for kind in STAGE_KINDS:
+        values = dict(tables.get(kind, {}))
+        if "plugin" not in values:
+            raise ConfigError(f"[{kind}] needs a plugin; valid choices: "
+                              f"{', '.join(registry.names(kind))}")
+        name = values.pop("plugin")
+        info = registry.get(kind, name)
+        stages[kind] = (name, build_dataclass(info.cls.Config, values, f"[{kind}] ({name})"))
+    host = {t: build_dataclass(_host_config_class(t), tables.get(t, {}), f"[{t}]")
+            for t in HOST_TABLES}
+    return ResolvedConfig(stages=stages, host=host, preset=preset)
+
+
+def load(preset: str | None = None, config: str | Path | dict[str, Any] | None = None,
+         overrides: dict[str, Any] | list[str] | None = None,
+         registry: Registry | None = None) -> ResolvedConfig:
+    """Resolve a config from a preset, a file (or dict) and overrides, in that order.
+
+    A ``preset`` argument wins over a ``preset`` key inside the config file.
+    """
+    raw: dict[str, Any] = {}
+    if config is not None:
+        raw = dict(config) if isinstance(config, dict) else load_config_file(config)
+    if preset is not None:
+        raw["preset"] = preset
+    raw = merge(raw, overrides_to_tables(overrides))
+    return resolve(raw, registry)
+
+
+def _toml_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (int, float)):
+        return repr(value)
+    if isinstance(value, str):
+        escaped = value.replace("\\", "\\\\").replace('"', '\\"')
+        return f'"{escaped}"'
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    raise ConfigError(f"cannot write {value!r} to TOML")
+
+
+def dumps_toml(data: dict[str, Any]) -> str:
+    """Write a two-level dict (top-level scalars, then tables of scalars/lists) as TOML.
+
+    ``None`` values are omitted (TOML has no null); they mean "use the default".
+    """
+    lines = [f"{k} = {_toml_value(v)}" for k, v in data.items()
+             if not isinstance(v, dict) and v is not None]
+    for table, values in data.items():
+        if isinstance(values, dict):
+            lines.append(f"\n[{table}]")
+            lines += [f"{k} = {_toml_value(v)}" for k, v in values.items() if v is not None]
+    return "\n".join(lines) + "\n"

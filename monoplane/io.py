@@ -1,0 +1,417 @@
+"""Reading inputs and writing outputs (the on-disk contract of DESIGN §6).
+
+Inputs
+------
+* Image: anything OpenCV reads (8- or 16-bit, grey or colour; alpha is dropped).
+* Depth: ``.npy`` float in any unit, or a 16-bit PNG divided by ``depth_scale`` (1000 for mm,
+  5000 for TUM). 0 marks invalid pixels; NaN/inf are rejected unless ``nan_as_invalid``.
+* Normals: ``.npy`` (H, W, 3) camera frame, or an 8-bit PNG storing ``(n + 1) / 2 * 255`` with
+  R, G, B = x, y, z.
+* Intrinsics: ``"fx,fy,cx,cy"`` or a JSON file ``{"fx":…, "fy":…, "cx":…, "cy":…}``.
+
+Outputs (one folder, written atomically: a temporary sibling folder renamed into place)
+-------------------------------------------------------------------------------------------
+``labels.png`` (uint16, 0 = non-planar), ``planes.json``, ``planes.ply`` (one coloured polygon
+per plane region), ``depth_planar.npy`` and ``config.toml``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import shutil
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from monoplane.errors import InvalidInput
+from monoplane.types import Frame, Reconstruction, default_intrinsics, intrinsics_matrix
+
+DEFAULT_HFOV_DEG = 60.0
+
+
+def _require_file(path: str | Path, what: str) -> Path:
+    p = Path(path)
+    if not p.exists():
+        raise InvalidInput(f"{what} file not found: {p}")
+    if not p.is_file():
+        raise InvalidInput(f"{what} path is not a file: {p}")
+    return p
+
+
+def read_image(path: str | Path) -> np.ndarray:
+    """Read an image as RGB.
+
+    Returns
+    -------
+    numpy.ndarray
+        (H, W, 3) uint8 RGB. 16-bit images are scaled to 8 bits; grey images are replicated.
+    """
+    p = _require_file(path, "image")
+    img = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
+    if img is None or img.size == 0:
+        raise InvalidInput(f"cannot read image {p}: not an image format OpenCV understands")
+    if img.dtype == np.uint16:
+        img = (img / 257.0).round().astype(np.uint8)
+    elif img.dtype != np.uint8:
+        raise InvalidInput(f"image {p} has unsupported pixel type {img.dtype}")
+    if img.ndim == 2:
+        img = np.repeat(img[..., None], 3, axis=2)
+    elif img.shape[2] == 4:
+        img = cv2.cvtColor(img, cv2.COLOR_BGRA2RGB)
+    else:
+        img = cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+    return np.ascontiguousarray(img)
+
+
+def _load_npy(p: Path, what: str) -> np.ndarray:
+    try:
+        arr = np.load(p, allow_pickle=False)
+    except (ValueError, OSError, EOFError) as exc:
+        raise InvalidInput(f"cannot read {what} {p}: {exc}") from None
+    if not isinstance(arr, np.ndarray) or not np.issubdtype(arr.dtype, np.number):
+        raise InvalidInput(f"{what} {p} must hold a numeric array")
+    return arr
+
+
+def read_depth(path: str | Path, depth_scale: float | None = None,
+               nan_as_invalid: bool = False) -> np.ndarray:
+    """Read a depth map.
+
+    Parameters
+    ----------
+    path : str or Path
+        ``.npy`` (float, any unit) or 16-bit ``.png``.
+    depth_scale : float, optional
+        Divisor for PNG values (1000 for millimetres, 5000 for TUM). Required for PNG, ignored
+        for ``.npy`` unless given (then the array is divided by it too).
+    nan_as_invalid : bool
+        Treat NaN/inf as invalid pixels (0) instead of rejecting the file.
+
+    Returns
+    -------
+    numpy.ndarray
+        (H, W) float32 z-depth; 0 = invalid.
+    """
+    p = _require_file(path, "depth")
+    if p.suffix.lower() == ".npy":
+        depth = _load_npy(p, "depth").astype(np.float64)
+    else:
+        raw = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
+        if raw is None:
+            raise InvalidInput(f"cannot read depth {p}: use .npy or a 16-bit PNG")
+        if raw.dtype != np.uint16 or raw.ndim != 2:
+            raise InvalidInput(f"depth PNG {p} must be single-channel 16-bit, "
+                               f"got {raw.dtype} with shape {raw.shape}")
+        if depth_scale is None:
+            raise InvalidInput(f"depth PNG {p} needs --depth-scale (1000 for mm, 5000 for TUM)")
+        depth = raw.astype(np.float64)
+    if depth_scale is not None:
+        if not depth_scale > 0:
+            raise InvalidInput(f"--depth-scale must be positive, got {depth_scale}")
+        depth = depth / depth_scale
+    if depth.ndim == 3 and depth.shape[2] == 1:
+        depth = depth[..., 0]
+    if depth.ndim != 2:
+        raise InvalidInput(f"depth {p} must have shape (H, W), got {depth.shape}")
+    bad = ~np.isfinite(depth)
+    if bad.any():
+        if not nan_as_invalid:
+            raise InvalidInput(f"depth {p}: {int(bad.sum())} pixels are NaN or inf; mark invalid "
+                               "pixels with 0 or pass --nan-as-invalid")
+        depth[bad] = 0.0
+    if np.any(depth < 0):
+        raise InvalidInput(f"depth {p} has negative values")
+    if not np.any(depth > 0):
+        raise InvalidInput(f"depth {p} has no valid pixel (all zero, NaN or inf)")
+    return depth.astype(np.float32)
+
+
+def read_normals(path: str | Path) -> np.ndarray:
+    """Read a normal map (camera frame, OpenCV axes).
+
+    Returns
+    -------
+    numpy.ndarray
+        (H, W, 3) float32 unit normals; all-zero where the input was zero-length.
+    """
+    p = _require_file(path, "normals")
+    if p.suffix.lower() == ".npy":
+        n = _load_npy(p, "normals").astype(np.float64)
+        if n.ndim != 3 or n.shape[2] != 3:
+            raise InvalidInput(f"normals {p} must have shape (H, W, 3), got {n.shape}")
+        if not np.all(np.isfinite(n)):
+            raise InvalidInput(f"normals {p} contain NaN or inf")
+    else:
+        raw = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
+        if raw is None or raw.ndim != 3 or raw.shape[2] < 3 or raw.dtype != np.uint8:
+            raise InvalidInput(f"normals PNG {p} must be 8-bit RGB storing (n+1)/2*255")
+        rgb = cv2.cvtColor(raw[..., :3], cv2.COLOR_BGR2RGB).astype(np.float64)
+        n = rgb / 255.0 * 2.0 - 1.0
+        n[np.all(raw[..., :3] == 0, axis=-1)] = 0.0
+    norm = np.linalg.norm(n, axis=-1, keepdims=True)
+    out = np.where(norm > 1e-6, n / np.maximum(norm, 1e-12), 0.0)
+    return out.astype(np.float32)
+
+
+def read_intrinsics(spec: str | Path) -> np.ndarray:
+    """Parse intrinsics from ``"fx,fy,cx,cy"`` or a JSON file.
+
+    Returns
+    -------
+    numpy.ndarray
+        (3, 3) float64 K.
+    """
+    text = str(spec)
+    if text.lower().endswith(".json") or Path(text).is_file():
+        p = _require_file(text, "intrinsics")
+        try:
+            data = json.loads(p.read_text())
+        except json.JSONDecodeError as exc:
+            raise InvalidInput(f"intrinsics {p} is not valid JSON: {exc}") from None
+        missing = [k for k in ("fx", "fy", "cx", "cy") if not isinstance(data, dict) or k not in data]
+        if missing:
+            raise InvalidInput(f"intrinsics {p} lacks {', '.join(missing)}; expected "
+                               '{"fx": …, "fy": …, "cx": …, "cy": …}')
+        values = [data[k] for k in ("fx", "fy", "cx", "cy")]
+        where = str(p)
+    else:
+        parts = text.split(",")
+        where = f"--intrinsics '{text}'"
+        if len(parts) != 4:
+            raise InvalidInput(f"{where} must be fx,fy,cx,cy or a JSON file")
+        values = parts
+    try:
+        fx, fy, cx, cy = (float(v) for v in values)
+    except (TypeError, ValueError):
+        raise InvalidInput(f"{where}: fx, fy, cx, cy must be numbers") from None
+    if not all(np.isfinite([fx, fy, cx, cy])) or fx <= 0 or fy <= 0:
+        raise InvalidInput(f"{where}: focal lengths must be positive and all values finite")
+    return intrinsics_matrix(fx, fy, cx, cy)
+
+
+def load_frame(image: str | Path | None = None, depth: str | Path | None = None,
+               normals: str | Path | None = None, intrinsics: str | Path | None = None,
+               depth_scale: float | None = None, nan_as_invalid: bool = False,
+               depth_kind: str = "metric", depth_units: str | None = None) -> Frame:
+    """Build a :class:`Frame` from files.
+
+    Parameters
+    ----------
+    image : path, optional
+        Colour image; may be omitted for depth-only input (then ``depth`` is required).
+    depth, normals : path, optional
+        Cue files (see :func:`read_depth`, :func:`read_normals`).
+    intrinsics : str or path, optional
+        ``"fx,fy,cx,cy"`` or JSON; without it a 60° horizontal field of view is assumed and
+        noted in ``frame.notes``.
+    depth_scale : float, optional
+        Divisor for 16-bit depth PNGs.
+    nan_as_invalid : bool
+        Accept NaN/inf in depth as invalid pixels.
+    depth_kind : {"metric", "relative"}
+        Whether the given depth has a true scale.
+    depth_units : str, optional
+        Unit label for outputs; ``"m"`` when a depth scale is given, else ``"input"``.
+    """
+    if image is None and depth is None:
+        raise InvalidInput("give an image, a depth map, or both")
+    rgb = read_image(image) if image is not None else None
+    d = read_depth(depth, depth_scale, nan_as_invalid) if depth is not None else None
+    n = read_normals(normals) if normals is not None else None
+    shape = rgb.shape[:2] if rgb is not None else d.shape  # type: ignore[union-attr]
+    notes: list[str] = []
+    if intrinsics is not None:
+        K = read_intrinsics(intrinsics)
+    else:
+        K = default_intrinsics(shape[1], shape[0], DEFAULT_HFOV_DEG)
+        notes.append(f"intrinsics not given: assumed a {DEFAULT_HFOV_DEG:g}° horizontal field "
+                     "of view with the principal point at the image centre")
+    name = Path(image if image is not None else depth).stem  # type: ignore[arg-type]
+    if depth_units is None:
+        depth_units = "m" if depth_scale is not None else "input"
+    if depth_kind == "relative":
+        depth_units = "relative"
+    return Frame(rgb=rgb, K=K, depth=d, normals=n, depth_kind=depth_kind,  # type: ignore[arg-type]
+                 depth_units=depth_units, name=name, notes=notes)
+
+
+@contextlib.contextmanager
+def atomic_output_dir(out_dir: str | Path, overwrite: bool = False) -> Iterator[Path]:
+    """Yield a temporary folder that becomes ``out_dir`` only if the block succeeds.
+
+    The temporary folder is a sibling of ``out_dir`` (same file system, so the final rename is
+    atomic). On any exception it is removed and ``out_dir`` is left untouched.
+
+    Raises
+    ------
+    InvalidInput
+        If ``out_dir`` is an existing file, or an existing non-empty folder without
+        ``overwrite``.
+    """
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise InvalidInput(f"output path {out} is an existing file, not a folder")
+    if out.is_dir() and any(out.iterdir()) and not overwrite:
+        raise InvalidInput(f"output folder {out} exists and is not empty; pass --overwrite")
+    parent = out.parent if str(out.parent) else Path(".")
+    if not parent.is_dir():
+        raise InvalidInput(f"cannot write to {out}: folder {parent} does not exist")
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".partial", dir=parent))
+    try:
+        yield tmp
+        if out.exists():
+            trash = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=parent))
+            os.replace(out, trash / out.name)
+            os.replace(tmp, out)
+            shutil.rmtree(trash, ignore_errors=True)
+        else:
+            os.replace(tmp, out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+
+
+def plane_polygons(rec: Reconstruction, tolerance_px: float = 1.5
+                   ) -> list[tuple[int, np.ndarray]]:
+    """Outer boundary polygon of every plane region, lifted onto its plane.
+
+    Parameters
+    ----------
+    rec : Reconstruction
+        Planes and label map.
+    tolerance_px : float
+        Douglas–Peucker simplification tolerance of the image contour, in pixels.
+
+    Returns
+    -------
+    list of (int, numpy.ndarray)
+        ``(plane_id, (V, 3) vertices)`` in the camera frame and depth units, one entry per
+        connected region (holes are not cut out).
+    """
+    K_inv = np.linalg.inv(rec.frame.K)
+    polygons = []
+    for pid in range(1, rec.num_planes + 1):
+        mask = (rec.labels == pid).astype(np.uint8)
+        contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+        n, d = rec.params[pid - 1, :3], rec.params[pid - 1, 3]
+        for contour in contours:
+            poly = cv2.approxPolyDP(contour, tolerance_px, True).reshape(-1, 2)
+            if len(poly) < 3:
+                continue
+            rays = np.c_[poly.astype(np.float64), np.ones(len(poly))] @ K_inv.T
+            denom = rays @ n
+            with np.errstate(divide="ignore", invalid="ignore"):
+                z = -d / denom
+            if not np.all(np.isfinite(z) & (z > 0)):
+                continue  # the region's outline leaves the plane's visible half-space
+            polygons.append((pid, rays * z[:, None]))
+    return polygons
+
+
+def write_polygon_ply(path: Path, polygons: list[tuple[np.ndarray, np.ndarray]]) -> None:
+    """Write coloured polygons as an ASCII PLY (one face per polygon).
+
+    Parameters
+    ----------
+    path : Path
+        Output file.
+    polygons : list of (vertices, color)
+        ``(V, 3)`` float vertices and a (3,) uint8 RGB colour per polygon.
+    """
+    n_vertices = sum(len(v) for v, _ in polygons)
+    lines = ["ply", "format ascii 1.0", f"element vertex {n_vertices}",
+             "property float x", "property float y", "property float z",
+             "property uchar red", "property uchar green", "property uchar blue",
+             f"element face {len(polygons)}", "property list uchar int vertex_indices",
+             "property uchar red", "property uchar green", "property uchar blue", "end_header"]
+    faces = []
+    start = 0
+    for verts, color in polygons:
+        r, g, b = (int(c) for c in color)
+        lines += [f"{x:.6g} {y:.6g} {z:.6g} {r} {g} {b}" for x, y, z in verts]
+        faces.append(f"{len(verts)} " + " ".join(str(start + i) for i in range(len(verts)))
+                     + f" {r} {g} {b}")
+        start += len(verts)
+    path.write_text("\n".join(lines + faces) + "\n")
+
+
+def planes_document(rec: Reconstruction) -> dict:
+    """The ``planes.json`` content for a reconstruction."""
+    K = rec.frame.K
+    colors = rec.colors
+    area = rec.area_px
+    planes = [{
+        "id": i + 1,
+        "normal": [float(v) for v in rec.params[i, :3]],
+        "offset": float(rec.params[i, 3]),
+        "area_px": int(area[i]),
+        "rmse": float(rec.rmse[i]),  # type: ignore[index]
+        "support": int(rec.support[i]),  # type: ignore[index]
+        "color": [int(c) for c in colors[i]],
+    } for i in range(rec.num_planes)]
+    return {
+        "planes": planes,
+        "convention": "normal . X + offset = 0, X in the camera frame (x right, y down, "
+                      "z forward) in depth_units; normal faces the camera",
+        "intrinsics": {"fx": float(K[0, 0]), "fy": float(K[1, 1]), "cx": float(K[0, 2]),
+                       "cy": float(K[1, 2]), "width": rec.frame.width,
+                       "height": rec.frame.height},
+        "depth_units": rec.frame.depth_units,
+        "depth_kind": rec.frame.depth_kind,
+        "notes": list(rec.frame.notes),
+        "timings_s": {k: round(float(v), 4) for k, v in rec.timings.items()},
+        "config": rec.config,
+    }
+
+
+def write_reconstruction_files(rec: Reconstruction, folder: Path) -> None:
+    """Write the single-view outputs into an existing folder (not atomic by itself)."""
+    from monoplane.config import dumps_toml
+    from monoplane import __version__
+
+    if rec.num_planes > np.iinfo(np.uint16).max:
+        raise InvalidInput(f"{rec.num_planes} planes do not fit in a uint16 labels.png")
+    cv2.imwrite(str(folder / "labels.png"), rec.labels.astype(np.uint16))
+    doc = planes_document(rec)
+    doc["monoplane_version"] = __version__
+    (folder / "planes.json").write_text(json.dumps(doc, indent=2) + "\n")
+    colors = rec.colors
+    write_polygon_ply(folder / "planes.ply",
+                      [(verts, colors[pid - 1]) for pid, verts in plane_polygons(rec)])
+    np.save(folder / "depth_planar.npy", rec.planar_depth())
+    (folder / "config.toml").write_text(
+        "# Resolved monoplane config; rerun with: monoplane run ... --config config.toml\n"
+        + dumps_toml(rec.config))
+
+
+def save_reconstruction(rec: Reconstruction, out_dir: str | Path, overwrite: bool = False,
+                        report: bool = False) -> Path:
+    """Write a reconstruction's outputs atomically into ``out_dir``.
+
+    Parameters
+    ----------
+    rec : Reconstruction
+        What to write.
+    out_dir : str or Path
+        Target folder; must not exist (or be empty) unless ``overwrite``.
+    overwrite : bool
+        Replace an existing folder.
+    report : bool
+        Also write ``report.html`` with its figures (see :mod:`monoplane.report`).
+
+    Returns
+    -------
+    Path
+        The output folder.
+    """
+    with atomic_output_dir(out_dir, overwrite) as tmp:
+        write_reconstruction_files(rec, tmp)
+        if report:
+            from monoplane.report import write_frame_report
+            write_frame_report(rec, tmp)
+    return Path(out_dir)

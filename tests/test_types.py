@@ -1,0 +1,94 @@
+import numpy as np
+import pytest
+
+from monoplane.errors import InvalidInput
+from monoplane.types import (
+    Camera, Frame, Reconstruction, default_intrinsics, intrinsics_matrix,
+    orient_towards_camera, pixel_rays, plane_to_camera, plane_to_world,
+)
+from tests.conftest import box_corner_depth
+
+
+def frame(**kw):
+    K, depth, _ = box_corner_depth()
+    args = dict(rgb=np.zeros((*depth.shape, 3), np.uint8), K=K, depth=depth)
+    args.update(kw)
+    return Frame(**args)
+
+
+def test_pixel_rays_have_unit_z_and_hit_principal_point():
+    K = intrinsics_matrix(100, 80, 10, 5)
+    rays = pixel_rays(K, 12, 20)
+    assert np.allclose(rays[..., 2], 1)
+    assert np.allclose(rays[5, 10], [0, 0, 1])
+    assert np.allclose(rays[5, 11], [1 / 100, 0, 1])
+
+
+def test_default_intrinsics_has_60_degree_fov():
+    K = default_intrinsics(640, 480)
+    assert np.isclose(2 * np.degrees(np.arctan(320 / K[0, 0])), 60)
+
+
+@pytest.mark.parametrize("kw, match", [
+    (dict(depth=np.zeros((48, 64), np.float32)), "no valid"),
+    (dict(depth=np.full((48, 64), np.nan, np.float32)), "NaN or inf"),
+    (dict(depth=np.ones((40, 64), np.float32)), "differs from image size"),
+    (dict(normals=np.ones((48, 64, 2), np.float32)), r"shape \(H, W, 3\)"),
+    (dict(normals=np.full((48, 64, 3), 0.9, np.float32)), "unit length"),
+    (dict(K=np.eye(2)), "3x3"),
+    (dict(K=np.diag([0.0, 1.0, 1.0])), "positive"),
+    (dict(rgb=np.zeros((48, 64, 3), np.float32)), "uint8"),
+    (dict(depth_kind="metres"), "depth_kind"),
+])
+def test_frame_validation(kw, match):
+    with pytest.raises(InvalidInput, match=match):
+        frame(**kw)
+
+
+def test_frame_points_unproject_depth():
+    f = frame()
+    pts = f.points()
+    assert np.allclose(pts[..., 2], f.depth)
+    u, v = 7, 30
+    assert np.allclose(f.K @ (pts[v, u] / pts[v, u, 2]), [u, v, 1])
+
+
+def test_grey_image_has_no_colour():
+    assert not frame(rgb=np.full((48, 64, 3), 90, np.uint8)).has_color
+    assert not frame(rgb=None).has_color
+
+
+def test_orientation_makes_offset_positive():
+    p = orient_towards_camera(np.array([[0, 2, 0, -4.0]]))
+    assert np.allclose(p, [[0, -1, 0, 2]])
+
+
+def test_planar_depth_reproduces_exact_depth():
+    K, depth, planes = box_corner_depth()
+    rays = pixel_rays(K, *depth.shape)
+    labels = np.argmin([np.where(-p[3] / (rays @ p[:3]) > 0, -p[3] / (rays @ p[:3]), np.inf)
+                        for p in planes], axis=0) + 1
+    rec = Reconstruction(frame=frame(), labels=labels, params=np.array(planes))
+    assert np.allclose(rec.planar_depth(), depth, rtol=1e-5)
+    assert rec.area_px.sum() == depth.size
+    assert rec.support.tolist() == rec.area_px.tolist()
+
+
+def test_reconstruction_rejects_labels_beyond_planes():
+    with pytest.raises(InvalidInput, match="labels must lie"):
+        Reconstruction(frame=frame(), labels=np.full((48, 64), 2), params=np.zeros((1, 4)) + 1)
+
+
+def test_plane_world_round_trip():
+    rng = np.random.default_rng(1)
+    R, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    R *= np.sign(np.linalg.det(R))
+    t = rng.normal(size=3)
+    cam = Camera(K=intrinsics_matrix(100, 100, 50, 50), R=R, t=t, width=100, height=100)
+    plane_c = orient_towards_camera(np.array([0.2, -0.9, 0.1, 1.3]))
+    x_c = -plane_c[3] * plane_c[:3]  # the foot of the perpendicular, on the plane
+    x_w = R.T @ (x_c - t)
+    plane_w = plane_to_world(plane_c, R, t)[0]
+    assert np.isclose(plane_w[:3] @ x_w + plane_w[3], 0)
+    assert np.allclose(plane_to_camera(plane_w, R, t)[0], plane_c)
+    assert np.allclose(cam.center, R.T @ -t)
