@@ -390,7 +390,7 @@ def write_reconstruction_files(rec: Reconstruction, folder: Path) -> None:
 
 
 def save_reconstruction(rec: Reconstruction, out_dir: str | Path, overwrite: bool = False,
-                        report: bool = False) -> Path:
+                        report: bool = False, progress: bool = False) -> Path:
     """Write a reconstruction's outputs atomically into ``out_dir``.
 
     Parameters
@@ -403,6 +403,8 @@ def save_reconstruction(rec: Reconstruction, out_dir: str | Path, overwrite: boo
         Replace an existing folder.
     report : bool
         Also write ``report.html`` with its figures (see :mod:`monoplane.report`).
+    progress : bool
+        Show a progress bar while the report renders.
 
     Returns
     -------
@@ -413,5 +415,5 @@ def save_reconstruction(rec: Reconstruction, out_dir: str | Path, overwrite: boo
         write_reconstruction_files(rec, tmp)
         if report:
             from monoplane.report import write_frame_report
-            write_frame_report(rec, tmp)
+            write_frame_report(rec, tmp, progress=progress)
     return Path(out_dir)

@@ -40,7 +40,8 @@ def run(args: argparse.Namespace) -> int:
     for note in frame.notes:
         print(f"monoplane: note: {note}", file=sys.stderr)
     rec = pipe.run(frame)
-    out = save_reconstruction(rec, args.out, overwrite=args.overwrite, report=args.report)
+    out = save_reconstruction(rec, args.out, overwrite=args.overwrite, report=args.report,
+                              progress=not args.quiet)
     if not args.quiet:
         print(f"{rec.num_planes} planes in {rec.timings.get('total', 0.0):.2f} s -> {out}")
     return 0

@@ -1,0 +1,249 @@
+"""The single-view report: inputs, cues, plane labels, planar depth, 3D views and a plane table."""
+
+from __future__ import annotations
+
+import json
+import time
+from datetime import datetime
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from monoplane.geometry.mesh import planar_mesh
+from monoplane.report import figures as fig
+from monoplane.report import html
+from monoplane.report.colors import colorize_normals, plane_palette, shade
+from monoplane.report.render3d import DEFAULT_TIMEOUT, Mesh, RenderResult, Shot, render
+from monoplane.report.viewpoints import facing_triangles, orbit_viewpoints, zoom_to_fit
+from monoplane.types import Reconstruction
+
+#: Width of the 3D renders in pixels (height follows the image's aspect ratio).
+RENDER_WIDTH = 640
+#: Aim for about this many mesh vertices; the grid step of :func:`planar_mesh` follows.
+MESH_VERTICES = 80_000
+
+
+def mesh_step(height: int, width: int) -> int:
+    """Grid step that keeps a planar mesh near :data:`MESH_VERTICES` vertices."""
+    return max(1, int(round(np.sqrt(height * width / MESH_VERTICES))))
+
+
+def render_size(height: int, width: int) -> tuple[int, int]:
+    """``(width, height)`` of the 3D renders: :data:`RENDER_WIDTH` wide, the image's aspect."""
+    return RENDER_WIDTH, max(16, int(round(RENDER_WIDTH * height / width)))
+
+
+def estimate_up(rec: Reconstruction, max_tilt_deg: float = 35.0) -> np.ndarray:
+    """The scene's "up" in the camera frame, from its largest floor- or ceiling-like plane.
+
+    A virtual bird's eye view looks along gravity only if it knows where up is; the camera's
+    own -y axis is off by the camera's pitch and roll. The largest plane whose normal is within
+    ``max_tilt_deg`` of the camera's vertical is taken as horizontal: a floor's normal (facing
+    the camera above it) points up, a ceiling's points down.
+
+    Returns
+    -------
+    numpy.ndarray
+        (3,) unit vector, camera frame (OpenCV axes); ``(0, -1, 0)`` when no plane qualifies.
+    """
+    camera_up = np.array([0.0, -1.0, 0.0])
+    if rec.num_planes == 0:
+        return camera_up
+    cos_up = rec.params[:, :3] @ camera_up
+    horizontal = np.abs(cos_up) > np.cos(np.deg2rad(max_tilt_deg))
+    if not np.any(horizontal):
+        return camera_up
+    area = np.where(horizontal, rec.area_px, -1)
+    i = int(np.argmax(area))
+    return rec.params[i, :3] * np.sign(cos_up[i])
+
+
+def frame_views(rec: Reconstruction, out_dir: Path, timeout: float = DEFAULT_TIMEOUT
+                ) -> tuple[list[html.Figure], RenderResult]:
+    """Render the planar mesh from the camera, from above and obliquely, by plane and textured.
+
+    Returns
+    -------
+    figures : list of html.Figure
+        Rendered pictures with captions, in display order (plane colours and texture of each
+        viewpoint side by side).
+    result : RenderResult
+        What the renderer produced, with the reason when it failed.
+    """
+    frame = rec.frame
+    vertices, triangles, colors, plane_ids = planar_mesh(rec, mesh_step(*frame.shape))
+    if len(triangles) == 0:
+        return [], RenderResult({}, "no planar surface to render in 3D", 0.0)
+    palette = plane_palette(rec.num_planes) / 255.0
+    by_plane = shade(palette[plane_ids - 1], rec.params[plane_ids - 1, :3])
+    meshes = [Mesh(vertices, triangles, by_plane), Mesh(vertices, triangles, colors)]
+    width, height = render_size(*frame.shape)
+    K = frame.K.copy()
+    K[0] *= width / frame.width
+    K[1] *= height / frame.height
+    tri_planes = plane_ids[triangles[:, 0]] - 1
+    views: list[tuple[str, str, np.ndarray, np.ndarray, np.ndarray | None]] = [
+        ("frontal", "frontal view (the input camera)", K, np.eye(4), None)]
+    for vp in orbit_viewpoints(vertices, estimate_up(rec), np.array([0.0, 0.0, 1.0]), width,
+                               height)[:2]:
+        facing = facing_triangles(tri_planes, rec.params, vp.eye)
+        vp = zoom_to_fit(vp, vertices[np.unique(triangles[facing])], width, height)
+        views.append((vp.name, vp.title, vp.K, vp.world_to_cam, facing))
+    shots: list[Shot] = []
+    figures: list[html.Figure] = []
+    for name, title, K_v, T, keep in views:
+        for j, kind in enumerate(("planes", "texture")):
+            shots.append(Shot(f"3d_{name}_{kind}", K_v, T, {j: keep}))
+            label = "coloured by plane" if kind == "planes" else "image texture"
+            figures.append(html.Figure(f"3d_{name}_{kind}.png", f"{title}, {label}"))
+    result = render(meshes, [], shots, out_dir, width, height, timeout=timeout)
+    figures = [f for f in figures if f.src[:-4] in result.paths]
+    return figures, result
+
+
+def plane_rows(rec: Reconstruction) -> list[list[str]]:
+    """Table rows (markup) for the planes of a reconstruction."""
+    palette = plane_palette(rec.num_planes)
+    total = rec.frame.height * rec.frame.width
+    units = html.esc(rec.frame.depth_units)
+    rmse, support = np.asarray(rec.rmse), np.asarray(rec.support)  # filled on construction
+    rows = []
+    for i in range(rec.num_planes):
+        n, d = rec.params[i, :3], rec.params[i, 3]
+        rows.append([
+            f"{html.swatch(palette[i])}{i + 1}",
+            "(" + ", ".join(f"{x:+.3f}" for x in n) + ")",
+            f"{d:.3f} {units}",
+            f"{int(rec.area_px[i])} ({100.0 * rec.area_px[i] / total:.1f} %)",
+            f"{rmse[i]:.4f} {units}",
+            f"{int(support[i])}",
+        ])
+    return rows
+
+
+def write_frame_report(rec: Reconstruction, out_dir: Path, render_3d: bool = True,
+                       progress: bool = False, timeout: float = DEFAULT_TIMEOUT) -> Path:
+    """Write ``report.html`` and its PNG figures for one reconstruction.
+
+    Parameters
+    ----------
+    rec : Reconstruction
+        Planes of one frame (camera frame, OpenCV axes).
+    out_dir : pathlib.Path
+        Folder for ``report.html`` and the PNGs (created if missing).
+    render_3d : bool
+        Render the planar mesh with Open3D (in a child process). When false, or when rendering
+        fails, the report has the 2D figures and says why the 3D views are missing.
+    progress : bool
+        Show a progress bar on stderr.
+    timeout : float
+        Seconds the 3D renderer may take.
+
+    Returns
+    -------
+    pathlib.Path
+        Path of ``report.html``.
+    """
+    start = time.perf_counter()
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    frame = rec.frame
+    bar = tqdm(total=4, desc="report", unit="step", disable=not progress)
+
+    bar.set_postfix_str("inputs")
+    inputs = [html.Figure("input.png", "input image")]
+    rgb = frame.rgb if frame.rgb is not None else fig.grey_image(frame.shape)
+    fig.save_png(out / "input.png", fig.enlarge(rgb, fig.display_scale(frame.width)))
+    if frame.depth is not None:
+        fig.save_png(out / "depth.png", fig.colorized_depth_figure(frame.depth,
+                                                                   frame.depth_units))
+        inputs.append(html.Figure("depth.png", f"depth cue ({frame.depth_kind}, "
+                                               f"{frame.depth_units}; near blue, far red)"))
+    if frame.normals is not None:
+        fig.save_png(out / "normals.png", fig.enlarge(colorize_normals(frame.normals),
+                                                      fig.display_scale(frame.width), True))
+        inputs.append(html.Figure("normals.png", "normal cue (blue: facing the camera, "
+                                                 "green: facing up, red/cyan: facing sideways)"))
+    bar.update()
+
+    bar.set_postfix_str("planes")
+    fig.save_png(out / "labels_overlay.png", fig.overlay_labels(frame.rgb, rec.labels,
+                                                                n_planes=rec.num_planes))
+    fig.save_png(out / "labels.png", fig.label_map(rec.labels, rec.num_planes))
+    planes_figs = [
+        html.Figure("labels_overlay.png", "planes over the image, with plane ids"),
+        html.Figure("labels.png", "label map (dark: non-planar)"),
+    ]
+    depth_figs = []
+    if frame.depth is not None:
+        fig.save_png(out / "depth_compare.png",
+                     fig.depth_comparison(frame.depth, rec.planar_depth(), frame.depth_units))
+        depth_figs.append(html.Figure(
+            "depth_compare.png", "input depth (left) and the depth the planes imply (right), "
+                                 "on one colour scale; black: invalid or non-planar"))
+    bar.update()
+
+    bar.set_postfix_str("3D views")
+    notes = list(frame.notes)
+    if render_3d:
+        views, result = frame_views(rec, out, timeout)
+        if result.reason:
+            notes.append(f"3D views: {result.reason}")
+        render_msg = result.reason
+        render_seconds = result.seconds
+    else:
+        views, render_msg, render_seconds = [], "3D views were not requested", 0.0
+    bar.update()
+
+    bar.set_postfix_str("html")
+    panels = [(fig.load_png(out / "input.png"), "input image"),
+              (fig.load_png(out / "labels_overlay.png"), f"{rec.num_planes} planes")]
+    if frame.depth is not None:
+        panels.append((fig.load_png(out / "depth.png"), "depth cue"))
+    panels += [(fig.load_png(out / f.src), f.caption.split(",")[0]) for f in views
+               if f.src.endswith("_planes.png")]
+    fig.save_png(out / "summary.png", fig.contact_sheet(panels, columns=3))
+    total_px = frame.height * frame.width
+    coverage = 100.0 * float((rec.labels > 0).sum()) / total_px
+    sections = [
+        html.paragraph("summary.png beside this page gathers the main figures in one "
+                       "picture."),
+        html.section("Inputs", html.figure_grid(inputs, 3)),
+        html.section("Planes", html.figure_grid(planes_figs, 2)
+                     + html.figure_grid(depth_figs, 1)),
+    ]
+    body3d = ""
+    if render_msg:
+        body3d += html.warning(f"3D views are missing or incomplete: {render_msg}. "
+                               "The 2D figures above are complete.")
+    if views:
+        body3d += html.figure_grid(views, 2)
+    sections.append(html.section("3D planar model", body3d))
+    header = ["id", "normal (x, y, z)", "offset d", "area px (share)", "RMSE", "support"]
+    sections.append(html.section(
+        "Plane table",
+        html.paragraph("Each plane satisfies n · X + d = 0 in the camera frame (x right, "
+                       "y down, z forward), with n facing the camera.")
+        + html.table(header, plane_rows(rec), raw=True),
+    ))
+    sections.append(html.section("Notes", html.bullet_list(notes) or html.paragraph("none")))
+    timing_rows = [[k, f"{float(v):.3f}"] for k, v in rec.timings.items()]
+    if render_3d:
+        timing_rows.append(["3D rendering (report)", f"{render_seconds:.3f}"])
+    timing_rows.append(["report total", f"{time.perf_counter() - start:.3f}"])
+    timing = html.table(["step", "seconds"], timing_rows)
+    if rec.config:
+        timing += html.preformatted(json.dumps(rec.config, indent=2, default=str),
+                                    "resolved configuration")
+    sections.append(html.section("Timing and configuration", timing))
+    K = frame.K
+    subtitle = (f"{frame.width}×{frame.height} px · {rec.num_planes} planes covering "
+                f"{coverage:.1f} % of the image · depth {frame.depth_kind} in "
+                f"{frame.depth_units} · fx={K[0, 0]:.1f} fy={K[1, 1]:.1f} "
+                f"cx={K[0, 2]:.1f} cy={K[1, 2]:.1f} · {datetime.now():%Y-%m-%d %H:%M}")
+    path = html.write_page(out / "report.html", f"monoplane report: {frame.name}", subtitle,
+                           sections)
+    bar.update()
+    bar.close()
+    return path

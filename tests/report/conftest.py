@@ -1,0 +1,76 @@
+"""Fixtures for report tests: a hand-made room (floor, ceiling, three walls and a box) with exact
+planes.
+
+The camera looks into the room, pitched 6° down; pixels are ray-cast analytically against
+bounded rectangles, so labels, depth, normals and plane parameters are all exact.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from monoplane.types import Frame, Reconstruction, default_intrinsics, pixel_rays, plane_to_camera
+
+# (normal, d, lower bound, upper bound) in the room frame (x right, y down, z forward).
+_RECTS = [
+    ((0, -1, 0), 1.3, (-2.2, 1.3, 0.0), (2.0, 1.3, 5.0)),  # floor
+    ((0, 1, 0), 1.4, (-2.2, -1.4, 0.0), (2.0, -1.4, 5.0)),  # ceiling
+    ((0, 0, -1), 5.0, (-2.2, -1.4, 5.0), (2.0, 1.3, 5.0)),  # back wall
+    ((1, 0, 0), 2.2, (-2.2, -1.4, 0.0), (-2.2, 1.3, 5.0)),  # left wall
+    ((-1, 0, 0), 2.0, (2.0, -1.4, 0.0), (2.0, 1.3, 5.0)),  # right wall
+    ((0, -1, 0), 0.6, (-0.3, 0.6, 2.8), (1.0, 0.6, 3.8)),  # box top
+    ((0, 0, -1), 2.8, (-0.3, 0.6, 2.8), (1.0, 1.3, 2.8)),  # box front
+]
+_BASE = np.array([[150, 120, 90], [235, 235, 230], [200, 190, 170], [170, 185, 200],
+                  [185, 200, 170], [120, 70, 50], [140, 85, 60]], dtype=np.float64)
+
+
+def make_room(width: int = 160, height: int = 120, pitch_deg: float = 6.0) -> Reconstruction:
+    """Ground-truth reconstruction of the room seen by a camera at the origin.
+
+    Returns
+    -------
+    Reconstruction
+        7 planes, labels with a small non-planar blob on the back wall, exact depth and normals.
+    """
+    a = np.deg2rad(pitch_deg)
+    R = np.array([[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])
+    K = default_intrinsics(width, height, 70.0)
+    rays = pixel_rays(K, height, width).reshape(-1, 3)
+    rays_room = rays @ R  # R^T applied to each row
+    depth = np.full(len(rays), np.inf)
+    labels = np.zeros(len(rays), dtype=np.int32)
+    for i, (n, d, lo, hi) in enumerate(_RECTS):
+        n = np.asarray(n, dtype=np.float64)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = -d / (rays_room @ n)
+        pts = rays_room * t[:, None]
+        inside = np.all((pts >= np.asarray(lo) - 1e-9) & (pts <= np.asarray(hi) + 1e-9), axis=1)
+        hit = inside & (t > 0) & (t < depth)
+        depth[hit] = t[hit]
+        labels[hit] = i + 1
+    params_room = np.array([[*n, d] for n, d, _, _ in _RECTS], dtype=np.float64)
+    params = plane_to_camera(params_room, R, np.zeros(3))
+    depth = depth.reshape(height, width)
+    labels = labels.reshape(height, width)
+    normals = params[labels - 1, :3].astype(np.float32)
+
+    v, u = np.mgrid[0:height, 0:width]
+    rng = np.random.default_rng(0)
+    checker = ((u // 8 + v // 8) % 2)[..., None] * 18.0
+    rgb = _BASE[labels - 1] + checker + rng.normal(0, 4, (height, width, 3))
+    blob = (u - 0.42 * width) ** 2 + (v - 0.35 * height) ** 2 < (0.06 * width) ** 2
+    rgb[blob] = (40, 140, 60)
+    labels[blob] = 0
+    rgb = np.clip(rgb, 0, 255).astype(np.uint8)
+    frame = Frame(rgb=rgb, K=K, depth=depth.astype(np.float32), normals=normals, name="room",
+                  notes=["synthetic test room"])
+    return Reconstruction(frame=frame, labels=labels, params=params,
+                          rmse=np.full(len(params), 0.004), timings={"total": 1.25})
+
+
+@pytest.fixture
+def room() -> Reconstruction:
+    """The room at 160x120 pixels."""
+    return make_room()
