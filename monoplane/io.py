@@ -12,7 +12,8 @@ Inputs
 Outputs (one folder, written atomically: a temporary sibling folder renamed into place)
 -------------------------------------------------------------------------------------------
 ``labels.png`` (uint16, 0 = non-planar), ``planes.json``, ``planes.ply`` (one coloured polygon
-per plane region), ``depth_planar.npy`` and ``config.toml``.
+per plane region, triangulated so
+that any PLY reader loads it), ``depth_planar.npy`` and ``config.toml``.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ import cv2
 import numpy as np
 
 from monoplane.errors import InvalidInput
+from monoplane.geometry.polygons import plane_polygons, triangulate_on_plane
 from monoplane.types import Frame, Reconstruction, default_intrinsics, intrinsics_matrix
 
 DEFAULT_HFOV_DEG = 60.0
@@ -276,43 +278,6 @@ def atomic_output_dir(out_dir: str | Path, overwrite: bool = False) -> Iterator[
         raise
 
 
-def plane_polygons(rec: Reconstruction, tolerance_px: float = 1.5
-                   ) -> list[tuple[int, np.ndarray]]:
-    """Outer boundary polygon of every plane region, lifted onto its plane.
-
-    Parameters
-    ----------
-    rec : Reconstruction
-        Planes and label map.
-    tolerance_px : float
-        Douglas–Peucker simplification tolerance of the image contour, in pixels.
-
-    Returns
-    -------
-    list of (int, numpy.ndarray)
-        ``(plane_id, (V, 3) vertices)`` in the camera frame and depth units, one entry per
-        connected region (holes are not cut out).
-    """
-    K_inv = np.linalg.inv(rec.frame.K)
-    polygons = []
-    for pid in range(1, rec.num_planes + 1):
-        mask = (rec.labels == pid).astype(np.uint8)
-        contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
-        n, d = rec.params[pid - 1, :3], rec.params[pid - 1, 3]
-        for contour in contours:
-            poly = cv2.approxPolyDP(contour, tolerance_px, True).reshape(-1, 2)
-            if len(poly) < 3:
-                continue
-            rays = np.c_[poly.astype(np.float64), np.ones(len(poly))] @ K_inv.T
-            denom = rays @ n
-            with np.errstate(divide="ignore", invalid="ignore"):
-                z = -d / denom
-            if not np.all(np.isfinite(z) & (z > 0)):
-                continue  # the region's outline leaves the plane's visible half-space
-            polygons.append((pid, rays * z[:, None]))
-    return polygons
-
-
 def write_polygon_ply(path: Path, polygons: list[tuple[np.ndarray, np.ndarray]]) -> None:
     """Write coloured polygons as an ASCII PLY (one face per polygon).
 
@@ -382,7 +347,8 @@ def write_reconstruction_files(rec: Reconstruction, folder: Path) -> None:
     (folder / "planes.json").write_text(json.dumps(doc, indent=2) + "\n")
     colors = rec.colors
     write_polygon_ply(folder / "planes.ply",
-                      [(verts, colors[pid - 1]) for pid, verts in plane_polygons(rec)])
+                      [(tri, colors[pid - 1]) for pid, verts in plane_polygons(rec)
+                       for tri in triangulate_on_plane(verts, rec.params[pid - 1, :3])])
     np.save(folder / "depth_planar.npy", rec.planar_depth())
     (folder / "config.toml").write_text(
         "# Resolved monoplane config; rerun with: monoplane run ... --config config.toml\n"

@@ -584,7 +584,7 @@ class SfmResult:
             if self.colors.shape[0] != m:
                 raise InvalidInput(f"SfM result: {m} points but {self.colors.shape[0]} colours")
         kps, ids = [], []
-        for i, (kp, pid) in enumerate(zip(self.keypoints, self.point_ids)):
+        for i, (kp, pid) in enumerate(zip(self.keypoints, self.point_ids, strict=True)):
             kp = np.asarray(kp, dtype=np.float64).reshape(-1, 2)
             pid = np.asarray(pid, dtype=np.int64).reshape(-1)
             if pid.shape[0] != kp.shape[0]:

@@ -1,0 +1,91 @@
+"""``monoplane multiview``: planes of a scene seen in a few images."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from monoplane.cli.common import add_pipeline_args, pipeline_from_args
+from monoplane.io import load_frame
+
+DESCRIPTION = """Sparse-view planar reconstruction (MonoPlane §III-C): structure from motion
+(pycolmap SIFT, CPU), monocular cues per image, scale alignment of each depth onto the SfM
+points, single-view planes per image, then plane matching and fusion into global planes.
+
+Writes into --out: view_000/, view_001/, ... (the single-view outputs of each image, planes in
+that camera's frame), scene.json (cameras and global planes in the SfM world frame, with the
+links from view planes to global planes), scene.ply (one coloured polygon per global plane),
+cameras.json and points.ply (sparse SfM points).
+
+--depth/--normals, when given, take one file per image, in image order."""
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("multiview", help="planes from a few views (SfM + per-view planes + fusion)",
+                       description=DESCRIPTION,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("images", nargs="+", metavar="IMG", help="two or more colour images")
+    g = p.add_argument_group("inputs")
+    g.add_argument("--depth", nargs="+", metavar="FILE",
+                   help="one depth map per image: .npy float or 16-bit PNG with --depth-scale")
+    g.add_argument("--depth-scale", type=float, metavar="S",
+                   help="divide PNG depth by S (1000 for millimetres)")
+    g.add_argument("--normals", nargs="+", metavar="FILE",
+                   help="one normal map per image: .npy (H, W, 3) camera frame or 8-bit PNG")
+    g.add_argument("--intrinsics", metavar="fx,fy,cx,cy|FILE.json",
+                   help="known intrinsics shared by all images, kept fixed in SfM; default: "
+                        "estimated from a 60 degree horizontal field of view")
+    g.add_argument("--relative-depth", action="store_true",
+                   help="the given depths are correct only up to scale")
+    add_pipeline_args(p)
+    o = p.add_argument_group("outputs")
+    o.add_argument("--out", required=True, metavar="DIR",
+                   help="output folder (written atomically: nothing is left on failure)")
+    o.add_argument("--overwrite", action="store_true", help="replace DIR if it exists")
+    o.add_argument("--report", action="store_true", help="also write report.html")
+    o.add_argument("--quiet", action="store_true", help="no progress bars or summary")
+    p.set_defaults(func=run)
+
+
+def _per_image(files: list[str] | None, n: int, what: str) -> list[str | None]:
+    from monoplane.errors import InvalidInput
+
+    if files is None:
+        return [None] * n
+    if len(files) != n:
+        raise InvalidInput(f"{len(files)} {what} files for {n} images; give one per image")
+    return list(files)
+
+
+def run(args: argparse.Namespace) -> int:
+    from monoplane.errors import InvalidInput
+    from monoplane.multiview import reconstruct_multiview, save_scene
+
+    n = len(args.images)
+    if n < 2:
+        raise InvalidInput(f"multiview needs at least 2 images, got {n}")
+    depths = _per_image(args.depth, n, "--depth")
+    normals = _per_image(args.normals, n, "--normals")
+    if args.intrinsics:
+        args.overrides = [*args.overrides, "matcher.fixed_intrinsics=true"]
+    pipe = pipeline_from_args(args)
+    frames = [
+        load_frame(img, depth=d, normals=nm, intrinsics=args.intrinsics,
+                   depth_scale=args.depth_scale,
+                   depth_kind="relative" if args.relative_depth else "metric")
+        for img, d, nm in zip(args.images, depths, normals, strict=True)
+    ]
+    names = [f.name for f in frames]
+    if len(set(names)) < n:
+        frames = [f.with_(name=f"{i:03d}_{f.name}") for i, f in enumerate(frames)]
+    if not args.quiet and not args.intrinsics:
+        print("monoplane: note: intrinsics not given: the focal length is estimated by SfM "
+              "from a 60 degree field-of-view start", file=sys.stderr)
+    result = reconstruct_multiview(frames, pipe, progress=not args.quiet)
+    out = save_scene(result, args.out, overwrite=args.overwrite, report=args.report)
+    if not args.quiet:
+        scene = result.scene
+        per_view = ", ".join(str(v.num_planes) for v in scene.views)
+        print(f"{scene.planes.shape[0]} global planes from {per_view} view planes, "
+              f"{len(result.sfm.points)} SfM points, {result.timings['total']:.2f} s -> {out}")
+    return 0

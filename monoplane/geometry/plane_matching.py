@@ -1,0 +1,288 @@
+"""Matching planes between views and fusing matched planes (paper §III-C and appendix).
+
+Two criteria decide that plane ``p`` of view ``i`` and plane ``q`` of view ``j`` are the same
+surface:
+
+* **keypoints**: more than ``min_matches`` SfM keypoint matches fall in ``p`` (view ``i``) and in
+  ``q`` (view ``j``), and a mutual check holds: at least ``mutual_ratio`` of ``p``'s matched
+  keypoints that land on any plane of ``j`` land in ``q``, and the same from ``q``'s side;
+* **reprojection**: ``p`` warped into view ``j`` through its plane parameters and the relative
+  pose overlaps ``q`` with a large IoU, measured only where ``p`` is visible from ``j``.
+
+Fusion follows the paper (after Jin et al., SparsePlanes): the fused normal maximises
+``Σ_i (nᵀ n_i)²``, i.e. it is the principal eigenvector of ``Σ_i n_i n_iᵀ``, and the fused
+offset is the mean offset. This holds for any number of planes.
+
+Coordinates: camera frames are OpenCV's (x right, y down, z forward); pixel centres are at
+integer ``(u, v)``; poses are world-to-camera ``x_cam = R x_world + t``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from monoplane.errors import InvalidInput
+from monoplane.types import pixel_rays
+
+
+def keypoint_counts(labels_i: np.ndarray, labels_j: np.ndarray, keypoints_i: np.ndarray,
+                    keypoints_j: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """Count keypoint matches between every plane of view ``i`` and every plane of view ``j``.
+
+    Parameters
+    ----------
+    labels_i, labels_j : numpy.ndarray
+        (H_i, W_i) and (H_j, W_j) int label maps, 0 = non-planar, 1..P planes.
+    keypoints_i, keypoints_j : numpy.ndarray
+        (k_i, 2) and (k_j, 2) keypoint pixel coordinates ``(u, v)``.
+    pairs : numpy.ndarray
+        (m, 2) int keypoint index pairs ``(index in i, index in j)``.
+
+    Returns
+    -------
+    numpy.ndarray
+        (P_i + 1, P_j + 1) int64 counts; row/column 0 counts matches on non-planar pixels or
+        outside the image.
+    """
+    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    li = _labels_at(labels_i, np.asarray(keypoints_i)[pairs[:, 0]])
+    lj = _labels_at(labels_j, np.asarray(keypoints_j)[pairs[:, 1]])
+    ni, nj = int(labels_i.max()) + 1, int(labels_j.max()) + 1
+    return np.bincount(li * nj + lj, minlength=ni * nj).reshape(ni, nj).astype(np.int64)
+
+
+def _labels_at(labels: np.ndarray, pixels: np.ndarray) -> np.ndarray:
+    h, w = labels.shape
+    uv = np.rint(np.asarray(pixels, dtype=np.float64)).astype(np.int64).reshape(-1, 2)
+    inside = (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
+    out = np.zeros(len(uv), dtype=np.int64)
+    out[inside] = labels[uv[inside, 1], uv[inside, 0]]
+    return out
+
+
+def keypoint_plane_matches(counts: np.ndarray, min_matches: int = 10,
+                           mutual_ratio: float = 0.6) -> np.ndarray:
+    """Plane pairs accepted by the keypoint criterion with the mutual check.
+
+    Parameters
+    ----------
+    counts : numpy.ndarray
+        (P_i + 1, P_j + 1) counts from :func:`keypoint_counts`.
+    min_matches : int
+        A pair needs strictly more matches than this (paper: 10).
+    mutual_ratio : float
+        Share of a plane's plane-to-plane matches that must go to the candidate, checked from
+        both sides (paper: 60 %).
+
+    Returns
+    -------
+    numpy.ndarray
+        (K, 2) int64 1-based plane ids ``(p in i, q in j)``.
+    """
+    c = np.asarray(counts, dtype=np.float64)[1:, 1:]
+    if c.size == 0:
+        return np.zeros((0, 2), dtype=np.int64)
+    row = c.sum(axis=1, keepdims=True)
+    col = c.sum(axis=0, keepdims=True)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ok = (c > min_matches) & (c >= mutual_ratio * row) & (c >= mutual_ratio * col)
+    return np.argwhere(ok).astype(np.int64) + 1
+
+
+def relative_pose(R_i: np.ndarray, t_i: np.ndarray, R_j: np.ndarray,
+                  t_j: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pose of camera ``j`` relative to camera ``i``: ``x_j = R x_i + t``.
+
+    Parameters
+    ----------
+    R_i, t_i, R_j, t_j : numpy.ndarray
+        World-to-camera rotations (3, 3) and translations (3,).
+
+    Returns
+    -------
+    R, t : numpy.ndarray
+        (3, 3) and (3,) float64.
+    """
+    R = np.asarray(R_j) @ np.asarray(R_i).T
+    return R, np.asarray(t_j) - R @ np.asarray(t_i)
+
+
+def reprojection_iou(labels_i: np.ndarray, params_i: np.ndarray, K_i: np.ndarray,
+                     labels_j: np.ndarray, K_j: np.ndarray, R_ji: np.ndarray,
+                     t_ji: np.ndarray, step: int = 1) -> np.ndarray:
+    """IoU of every plane of view ``i`` warped into view ``j`` with every plane of view ``j``.
+
+    For each plane ``p`` of view ``i``, every (sub-sampled) pixel of view ``j`` is back-projected
+    onto ``p`` (expressed in camera ``j``), moved into camera ``i`` and projected there. The
+    pixel is *visible* when the plane point is in front of both cameras and inside image ``i``;
+    it is *warped* when it also lands on ``p``'s mask. Then
+    ``IoU(p, q) = |warped ∩ q| / |warped ∪ (q ∩ visible)|``.
+
+    Parameters
+    ----------
+    labels_i : numpy.ndarray
+        (H_i, W_i) int label map of view ``i``.
+    params_i : numpy.ndarray
+        (P_i, 4) planes of view ``i`` in camera ``i``'s frame, in the SfM units of ``t_ji``.
+    K_i, K_j : numpy.ndarray
+        (3, 3) intrinsics.
+    labels_j : numpy.ndarray
+        (H_j, W_j) int label map of view ``j``.
+    R_ji, t_ji : numpy.ndarray
+        Relative pose ``x_j = R_ji x_i + t_ji``.
+    step : int
+        Evaluate every ``step``-th row and column of view ``j`` (speed at native resolution).
+
+    Returns
+    -------
+    numpy.ndarray
+        (P_i, P_j) float64 IoUs in [0, 1].
+    """
+    params_i = np.asarray(params_i, dtype=np.float64).reshape(-1, 4)
+    p_i, p_j = params_i.shape[0], int(labels_j.max())
+    out = np.zeros((p_i, p_j))
+    if p_i == 0 or p_j == 0:
+        return out
+    h_i, w_i = labels_i.shape
+    rays = pixel_rays(K_j, *labels_j.shape)[::step, ::step].reshape(-1, 3)
+    lab_j = labels_j[::step, ::step].reshape(-1).astype(np.int64)
+    # Plane p in camera j: n_j = R n_i, d_j = d_i − n_j · t.
+    n_j = params_i[:, :3] @ R_ji.T
+    d_j = params_i[:, 3] - n_j @ t_ji
+    for p in range(p_i):
+        denom = rays @ n_j[p]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            z = -d_j[p] / denom
+        front = np.isfinite(z) & (z > 0)
+        x_i = ((rays[front] * z[front, None]) - t_ji) @ R_ji  # R^T (x_j − t)
+        uvw = x_i @ np.asarray(K_i).T
+        ok = uvw[:, 2] > 1e-9
+        u = np.full(len(uvw), -1, dtype=np.int64)
+        v = np.full(len(uvw), -1, dtype=np.int64)
+        u[ok] = np.rint(uvw[ok, 0] / uvw[ok, 2]).astype(np.int64)
+        v[ok] = np.rint(uvw[ok, 1] / uvw[ok, 2]).astype(np.int64)
+        inside = ok & (u >= 0) & (u < w_i) & (v >= 0) & (v < h_i)
+        visible = np.zeros(len(rays), dtype=bool)
+        visible[np.flatnonzero(front)[inside]] = True
+        warped = np.zeros(len(rays), dtype=bool)
+        warped[np.flatnonzero(front)[inside]] = labels_i[v[inside], u[inside]] == p + 1
+        n_warped = int(warped.sum())
+        if n_warped == 0:
+            continue
+        inter = np.bincount(lab_j[warped], minlength=p_j + 1)[1:]
+        area_visible = np.bincount(lab_j[visible], minlength=p_j + 1)[1:]
+        union = n_warped + area_visible - inter
+        out[p] = inter / np.maximum(union, 1)
+    return out
+
+
+def normal_angles_deg(normals_a: np.ndarray, normals_b: np.ndarray) -> np.ndarray:
+    """Unsigned angle between every pair of normals, in degrees.
+
+    Parameters
+    ----------
+    normals_a, normals_b : numpy.ndarray
+        (A, 3) and (B, 3) unit normals in one frame.
+
+    Returns
+    -------
+    numpy.ndarray
+        (A, B) float64 angles in [0, 180].
+    """
+    cos = np.clip(np.atleast_2d(normals_a) @ np.atleast_2d(normals_b).T, -1.0, 1.0)
+    return np.degrees(np.arccos(cos))
+
+
+def reprojection_plane_matches(iou_ij: np.ndarray, iou_ji: np.ndarray,
+                               min_iou: float = 0.5) -> np.ndarray:
+    """Plane pairs accepted by the reprojection criterion.
+
+    The score of ``(p, q)`` is the larger of the two warping directions; a pair is accepted when
+    its score reaches ``min_iou`` and each plane is the other's best-scoring candidate.
+
+    Parameters
+    ----------
+    iou_ij : numpy.ndarray
+        (P_i, P_j) IoUs of view ``i``'s planes warped into view ``j``.
+    iou_ji : numpy.ndarray
+        (P_j, P_i) IoUs of view ``j``'s planes warped into view ``i``.
+    min_iou : float
+        Threshold on the score.
+
+    Returns
+    -------
+    numpy.ndarray
+        (K, 2) int64 1-based plane ids ``(p in i, q in j)``.
+    """
+    score = np.maximum(np.asarray(iou_ij), np.asarray(iou_ji).T)
+    if score.size == 0:
+        return np.zeros((0, 2), dtype=np.int64)
+    best_q = score.argmax(axis=1)
+    best_p = score.argmax(axis=0)
+    p = np.arange(score.shape[0])
+    mutual = (best_p[best_q] == p) & (score[p, best_q] >= min_iou)
+    return np.stack([p[mutual] + 1, best_q[mutual] + 1], axis=1).astype(np.int64)
+
+
+def fuse_planes(planes: np.ndarray) -> np.ndarray:
+    """Average several estimates of one plane, all in the same (world) frame.
+
+    The fused normal maximises ``Σ_i (nᵀ n_i)²``: the principal eigenvector of
+    ``Σ_i n_i n_iᵀ`` (insensitive to each estimate's sign). Each estimate is then oriented to
+    agree with it and the fused offset is the mean of their offsets (paper appendix).
+
+    Parameters
+    ----------
+    planes : numpy.ndarray
+        (N, 4) planes ``n_i · x + d_i = 0`` with unit normals, N >= 1.
+
+    Returns
+    -------
+    numpy.ndarray
+        (4,) float64 fused plane with a unit normal, oriented like the majority of the inputs.
+    """
+    p = np.atleast_2d(np.asarray(planes, dtype=np.float64))
+    if p.shape[0] == 0 or p.shape[1] != 4:
+        raise InvalidInput(f"fuse_planes needs (N>=1, 4) planes, got {p.shape}")
+    n = p[:, :3] / np.linalg.norm(p[:, :3], axis=1, keepdims=True)
+    d = p[:, 3] / np.linalg.norm(p[:, :3], axis=1)
+    _, vecs = np.linalg.eigh(n.T @ n)
+    fused = vecs[:, -1]
+    signs = np.where(n @ fused >= 0, 1.0, -1.0)
+    if signs.sum() < 0:
+        fused, signs = -fused, -signs
+    return np.concatenate([fused, [float(np.mean(signs * d))]])
+
+
+class UnionFind:
+    """Disjoint sets over hashable items (used to group matched view planes)."""
+
+    def __init__(self) -> None:
+        self._parent: dict = {}
+
+    def add(self, item: object) -> None:
+        """Make ``item`` a singleton set unless already present."""
+        self._parent.setdefault(item, item)
+
+    def find(self, item: object) -> object:
+        """Representative of ``item``'s set (with path halving)."""
+        parent = self._parent
+        while parent[item] != item:
+            parent[item] = parent[parent[item]]
+            item = parent[item]
+        return item
+
+    def union(self, a: object, b: object) -> None:
+        """Merge the sets of ``a`` and ``b``."""
+        self.add(a)
+        self.add(b)
+        ra, rb = self.find(a), self.find(b)
+        if ra != rb:
+            self._parent[rb] = ra
+
+    def groups(self) -> list[list]:
+        """All sets, each listed in insertion order, ordered by their first item."""
+        out: dict = {}
+        for item in self._parent:
+            out.setdefault(self.find(item), []).append(item)
+        return list(out.values())

@@ -1,0 +1,165 @@
+"""Built-in fusers: match per-view planes across views and fuse them into global planes.
+
+``average`` implements the paper's sparse-view fusion (§III-C and appendix): plane matches come
+from SfM keypoint matches with a mutual check, completed by a plane-reprojection IoU check;
+matched planes (over any number of views) are fused by the principal eigenvector of
+``Σ n_i n_iᵀ`` and the mean offset, in the SfM world frame.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from monoplane.errors import InvalidInput
+from monoplane.geometry.plane_matching import (
+    UnionFind,
+    fuse_planes,
+    keypoint_counts,
+    keypoint_plane_matches,
+    normal_angles_deg,
+    relative_pose,
+    reprojection_iou,
+    reprojection_plane_matches,
+)
+from monoplane.hookspecs import hookimpl
+from monoplane.stages.base import Fuser, Stage, param
+from monoplane.types import Reconstruction, Scene, SfmResult, plane_to_world
+
+
+@dataclass
+class AverageConfig:
+    """Parameters of the ``average`` fuser."""
+
+    use_keypoints: bool = param(True, "match planes through SfM keypoint matches")
+    min_keypoint_matches: int = param(
+        10, "a keypoint plane match needs more than this many keypoint matches")
+    mutual_ratio: float = param(
+        0.6, "share of a plane's keypoint matches that must land in the candidate, both ways")
+    use_reprojection: bool = param(True, "match planes by reprojection overlap (IoU)")
+    min_reprojection_iou: float = param(
+        0.5, "IoU, in the visible region, a reprojected plane needs with its match")
+    max_normal_angle_deg: float = param(
+        30.0, "matched planes' normals may differ by at most this in the world frame (deg)")
+    grid_width: int = param(
+        256, "reprojection check resolution: pixel columns sampled per view")
+
+
+@dataclass
+class PlaneMatch:
+    """One accepted correspondence between planes of two views (1-based local ids)."""
+
+    view_i: int
+    plane_i: int
+    view_j: int
+    plane_j: int
+    criterion: str
+
+
+class AverageFuser(Fuser):
+    """Keypoint + reprojection plane matching, eigenvector-normal and mean-offset fusion."""
+
+    name = "average"
+    Config = AverageConfig
+
+    def fuse(self, views: list[Reconstruction], sfm: SfmResult) -> Scene:
+        """Fuse scale-aligned per-view planes into global planes.
+
+        Parameters
+        ----------
+        views : list of Reconstruction
+            One per camera of ``sfm``, in the same order; planes in each camera's frame and in
+            SfM units (depth already scale-aligned), label maps at the cameras' resolution.
+        sfm : SfmResult
+            Cameras, keypoints and pairwise keypoint matches.
+
+        Returns
+        -------
+        Scene
+            Global planes in the SfM world frame, each oriented to face the first camera that
+            sees it, and ``links[v][local] = global``.
+        """
+        return self.fuse_with_matches(views, sfm)[0]
+
+    def fuse_with_matches(self, views: list[Reconstruction],
+                          sfm: SfmResult) -> tuple[Scene, list[PlaneMatch]]:
+        """:meth:`fuse`, also returning the accepted plane correspondences."""
+        if len(views) != sfm.num_views:
+            raise InvalidInput(f"{len(views)} views but {sfm.num_views} SfM cameras")
+        for v, (rec, cam) in enumerate(zip(views, sfm.cameras, strict=True)):
+            if rec.frame.shape != (cam.height, cam.width):
+                raise InvalidInput(
+                    f"view {v}: labels are {rec.frame.width}x{rec.frame.height} but the camera "
+                    f"is {cam.width}x{cam.height}"
+                )
+        matches = self.match_planes(views, sfm)
+        groups = UnionFind()
+        for v, rec in enumerate(views):
+            for local in range(1, rec.num_planes + 1):
+                groups.add((v, local))
+        for m in matches:
+            groups.union((m.view_i, m.plane_i), (m.view_j, m.plane_j))
+
+        world = [plane_to_world(rec.params, cam.R, cam.t) if rec.num_planes else
+                 np.zeros((0, 4)) for rec, cam in zip(views, sfm.cameras, strict=True)]
+        planes, links = [], [dict() for _ in views]
+        for members in groups.groups():
+            fused = fuse_planes(np.array([world[v][local - 1] for v, local in members]))
+            first = sfm.cameras[members[0][0]]
+            if fused[:3] @ first.center + fused[3] < 0:
+                fused = -fused
+            for v, local in members:
+                links[v][local] = len(planes)
+            planes.append(fused)
+        scene = Scene(cameras=list(sfm.cameras), views=list(views),
+                      planes=np.array(planes).reshape(-1, 4), links=links, points=sfm.points)
+        return scene, matches
+
+    def match_planes(self, views: list[Reconstruction], sfm: SfmResult) -> list[PlaneMatch]:
+        """Plane correspondences between every pair of views.
+
+        Returns
+        -------
+        list of PlaneMatch
+            Accepted pairs; ``criterion`` is ``"keypoints"`` or ``"reprojection"``.
+        """
+        cfg = self.config
+        out: list[PlaneMatch] = []
+        for i in range(len(views)):
+            for j in range(i + 1, len(views)):
+                a, b = views[i], views[j]
+                if a.num_planes == 0 or b.num_planes == 0:
+                    continue
+                ci, cj = sfm.cameras[i], sfm.cameras[j]
+                angles = normal_angles_deg(a.params[:, :3] @ ci.R, b.params[:, :3] @ cj.R)
+                found: dict[tuple[int, int], str] = {}
+                pairs = sfm.matches.get((i, j))
+                if cfg.use_keypoints and pairs is not None and len(pairs):
+                    counts = keypoint_counts(a.labels, b.labels, sfm.keypoints[i],
+                                             sfm.keypoints[j], pairs)
+                    for p, q in keypoint_plane_matches(counts, cfg.min_keypoint_matches,
+                                                       cfg.mutual_ratio):
+                        found[(int(p), int(q))] = "keypoints"
+                if cfg.use_reprojection:
+                    R_ji, t_ji = relative_pose(ci.R, ci.t, cj.R, cj.t)
+                    iou_ij = reprojection_iou(a.labels, a.params, ci.K, b.labels, cj.K, R_ji,
+                                              t_ji, self._step(b))
+                    iou_ji = reprojection_iou(b.labels, b.params, cj.K, a.labels, ci.K,
+                                              R_ji.T, -R_ji.T @ t_ji, self._step(a))
+                    for p, q in reprojection_plane_matches(iou_ij, iou_ji,
+                                                           cfg.min_reprojection_iou):
+                        found.setdefault((int(p), int(q)), "reprojection")
+                for (p, q), criterion in found.items():
+                    if angles[p - 1, q - 1] <= cfg.max_normal_angle_deg:
+                        out.append(PlaneMatch(i, p, j, q, criterion))
+        return out
+
+    def _step(self, rec: Reconstruction) -> int:
+        return max(1, int(round(rec.frame.width / max(self.config.grid_width, 1))))
+
+
+@hookimpl
+def monoplane_register_fusers() -> list[type[Stage]]:
+    """Register the built-in fusers."""
+    return [AverageFuser]
