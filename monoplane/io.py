@@ -31,9 +31,8 @@ import numpy as np
 
 from monoplane.errors import InvalidInput
 from monoplane.geometry.polygons import plane_polygons, triangulate_on_plane
-from monoplane.types import Frame, Reconstruction, default_intrinsics, intrinsics_matrix
-
-DEFAULT_HFOV_DEG = 60.0
+from monoplane.cues.intrinsics import assume_intrinsics
+from monoplane.types import Frame, Reconstruction, intrinsics_matrix
 
 
 def _require_file(path: str | Path, what: str) -> Path:
@@ -230,9 +229,8 @@ def load_frame(image: str | Path | None = None, depth: str | Path | None = None,
     if intrinsics is not None:
         K = read_intrinsics(intrinsics)
     else:
-        K = default_intrinsics(shape[1], shape[0], DEFAULT_HFOV_DEG)
-        notes.append(f"intrinsics not given: assumed a {DEFAULT_HFOV_DEG:g}° horizontal field "
-                     "of view with the principal point at the image centre")
+        K, note = assume_intrinsics(shape[1], shape[0])
+        notes.append(note)
     name = Path(image if image is not None else depth).stem  # type: ignore[arg-type]
     if depth_units is None:
         depth_units = "m" if depth_scale is not None else "input"
@@ -240,6 +238,25 @@ def load_frame(image: str | Path | None = None, depth: str | Path | None = None,
         depth_units = "relative"
     return Frame(rgb=rgb, K=K, depth=d, normals=n, depth_kind=depth_kind,  # type: ignore[arg-type]
                  depth_units=depth_units, name=name, notes=notes)
+
+
+def check_output_dir(out_dir: str | Path, overwrite: bool = False) -> Path:
+    """Fail early if ``out_dir`` cannot become an output folder; returns it as a Path.
+
+    Raises
+    ------
+    InvalidInput
+        If ``out_dir`` is an existing file, an existing non-empty folder without ``overwrite``,
+        or its parent folder does not exist.
+    """
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise InvalidInput(f"output path {out} is an existing file, not a folder")
+    if out.is_dir() and any(out.iterdir()) and not overwrite:
+        raise InvalidInput(f"output folder {out} exists and is not empty; pass --overwrite")
+    if not out.parent.is_dir():
+        raise InvalidInput(f"cannot write to {out}: folder {out.parent} does not exist")
+    return out
 
 
 @contextlib.contextmanager
@@ -252,17 +269,10 @@ def atomic_output_dir(out_dir: str | Path, overwrite: bool = False) -> Iterator[
     Raises
     ------
     InvalidInput
-        If ``out_dir`` is an existing file, or an existing non-empty folder without
-        ``overwrite``.
+        As :func:`check_output_dir`.
     """
-    out = Path(out_dir)
-    if out.exists() and not out.is_dir():
-        raise InvalidInput(f"output path {out} is an existing file, not a folder")
-    if out.is_dir() and any(out.iterdir()) and not overwrite:
-        raise InvalidInput(f"output folder {out} exists and is not empty; pass --overwrite")
-    parent = out.parent if str(out.parent) else Path(".")
-    if not parent.is_dir():
-        raise InvalidInput(f"cannot write to {out}: folder {parent} does not exist")
+    out = check_output_dir(out_dir, overwrite)
+    parent = out.parent
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".partial", dir=parent))
     try:
         yield tmp

@@ -78,7 +78,8 @@ def check_stage_contract(cls: type, frame: Frame | None = None, seed: int = 0) -
     rng = np.random.default_rng(seed)
     params = RansacParams()
     if cls.kind == "cues":
-        out = stage.provide(frame.with_(depth=None, normals=None))
+        # Every provider must at least complete given depth with normals (RGB-D input).
+        out = stage.provide(frame.with_(normals=None))
         assert isinstance(out, Frame) and out.depth is not None and out.normals is not None
         assert out.shape == frame.shape
         return

@@ -101,7 +101,8 @@ def test_cli_run_on_files(sample_dir, capsys):
     frame = load_frame(sample_dir / "rgb.png", depth=sample_dir / "depth.npy",
                        intrinsics=sample_dir / "intrinsics.json")
     doc = json.loads((out / "planes.json").read_text())
-    # The corner scene is a floor and two walls, all exact: three planes with tiny RMSE.
+    # The corner scene is a floor and two walls, all exact: three planes with small RMSE
+    # (normals estimated from depth blur the wall crease by a pixel or two: millimetres at 3 m).
     assert len(doc["planes"]) == 3
-    assert all(p["rmse"] < 1e-3 for p in doc["planes"])
+    assert all(p["rmse"] < 5e-3 for p in doc["planes"])
     assert doc["intrinsics"]["fx"] == frame.K[0, 0]

@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import sys
 
 from monoplane.cli.common import (
     add_input_args, add_output_args, add_pipeline_args, pipeline_from_args,
 )
-from monoplane.io import load_frame, save_reconstruction
+from monoplane.io import check_output_dir, load_frame, save_reconstruction
 
 DESCRIPTION = """Recover the planes of one image and write labels.png (uint16, 0 = non-planar),
 planes.json (normal . X + offset = 0 in the camera frame and the depth's units), planes.ply,
@@ -32,16 +31,17 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    check_output_dir(args.out, args.overwrite)  # fail before any work
     pipe = pipeline_from_args(args)
     frame = load_frame(args.image, depth=args.depth, normals=args.normals,
                        intrinsics=args.intrinsics, depth_scale=args.depth_scale,
                        nan_as_invalid=args.nan_as_invalid,
                        depth_kind="relative" if args.relative_depth else "metric")
-    for note in frame.notes:
-        print(f"monoplane: note: {note}", file=sys.stderr)
     rec = pipe.run(frame)
     out = save_reconstruction(rec, args.out, overwrite=args.overwrite, report=args.report,
                               progress=not args.quiet)
     if not args.quiet:
+        for note in rec.frame.notes:
+            print(f"note: {note}")
         print(f"{rec.num_planes} planes in {rec.timings.get('total', 0.0):.2f} s -> {out}")
     return 0

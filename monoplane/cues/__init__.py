@@ -1,0 +1,55 @@
+"""Cue machinery shared by cue providers: ONNX model profiles, sessions, pre/post-processing
+and intrinsics handling.
+
+This is public API for third-party cue plugins. A plugin that wraps another monocular network
+declares a :class:`ModelSpec` / :class:`OnnxProfile` and lets a :class:`CueNetwork` do the
+loading, letterboxing, inference and conversion::
+
+    from monoplane.cues import CueNetwork, ModelSpec, OnnxProfile
+
+    PROFILE = OnnxProfile(name="my-net", depth=ModelSpec(output="inverse_depth",
+                                                         size=(518, 518), multiple_of=14))
+    frame = CueNetwork(PROFILE, depth_model="my-net.onnx").provide(frame)
+
+See ``docs/cues.md`` for exporting networks to ONNX.
+"""
+
+from monoplane.cues.intrinsics import (
+    ASSUMED_INTRINSICS_NOTE,
+    DEFAULT_HFOV_DEG,
+    assume_intrinsics,
+    intrinsics_assumed,
+    reassume_intrinsics,
+)
+from monoplane.cues.network import CueNetwork
+from monoplane.cues.profiles import (
+    BUILTIN_PROFILES,
+    IMAGENET_MEAN,
+    IMAGENET_STD,
+    OUTPUT_KINDS,
+    ModelSpec,
+    OnnxProfile,
+    get_profile,
+    parse_axes,
+)
+from monoplane.cues.session import OnnxModel
+from monoplane.cues.transforms import (
+    Letterbox,
+    decode_normals,
+    depth_from_disparity,
+    orient_normals,
+    plan_letterbox,
+    prepare_image,
+    relative_depth_from_depth,
+    restore_map,
+    scaled_intrinsics,
+)
+
+__all__ = [
+    "ASSUMED_INTRINSICS_NOTE", "BUILTIN_PROFILES", "CueNetwork", "DEFAULT_HFOV_DEG",
+    "IMAGENET_MEAN", "IMAGENET_STD", "Letterbox", "ModelSpec", "OUTPUT_KINDS", "OnnxModel",
+    "OnnxProfile", "assume_intrinsics", "decode_normals", "depth_from_disparity",
+    "get_profile", "intrinsics_assumed", "orient_normals", "parse_axes", "plan_letterbox",
+    "prepare_image", "reassume_intrinsics", "relative_depth_from_depth", "restore_map",
+    "scaled_intrinsics",
+]

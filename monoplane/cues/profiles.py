@@ -1,0 +1,230 @@
+"""ONNX model profiles: how to feed a monocular network and how to read what it returns.
+
+A :class:`ModelSpec` describes one network (input box, resize policy, normalisation, output
+kind and encoding); an :class:`OnnxProfile` pairs a depth network with an optional normals
+network. Profiles carry no weights and no file paths: users export their own models (see
+``docs/cues.md``) and point the config at them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Any, Literal
+
+from monoplane.errors import ConfigError
+
+OutputKind = Literal["metric_depth", "relative_depth", "inverse_depth", "normals"]
+#: What a network's output means.
+#:
+#: * ``metric_depth``: z-depth in metres (times ``ModelSpec.depth_scale``).
+#: * ``relative_depth``: z-depth up to an unknown scale (affine-invariant networks are treated
+#:   as shift-free).
+#: * ``inverse_depth``: relative disparity ``∝ 1/z`` (MiDaS, Depth Anything).
+#: * ``normals``: a 3-channel normal map, see ``normal_encoding`` and ``normal_axes``.
+OUTPUT_KINDS: tuple[str, ...] = ("metric_depth", "relative_depth", "inverse_depth", "normals")
+RESIZE_POLICIES: tuple[str, ...] = ("keep_aspect", "stretch")
+NORMAL_ENCODINGS: tuple[str, ...] = ("signed", "unsigned")
+
+IMAGENET_MEAN = (0.485, 0.456, 0.406)
+IMAGENET_STD = (0.229, 0.224, 0.225)
+
+
+def parse_axes(axes: str) -> tuple[tuple[int, float], ...]:
+    """Parse a normal axis convention such as ``"x,-y,-z"``.
+
+    Entry ``i`` names the model output channel (and sign) that becomes camera axis ``i`` of
+    OpenCV's frame (x right, y down, z forward). ``"x,y,z"`` is OpenCV itself; ``"x,-y,-z"`` is
+    OpenGL's (y up, z backwards).
+
+    Returns
+    -------
+    tuple
+        Three ``(channel index, sign)`` pairs.
+    """
+    parts = [p.strip().lower() for p in axes.split(",")]
+    out = []
+    for p in parts:
+        sign = -1.0 if p.startswith("-") else 1.0
+        name = p.lstrip("+-")
+        if name not in ("x", "y", "z"):
+            break
+        out.append(("xyz".index(name), sign))
+    if len(parts) != 3 or len(out) != 3 or len({c for c, _ in out}) != 3:
+        raise ConfigError(
+            f"normal axes must map camera x,y,z to a permutation of the model's x,y,z with "
+            f"optional signs, e.g. 'x,-y,-z'; got {axes!r}"
+        )
+    return tuple(out)
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    """How to run one ONNX network and interpret its output.
+
+    Attributes
+    ----------
+    output : str
+        One of :data:`OUTPUT_KINDS`.
+    size : tuple of int
+        ``(height, width)`` input box in pixels. A model exported with fixed spatial input
+        dimensions overrides it with its own.
+    resize : str
+        ``"keep_aspect"``: scale the image to fit the box, then pad bottom/right by edge
+        replication up to a multiple of ``multiple_of`` (or to the fixed input size);
+        ``"stretch"``: resize to the box (rounded to the multiple), ignoring the aspect ratio.
+    multiple_of : int
+        The padded input height and width are multiples of this (32 for DPT/CNN decoders,
+        14 for ViT-14 backbones such as DINOv2).
+    mean, std : tuple of float
+        Per-channel RGB normalisation applied to values scaled to [0, 1].
+    normal_encoding : str
+        ``"signed"`` (components in [-1, 1]) or ``"unsigned"`` (``(n + 1) / 2`` in [0, 1]).
+    normal_axes : str
+        Axis convention of the normals, see :func:`parse_axes`.
+    depth_scale : float
+        Factor turning a metric output into metres (e.g. 0.001 for millimetres).
+    image_input : str or None
+        Name of the image input (N, 3, H, W) float32; ``None`` takes the only other input.
+    intrinsics_input : str or None
+        Name of a (N, 3, 3) float32 intrinsics input (camera-aware networks such as ZeroDepth);
+        the intrinsics are rescaled to the network's input resolution.
+    output_name : str or None
+        Output to read; ``None`` reads the first.
+    """
+
+    output: str
+    size: tuple[int, int] = (384, 384)
+    resize: str = "keep_aspect"
+    multiple_of: int = 32
+    mean: tuple[float, float, float] = (0.5, 0.5, 0.5)
+    std: tuple[float, float, float] = (0.5, 0.5, 0.5)
+    normal_encoding: str = "signed"
+    normal_axes: str = "x,y,z"
+    depth_scale: float = 1.0
+    image_input: str | None = None
+    intrinsics_input: str | None = None
+    output_name: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.output not in OUTPUT_KINDS:
+            raise ConfigError(
+                f"model output must be one of {', '.join(OUTPUT_KINDS)}, got {self.output!r}")
+        if self.resize not in RESIZE_POLICIES:
+            raise ConfigError(
+                f"resize must be one of {', '.join(RESIZE_POLICIES)}, got {self.resize!r}")
+        if self.normal_encoding not in NORMAL_ENCODINGS:
+            raise ConfigError(f"normal_encoding must be one of {', '.join(NORMAL_ENCODINGS)}, "
+                              f"got {self.normal_encoding!r}")
+        if len(self.size) != 2 or min(self.size) < 1:
+            raise ConfigError(f"input size must be (height, width) > 0, got {self.size}")
+        if self.multiple_of < 1:
+            raise ConfigError(f"multiple_of must be >= 1, got {self.multiple_of}")
+        if len(self.mean) != 3 or len(self.std) != 3 or min(self.std) <= 0:
+            raise ConfigError(f"mean and std need 3 values, std > 0; got {self.mean}, {self.std}")
+        if self.depth_scale <= 0:
+            raise ConfigError(f"depth_scale must be positive, got {self.depth_scale}")
+        parse_axes(self.normal_axes)
+
+    @property
+    def is_depth(self) -> bool:
+        """True for the three depth-like output kinds."""
+        return self.output != "normals"
+
+    def describe(self) -> str:
+        """One line naming the expected signature, used in error messages."""
+        inputs = f"image input (1, 3, H, W) float32 named {self.image_input or '<any>'}"
+        if self.intrinsics_input:
+            inputs += f" and intrinsics input (1, 3, 3) float32 named {self.intrinsics_input}"
+        if self.is_depth:
+            out = f"one {self.output.replace('_', ' ')} output (1, 1, H, W) or (1, H, W)"
+        else:
+            out = "one normals output (1, 3, H, W) or (1, H, W, 3)"
+        return f"{inputs}; {out}"
+
+
+@dataclass(frozen=True)
+class OnnxProfile:
+    """A depth network and an optional normals network that together provide cues.
+
+    Attributes
+    ----------
+    name : str
+        Profile name used in configs (``cues.profile``).
+    depth : ModelSpec
+        The depth network (any depth-like output kind).
+    normals : ModelSpec or None
+        The normals network, when the model family has one; without it (or without a model
+        file), normals are estimated from the predicted depth.
+    hfov_deg : float or None
+        Horizontal field of view to assume when the image comes without intrinsics; ``None``
+        uses monoplane's default (60°).
+    summary : str
+        One line for listings and docs.
+    """
+
+    name: str
+    depth: ModelSpec
+    normals: ModelSpec | None = None
+    hfov_deg: float | None = None
+    summary: str = ""
+
+    def __post_init__(self) -> None:
+        if not self.depth.is_depth:
+            raise ConfigError(f"profile {self.name!r}: the depth model must output depth")
+        if self.normals is not None and self.normals.is_depth:
+            raise ConfigError(f"profile {self.name!r}: the normals model must output normals")
+
+    def with_overrides(self, *, size: tuple[int, int] | None = None,
+                       mean: tuple[float, float, float] | None = None,
+                       std: tuple[float, float, float] | None = None,
+                       normal_axes: str | None = None) -> OnnxProfile:
+        """Copy with user overrides applied (``size``, ``mean``, ``std`` to both networks)."""
+        changes: dict[str, Any] = {
+            k: v for k, v in (("size", size), ("mean", mean), ("std", std)) if v}
+        depth = replace(self.depth, **changes)
+        normals = self.normals
+        if normals is not None:
+            normals = replace(normals, **changes)
+            if normal_axes:
+                normals = replace(normals, normal_axes=normal_axes)
+        return replace(self, depth=depth, normals=normals)
+
+
+OMNIDATA = OnnxProfile(
+    name="omnidata",
+    depth=ModelSpec(output="relative_depth", size=(384, 384), multiple_of=32),
+    # 2D3DS convention, as documented by the Omnidata authors: x right, y down, z towards the
+    # viewer, stored as (n + 1) / 2. OpenCV's z points away from the viewer.
+    normals=ModelSpec(output="normals", size=(384, 384), multiple_of=32, mean=(0.0, 0.0, 0.0),
+                      std=(1.0, 1.0, 1.0), normal_encoding="unsigned", normal_axes="x,y,-z"),
+    summary="Omnidata v2 DPT: relative depth and surface normals (two models)",
+)
+
+ZERODEPTH = OnnxProfile(
+    name="zerodepth",
+    depth=ModelSpec(output="metric_depth", size=(480, 640), multiple_of=32,
+                    mean=(0.0, 0.0, 0.0), std=(1.0, 1.0, 1.0), image_input="rgb",
+                    intrinsics_input="intrinsics"),
+    normals=ModelSpec(output="normals", size=(480, 640), multiple_of=32),
+    summary="ZeroDepth: camera-aware metric depth (image + intrinsics); normals from depth "
+            "or a second OpenCV-frame normals model",
+)
+
+MIDAS = OnnxProfile(
+    name="midas",
+    depth=ModelSpec(output="inverse_depth", size=(384, 384), multiple_of=32),
+    summary="MiDaS v3 DPT: relative inverse depth; normals from depth",
+)
+
+#: Profiles shipped with monoplane, by name.
+BUILTIN_PROFILES: dict[str, OnnxProfile] = {p.name: p for p in (OMNIDATA, ZERODEPTH, MIDAS)}
+
+
+def get_profile(name: str) -> OnnxProfile:
+    """Look up a built-in profile; unknown names raise :class:`ConfigError` listing the valid."""
+    try:
+        return BUILTIN_PROFILES[name]
+    except KeyError:
+        raise ConfigError(
+            f"unknown cue profile {name!r}; valid profiles: {', '.join(sorted(BUILTIN_PROFILES))}"
+        ) from None

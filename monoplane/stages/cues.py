@@ -1,0 +1,186 @@
+"""Cue providers: where a frame's depth and normals come from.
+
+* ``given``: depth (and optionally normals) supplied by the user, e.g. an RGB-D frame; missing
+  normals are estimated from depth with edge-aware fits
+  (:func:`monoplane.geometry.normals.normals_from_depth`).
+* ``onnx``: monocular networks run with onnxruntime on the CPU, described by a profile
+  (``omnidata``, ``zerodepth``, ``midas``; see :mod:`monoplane.cues.profiles`). The profile is
+  chosen purely by config::
+
+      [cues]
+      plugin = "onnx"
+      profile = "omnidata"
+      depth_model = "models/omnidata_dpt_depth.onnx"
+      normal_model = "models/omnidata_dpt_normal.onnx"
+
+Both keep cues the user already gave, orient normals towards the camera and record what they
+did in ``frame.notes`` (written to ``planes.json``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from monoplane.cues.network import CueNetwork
+from monoplane.cues.profiles import BUILTIN_PROFILES, OnnxProfile, get_profile
+from monoplane.cues.transforms import orient_normals
+from monoplane.errors import ConfigError, InvalidInput
+from monoplane.geometry.normals import normals_from_depth
+from monoplane.hookspecs import hookimpl
+from monoplane.stages.base import CueProvider, Stage, param
+from monoplane.types import Frame
+
+
+@dataclass
+class GivenCuesConfig:
+    """Parameters of the ``given`` cue provider."""
+
+    recompute_normals: bool = param(
+        False, "estimate normals from depth even when normals are given")
+    normals_radius: int = param(
+        0, "half-size in pixels of the window that estimates normals from depth "
+           "(0: about 1 % of the longer image side)")
+    normals_stride: int = param(
+        0, "spacing in pixels of the samples in that window, larger = wider at the same cost "
+           "(0: automatic)")
+    max_jump: float = param(
+        0.05, "relative depth jump between neighbouring pixels that marks a depth edge")
+
+    def __post_init__(self) -> None:
+        _check_normals_options(self.normals_radius, self.normals_stride, self.max_jump)
+
+
+def _check_normals_options(radius: int, stride: int, max_jump: float) -> None:
+    if radius < 0 or stride < 0 or (radius and stride > radius):
+        raise ConfigError(f"need 0 <= normals_stride <= normals_radius (0 = automatic), got "
+                          f"radius {radius}, stride {stride}")
+    if max_jump <= 0:
+        raise ConfigError(f"max_jump must be positive, got {max_jump}")
+
+
+class GivenCues(CueProvider):
+    """Depth and normals given with the image (RGB-D, precomputed network outputs)."""
+
+    name = "given"
+    Config = GivenCuesConfig
+
+    def provide(self, frame: Frame) -> Frame:
+        """Check the given cues, estimate missing normals, orient normals to the camera.
+
+        Parameters
+        ----------
+        frame : Frame
+            Must have ``depth``; ``normals`` are optional.
+
+        Returns
+        -------
+        Frame
+            With ``normals`` set: unit, camera frame (OpenCV axes), facing the camera, zero
+            where depth is invalid.
+        """
+        cfg = self.config
+        if frame.depth is None:
+            raise InvalidInput(
+                f"{frame.name}: cue provider 'given' needs a depth map (--depth FILE); to "
+                f"predict depth from the image use cues.plugin=onnx")
+        notes = list(frame.notes)
+        if frame.normals is None or cfg.recompute_normals:
+            normals = normals_from_depth(frame.depth, frame.K, radius=cfg.normals_radius or None,
+                                         stride=cfg.normals_stride or None,
+                                         max_jump=cfg.max_jump)
+            notes.append("normals: estimated from depth (edge-aware inverse-depth fits)")
+        else:
+            normals = orient_normals(frame.normals, frame.K)
+            flipped = np.sum(np.any(normals != frame.normals, axis=-1))
+            if flipped:
+                notes.append(f"normals: {int(flipped)} given normals pointed away from the "
+                             f"camera and were flipped")
+        normals = np.where((frame.depth > 0)[..., None], normals, 0).astype(np.float32)
+        return frame.with_(normals=normals, notes=notes)
+
+
+@dataclass
+class OnnxCuesConfig:
+    """Parameters of the ``onnx`` cue provider."""
+
+    profile: str = param(
+        "omnidata", f"network profile: {', '.join(sorted(BUILTIN_PROFILES))}")
+    depth_model: str = param("", "path to the depth network's .onnx file")
+    normal_model: str = param(
+        "", "path to the normals network's .onnx file (empty: normals estimated from depth)")
+    threads: int = param(2, "onnxruntime CPU threads per network")
+    input_size: list[int] = param(
+        [], "override the profile's network input box [height, width] in pixels")
+    mean: list[float] = param([], "override the profile's RGB mean (3 values, 0-1 scale)")
+    std: list[float] = param([], "override the profile's RGB std (3 values, 0-1 scale)")
+    normal_axes: str = param(
+        "", "override the normals network's axis convention, e.g. 'x,-y,-z' (see docs/cues.md)")
+    hfov_deg: float = param(
+        0.0, "field of view to assume for images without intrinsics (0: the profile's, or 60)")
+    disparity_floor: float = param(
+        0.01, "inverse-depth networks: disparities below this fraction of the median are "
+              "invalid")
+    normals_radius: int = param(
+        0, "half-size in pixels of the window that estimates normals from depth "
+           "(0: about 1 % of the longer image side)")
+    normals_stride: int = param(
+        0, "spacing in pixels of the samples in that window, larger = wider at the same cost "
+           "(0: automatic)")
+    max_jump: float = param(
+        0.05, "relative depth jump between neighbouring pixels that marks a depth edge")
+
+    def __post_init__(self) -> None:
+        get_profile(self.profile)
+        if self.threads < 1:
+            raise ConfigError(f"threads must be >= 1, got {self.threads}")
+        if self.input_size and (len(self.input_size) != 2 or min(self.input_size) < 1):
+            raise ConfigError(f"input_size must be [height, width], got {self.input_size}")
+        for key in ("mean", "std"):
+            if getattr(self, key) and len(getattr(self, key)) != 3:
+                raise ConfigError(f"{key} needs 3 values, got {getattr(self, key)}")
+        if self.hfov_deg < 0 or self.hfov_deg >= 180:
+            raise ConfigError(f"hfov_deg must be in [0, 180), got {self.hfov_deg}")
+        if not 0 < self.disparity_floor < 1:
+            raise ConfigError(f"disparity_floor must be in (0, 1), got {self.disparity_floor}")
+        _check_normals_options(self.normals_radius, self.normals_stride, self.max_jump)
+        # Validates the overrides (axes, sizes) now, at config time.
+        self.resolved_profile()
+
+    def resolved_profile(self) -> OnnxProfile:
+        """The chosen profile with this config's overrides applied."""
+        def triple(v: list[float]) -> tuple[float, float, float] | None:
+            return (v[0], v[1], v[2]) if v else None
+
+        size = (self.input_size[0], self.input_size[1]) if self.input_size else None
+        return get_profile(self.profile).with_overrides(
+            size=size, mean=triple(self.mean), std=triple(self.std),
+            normal_axes=self.normal_axes or None)
+
+
+class OnnxCues(CueProvider):
+    """Monocular depth and normals from ONNX networks, described by a profile."""
+
+    name = "onnx"
+    Config = OnnxCuesConfig
+
+    def __init__(self, config: OnnxCuesConfig | None = None) -> None:
+        super().__init__(config)
+        cfg = self.config
+        self.network = CueNetwork(
+            cfg.resolved_profile(), cfg.depth_model or None, cfg.normal_model or None,
+            threads=cfg.threads, disparity_floor=cfg.disparity_floor,
+            hfov_deg=cfg.hfov_deg or None,
+            normals_options={"radius": cfg.normals_radius or None,
+                             "stride": cfg.normals_stride or None, "max_jump": cfg.max_jump})
+
+    def provide(self, frame: Frame) -> Frame:
+        """Predict the frame's missing depth and normals (see :meth:`CueNetwork.provide`)."""
+        return self.network.provide(frame)
+
+
+@hookimpl
+def monoplane_register_cue_providers() -> list[type[Stage]]:
+    """Register the built-in cue providers."""
+    return [GivenCues, OnnxCues]

@@ -1,0 +1,51 @@
+"""Built-in ONNX profiles and overrides."""
+
+from __future__ import annotations
+
+import pytest
+
+from monoplane.cues import BUILTIN_PROFILES, ModelSpec, OnnxProfile, get_profile
+from monoplane.errors import ConfigError
+
+
+def test_builtin_profiles_and_their_outputs() -> None:
+    assert set(BUILTIN_PROFILES) == {"omnidata", "zerodepth", "midas"}
+    omni = get_profile("omnidata")
+    assert omni.depth.output == "relative_depth"
+    assert omni.normals is not None and omni.normals.normal_encoding == "unsigned"
+    zero = get_profile("zerodepth")
+    assert zero.depth.output == "metric_depth" and zero.depth.intrinsics_input == "intrinsics"
+    assert get_profile("midas").depth.output == "inverse_depth"
+    assert get_profile("midas").normals is None
+
+
+def test_unknown_profile_lists_valid_ones() -> None:
+    with pytest.raises(ConfigError, match="midas, omnidata, zerodepth"):
+        get_profile("dpt")
+
+
+def test_overrides_apply_to_both_networks() -> None:
+    p = get_profile("omnidata").with_overrides(size=(256, 320), mean=(0.1, 0.2, 0.3),
+                                               normal_axes="x,-y,-z")
+    assert p.depth.size == (256, 320) and p.normals.size == (256, 320)
+    assert p.depth.mean == (0.1, 0.2, 0.3)
+    assert p.normals.normal_axes == "x,-y,-z"
+    assert p.depth.std == get_profile("omnidata").depth.std
+
+
+@pytest.mark.parametrize("kwargs", [
+    {"output": "disparity"}, {"output": "metric_depth", "resize": "crop"},
+    {"output": "metric_depth", "size": (0, 10)}, {"output": "metric_depth", "std": (1, 0, 1)},
+    {"output": "normals", "normal_encoding": "rgb"}, {"output": "normals", "normal_axes": "x"},
+])
+def test_bad_specs_are_config_errors(kwargs: dict) -> None:
+    with pytest.raises(ConfigError):
+        ModelSpec(**kwargs)
+
+
+def test_profile_checks_roles() -> None:
+    depth = ModelSpec(output="metric_depth")
+    with pytest.raises(ConfigError, match="depth model"):
+        OnnxProfile(name="x", depth=ModelSpec(output="normals"))
+    with pytest.raises(ConfigError, match="normals model"):
+        OnnxProfile(name="x", depth=depth, normals=depth)

@@ -1,0 +1,183 @@
+"""Connected components, small-region removal and refit, on hand-made maps with exact answers."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from monoplane.errors import InvalidInput
+from monoplane.regions import (
+    clean_regions,
+    refit_planes,
+    remove_small_regions,
+    scaled_min_area,
+    split_components,
+)
+from monoplane.types import Frame, Reconstruction, intrinsics_matrix, pixel_rays
+
+# Label 1 has two regions touching only at a corner (joined by 8- but not by 4-connectivity)
+# plus a separate region on the right; label 2 has two regions; 0 is non-planar. New labels go
+# by original label, then by the raster index of each region's first pixel.
+MAP = np.array([
+    [1, 1, 0, 0, 0, 1],
+    [1, 1, 0, 2, 0, 1],
+    [0, 0, 1, 2, 0, 0],
+    [2, 0, 1, 0, 0, 0],
+], dtype=np.int32)
+
+
+def test_split_components_8_connectivity_exact():
+    labels, origin = split_components(MAP, connectivity=8)
+    expected = np.array([
+        [1, 1, 0, 0, 0, 2],
+        [1, 1, 0, 3, 0, 2],
+        [0, 0, 1, 3, 0, 0],
+        [4, 0, 1, 0, 0, 0],
+    ])
+    np.testing.assert_array_equal(labels, expected)
+    np.testing.assert_array_equal(origin, [1, 1, 2, 2])
+    assert labels.dtype == np.int32
+
+
+def test_split_components_4_connectivity_exact():
+    labels, origin = split_components(MAP, connectivity=4)
+    expected = np.array([
+        [1, 1, 0, 0, 0, 2],
+        [1, 1, 0, 4, 0, 2],
+        [0, 0, 3, 4, 0, 0],
+        [5, 0, 3, 0, 0, 0],
+    ])
+    np.testing.assert_array_equal(labels, expected)
+    np.testing.assert_array_equal(origin, [1, 1, 1, 2, 2])
+
+
+def test_split_components_anti_diagonal_and_edges():
+    # An anti-diagonal chain is one region with 8-connectivity, three with 4-connectivity.
+    m = np.array([[0, 0, 3], [0, 3, 0], [3, 0, 0]], dtype=np.int32)
+    eight, origin8 = split_components(m, 8)
+    np.testing.assert_array_equal(eight, (m > 0).astype(np.int32))
+    np.testing.assert_array_equal(origin8, [3])
+    four, origin4 = split_components(m, 4)
+    np.testing.assert_array_equal(four, [[0, 0, 1], [0, 2, 0], [3, 0, 0]])
+    np.testing.assert_array_equal(origin4, [3, 3, 3])
+    empty, origin = split_components(np.zeros((3, 4), np.int32))
+    assert not empty.any() and origin.size == 0
+    with pytest.raises(InvalidInput):
+        split_components(m, connectivity=6)
+
+
+def test_remove_small_regions_exact():
+    m = np.array([[1, 1, 2], [1, 3, 3], [0, 3, 3]], dtype=np.int32)
+    labels, kept = remove_small_regions(m, min_area=3)
+    np.testing.assert_array_equal(labels, [[1, 1, 0], [1, 2, 2], [0, 2, 2]])
+    np.testing.assert_array_equal(kept, [1, 3])
+    same, kept_all = remove_small_regions(m, min_area=0)
+    np.testing.assert_array_equal(same, m)
+    np.testing.assert_array_equal(kept_all, [1, 2, 3])
+    none, kept_none = remove_small_regions(m, min_area=100)
+    assert not none.any() and kept_none.size == 0
+
+
+def test_scaled_min_area():
+    assert scaled_min_area((192, 256)) == 300
+    assert scaled_min_area((480, 640)) == 1875
+    assert scaled_min_area((96, 128)) == 75
+    assert scaled_min_area((192, 256), 0) == 0
+    with pytest.raises(InvalidInput):
+        scaled_min_area((192, 256), -1)
+
+
+def two_plane_frame(height: int = 40, width: int = 60):
+    """Exact depth of two planes (left: tilted wall, right: floor-like slope) and its labels."""
+    K = intrinsics_matrix(50.0, 50.0, (width - 1) / 2, (height - 1) / 2)
+    rays = pixel_rays(K, height, width)
+    planes = np.array([[0.3, -0.2, -0.9327379, 3.0], [0.0, -0.8, -0.6, 2.0]])
+    planes[:, :3] /= np.linalg.norm(planes[:, :3], axis=1, keepdims=True)
+    labels = np.where(np.arange(width)[None, :] < width // 2, 1, 2).repeat(height, axis=0)
+    p = planes[labels - 1]
+    depth = -p[..., 3] / np.einsum("hwc,hwc->hw", rays, p[..., :3])
+    assert np.all(depth > 0)
+    return Frame(rgb=None, K=K, depth=depth), labels.astype(np.int32), planes
+
+
+def test_refit_recovers_exact_planes():
+    frame, labels, planes = two_plane_frame()
+    # float32 depth limits accuracy; refit on float64 points computed from the exact planes.
+    rays = pixel_rays(frame.K, *frame.shape)
+    p = planes[labels - 1]
+    z = -p[..., 3] / np.einsum("hwc,hwc->hw", rays, p[..., :3])
+    points = rays * z[..., None]
+    wrong = np.array([[0.0, 0.0, -1.0, 1.0], [0.0, 0.0, -1.0, 1.0]])
+    params, rmse, support = refit_planes(points, np.ones(frame.shape, bool), labels, wrong)
+    np.testing.assert_allclose(params, planes, atol=1e-9)
+    np.testing.assert_allclose(rmse, 0.0, atol=1e-9)
+    np.testing.assert_array_equal(support, [1200, 1200])
+
+
+def test_refit_falls_back_without_enough_valid_points():
+    frame, labels, planes = two_plane_frame()
+    points = frame.points()
+    valid = np.ones(frame.shape, bool)
+    valid[labels == 2] = False
+    valid[0, -2:] = True  # two valid points left on plane 2
+    fallback = np.array([[0.0, 0.0, -1.0, 1.0], planes[1]])
+    params, rmse, support = refit_planes(points, valid, labels, fallback)
+    np.testing.assert_allclose(params[0], planes[0], atol=1e-5)
+    np.testing.assert_array_equal(params[1], planes[1])
+    np.testing.assert_array_equal(support, [1200, 2])
+    assert rmse[1] < 1e-5
+
+
+def test_clean_regions_splits_filters_and_refits():
+    frame, labels, planes = two_plane_frame()
+    # One plane label covering both true planes, split by a non-planar column in the middle;
+    # plus a 4-pixel fragment that must disappear.
+    observed = np.ones_like(labels)
+    observed[:, 29:31] = 0
+    observed[0:2, 0:2] = 2
+    rec = Reconstruction(frame=frame, labels=observed,
+                         params=np.array([[0.0, 0.0, -1.0, 2.5], [0.0, 0.0, -1.0, 9.0]]),
+                         config={"refiner": {"plugin": "x"}}, timings={"ransac": 1.0})
+    out = clean_regions(rec, observed, min_area=10, connectivity=8)
+    assert out.num_planes == 2
+    expected = np.zeros_like(labels)
+    expected[:, :29] = 1
+    expected[:, 31:] = 2
+    expected[0:2, 0:2] = 0
+    np.testing.assert_array_equal(out.labels, expected)
+    np.testing.assert_allclose(out.params, planes, atol=1e-5)  # float32 depth
+    assert np.all(out.rmse < 1e-5)
+    np.testing.assert_array_equal(out.support, [40 * 29 - 4, 40 * 29])
+    assert out.config == rec.config and out.timings == rec.timings
+    assert out.frame is frame
+
+
+def test_clean_regions_with_nothing_left():
+    frame, labels, _ = two_plane_frame()
+    rec = Reconstruction(frame=frame, labels=labels,
+                         params=np.array([[0.0, 0.0, -1.0, 2.5], [0.0, 0.0, -1.0, 9.0]]))
+    out = clean_regions(rec, labels, min_area=10_000)
+    assert out.num_planes == 0 and not out.labels.any()
+    assert out.params.shape == (0, 4) and out.rmse.shape == (0,)
+
+
+def test_clean_regions_without_split_keeps_one_plane_per_label():
+    frame, labels, planes = two_plane_frame()
+    # Plane 1 appears as two large regions (left and right of a non-planar column) and one
+    # 4-pixel fragment; plane 2 is a 5x5 block. With split=False the two large regions stay
+    # plane 1, the fragment goes, and plane 2 keeps its own label.
+    observed = np.ones_like(labels)
+    observed[:, 29:31] = 0
+    observed[:3, :3] = 0
+    observed[:2, :2] = 1  # the fragment, cut off by a one-pixel non-planar L
+    observed[35:40, 50:55] = 2
+    params = np.array([[0.0, 0.0, -1.0, 2.5], [0.0, 0.0, -1.0, 9.0]])
+    rec = Reconstruction(frame=frame, labels=observed, params=params)
+    out = clean_regions(rec, observed, min_area=10, split=False)
+    expected = observed.copy()
+    expected[:2, :2] = 0
+    np.testing.assert_array_equal(out.labels, expected)
+    assert out.num_planes == 2
+    split = clean_regions(rec, observed, min_area=10, split=True)
+    assert split.num_planes == 3
+    np.testing.assert_array_equal(np.unique(split.labels), [0, 1, 2, 3])
