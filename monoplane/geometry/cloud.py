@@ -1,0 +1,280 @@
+"""The oriented, coloured point cloud that plane RANSAC works on (paper §III-A).
+
+A :class:`PlaneCloud` is a frame's valid pixels unprojected into the camera frame (OpenCV axes:
+x right, y down, z forward) and then normalised "roughly into a unit sphere" so that the RANSAC
+thresholds (ε = 0.02, α_p² = 0.005, ...) mean the same thing whatever the depth's scale or unit:
+
+    X_norm = (X_cam - center) / scale
+
+``center`` is the centroid of the valid points and ``scale`` the largest distance of a valid
+point from it, so every point lies in the closed unit ball.
+
+Subsampling
+-----------
+At high resolution RANSAC runs on a random subset of at most ``max_points`` valid pixels (drawn
+from the caller's generator, so it is deterministic for a seed). :meth:`PlaneCloud.propagate`
+then carries the labels of the subset to every valid pixel. A pixel first takes the label of
+its nearest sampled pixel in the image (a distance transform). Where that is doubtful (the
+sample is farther in 3D than a radius tied to the sampling density, or the pixel is not close
+to the sample's plane) it is decided in 3D instead: non-planar if its nearest 3D sample is
+non-planar or out of the radius, else the closest plane among its few nearest samples' planes.
+Neighbour transfer keeps region extents where the graph cut put them (a plain per-plane
+distance test would re-open holes that the proximity terms had closed), choosing by plane
+distance keeps creases sharp, and the 3D radius stops labels leaking across depth jumps.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+from scipy.ndimage import distance_transform_edt
+from scipy.spatial import cKDTree
+
+from monoplane.errors import InvalidInput
+from monoplane.types import Frame
+
+#: A non-sampled pixel inherits its nearest sample's label only within this many times the
+#: median sample-to-nearest-sample spacing.
+PROPAGATION_RADIUS_FACTOR = 4.0
+#: Nearest samples whose planes compete for a non-sampled pixel (see :meth:`propagate`).
+PROPAGATION_NEIGHBOURS = 4
+
+
+@dataclass
+class PlaneCloud:
+    """Oriented point cloud of one frame, normalised into the unit sphere.
+
+    Attributes
+    ----------
+    points : numpy.ndarray
+        (N, 3) float64 normalised points ``(X_cam - center) / scale`` (camera axes, unitless).
+    normals : numpy.ndarray
+        (N, 3) float64 unit normals in the camera frame (normalisation does not rotate them),
+        facing the camera.
+    colors : numpy.ndarray or None
+        (N, 3) float64 RGB in [0, 1]; ``None`` when the frame has no colour (depth-only or grey
+        input), in which case colour terms are dropped.
+    pixels : numpy.ndarray
+        (N,) int64 flat pixel index ``v * W + u`` of each point.
+    center : numpy.ndarray
+        (3,) float64 camera-frame centre subtracted before scaling, in depth units.
+    scale : float
+        Depth units per normalised unit.
+    shape : tuple of int
+        ``(H, W)`` of the frame.
+    all_points : numpy.ndarray
+        (V, 3) float64 normalised points of *every* valid pixel (equal to ``points`` when no
+        subsampling happened).
+    all_pixels : numpy.ndarray
+        (V,) int64 flat pixel index of every valid pixel, ascending.
+    """
+
+    points: np.ndarray
+    normals: np.ndarray
+    colors: np.ndarray | None
+    pixels: np.ndarray
+    center: np.ndarray
+    scale: float
+    shape: tuple[int, int]
+    all_points: np.ndarray
+    all_pixels: np.ndarray
+
+    def __post_init__(self) -> None:
+        n = self.points.shape[0]
+        if self.points.shape != (n, 3) or self.normals.shape != (n, 3):
+            raise InvalidInput("points and normals must both have shape (N, 3)")
+        if self.colors is not None and self.colors.shape != (n, 3):
+            raise InvalidInput("colors must have shape (N, 3)")
+        if self.pixels.shape != (n,):
+            raise InvalidInput("pixels must have shape (N,)")
+        if not self.scale > 0:
+            raise InvalidInput(f"scale must be positive, got {self.scale}")
+
+    @property
+    def size(self) -> int:
+        """Number N of points RANSAC works on."""
+        return int(self.points.shape[0])
+
+    @cached_property
+    def tree(self) -> cKDTree:
+        """KD-tree over ``points`` (built on first use)."""
+        return cKDTree(self.points)
+
+    @property
+    def subsampled(self) -> bool:
+        """True when RANSAC works on a subset of the valid pixels."""
+        return self.points.shape[0] != self.all_points.shape[0]
+
+    @classmethod
+    def from_frame(cls, frame: Frame, max_points: int | None = None,
+                   rng: np.random.Generator | None = None) -> PlaneCloud:
+        """Unproject a frame's valid pixels into a normalised oriented cloud.
+
+        Parameters
+        ----------
+        frame : Frame
+            Needs ``depth`` and ``normals`` (camera frame, facing the camera); ``rgb`` is
+            optional and ignored when grey.
+        max_points : int, optional
+            Keep at most this many points, drawn uniformly without replacement; ``None`` or
+            a value >= the number of valid pixels keeps all of them.
+        rng : numpy.random.Generator, optional
+            Source of the subsampling; required when subsampling happens.
+
+        Returns
+        -------
+        PlaneCloud
+            Points ordered by ascending pixel index.
+
+        Raises
+        ------
+        InvalidInput
+            When the frame lacks depth or normals or has fewer than 3 valid pixels.
+        """
+        if frame.depth is None or frame.normals is None:
+            raise InvalidInput(
+                f"{frame.name}: plane fitting needs depth and normals; run a cue provider first"
+            )
+        valid = frame.valid.ravel()
+        all_pixels = np.flatnonzero(valid).astype(np.int64)
+        if all_pixels.size < 3:
+            raise InvalidInput(f"{frame.name}: fewer than 3 valid pixels")
+        cam = frame.points().reshape(-1, 3)[all_pixels]
+        center = cam.mean(axis=0)
+        scale = float(np.sqrt(((cam - center) ** 2).sum(axis=1).max()))
+        if scale <= 0:
+            raise InvalidInput(f"{frame.name}: all valid pixels unproject to the same point")
+        all_points = (cam - center) / scale
+
+        keep = all_pixels
+        points = all_points
+        if max_points is not None and all_pixels.size > max_points:
+            if max_points < 3:
+                raise InvalidInput(f"max_points must be at least 3, got {max_points}")
+            if rng is None:
+                raise InvalidInput("subsampling a cloud needs a random generator")
+            chosen = np.sort(rng.choice(all_pixels.size, size=max_points, replace=False))
+            keep = all_pixels[chosen]
+            points = all_points[chosen]
+
+        normals = frame.normals.reshape(-1, 3)[keep].astype(np.float64)
+        normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+        colors = None
+        if frame.has_color and frame.rgb is not None:
+            colors = frame.rgb.reshape(-1, 3)[keep].astype(np.float64) / 255.0
+        return cls(points=np.ascontiguousarray(points), normals=normals, colors=colors,
+                   pixels=keep, center=center, scale=scale, shape=frame.shape,
+                   all_points=all_points, all_pixels=all_pixels)
+
+    def plane_to_camera(self, planes: np.ndarray) -> np.ndarray:
+        """Express normalised-frame planes in the camera frame and depth units.
+
+        ``n · X_norm + d = 0`` with ``X_norm = (X_cam - c) / s`` gives
+        ``n · X_cam + (s d - n · c) = 0``.
+
+        Parameters
+        ----------
+        planes : numpy.ndarray
+            (P, 4) or (4,) unit-normal planes in the normalised frame.
+
+        Returns
+        -------
+        numpy.ndarray
+            Same shape, unit normals, camera frame, not re-oriented.
+        """
+        p = np.array(planes, dtype=np.float64)
+        out = p.copy()
+        out[..., 3] = self.scale * p[..., 3] - p[..., :3] @ self.center
+        return out
+
+    def plane_to_normalised(self, planes: np.ndarray) -> np.ndarray:
+        """Inverse of :meth:`plane_to_camera`: ``d_norm = (d + n · c) / s``.
+
+        Parameters
+        ----------
+        planes : numpy.ndarray
+            (P, 4) or (4,) unit-normal camera-frame planes in depth units.
+
+        Returns
+        -------
+        numpy.ndarray
+            Same shape, planes in the normalised frame.
+        """
+        p = np.array(planes, dtype=np.float64)
+        out = p.copy()
+        out[..., 3] = (p[..., 3] + p[..., :3] @ self.center) / self.scale
+        return out
+
+    def propagate(self, labels: np.ndarray, planes: np.ndarray | None = None,
+                  spacing: float | None = None, tolerance: float = 0.0) -> np.ndarray:
+        """Carry per-point labels of the (possibly subsampled) cloud to the full image.
+
+        Parameters
+        ----------
+        labels : numpy.ndarray
+            (N,) integer labels of ``points`` (0 = non-planar, ``i`` = ``planes[i - 1]``).
+        planes : numpy.ndarray, optional
+            (P, 4) planes of the labels in the normalised frame. When given, a pixel whose
+            nearest sample is planar but which lies farther than ``tolerance`` from that
+            sample's plane takes, among the planar labels of its
+            :data:`PROPAGATION_NEIGHBOURS` nearest samples, the plane it is closest to; this
+            keeps creases between planes sharp instead of following the sampling pattern.
+        spacing : float, optional
+            Median distance from a point to its nearest other point, if known already.
+        tolerance : float
+            Distance to its nearest sample's plane (normalised units) below which a pixel
+            keeps that label without comparing planes.
+
+        Returns
+        -------
+        numpy.ndarray
+            (H, W) int32 label image; invalid pixels are 0. See the module docstring for the
+            nearest-sample rule used on pixels that were not sampled.
+        """
+        labels = np.asarray(labels)
+        h, w = self.shape
+        out = np.zeros(h * w, dtype=np.int32)
+        if not self.subsampled:
+            out[self.pixels] = labels
+            return out.reshape(h, w)
+        if spacing is None:
+            nn, _ = self.tree.query(self.points, k=2)
+            spacing = float(np.median(nn[:, 1]))
+        radius = PROPAGATION_RADIUS_FACTOR * spacing
+        # Nearest sample in the image first (a distance transform, far cheaper than a 3D query
+        # for every pixel); pixels where that choice is doubtful are resolved in 3D below.
+        sampled = np.zeros(h * w, dtype=bool)
+        sampled[self.pixels] = True
+        _, (rows, cols) = distance_transform_edt(~sampled.reshape(h, w), return_indices=True)
+        sample_of = np.full(h * w, -1, dtype=np.int64)
+        sample_of[self.pixels] = np.arange(self.size)
+        near = sample_of[(rows * w + cols).ravel()[self.all_pixels]]
+        full = labels[near].astype(np.int32)
+        gap = ((self.all_points - self.points[near]) ** 2).sum(axis=1) > radius**2
+        unsure = gap
+        p = None
+        if planes is not None and len(planes):
+            p = np.asarray(planes, dtype=np.float64)
+            lab = np.maximum(full - 1, 0)
+            resid = np.abs(np.einsum("vc,vc->v", p[lab, :3], self.all_points) + p[lab, 3])
+            unsure = gap | ((full > 0) & (resid > tolerance))
+        unsure = np.flatnonzero(unsure)
+        k = 1 if p is None else min(PROPAGATION_NEIGHBOURS, self.size)
+        d_k, n_k = self.tree.query(self.all_points[unsure], k=k, distance_upper_bound=radius)
+        d_k, n_k = d_k.reshape(unsure.size, k), n_k.reshape(unsure.size, k)
+        cand = np.where(np.isfinite(d_k), labels[np.minimum(n_k, self.size - 1)], 0)
+        pick = cand[:, 0]
+        if p is not None:
+            lab = np.maximum(cand - 1, 0)
+            res_k = np.abs(np.einsum("vkc,vc->vk", p[lab, :3], self.all_points[unsure])
+                           + p[lab, 3])
+            res_k[cand == 0] = np.inf
+            best = cand[np.arange(unsure.size), np.argmin(res_k, axis=1)]
+            pick = np.where(pick > 0, best, 0)
+        full[unsure] = pick
+        out[self.all_pixels] = full
+        # Sampled pixels keep their own label even if a closer duplicate point exists.
+        out[self.pixels] = labels
+        return out.reshape(h, w)

@@ -1,0 +1,298 @@
+"""Sequential multi-plane RANSAC driver (paper §III-A/B): the host side of the RANSAC stages.
+
+One plane at a time, on the points not yet assigned (the *pool*):
+
+1. the sampler draws minimal samples in batches and the scorer scores the exact 3-point planes
+   on the pool, vectorised; the number of batches adapts to the best inlier ratio w so far,
+   ``log(1 - confidence) / log(1 - w³)``, between ``min_iterations`` and ``max_iterations``;
+2. the labeler labels the pool for the best hypothesis (threshold or graph cut on the kNN
+   subgraph of the pool);
+3. local optimisation: least-squares refit on the inliers (model normal θ_n = mean predicted
+   normal of the inliers), relabel, and keep the refit while the labeler's energy decreases;
+4. the plane is accepted if its support reaches ``min_support``, otherwise the search stops;
+   its inliers leave the pool.
+
+The cloud and its neighbour graph are built once per frame. Afterwards labels are carried to
+every valid pixel (:meth:`PlaneCloud.propagate`), each plane is refit by least squares on all
+its pixels in the camera frame and the depth's units, and normals are turned towards the
+camera. All randomness comes from one generator seeded with ``seed``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, TypeVar
+
+import numpy as np
+
+from monoplane.errors import ConfigError, StageError
+from monoplane.geometry.cloud import PlaneCloud
+from monoplane.geometry.graph import NeighbourGraph
+from monoplane.geometry.planes import fit_plane, planes_from_triplets
+from monoplane.stages.base import (
+    Labeler,
+    Labeling,
+    RansacParams,
+    Sampler,
+    Scorer,
+    Stage,
+    param,
+)
+from monoplane.types import Frame, Reconstruction, orient_towards_camera
+
+T = TypeVar("T")
+
+
+@dataclass
+class RansacConfig:
+    """Parameters of the sequential RANSAC driver (config table ``[ransac]``).
+
+    Distances are in unit-sphere units of the normalised cloud (paper §III-A).
+    """
+
+    epsilon: float = param(0.02, "inlier distance threshold ε, unit-sphere units")
+    epsilon_n_deg: float = param(10.0, "normal angle threshold ε_n in degrees")
+    confidence: float = param(0.99, "RANSAC confidence for the adaptive number of samples")
+    max_iterations: int = param(1000, "most minimal samples drawn per plane")
+    min_iterations: int = param(100, "fewest minimal samples drawn per plane")
+    batch_size: int = param(100, "minimal samples drawn and scored together")
+    min_support: float = param(
+        0.006, "smallest plane, as a fraction of the cloud's points (paper: 300 px at 256x192)")
+    min_support_points: int = param(30, "smallest plane in points, whatever the fraction")
+    max_planes: int = param(20, "most planes extracted from one frame")
+    knn: int = param(8, "neighbours per point in the graph-cut neighbourhood graph")
+    max_points: int = param(20000, "subsample the valid pixels to at most this many points")
+    lo_iterations: int = param(3, "local optimisation rounds (refit + relabel) per plane")
+    score_points: int = param(
+        5000, "score hypotheses on a random subset of at most this many pool points (0 = all)")
+    seed: int = param(0, "seed of the random generator; equal seeds give equal results")
+
+    def __post_init__(self) -> None:
+        checks = [
+            (self.epsilon > 0, "epsilon must be positive"),
+            (0 < self.epsilon_n_deg <= 180, "epsilon_n_deg must lie in (0, 180]"),
+            (0 < self.confidence < 1, "confidence must lie in (0, 1)"),
+            (self.batch_size >= 1, "batch_size must be at least 1"),
+            (1 <= self.min_iterations <= self.max_iterations,
+             "need 1 <= min_iterations <= max_iterations"),
+            (0 <= self.min_support < 1, "min_support must lie in [0, 1)"),
+            (self.min_support_points >= 3, "min_support_points must be at least 3"),
+            (self.max_planes >= 1, "max_planes must be at least 1"),
+            (self.knn >= 1, "knn must be at least 1"),
+            (self.max_points >= 3, "max_points must be at least 3"),
+            (self.lo_iterations >= 0, "lo_iterations must be non-negative"),
+            (self.score_points == 0 or self.score_points >= 3,
+             "score_points must be 0 (all) or at least 3"),
+        ]
+        for ok, message in checks:
+            if not ok:
+                raise ConfigError(f"ransac: {message}")
+
+    @property
+    def params(self) -> RansacParams:
+        """The thresholds shared with the sampler, scorer and labeler."""
+        return RansacParams(epsilon=self.epsilon, epsilon_n_deg=self.epsilon_n_deg)
+
+
+def _call(stage: Stage, fn: Callable[..., T], *args: Any) -> T:
+    """Run one stage method, reporting a failure with the stage's kind and plugin name."""
+    try:
+        return fn(*args)
+    except StageError:
+        raise
+    except Exception as exc:
+        raise StageError(stage.kind, stage.name, exc) from exc
+
+
+def _unit_mean(normals: np.ndarray, fallback: np.ndarray) -> np.ndarray:
+    """Normalised mean of (..., K, 3) normals over K; ``fallback`` (..., 3) where it vanishes."""
+    m = normals.mean(axis=-2)
+    norm = np.linalg.norm(m, axis=-1, keepdims=True)
+    return np.where(norm > 1e-9, m / np.maximum(norm, 1e-300), fallback)
+
+
+def required_iterations(inlier_ratio: float, confidence: float, sample_size: int = 3) -> float:
+    """Samples needed to draw one all-inlier sample with the given confidence.
+
+    Parameters
+    ----------
+    inlier_ratio : float
+        Fraction w of inliers in the pool.
+    confidence : float
+        Wanted probability of success.
+    sample_size : int
+        Points per minimal sample.
+
+    Returns
+    -------
+    float
+        ``log(1 - confidence) / log(1 - w^s)``; ``inf`` when w = 0, 1 when w = 1.
+    """
+    good = inlier_ratio ** sample_size
+    if good <= 0:
+        return math.inf
+    if good >= 1:
+        return 1.0
+    return math.log(1.0 - confidence) / math.log1p(-good)
+
+
+class SequentialRansac:
+    """Sequential plane RANSAC with pluggable sampler, scorer and labeler.
+
+    Parameters
+    ----------
+    sampler, scorer, labeler : Stage
+        The RANSAC stages (see :mod:`monoplane.stages.base`).
+    config : RansacConfig, optional
+        Driver parameters; defaults to the paper's.
+    """
+
+    def __init__(self, sampler: Sampler, scorer: Scorer, labeler: Labeler,
+                 config: RansacConfig | None = None) -> None:
+        self.sampler = sampler
+        self.scorer = scorer
+        self.labeler = labeler
+        self.config = RansacConfig() if config is None else config
+
+    def run(self, frame: Frame) -> Reconstruction:
+        """Detect planes in a frame.
+
+        Parameters
+        ----------
+        frame : Frame
+            With ``depth`` and ``normals`` (camera frame); colour optional.
+
+        Returns
+        -------
+        Reconstruction
+            ``labels`` (H, W) int32 (0 = non-planar, planes in detection order), ``params``
+            (P, 4) camera-frame planes in the depth's units facing the camera, ``rmse`` (P,)
+            in depth units over each plane's pixels, ``support`` (P,) pixel counts, and
+            ``timings`` in seconds per sub-step (keys ``ransac.*``).
+        """
+        cfg = self.config
+        params = cfg.params
+        rng = np.random.default_rng(cfg.seed)
+        timings = {"ransac.cloud": 0.0, "ransac.graph": 0.0, "ransac.search": 0.0,
+                   "ransac.label": 0.0, "ransac.finalize": 0.0}
+
+        t = time.perf_counter()
+        cloud = PlaneCloud.from_frame(frame, cfg.max_points, rng)
+        timings["ransac.cloud"] = time.perf_counter() - t
+        t = time.perf_counter()
+        graph = NeighbourGraph.build(cloud.points, cfg.knn, tree=cloud.tree)
+        timings["ransac.graph"] = time.perf_counter() - t
+
+        min_support = max(cfg.min_support_points, math.ceil(cfg.min_support * cloud.size))
+        point_labels = np.zeros(cloud.size, dtype=np.int32)
+        pool = np.arange(cloud.size, dtype=np.int64)
+        found: list[np.ndarray] = []
+        while len(found) < cfg.max_planes and pool.size >= min_support:
+            t = time.perf_counter()
+            best = self._search(cloud, pool, rng, params)
+            timings["ransac.search"] += time.perf_counter() - t
+            if best is None:
+                break
+            t = time.perf_counter()
+            plane, inliers = self._label(cloud, graph, pool, best[0], best[1], params)
+            timings["ransac.label"] += time.perf_counter() - t
+            if inliers.sum() < min_support:
+                break
+            found.append(plane)
+            point_labels[pool[inliers]] = len(found)
+            pool = pool[~inliers]
+
+        t = time.perf_counter()
+        # Pixels within ε/4 of their nearest sample's plane keep its label outright.
+        labels = cloud.propagate(point_labels, np.array(found).reshape(-1, 4),
+                                 spacing=graph.spacing, tolerance=0.25 * cfg.epsilon)
+        rec = self._finalize(frame, labels)
+        timings["ransac.finalize"] = time.perf_counter() - t
+        rec.timings.update(timings)
+        return rec
+
+    def _search(self, cloud: PlaneCloud, pool: np.ndarray, rng: np.random.Generator,
+                params: RansacParams) -> tuple[np.ndarray, np.ndarray] | None:
+        """Best hypothesis ``(plane (4,), model normal (3,))`` on the pool, or None."""
+        cfg = self.config
+        # Hypotheses are ranked on a fixed random subset of the pool: the ranking of MSAC-type
+        # costs is stable under uniform subsampling, and scoring dominates the search time.
+        scored = pool
+        if 0 < cfg.score_points < pool.size:
+            scored = np.sort(rng.choice(pool, size=cfg.score_points, replace=False))
+        best_cost = math.inf
+        best: tuple[np.ndarray, np.ndarray] | None = None
+        needed = float(cfg.max_iterations)
+        drawn = 0
+        while drawn < min(max(needed, cfg.min_iterations), cfg.max_iterations):
+            samples = _call(self.sampler, self.sampler.sample, cloud, pool, cfg.batch_size,
+                            rng, params)
+            # Samples the sampler rejected (e.g. normal-inconsistent ones) count as drawn: the
+            # budget bounds the work per plane whatever the rejection rate.
+            drawn += cfg.batch_size
+            if samples.shape[0] == 0:
+                break
+            planes, valid = planes_from_triplets(cloud.points[samples])
+            if not valid.any():
+                continue
+            planes = planes[valid]
+            model_normals = _unit_mean(cloud.normals[samples[valid]], planes[:, :3])
+            costs = _call(self.scorer, self.scorer.score, cloud, scored, planes,
+                          model_normals, params)
+            i = int(np.argmin(costs))
+            if costs[i] < best_cost:
+                best_cost = float(costs[i])
+                best = (planes[i], model_normals[i])
+                dist = np.abs(cloud.points[scored] @ planes[i, :3] + planes[i, 3])
+                ratio = float((dist < params.epsilon).mean())
+                needed = required_iterations(ratio, cfg.confidence)
+        return best
+
+    def _label(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray,
+               plane: np.ndarray, model_normal: np.ndarray,
+               params: RansacParams) -> tuple[np.ndarray, np.ndarray]:
+        """Label the pool for a hypothesis, then refit and relabel while the energy drops.
+
+        Returns the plane (4,) of the kept labelling and its (M,) bool inlier mask.
+        """
+        lab: Labeling = _call(self.labeler, self.labeler.label, cloud, graph, pool, plane,
+                              model_normal, params)
+        for _ in range(self.config.lo_iterations):
+            members = pool[lab.inliers]
+            if members.size < 3:
+                break
+            refit, _ = fit_plane(cloud.points[members])
+            refit_normal = _unit_mean(cloud.normals[members][None], model_normal[None])[0]
+            new = _call(self.labeler, self.labeler.label, cloud, graph, pool, refit,
+                        refit_normal, params)
+            if not new.energy < lab.energy - 1e-9 * max(1.0, abs(lab.energy)):
+                break
+            lab, plane = new, refit
+        return plane, np.asarray(lab.inliers, dtype=bool)
+
+    @staticmethod
+    def _finalize(frame: Frame, labels: np.ndarray) -> Reconstruction:
+        """Least-squares plane per label on all its pixels, camera frame and depth units."""
+        pts = frame.points().reshape(-1, 3)
+        flat = labels.ravel()
+        order = np.argsort(flat, kind="stable")
+        bounds = np.searchsorted(flat[order], np.arange(1, flat.max(initial=0) + 2))
+        out_labels = np.zeros_like(flat)
+        planes, rmses, supports = [], [], []
+        for k in range(1, len(bounds)):
+            idx = order[bounds[k - 1]:bounds[k]]
+            if idx.size < 3:
+                continue
+            plane, rmse = fit_plane(pts[idx])
+            planes.append(plane)
+            rmses.append(rmse)
+            supports.append(idx.size)
+            out_labels[idx] = len(planes)
+        params = (orient_towards_camera(np.array(planes)) if planes
+                  else np.zeros((0, 4)))
+        return Reconstruction(frame=frame, labels=out_labels.reshape(labels.shape),
+                              params=params, rmse=np.array(rmses, dtype=np.float64),
+                              support=np.array(supports, dtype=np.int64))

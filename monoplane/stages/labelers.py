@@ -1,0 +1,121 @@
+"""Binary inlier labelers for one plane hypothesis.
+
+* ``threshold``: vanilla RANSAC, inliers are the points with φ < ε; energy = −|inliers|.
+* ``graph-cut``: GC-RANSAC with the paper's truncated-L2 data term and a constant Potts
+  pairwise term (cut cost 1, both-outliers cost ½(f(0,p) + f(0,q))), E = (1-λ)E_d + λE_s.
+* ``proximity-graph-cut``: MonoPlane's labeler (§III-B2): the data term adds the normal energy
+  E_n and the cut cost of an edge is 0.5 + k_p + k_c + k_n (eqs. kp, kc, kn), so
+  E = (1-λ)E_d + (1-λ)E_n + λE_s. The colour term is dropped when the cloud has no colour.
+
+The graph cuts run only on the kNN subgraph of the points still in the pool.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from monoplane.geometry.cloud import PlaneCloud
+from monoplane.geometry.graph import NeighbourGraph
+from monoplane.graphcut import (
+    gc_ransac_energy,
+    msac_costs,
+    normal_angles,
+    normal_costs,
+    proximity_weights,
+)
+from monoplane.hookspecs import hookimpl
+from monoplane.stages.base import Labeler, Labeling, RansacParams, Stage, param
+
+
+def _pool_distances(cloud: PlaneCloud, pool: np.ndarray, plane: np.ndarray) -> np.ndarray:
+    """(M,) distances of the pool's points to ``plane`` (normalised frame)."""
+    return np.abs(cloud.points[pool] @ plane[:3] + plane[3])
+
+
+class ThresholdLabeler(Labeler):
+    """Vanilla RANSAC labelling: inlier iff the point-to-plane distance is below ε."""
+
+    name = "threshold"
+
+    def label(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray,
+              plane: np.ndarray, model_normal: np.ndarray, params: RansacParams) -> Labeling:
+        """See :meth:`monoplane.stages.base.Labeler.label`; energy is −(inlier count)."""
+        inliers = _pool_distances(cloud, pool, plane) < params.epsilon
+        return Labeling(inliers=inliers, energy=-float(inliers.sum()))
+
+
+@dataclass
+class GraphCutConfig:
+    """Parameters of the GC-RANSAC labeler."""
+
+    lambda_: float = param(0.95, "smoothness weight λ in E = (1-λ)E_d + λE_s")
+
+
+class GraphCutLabeler(Labeler):
+    """GC-RANSAC: truncated-L2 data term, constant Potts pairwise term, exact graph cut."""
+
+    name = "graph-cut"
+    Config = GraphCutConfig
+
+    def label(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray,
+              plane: np.ndarray, model_normal: np.ndarray, params: RansacParams) -> Labeling:
+        """See :meth:`monoplane.stages.base.Labeler.label`."""
+        f0, f1 = msac_costs(_pool_distances(cloud, pool, plane), params.epsilon)
+        edges, _ = graph.subgraph(pool)
+        e = gc_ransac_energy(f0, f1, edges, 1.0, self.config.lambda_)
+        inliers = e.minimize()
+        return Labeling(inliers=inliers, energy=e.energy(inliers))
+
+
+@dataclass
+class ProximityGraphCutConfig:
+    """Parameters of MonoPlane's proximity-guided graph-cut labeler (paper §IV-A values)."""
+
+    lambda_: float = param(0.95, "smoothness weight λ in E = (1-λ)(E_d + E_n) + λE_s")
+    alpha_p2: float = param(0.005, "α_p², squared position bandwidth of k_p, k_c, k_n")
+    alpha_c2: float = param(0.1, "α_c², squared colour bandwidth of k_c (RGB in [0, 1])")
+    alpha_n2: float = param(5.0, "α_n², bandwidth of the normal angle (radians) in k_n")
+    w_p: float = param(1.0, "weight of the position proximity term k_p")
+    w_c: float = param(1.0, "weight of the colour proximity term k_c (dropped without colour)")
+    w_n: float = param(1.0, "weight of the normal proximity term k_n")
+    normal_term: bool = param(True, "add the normal data energy E_n to the data term")
+
+
+class ProximityGraphCutLabeler(Labeler):
+    """MonoPlane labeler: E_d + E_n data terms and proximity-weighted pairwise cut costs."""
+
+    name = "proximity-graph-cut"
+    Config = ProximityGraphCutConfig
+
+    def _edge_weights(self, cloud: PlaneCloud, graph: NeighbourGraph) -> np.ndarray:
+        """(E,) cut costs of every graph edge; they depend on the frame only, so cached."""
+        c = self.config
+        key = ("proximity-graph-cut", id(cloud), c.alpha_p2, c.alpha_c2, c.alpha_n2,
+               c.w_p, c.w_c, c.w_n)
+        w = graph.cache.get(key)
+        if w is None:
+            w = proximity_weights(cloud.points, graph.edges, cloud.normals, cloud.colors,
+                                  c.alpha_p2, c.alpha_c2, c.alpha_n2, c.w_p, c.w_c, c.w_n)
+            graph.cache[key] = w
+        return w
+
+    def label(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray,
+              plane: np.ndarray, model_normal: np.ndarray, params: RansacParams) -> Labeling:
+        """See :meth:`monoplane.stages.base.Labeler.label`."""
+        f0, f1 = msac_costs(_pool_distances(cloud, pool, plane), params.epsilon)
+        g1 = None
+        if self.config.normal_term:
+            g1 = normal_costs(normal_angles(cloud.normals[pool], model_normal), params.epsilon_n)
+        edges, edge_ids = graph.subgraph(pool)
+        cut = self._edge_weights(cloud, graph)[edge_ids]
+        e = gc_ransac_energy(f0, f1, edges, cut, self.config.lambda_, g1)
+        inliers = e.minimize()
+        return Labeling(inliers=inliers, energy=e.energy(inliers))
+
+
+@hookimpl
+def monoplane_register_labelers() -> list[type[Stage]]:
+    """Built-in labelers."""
+    return [ThresholdLabeler, GraphCutLabeler, ProximityGraphCutLabeler]

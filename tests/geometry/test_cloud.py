@@ -1,0 +1,104 @@
+"""PlaneCloud: unprojection, unit-sphere normalisation, plane frame changes, propagation."""
+
+import numpy as np
+import pytest
+
+from monoplane.errors import InvalidInput
+from monoplane.geometry.cloud import PlaneCloud
+from monoplane.types import Frame, intrinsics_matrix, pixel_rays
+
+K = intrinsics_matrix(40.0, 40.0, 15.5, 11.5)
+
+
+def slanted_frame(rgb=True, grey=False, hole=True):
+    """A 24x32 view of the plane z = 2 + 0.5 x (camera frame), with an invalid 4x4 hole."""
+    rays = pixel_rays(K, 24, 32)
+    depth = 2.0 / (1.0 - 0.5 * rays[..., 0])  # z = 2 + 0.5 x with x = z * ray_x
+    n = np.array([0.5, 0.0, -1.0]) / np.linalg.norm([0.5, 0.0, -1.0])
+    normals = np.broadcast_to(n, (24, 32, 3)).copy()
+    if hole:
+        depth[5:9, 5:9] = 0.0
+    image = None
+    if rgb:
+        image = np.zeros((24, 32, 3), np.uint8)
+        image[..., 0] = 200
+        image[..., 1] = 100 if not grey else 200
+        image[..., 2] = 50 if not grey else 200
+    return Frame(rgb=image, K=K, depth=depth.astype(np.float32),
+                 normals=normals.astype(np.float32))
+
+
+def test_points_lie_in_unit_sphere_and_invert_to_camera_points():
+    f = slanted_frame()
+    c = PlaneCloud.from_frame(f)
+    assert c.size == 24 * 32 - 16
+    norms = np.linalg.norm(c.points, axis=1)
+    assert norms.max() == pytest.approx(1.0)
+    np.testing.assert_allclose(c.points.mean(axis=0), 0.0, atol=1e-12)
+    cam = f.points().reshape(-1, 3)[c.pixels]
+    np.testing.assert_allclose(c.points * c.scale + c.center, cam, atol=1e-6)
+    assert not np.isin(np.ravel_multi_index((6, 6), (24, 32)), c.pixels)
+    np.testing.assert_allclose(np.linalg.norm(c.normals, axis=1), 1.0)
+    assert c.colors.shape == (c.size, 3)
+    np.testing.assert_allclose(c.colors[0], [200 / 255, 100 / 255, 50 / 255])
+
+
+@pytest.mark.parametrize("rgb,grey", [(False, False), (True, True)])
+def test_colour_is_dropped_without_rgb_or_for_grey_images(rgb, grey):
+    c = PlaneCloud.from_frame(slanted_frame(rgb=rgb, grey=grey))
+    assert c.colors is None
+
+
+def test_missing_normals_is_an_input_error():
+    f = slanted_frame().with_(normals=None)
+    with pytest.raises(InvalidInput, match="normals"):
+        PlaneCloud.from_frame(f)
+
+
+def test_plane_frame_changes_round_trip_and_hold_the_points():
+    f = slanted_frame()
+    c = PlaneCloud.from_frame(f)
+    n = np.array([0.5, 0.0, -1.0]) / np.linalg.norm([0.5, 0.0, -1.0])
+    cam_plane = np.r_[n, 2.0 / np.linalg.norm([0.5, 0.0, -1.0])]  # n . X + d = 0
+    cam = f.points().reshape(-1, 3)[c.pixels]
+    np.testing.assert_allclose(cam @ cam_plane[:3] + cam_plane[3], 0.0, atol=1e-5)
+    norm_plane = c.plane_to_normalised(cam_plane)
+    np.testing.assert_allclose(c.points @ norm_plane[:3] + norm_plane[3], 0.0, atol=1e-5)
+    np.testing.assert_allclose(c.plane_to_camera(norm_plane), cam_plane, atol=1e-12)
+    both = c.plane_to_camera(np.stack([norm_plane, norm_plane]))
+    assert both.shape == (2, 4)
+
+
+def test_subsampling_is_deterministic_and_propagation_fills_valid_pixels_only():
+    f = slanted_frame()
+    a = PlaneCloud.from_frame(f, max_points=200, rng=np.random.default_rng(3))
+    b = PlaneCloud.from_frame(f, max_points=200, rng=np.random.default_rng(3))
+    assert a.size == 200 and a.subsampled
+    np.testing.assert_array_equal(a.pixels, b.pixels)
+    assert np.all(np.diff(a.pixels) > 0)
+    # Label the left half of the samples 1, the right half 2 (by image column).
+    cols = a.pixels % 32
+    labels = np.where(cols < 16, 1, 2)
+    full = a.propagate(labels)
+    assert full.shape == (24, 32) and full.dtype == np.int32
+    assert np.all(full[5:9, 5:9] == 0)  # invalid pixels stay unlabelled
+    valid = f.valid
+    assert np.all(full[valid] > 0)
+    # Away from the split every pixel gets its side's label.
+    assert np.all(full[:, :12][valid[:, :12]] == 1)
+    assert np.all(full[:, 20:][valid[:, 20:]] == 2)
+
+
+def test_propagation_does_not_jump_far_gaps():
+    f = slanted_frame(hole=False)
+    depth = f.depth.copy()
+    depth[:, 28:] *= 3.0  # a far-away strip: none of it gets sampled below
+    f = f.with_(depth=depth)
+    c = PlaneCloud.from_frame(f)
+    keep = (c.pixels % 32) < 28
+    sub = PlaneCloud(points=c.points[keep], normals=c.normals[keep], colors=None,
+                     pixels=c.pixels[keep], center=c.center, scale=c.scale, shape=c.shape,
+                     all_points=c.all_points, all_pixels=c.all_pixels)
+    full = sub.propagate(np.ones(sub.size, dtype=np.int32))
+    assert np.all(full[:, :28] == 1)
+    assert np.all(full[:, 28:] == 0)

@@ -1,0 +1,75 @@
+"""NeighbourGraph: symmetric deduplicated kNN edges, CSR adjacency and pool subgraphs."""
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from monoplane.geometry.graph import NeighbourGraph
+
+
+def grid_points(n=6):
+    u, v = np.meshgrid(np.arange(n, dtype=float), np.arange(n, dtype=float))
+    return np.stack([u.ravel(), v.ravel(), np.zeros(n * n)], axis=1)
+
+
+def test_grid_with_four_neighbours_gives_the_lattice_edges():
+    pts = grid_points(6)
+    # Tiny jitter breaks distance ties at the diagonal so the 4 nearest are the axis neighbours.
+    pts[:, :2] += np.random.default_rng(0).uniform(-1e-3, 1e-3, size=(36, 2))
+    g = NeighbourGraph.build(pts, k=4)
+    # The 4-neighbour lattice on 6x6 has 2 * 6 * 5 = 60 edges; border nodes pick extra
+    # (diagonal or second-ring) neighbours, so the graph contains the lattice.
+    lattice = set()
+    for r in range(6):
+        for c in range(6):
+            i = r * 6 + c
+            if c < 5:
+                lattice.add((i, i + 1))
+            if r < 5:
+                lattice.add((i, i + 6))
+    edges = {tuple(e) for e in g.edges.tolist()}
+    assert lattice <= edges
+    assert g.spacing == np.float64(g.spacing) and 0.99 < g.spacing < 1.01
+
+
+def test_edges_are_unique_ordered_and_contain_every_knn_pair():
+    rng = np.random.default_rng(1)
+    pts = rng.uniform(size=(300, 3))
+    g = NeighbourGraph.build(pts, k=5)
+    e = g.edges
+    assert np.all(e[:, 0] < e[:, 1])
+    assert len({tuple(x) for x in e.tolist()}) == len(e)
+    _, nbr = cKDTree(pts).query(pts, k=6)
+    edges = {tuple(x) for x in e.tolist()}
+    for i in range(300):
+        for j in nbr[i, 1:]:
+            assert (min(i, j), max(i, j)) in edges
+    # Every edge comes from some point's kNN list.
+    assert len(edges) <= 300 * 5
+
+
+def test_csr_adjacency_is_symmetric_and_matches_edges():
+    rng = np.random.default_rng(2)
+    g = NeighbourGraph.build(rng.uniform(size=(100, 3)), k=4)
+    assert g.indptr[-1] == 2 * g.num_edges
+    for i, j in g.edges[:50]:
+        assert j in g.neighbours(i) and i in g.neighbours(j)
+    degree = np.diff(g.indptr)
+    assert degree.min() >= 4
+
+
+def test_subgraph_keeps_edges_among_pool_in_local_indices():
+    rng = np.random.default_rng(3)
+    g = NeighbourGraph.build(rng.uniform(size=(200, 3)), k=6)
+    pool = np.sort(rng.choice(200, size=120, replace=False))
+    local, ids = g.subgraph(pool)
+    np.testing.assert_array_equal(pool[local], g.edges[ids])
+    inside = np.isin(g.edges, pool).all(axis=1)
+    assert inside.sum() == len(ids)
+
+
+def test_duplicate_points_do_not_create_self_loops_and_tiny_clouds_work():
+    pts = np.zeros((5, 3))
+    g = NeighbourGraph.build(pts, k=3)
+    assert np.all(g.edges[:, 0] != g.edges[:, 1])
+    single = NeighbourGraph.build(np.zeros((1, 3)), k=3)
+    assert single.num_edges == 0

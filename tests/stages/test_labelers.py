@@ -1,0 +1,123 @@
+"""Labelers: threshold vs graph cuts on a plane with noisy points, E_n, colour-free input."""
+
+import numpy as np
+import pytest
+
+from monoplane.geometry.cloud import PlaneCloud
+from monoplane.geometry.graph import NeighbourGraph
+from monoplane.graphcut import (
+    gc_ransac_energy,
+    msac_costs,
+    normal_angles,
+    normal_costs,
+    proximity_weights,
+)
+from monoplane.stages.base import RansacParams
+from monoplane.stages.labelers import (
+    GraphCutLabeler,
+    ProximityGraphCutLabeler,
+    ThresholdLabeler,
+)
+
+EPS = 0.02
+PLANE = np.array([0.0, 0.0, -1.0, 0.0])  # z = 0 in the normalised frame
+
+
+def grid_cloud(colors=True, tilt_deg=0.0):
+    """A 30x30 grid on z = 0 (spacing 0.01) plus a far cluster; 3x3 bumps at 1.3 ε.
+
+    Returns the cloud, the flat indices of the bumps and of the far cluster.
+    """
+    u, v = np.meshgrid(np.linspace(-0.15, 0.14, 30), np.linspace(-0.15, 0.14, 30))
+    pts = np.stack([u.ravel(), v.ravel(), np.zeros(900)], axis=1)
+    bump = (np.abs(u - 0.0) < 0.015).ravel() & (np.abs(v - 0.0) < 0.015).ravel()
+    pts[bump, 2] = 1.3 * EPS
+    far = np.random.default_rng(0).uniform(-0.1, 0.1, size=(50, 3)) + [0, 0, 0.5]
+    pts = np.concatenate([pts, far])
+    nrm = np.tile([0.0, 0.0, -1.0], (950, 1))
+    t = np.deg2rad(tilt_deg)
+    patch = np.zeros(950, bool)
+    patch[:900] = ((u > 0.05) & (v > 0.05)).ravel()
+    nrm[patch] = [np.sin(t), 0.0, -np.cos(t)]
+    col = np.full((950, 3), 0.5) if colors else None
+    cloud = PlaneCloud(points=pts, normals=nrm, colors=col,
+                       pixels=np.arange(950, dtype=np.int64), center=np.zeros(3), scale=1.0,
+                       shape=(1, 950), all_points=pts, all_pixels=np.arange(950, dtype=np.int64))
+    return cloud, np.flatnonzero(bump), np.arange(900, 950), np.flatnonzero(patch)
+
+
+def run(labeler, cloud, pool=None):
+    graph = NeighbourGraph.build(cloud.points, k=8)
+    pool = np.arange(cloud.size, dtype=np.int64) if pool is None else pool
+    return labeler.label(cloud, graph, pool, PLANE, np.array([0.0, 0.0, -1.0]),
+                         RansacParams(epsilon=EPS, epsilon_n_deg=10.0)), graph
+
+
+def test_threshold_labels_by_distance_and_reports_minus_count():
+    cloud, bump, far, _ = grid_cloud()
+    lab, _ = run(ThresholdLabeler(), cloud)
+    expected = np.ones(950, bool)
+    expected[bump] = False
+    expected[far] = False
+    np.testing.assert_array_equal(lab.inliers, expected)
+    assert lab.energy == -expected.sum()
+
+
+@pytest.mark.parametrize("labeler", [GraphCutLabeler(), ProximityGraphCutLabeler()])
+@pytest.mark.parametrize("colors", [True, False])
+def test_graph_cuts_close_holes_but_keep_far_points_out(labeler, colors):
+    cloud, bump, far, _ = grid_cloud(colors=colors)
+    lab, _ = run(labeler, cloud)
+    assert lab.inliers[bump].all()  # spatial coherence absorbs the 1.3 ε bump
+    assert not lab.inliers[far].any()
+    assert lab.inliers[:900].all()
+
+
+@pytest.mark.parametrize("labeler", [GraphCutLabeler(), ProximityGraphCutLabeler()])
+def test_graph_cut_labelling_is_a_local_minimum_of_its_energy(labeler):
+    cloud, _, _, _ = grid_cloud(tilt_deg=40.0)
+    lab, graph = run(labeler, cloud)
+    thr, _ = run(ThresholdLabeler(), cloud)
+    rng = np.random.default_rng(0)
+    base = lab.energy
+
+    def energy_of(labels):
+        d = np.abs(cloud.points @ PLANE[:3] + PLANE[3])
+        f0, f1 = msac_costs(d, EPS)
+        edges = graph.edges
+        if labeler.name == "graph-cut":
+            e = gc_ransac_energy(f0, f1, edges, 1.0, 0.95)
+        else:
+            g1 = normal_costs(normal_angles(cloud.normals, PLANE[:3]), np.deg2rad(10))
+            w = proximity_weights(cloud.points, edges, cloud.normals, cloud.colors)
+            e = gc_ransac_energy(f0, f1, edges, w, 0.95, g1)
+        return e.energy(labels)
+
+    assert energy_of(lab.inliers) == pytest.approx(base)
+    assert base <= energy_of(thr.inliers) + 1e-9
+    for _ in range(20):
+        flipped = lab.inliers.copy()
+        idx = rng.choice(950, size=3, replace=False)
+        flipped[idx] = ~flipped[idx]
+        assert energy_of(flipped) >= base - 1e-9
+
+
+def test_normal_energy_rejects_coplanar_points_with_wrong_normals():
+    cloud, _, _, patch = grid_cloud(tilt_deg=60.0)
+    gc, _ = run(GraphCutLabeler(), cloud)
+    prox, _ = run(ProximityGraphCutLabeler(), cloud)
+    assert gc.inliers[patch].all()
+    assert prox.inliers[patch].mean() < 0.1  # only a few boundary points stay in
+    no_en, _ = run(ProximityGraphCutLabeler(ProximityGraphCutLabeler.Config(normal_term=False)),
+                   cloud)
+    assert no_en.inliers[patch].all()
+
+
+def test_subgraph_pool_and_weight_cache():
+    cloud, bump, far, _ = grid_cloud()
+    pool = np.arange(0, 950, 2, dtype=np.int64)
+    labeler = ProximityGraphCutLabeler()
+    lab, graph = run(labeler, cloud, pool)
+    assert lab.inliers.shape == pool.shape
+    assert not lab.inliers[np.isin(pool, far)].any()
+    assert len(graph.cache) == 1

@@ -1,0 +1,86 @@
+"""Samplers: distinct in-pool triplets, normal-consistency rejection, locality, determinism."""
+
+import numpy as np
+import pytest
+
+from monoplane.geometry.cloud import PlaneCloud
+from monoplane.stages.base import RansacParams
+from monoplane.stages.samplers import NapsacSampler, NormalConsistentSampler, UniformSampler
+
+
+def make_cloud(points, normals):
+    n = len(points)
+    return PlaneCloud(points=points, normals=normals, colors=None,
+                      pixels=np.arange(n, dtype=np.int64), center=np.zeros(3), scale=1.0,
+                      shape=(1, n), all_points=points, all_pixels=np.arange(n, dtype=np.int64))
+
+
+@pytest.fixture
+def cloud():
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(-0.5, 0.5, size=(400, 3))
+    nrm = np.tile([0.0, 0.0, -1.0], (400, 1))
+    # Every other point has a normal tilted by 30 degrees.
+    t = np.deg2rad(30)
+    nrm[1::2] = [np.sin(t), 0.0, -np.cos(t)]
+    return make_cloud(pts, nrm)
+
+
+@pytest.mark.parametrize("sampler", [UniformSampler(), NormalConsistentSampler(),
+                                     NapsacSampler()])
+def test_samples_are_distinct_pool_members_and_deterministic(cloud, sampler):
+    pool = np.arange(0, 400, 3, dtype=np.int64)
+    params = RansacParams()
+    a = sampler.sample(cloud, pool, 500, np.random.default_rng(7), params)
+    b = sampler.sample(cloud, pool, 500, np.random.default_rng(7), params)
+    np.testing.assert_array_equal(a, b)
+    assert a.dtype == np.int64 and a.shape[1] == 3 and 0 < len(a) <= 500
+    assert np.isin(a, pool).all()
+    assert np.all((a[:, 0] != a[:, 1]) & (a[:, 0] != a[:, 2]) & (a[:, 1] != a[:, 2]))
+
+
+def test_uniform_sampler_covers_the_pool_evenly(cloud):
+    pool = np.arange(10, dtype=np.int64)
+    s = UniformSampler().sample(cloud, pool, 30000, np.random.default_rng(1), RansacParams())
+    counts = np.bincount(s.ravel(), minlength=10)
+    np.testing.assert_allclose(counts / counts.sum(), 0.1, atol=0.01)
+
+
+def test_normal_consistent_sampler_rejects_mixed_normal_samples(cloud):
+    pool = np.arange(400, dtype=np.int64)
+    params = RansacParams(epsilon_n_deg=10.0)
+    s = NormalConsistentSampler().sample(cloud, pool, 300, np.random.default_rng(2), params)
+    assert len(s) == 300
+    parity = s % 2
+    assert np.all(parity == parity[:, :1])  # all three from the same normal family
+    # With ε_n above 30 degrees nothing is rejected, so mixed samples appear.
+    loose = NormalConsistentSampler().sample(cloud, pool, 300, np.random.default_rng(2),
+                                             RansacParams(epsilon_n_deg=31.0))
+    assert np.any((loose % 2).min(axis=1) != (loose % 2).max(axis=1))
+
+
+def test_normal_consistent_sampler_gives_up_when_nothing_passes():
+    pts = np.random.default_rng(0).uniform(size=(6, 3))
+    nrm = np.eye(3)[[0, 1, 2, 0, 1, 2]]
+    nrm[3:] *= -1
+    c = make_cloud(pts, nrm)
+    pool = np.array([0, 1, 2], dtype=np.int64)
+    s = NormalConsistentSampler().sample(c, pool, 10, np.random.default_rng(0), RansacParams())
+    assert s.shape == (0, 3)
+
+
+def test_napsac_samples_are_local(cloud):
+    pool = np.arange(400, dtype=np.int64)
+    sampler = NapsacSampler(NapsacSampler.Config(radius=0.15, candidates=20))
+    s = sampler.sample(cloud, pool, 200, np.random.default_rng(3), RansacParams())
+    assert len(s) > 0
+    p = cloud.points
+    assert np.all(np.linalg.norm(p[s[:, 1]] - p[s[:, 0]], axis=1) <= 0.15)
+    assert np.all(np.linalg.norm(p[s[:, 2]] - p[s[:, 0]], axis=1) <= 0.15)
+
+
+def test_too_small_pools_give_no_samples(cloud):
+    for sampler in (UniformSampler(), NormalConsistentSampler(), NapsacSampler()):
+        s = sampler.sample(cloud, np.array([1, 2], dtype=np.int64), 5,
+                           np.random.default_rng(0), RansacParams())
+        assert s.shape == (0, 3)

@@ -1,0 +1,165 @@
+"""Sequential RANSAC driver on exact synthetic rooms (ray-plane intersection)."""
+
+import numpy as np
+import pytest
+
+from monoplane.errors import StageError
+from monoplane.ransac import RansacConfig, SequentialRansac, required_iterations
+from monoplane.stages.labelers import GraphCutLabeler, ProximityGraphCutLabeler, ThresholdLabeler
+from monoplane.stages.samplers import NormalConsistentSampler, UniformSampler
+from monoplane.stages.scorers import InlierCountScorer, MsacNormalScorer, MsacScorer
+from monoplane.types import Frame, default_intrinsics, orient_towards_camera, pixel_rays
+
+
+def room(h=96, w=128, rgb=True):
+    """Floor, back wall, left wall, right wall and a box face seen from a tilted camera.
+
+    Returns the frame, the ground-truth labels (H, W) and the planes (P, 4) in the camera
+    frame (metres, facing the camera).
+    """
+    K = default_intrinsics(w, h, 70.0)
+    c, s = np.cos(0.3), np.sin(0.3)
+    R = np.array([[1, 0, 0], [0, c, -s], [0, s, c]])  # camera looks slightly down
+    world = [  # (normal, offset): n . X_w + d = 0, y down, camera 1.4 m above the floor
+        ([0, -1, 0], 1.4), ([0, 0, -1], 5.0), ([1, 0, 0], 2.0), ([-1, 0, 0], 2.5)]
+    planes = np.array([np.r_[R @ n, d] for n, d in world], dtype=float)
+    rays = pixel_rays(K, h, w).reshape(-1, 3)
+    with np.errstate(divide="ignore"):
+        t = -planes[:, 3][None] / (rays @ planes[:, :3].T)
+    t[t <= 0] = np.inf
+    # The box front: plane z_w = 3 limited to x_w in [0.2, 1.2], y_w in [0.5, 1.4].
+    box = np.r_[R @ [0, 0, -1.0], 3.0]
+    tb = -box[3] / (rays @ box[:3])
+    xw = (rays * tb[:, None]) @ R  # camera -> world (R orthonormal)
+    inside = (tb > 0) & (xw[:, 0] > 0.2) & (xw[:, 0] < 1.2) & (xw[:, 1] > 0.5)
+    t = np.concatenate([t, np.where(inside, tb, np.inf)[:, None]], axis=1)
+    planes = orient_towards_camera(np.vstack([planes, box]))
+    labels = np.argmin(t, axis=1) + 1
+    depth = t[np.arange(len(t)), labels - 1]
+    normals = planes[labels - 1, :3]
+    image = None
+    if rgb:
+        palette = np.array([[0, 0, 0], [180, 60, 40], [40, 160, 60], [50, 70, 200],
+                            [200, 200, 40], [120, 40, 160]], dtype=np.uint8)
+        image = palette[labels].reshape(h, w, 3)
+    frame = Frame(rgb=image, K=K, depth=depth.reshape(h, w).astype(np.float32),
+                  normals=normals.reshape(h, w, 3).astype(np.float32))
+    return frame, labels.reshape(h, w), planes
+
+
+STACKS = {
+    "seq-ransac": (UniformSampler, InlierCountScorer, ThresholdLabeler),
+    "gc-ransac": (UniformSampler, MsacScorer, GraphCutLabeler),
+    "monoplane-nocrf": (NormalConsistentSampler, MsacNormalScorer, ProximityGraphCutLabeler),
+}
+
+
+def make(stack, **cfg):
+    sampler, scorer, labeler = STACKS[stack]
+    return SequentialRansac(sampler(), scorer(), labeler(), RansacConfig(**cfg))
+
+
+def match(rec, labels, planes):
+    """For each ground-truth plane: the predicted plane covering most of its pixels."""
+    out = []
+    for k in range(1, len(planes) + 1):
+        pred = rec.labels[labels == k]
+        pred = pred[pred > 0]
+        assert pred.size, f"plane {k} not detected"
+        out.append(np.bincount(pred).argmax())
+    return np.array(out)
+
+
+@pytest.mark.parametrize("stack,angle_tol,offset_tol", [
+    ("monoplane-nocrf", 1e-3, 1e-5), ("gc-ransac", 1.0, 0.02), ("seq-ransac", 1.0, 0.02)])
+def test_recovers_the_room_planes(stack, angle_tol, offset_tol):
+    frame, labels, planes = room()
+    rec = make(stack).run(frame)
+    assert rec.num_planes == len(planes)
+    ids = match(rec, labels, planes)
+    assert len(set(ids.tolist())) == len(planes)
+    est = rec.params[ids - 1]
+    angle = np.degrees(np.arccos(np.clip((est[:, :3] * planes[:, :3]).sum(1), -1, 1)))
+    assert angle.max() < angle_tol
+    np.testing.assert_allclose(est[:, 3], planes[:, 3], atol=offset_tol * planes[:, 3].max())
+    assert np.all(rec.params[:, 3] > 0)  # normals face the camera
+    np.testing.assert_array_equal(rec.support, rec.area_px)
+    # Pixel accuracy of the segmentation.
+    agree = np.mean(ids[labels - 1] == rec.labels)
+    assert agree > (0.98 if stack == "monoplane-nocrf" else 0.9)
+
+
+def test_exact_planes_have_near_zero_rmse_and_labels_are_int32():
+    frame, labels, planes = room()
+    rec = make("monoplane-nocrf").run(frame)
+    assert rec.labels.dtype == np.int32 and rec.labels.shape == frame.shape
+    assert rec.rmse.max() < 1e-4
+    assert set(rec.timings) >= {"ransac.search", "ransac.label", "ransac.graph"}
+
+
+def test_same_seed_same_result():
+    frame, _, _ = room()
+    a = make("monoplane-nocrf", max_points=3000).run(frame)
+    b = make("monoplane-nocrf", max_points=3000).run(frame)
+    np.testing.assert_array_equal(a.labels, b.labels)
+    np.testing.assert_array_equal(a.params, b.params)
+
+
+def test_depth_only_input_without_colour():
+    frame, labels, planes = room(rgb=False)
+    rec = make("monoplane-nocrf").run(frame)
+    assert rec.num_planes == len(planes)
+    ids = match(rec, labels, planes)
+    np.testing.assert_allclose(rec.params[ids - 1], planes, atol=1e-4)
+
+
+def test_planes_come_back_in_the_depth_units():
+    frame, _, _ = room()
+    mm = frame.with_(depth=frame.depth * 1000.0, depth_units="mm")
+    a = make("monoplane-nocrf").run(frame)
+    b = make("monoplane-nocrf").run(mm)
+    np.testing.assert_array_equal(a.labels, b.labels)
+    np.testing.assert_allclose(b.params[:, :3], a.params[:, :3], atol=1e-6)
+    np.testing.assert_allclose(b.params[:, 3], 1000.0 * a.params[:, 3], rtol=1e-5)
+    np.testing.assert_allclose(b.rmse, 1000.0 * a.rmse, atol=1e-3)
+
+
+def test_subsampled_run_labels_every_valid_pixel_of_the_planes():
+    frame, labels, planes = room(h=120, w=160)
+    depth = frame.depth.copy()
+    depth[:10, :10] = 0.0  # invalid corner
+    frame = frame.with_(depth=depth)
+    rec = make("monoplane-nocrf", max_points=4000).run(frame)
+    assert np.all(rec.labels[:10, :10] == 0)
+    ids = match(rec, labels, planes)
+    valid = frame.valid
+    assert np.mean(ids[labels[valid] - 1] == rec.labels[valid]) > 0.97
+    np.testing.assert_allclose(rec.params[ids - 1], planes, atol=5e-3)
+
+
+def test_max_planes_and_min_support_stop_the_search():
+    frame, _, _ = room()
+    assert make("gc-ransac", max_planes=2).run(frame).num_planes == 2
+    # With a 30 % minimum only the largest surfaces qualify.
+    big = make("monoplane-nocrf", min_support=0.3).run(frame)
+    assert 1 <= big.num_planes < 5
+    assert np.all(big.area_px >= 0.25 * frame.valid.sum())
+
+
+def test_a_failing_stage_is_reported_with_kind_and_name():
+    class Broken(UniformSampler):
+        name = "broken"
+
+        def sample(self, *args):
+            raise RuntimeError("boom")
+
+    frame, _, _ = room(h=24, w=32)
+    ransac = SequentialRansac(Broken(), MsacScorer(), ThresholdLabeler())
+    with pytest.raises(StageError, match="sampler stage 'broken' failed: boom"):
+        ransac.run(frame)
+
+
+def test_required_iterations():
+    assert required_iterations(0.5, 0.99) == pytest.approx(np.log(0.01) / np.log(1 - 0.125))
+    assert required_iterations(0.0, 0.99) == np.inf
+    assert required_iterations(1.0, 0.99) == 1.0
