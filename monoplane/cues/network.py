@@ -150,9 +150,9 @@ class CueNetwork:
             ``notes`` set. Normals are zero wherever depth is invalid.
         """
         rgb = frame.rgb
-        if rgb is None:
+        if rgb is None and frame.depth is None:
             raise InvalidInput(f"{frame.name}: the {self.profile.name} networks need an RGB "
-                               f"image")
+                               f"image (or give a depth map)")
         if self.hfov_deg is not None:
             frame = reassume_intrinsics(frame, self.hfov_deg, "cues.hfov_deg")
         elif self.profile.hfov_deg is not None:
@@ -162,11 +162,12 @@ class CueNetwork:
         changes: dict = {}
         depth = frame.depth
         if depth is None:
-            depth, kind, units, note = self.predict_depth(rgb, frame.K)
+            depth, kind, units, note = self.predict_depth(rgb, frame.K)  # type: ignore[arg-type]
             changes.update(depth=depth, depth_kind=kind, depth_units=units)
             notes.append(note)
         if frame.normals is None:
-            model = self._normal_model()
+            # Depth-only input (range images) has no image for a normals network.
+            model = self._normal_model() if rgb is not None else None
             if model is not None:
                 normals = decode_normals(model.predict(rgb, frame.K), model.spec, frame.K)
                 notes.append(f"normals: from {self.profile.name} network {model.path.name}")

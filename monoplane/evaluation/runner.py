@@ -1,0 +1,371 @@
+"""Score methods (pipeline presets and external baselines) on seeded synthetic scenes.
+
+The protocol of ``monoplane eval``:
+
+1. Scene ``i`` of a run is ``monoplane.synth.generate(seed + i, level, width, height)``; every
+   method sees exactly the same view-0 frame (its corrupted monocular-like cues) and is scored
+   against the same exact ground truth.
+2. Segmentation (VOI, RI, SC) is averaged over frames; plane recall is pooled over frames
+   (``Σ recalled / Σ ground-truth planes``); see :mod:`~monoplane.evaluation.segmentation` and
+   :mod:`~monoplane.evaluation.recall`.
+3. Time per frame is the wall time of the method's call on a frame that already carries its
+   cues (for presets: the whole :meth:`Pipeline.run`, whose ``given`` cue step is a
+   pass-through; for baselines: the baseline call).
+4. A method that raises a :class:`~monoplane.errors.MonoplaneError` on a frame is scored as if
+   it had found no plane there (all pixels non-planar), and counted in ``n_failed``.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+from monoplane.errors import InvalidInput, MonoplaneError
+from monoplane.evaluation.baselines import baseline_names, get_baseline
+from monoplane.evaluation.recall import DEPTH_THRESHOLDS, plane_recall
+from monoplane.evaluation.segmentation import segmentation_scores
+from monoplane.types import Frame, Reconstruction
+
+#: The paper's ablation rows (Tab. IV), in table order.
+PAPER_PRESETS: tuple[str, ...] = (
+    "seq-ransac", "seq-ransac+crf", "gc-ransac", "gc-ransac+crf", "monoplane-nocrf", "monoplane",
+)
+#: Baselines ``--all`` adds when they are available.
+ALL_BASELINES: tuple[str, ...] = ("open3d-ransac", "cgal")
+#: Corruption levels of :func:`monoplane.synth.generate`.
+LEVELS: tuple[str, ...] = ("clean", "mild", "strong")
+
+
+@dataclass
+class Method:
+    """Something that turns a cue-filled frame into planes.
+
+    Attributes
+    ----------
+    name : str
+        Row name in the table (preset or baseline name).
+    kind : str
+        ``"preset"`` or ``"baseline"``.
+    run : callable
+        ``run(frame, seed) -> Reconstruction``.
+    """
+
+    name: str
+    kind: str
+    run: Callable[[Frame, int], Reconstruction]
+
+
+def preset_method(name: str, overrides: list[str] | None = None) -> Method:
+    """A pipeline preset as a method (the config is validated now, not on the first frame).
+
+    The synthetic frames carry their (corrupted) cues already, so the cue provider is forced to
+    ``given`` before the caller's ``table.key=value`` overrides apply.
+    """
+    from monoplane.pipeline import Pipeline
+
+    pipe = Pipeline.from_preset(name, overrides=["cues.plugin=given", *(overrides or [])])
+    return Method(name=name, kind="preset", run=lambda frame, seed: pipe.run(frame))
+
+
+def baseline_method(name: str) -> Method:
+    """A registered baseline as a method (see :mod:`monoplane.evaluation.baselines`)."""
+    fn = get_baseline(name)
+    return Method(name=name, kind="baseline", run=lambda frame, seed: fn(frame, seed=seed))
+
+
+def resolve_methods(presets: Sequence[str] = (), baselines: Sequence[str] = (),
+                    all_methods: bool = False,
+                    overrides: list[str] | None = None) -> list[Method]:
+    """Build the method list of an evaluation run.
+
+    Parameters
+    ----------
+    presets : sequence of str
+        Pipeline presets, in order.
+    baselines : sequence of str
+        Baseline names, in order.
+    all_methods : bool
+        Prepend the paper's six ablation presets and append every available baseline of
+        :data:`ALL_BASELINES`.
+    overrides : list of str, optional
+        ``table.key=value`` overrides applied to every preset.
+
+    Returns
+    -------
+    list of Method
+        Without duplicates, presets first.
+    """
+    preset_names = list(PAPER_PRESETS) if all_methods else []
+    preset_names += [p for p in presets if p not in preset_names]
+    baseline_list = list(baselines)
+    if all_methods:
+        available = set(baseline_names())
+        baseline_list += [b for b in ALL_BASELINES if b in available and b not in baseline_list]
+    if not preset_names and not baseline_list:
+        raise InvalidInput("nothing to evaluate: give --preset, --baseline or --all")
+    methods = [preset_method(p, overrides) for p in preset_names]
+    methods += [baseline_method(b) for b in dict.fromkeys(baseline_list)]
+    return methods
+
+
+@dataclass
+class FrameResult:
+    """Scores of one method on one frame."""
+
+    scene_seed: int
+    voi: float
+    ri: float
+    sc: float
+    recalled: list[int]
+    n_gt: int
+    n_planes: int
+    seconds: float
+    failed: bool = False
+    error: str = ""
+
+
+@dataclass
+class MethodResult:
+    """Aggregated scores of one method.
+
+    Attributes
+    ----------
+    name, kind : str
+        As in :class:`Method`.
+    thresholds : list of float
+        Depth thresholds of ``recall`` (metres).
+    frames : list of FrameResult
+        Per-frame scores, in scene order.
+    """
+
+    name: str
+    kind: str
+    thresholds: list[float]
+    frames: list[FrameResult] = field(default_factory=list)
+
+    def _mean(self, attr: str) -> float:
+        values = [getattr(f, attr) for f in self.frames]
+        return float(np.mean(values)) if values else float("nan")
+
+    @property
+    def voi(self) -> float:
+        """Mean VOI (nats)."""
+        return self._mean("voi")
+
+    @property
+    def ri(self) -> float:
+        """Mean Rand index."""
+        return self._mean("ri")
+
+    @property
+    def sc(self) -> float:
+        """Mean segmentation covering."""
+        return self._mean("sc")
+
+    @property
+    def recall(self) -> list[float]:
+        """Pooled plane recall at each threshold."""
+        total = sum(f.n_gt for f in self.frames)
+        if total == 0:
+            return [float("nan")] * len(self.thresholds)
+        return [sum(f.recalled[k] for f in self.frames) / total
+                for k in range(len(self.thresholds))]
+
+    @property
+    def seconds_per_frame(self) -> float:
+        """Mean wall time per frame, seconds."""
+        return self._mean("seconds")
+
+    @property
+    def planes_per_frame(self) -> float:
+        """Mean number of predicted planes."""
+        return self._mean("n_planes")
+
+    @property
+    def n_failed(self) -> int:
+        """Frames on which the method raised."""
+        return sum(f.failed for f in self.frames)
+
+    def summary(self) -> dict[str, Any]:
+        """Aggregates only (one table row) as plain data."""
+        return {
+            "name": self.name, "kind": self.kind, "voi": self.voi, "ri": self.ri, "sc": self.sc,
+            "recall": {f"{t:g}": r for t, r in zip(self.thresholds, self.recall, strict=True)},
+            "seconds_per_frame": self.seconds_per_frame,
+            "planes_per_frame": self.planes_per_frame,
+            "n_frames": len(self.frames), "n_failed": self.n_failed,
+        }
+
+
+@dataclass
+class EvalResults:
+    """Everything one ``monoplane eval`` run measured.
+
+    Attributes
+    ----------
+    methods : list of MethodResult
+        One per method, in the order they were given.
+    settings : dict
+        ``level``, ``n``, ``seed``, ``width``, ``height`` and the thresholds of the run.
+    """
+
+    methods: list[MethodResult]
+    settings: dict[str, Any]
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready form: settings, per-method summaries and per-frame scores."""
+        return {
+            "settings": dict(self.settings),
+            "methods": [{**m.summary(), "frames": [asdict(f) for f in m.frames]}
+                        for m in self.methods],
+        }
+
+
+def score_reconstruction(rec: Reconstruction, gt_labels: np.ndarray, gt_depth: np.ndarray,
+                         thresholds: Sequence[float] = DEPTH_THRESHOLDS
+                         ) -> tuple[float, float, float, list[int], int]:
+    """VOI, RI, SC and recall counts of one reconstruction.
+
+    Parameters
+    ----------
+    rec : Reconstruction
+        Prediction; its ``planar_depth()`` is median-scale aligned to ``gt_depth``.
+    gt_labels : numpy.ndarray
+        (H, W) int ground-truth plane labels, 0 = non-planar.
+    gt_depth : numpy.ndarray
+        (H, W) ground-truth z-depth in metres, 0 = invalid.
+    thresholds : sequence of float
+        Recall depth thresholds in metres.
+
+    Returns
+    -------
+    tuple
+        ``(voi, ri, sc, recalled per threshold, number of ground-truth planes)``.
+    """
+    seg = segmentation_scores(rec.labels, gt_labels)
+    rec_counts = plane_recall(rec.labels, rec.planar_depth(), gt_labels, gt_depth,
+                              thresholds=tuple(thresholds))
+    return seg.voi, seg.ri, seg.sc, list(rec_counts.recalled), rec_counts.n_gt
+
+
+def _empty_reconstruction(frame: Frame) -> Reconstruction:
+    return Reconstruction(frame=frame, labels=np.zeros(frame.shape, dtype=np.int32),
+                          params=np.zeros((0, 4)))
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    """Parse ``"WxH"`` (e.g. ``"256x192"``) into ``(width, height)``."""
+    parts = text.lower().split("x")
+    try:
+        width, height = (int(p) for p in parts)
+    except ValueError:
+        raise InvalidInput(f"size must look like WIDTHxHEIGHT (e.g. 256x192), got '{text}'"
+                           ) from None
+    if width < 16 or height < 16:
+        raise InvalidInput(f"size {text} is too small (at least 16x16)")
+    return width, height
+
+
+def evaluate(methods: Sequence[Method], n: int = 50, level: str = "mild", seed: int = 0,
+             size: tuple[int, int] = (256, 192),
+             thresholds: Sequence[float] = DEPTH_THRESHOLDS,
+             progress: bool = True) -> EvalResults:
+    """Run every method on ``n`` synthetic scenes and score it.
+
+    Parameters
+    ----------
+    methods : sequence of Method
+        What to evaluate (see :func:`resolve_methods`).
+    n : int
+        Number of scenes.
+    level : str
+        Cue corruption level, one of :data:`LEVELS`.
+    seed : int
+        Scene ``i`` uses seed ``seed + i``.
+    size : tuple of int
+        ``(width, height)`` in pixels.
+    thresholds : sequence of float
+        Recall depth thresholds (metres).
+    progress : bool
+        Show a tqdm progress bar on stderr.
+
+    Returns
+    -------
+    EvalResults
+    """
+    from tqdm import tqdm
+
+    from monoplane.synth import generate
+
+    if n < 1:
+        raise InvalidInput(f"--n must be at least 1, got {n}")
+    if level not in LEVELS:
+        raise InvalidInput(f"unknown level '{level}'; valid levels: {', '.join(LEVELS)}")
+    if not methods:
+        raise InvalidInput("nothing to evaluate: the method list is empty")
+    width, height = size
+    thr = [float(t) for t in thresholds]
+    results = [MethodResult(m.name, m.kind, thr) for m in methods]
+    bar = tqdm(total=n * len(methods), disable=not progress, unit="run", desc="eval")
+    try:
+        for i in range(n):
+            scene_seed = seed + i
+            view = generate(scene_seed, level, width=width, height=height, n_views=1).views[0]
+            gt_labels = np.asarray(view.gt_labels)
+            gt_depth = np.asarray(view.gt_depth)
+            for method, result in zip(methods, results, strict=True):
+                bar.set_postfix_str(f"scene {i + 1}/{n} {method.name}")
+                failed, error = False, ""
+                start = time.perf_counter()
+                try:
+                    rec = method.run(view.frame, scene_seed)
+                except MonoplaneError as exc:
+                    failed, error = True, str(exc)
+                    warnings.warn(f"{method.name} failed on scene seed {scene_seed}: {exc}",
+                                  stacklevel=2)
+                    rec = _empty_reconstruction(view.frame)
+                seconds = time.perf_counter() - start
+                voi, ri, sc, recalled, n_gt = score_reconstruction(rec, gt_labels, gt_depth, thr)
+                result.frames.append(FrameResult(
+                    scene_seed=scene_seed, voi=voi, ri=ri, sc=sc, recalled=recalled, n_gt=n_gt,
+                    n_planes=rec.num_planes, seconds=seconds, failed=failed, error=error))
+                bar.update(1)
+    finally:
+        bar.close()
+    settings = {"level": level, "n": n, "seed": seed, "width": width, "height": height,
+                "thresholds": thr}
+    return EvalResults(methods=results, settings=settings)
+
+
+def format_table(results: EvalResults) -> str:
+    """The paper's table columns as aligned plain text.
+
+    Columns: method, VOI↓, RI↑, SC↑, recall at each threshold, mean planes and seconds per
+    frame; a failure count is appended to the name when a method failed on some frames.
+    """
+    thr = results.settings.get("thresholds", list(DEPTH_THRESHOLDS))
+    header = ["method", "VOI↓", "RI↑", "SC↑", *[f"R@{t:g}m↑" for t in thr], "planes",
+              "s/frame"]
+    rows = []
+    for m in results.methods:
+        name = m.name if not m.n_failed else f"{m.name} ({m.n_failed} failed)"
+        rows.append([name, f"{m.voi:.3f}", f"{m.ri:.3f}", f"{m.sc:.3f}",
+                     *[f"{r:.3f}" for r in m.recall], f"{m.planes_per_frame:.1f}",
+                     f"{m.seconds_per_frame:.3f}"])
+    widths = [max(len(r[c]) for r in [header, *rows]) for c in range(len(header))]
+
+    def line(cells: list[str]) -> str:
+        first = cells[0].ljust(widths[0])
+        rest = [c.rjust(w) for c, w in zip(cells[1:], widths[1:], strict=True)]
+        return "  ".join([first, *rest])
+
+    s = results.settings
+    title = (f"{s['n']} synthetic scenes, level {s['level']}, {s['width']}x{s['height']}, "
+             f"seeds {s['seed']}..{s['seed'] + s['n'] - 1}")
+    rule = "-" * len(line(header))
+    return "\n".join([title, line(header), rule, *[line(r) for r in rows]])

@@ -1,0 +1,119 @@
+"""CGAL Efficient RANSAC (Schnabel et al. 2007) as a ``monoplane eval`` baseline.
+
+Registered in the ``monoplane.baselines`` entry-point group under the name ``cgal``. The
+callable follows monoplane's baseline contract: ``baseline(frame, *, seed=0) ->
+Reconstruction``, planes in the frame's camera frame (OpenCV axes) and depth units.
+
+License: GPL-3.0-or-later (CGAL's Shape_detection package is GPL).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from monoplane.geometry.cloud import PlaneCloud
+from monoplane.geometry.planes import fit_plane
+from monoplane.types import Frame, Reconstruction
+
+__version__ = "0.1.0"
+
+
+@dataclass(frozen=True)
+class CgalRansacConfig:
+    """Settings of CGAL's ``efficient_RANSAC`` (plane shapes only), in unit-sphere units.
+
+    Attributes
+    ----------
+    epsilon : float
+        Largest point-to-plane distance of a shape's points (paper's ε).
+    normal_deg : float
+        Largest angle between a point's normal and the plane normal (paper's ε_n), degrees.
+    cluster_epsilon : float
+        Largest gap between neighbouring points of one shape (CGAL keeps the largest connected
+        component of a candidate).
+    probability : float
+        CGAL's probability of missing the largest candidate shape (its default).
+    min_support : float
+        Smallest shape as a fraction of the points (the pipeline's ``ransac.min_support``).
+    min_support_points : int
+        Smallest shape in points, whatever the fraction.
+    """
+
+    epsilon: float = 0.02
+    normal_deg: float = 10.0
+    cluster_epsilon: float = 0.03
+    probability: float = 0.01
+    min_support: float = 0.006
+    min_support_points: int = 30
+
+
+def _point_set(points: np.ndarray, normals: np.ndarray) -> object:
+    from CGAL import CGAL_Point_set_3
+    from CGAL.CGAL_Kernel import Vector_3
+
+    ps = CGAL_Point_set_3.Point_set_3()
+    ps.insert_range(np.ascontiguousarray(points, dtype=np.float64).ravel().tolist())
+    ps.add_normal_map()
+    normal_map = ps.normal_map()
+    for i, (x, y, z) in enumerate(normals.tolist()):
+        normal_map.set(i, Vector_3(x, y, z))
+    return ps
+
+
+def cgal_efficient_ransac(frame: Frame, *, seed: int = 0,
+                          config: CgalRansacConfig | None = None) -> Reconstruction:
+    """Detect planes with CGAL's Efficient RANSAC on the frame's normalised oriented cloud.
+
+    Parameters
+    ----------
+    frame : Frame
+        Frame with ``depth`` and ``normals`` (camera frame, facing the camera).
+    seed : int
+        Accepted for the baseline contract; CGAL's bindings expose no seed.
+    config : CgalRansacConfig, optional
+        Defaults as in the package README.
+
+    Returns
+    -------
+    Reconstruction
+        Labels 1..P in CGAL's detection order (0 = unassigned); planes are least-squares fits
+        of each shape's points in the camera frame and depth units.
+    """
+    from CGAL import CGAL_Shape_detection
+
+    del seed  # CGAL uses its own default random generator
+    cfg = config or CgalRansacConfig()
+    cloud = PlaneCloud.from_frame(frame)
+    normals = frame.normals.reshape(-1, 3)[cloud.all_pixels].astype(np.float64)
+    ps = _point_set(cloud.all_points, normals)
+    shape_map = ps.add_int_map("shape", -1)
+    n_points = cloud.all_points.shape[0]
+    min_points = max(3, cfg.min_support_points, int(math.ceil(cfg.min_support * n_points)))
+    CGAL_Shape_detection.efficient_RANSAC(
+        ps, shape_map, min_points=min_points, epsilon=cfg.epsilon,
+        cluster_epsilon=cfg.cluster_epsilon,
+        normal_threshold=math.cos(math.radians(cfg.normal_deg)),
+        probability=cfg.probability, planes=True)
+    shape = np.fromiter((shape_map.get(i) for i in range(n_points)), dtype=np.int64,
+                        count=n_points)
+    flat = np.zeros(frame.height * frame.width, dtype=np.int32)
+    planes: list[np.ndarray] = []
+    rmses: list[float] = []
+    supports: list[int] = []
+    for sid in np.unique(shape[shape >= 0]):
+        members = np.flatnonzero(shape == sid)
+        if members.size < 3:
+            continue
+        plane, rmse = fit_plane(cloud.all_points[members])
+        planes.append(cloud.plane_to_camera(plane))
+        rmses.append(rmse * cloud.scale)
+        supports.append(members.size)
+        flat[cloud.all_pixels[members]] = len(planes)
+    return Reconstruction(frame=frame, labels=flat.reshape(frame.shape),
+                          params=np.asarray(planes, dtype=np.float64).reshape(-1, 4),
+                          rmse=np.asarray(rmses, dtype=np.float64),
+                          support=np.asarray(supports, dtype=np.int64),
+                          config={"baseline": "cgal", **asdict(cfg)})

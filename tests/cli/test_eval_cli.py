@@ -1,0 +1,76 @@
+"""``monoplane eval`` and ``monoplane bench`` through the command line."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from monoplane.cli import main
+
+TINY = ["--n", "1", "--size", "96x72", "--no-progress"]
+
+
+def test_eval_baseline_prints_the_paper_columns_and_writes_json(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "scores.json"
+    assert main(["eval", "--baseline", "open3d-ransac", "--level", "clean", *TINY,
+                 "--json", str(out)]) == 0
+    text = capsys.readouterr().out
+    for column in ("VOI", "RI", "SC", "R@0.05m", "R@0.1m", "R@0.6m", "s/frame"):
+        assert column in text
+    assert "open3d-ransac" in text
+    data = json.loads(out.read_text())
+    assert data["settings"]["width"] == 96 and data["settings"]["level"] == "clean"
+    assert data["methods"][0]["n_frames"] == 1
+
+
+def test_eval_preset_row(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["eval", "--preset", "seq-ransac", *TINY]) == 0
+    assert "seq-ransac" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["eval", *TINY], "nothing to evaluate"),
+    (["eval", "--baseline", "nope", *TINY], "unknown baseline 'nope'"),
+    (["eval", "--baseline", "open3d-ransac", "--n", "0"], "--n must be at least 1"),
+    (["eval", "--baseline", "open3d-ransac", "--size", "big"], "WIDTHxHEIGHT"),
+    (["eval", "--multiview", "--baseline", "open3d-ransac", *TINY], "--multiview"),
+    (["bench", "--sizes", "x", "--no-progress"], "WIDTHxHEIGHT"),
+    (["bench", "--repeat", "0", "--no-progress"], "--repeat"),
+])
+def test_user_errors_are_one_line(argv: list[str], message: str,
+                                  capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err
+    assert len(err.splitlines()) == 1
+
+
+@pytest.mark.parametrize("command", ["eval", "bench"])
+def test_help_has_examples(command: str, capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exc:
+        main([command, "--help"])
+    assert exc.value.code == 0
+    text = capsys.readouterr().out
+    assert "examples:" in text and f"monoplane {command}" in text
+
+
+def test_bench_prints_stage_rows(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "bench.json"
+    assert main(["bench", "--preset", "seq-ransac", "--sizes", "96x72", "--repeat", "1",
+                 "--no-progress", "--json", str(out)]) == 0
+    text = capsys.readouterr().out
+    for row in ("cues", "ransac", "refiner", "total", "96x72 ms"):
+        assert row in text
+    data = json.loads(out.read_text())
+    names = [s["name"] for s in data[0]["stages"]]
+    assert names[0] == "cues" and names[-1] == "total"
+    assert data[0]["stages"][-1]["peak_mib"] > 0
+
+
+def test_eval_report_writes_html(tmp_path: Path) -> None:
+    out = tmp_path / "report"
+    assert main(["eval", "--baseline", "open3d-ransac", *TINY, "--report", str(out)]) == 0
+    assert (out / "report.html").is_file()
