@@ -7,15 +7,14 @@ cd "$(dirname "$0")"
 # libgl1 libegl1 libx11-6 libgomp1 libusb-1.0-0: needed by `import open3d` (libusb is missing on
 #   fresh machines and the import then fails).
 # libegl-mesa0 libgl1-mesa-dri: Mesa llvmpipe for Open3D's headless (EGL surfaceless) renderer.
-# build-essential: pydensecrf2 (dense CRF) ships no Linux wheel and compiles from source (~1 min).
-APT_PACKAGES="libgl1 libegl1 libx11-6 libgomp1 libusb-1.0-0 libegl-mesa0 libgl1-mesa-dri build-essential"
+# Every Python dependency ships manylinux wheels, so no compiler is needed.
+APT_PACKAGES="libgl1 libegl1 libx11-6 libgomp1 libusb-1.0-0 libegl-mesa0 libgl1-mesa-dri"
 SUDO=""
 if [ "$(id -u)" != 0 ]; then SUDO="sudo"; fi
 $SUDO apt-get update -qq
 DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends $APT_PACKAGES >/dev/null
 
 PYTHON="${PYTHON:-python3}"
-"$PYTHON" -m pip install --quiet --upgrade pip
 "$PYTHON" -m pip install --quiet -e ".[dev]"
 for plugin in plugins/*/; do
   if [ -f "$plugin/pyproject.toml" ]; then

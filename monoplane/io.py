@@ -247,15 +247,16 @@ def check_output_dir(out_dir: str | Path, overwrite: bool = False) -> Path:
     ------
     InvalidInput
         If ``out_dir`` is an existing file, an existing non-empty folder without ``overwrite``,
-        or its parent folder does not exist.
+        or a file stands where one of its parent folders should be.
     """
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise InvalidInput(f"output path {out} is an existing file, not a folder")
     if out.is_dir() and any(out.iterdir()) and not overwrite:
         raise InvalidInput(f"output folder {out} exists and is not empty; pass --overwrite")
-    if not out.parent.is_dir():
-        raise InvalidInput(f"cannot write to {out}: folder {out.parent} does not exist")
+    parent = next((p for p in out.parents if p.exists()), Path("."))
+    if not parent.is_dir():
+        raise InvalidInput(f"cannot write to {out}: {parent} is a file, not a folder")
     return out
 
 
@@ -263,7 +264,7 @@ def check_output_dir(out_dir: str | Path, overwrite: bool = False) -> Path:
 def atomic_output_dir(out_dir: str | Path, overwrite: bool = False) -> Iterator[Path]:
     """Yield a temporary folder that becomes ``out_dir`` only if the block succeeds.
 
-    The temporary folder is a sibling of ``out_dir`` (same file system, so the final rename is
+    Missing parent folders are created. The temporary folder is a sibling of ``out_dir`` (same file system, so the final rename is
     atomic). On any exception it is removed and ``out_dir`` is left untouched.
 
     Raises
@@ -273,6 +274,7 @@ def atomic_output_dir(out_dir: str | Path, overwrite: bool = False) -> Iterator[
     """
     out = check_output_dir(out_dir, overwrite)
     parent = out.parent
+    parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".partial", dir=parent))
     try:
         yield tmp
