@@ -6,7 +6,7 @@ import argparse
 import sys
 
 from monoplane.cli.common import add_pipeline_args, pipeline_from_args
-from monoplane.io import load_frame
+from monoplane.io import check_output_dir, load_frame
 
 DESCRIPTION = """Run the configured matcher (default: pycolmap SIFT + exhaustive matching +
 incremental mapping, on the CPU) on two or more images and write into --out:
@@ -38,6 +38,7 @@ def run(args: argparse.Namespace) -> int:
     from monoplane.errors import InvalidInput
     from monoplane.multiview import save_sfm
 
+    check_output_dir(args.out, args.overwrite)  # fail before any work
     if len(args.images) < 2:
         raise InvalidInput(f"match needs at least 2 images, got {len(args.images)}")
     if args.intrinsics:

@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from monoplane.cli.common import add_pipeline_args, pipeline_from_args
-from monoplane.io import load_frame
+from monoplane.cli.common import add_output_args, add_pipeline_args, pipeline_from_args
+from monoplane.io import check_output_dir, load_frame
 
 DESCRIPTION = """Sparse-view planar reconstruction (MonoPlane §III-C): structure from motion
 (pycolmap SIFT, CPU), monocular cues per image, scale alignment of each depth onto the SfM
@@ -38,12 +38,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--relative-depth", action="store_true",
                    help="the given depths are correct only up to scale")
     add_pipeline_args(p)
-    o = p.add_argument_group("outputs")
-    o.add_argument("--out", required=True, metavar="DIR",
-                   help="output folder (written atomically: nothing is left on failure)")
-    o.add_argument("--overwrite", action="store_true", help="replace DIR if it exists")
-    o.add_argument("--report", action="store_true", help="also write report.html")
-    o.add_argument("--quiet", action="store_true", help="no progress bars or summary")
+    add_output_args(p)
+    p.add_argument("--quiet", action="store_true", help="no progress bars or summary")
     p.set_defaults(func=run)
 
 
@@ -61,6 +57,7 @@ def run(args: argparse.Namespace) -> int:
     from monoplane.errors import InvalidInput
     from monoplane.multiview import reconstruct_multiview, save_scene
 
+    check_output_dir(args.out, args.overwrite)  # fail before any work
     n = len(args.images)
     if n < 2:
         raise InvalidInput(f"multiview needs at least 2 images, got {n}")

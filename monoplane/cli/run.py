@@ -5,7 +5,10 @@ from __future__ import annotations
 import argparse
 
 from monoplane.cli.common import (
-    add_input_args, add_output_args, add_pipeline_args, pipeline_from_args,
+    add_input_args,
+    add_output_args,
+    add_pipeline_args,
+    pipeline_from_args,
 )
 from monoplane.io import check_output_dir, load_frame, save_reconstruction
 

@@ -34,11 +34,9 @@ from monoplane.types import Frame
 
 
 @dataclass
-class GivenCuesConfig:
-    """Parameters of the ``given`` cue provider."""
+class NormalsFromDepthOptions:
+    """Options of the normals-from-depth estimator, shared by every cue provider that uses it."""
 
-    recompute_normals: bool = param(
-        False, "estimate normals from depth even when normals are given")
     normals_radius: int = param(
         0, "half-size in pixels of the window that estimates normals from depth "
            "(0: about 1 % of the longer image side)")
@@ -49,15 +47,25 @@ class GivenCuesConfig:
         0.05, "relative depth jump between neighbouring pixels that marks a depth edge")
 
     def __post_init__(self) -> None:
-        _check_normals_options(self.normals_radius, self.normals_stride, self.max_jump)
+        r, st = self.normals_radius, self.normals_stride
+        if r < 0 or st < 0 or (r and st > r):
+            raise ConfigError(f"need 0 <= normals_stride <= normals_radius (0 = automatic), "
+                              f"got radius {r}, stride {st}")
+        if self.max_jump <= 0:
+            raise ConfigError(f"max_jump must be positive, got {self.max_jump}")
+
+    def normals_options(self) -> dict:
+        """Keyword arguments for :func:`~monoplane.geometry.normals.normals_from_depth`."""
+        return {"radius": self.normals_radius or None, "stride": self.normals_stride or None,
+                "max_jump": self.max_jump}
 
 
-def _check_normals_options(radius: int, stride: int, max_jump: float) -> None:
-    if radius < 0 or stride < 0 or (radius and stride > radius):
-        raise ConfigError(f"need 0 <= normals_stride <= normals_radius (0 = automatic), got "
-                          f"radius {radius}, stride {stride}")
-    if max_jump <= 0:
-        raise ConfigError(f"max_jump must be positive, got {max_jump}")
+@dataclass
+class GivenCuesConfig(NormalsFromDepthOptions):
+    """Parameters of the ``given`` cue provider."""
+
+    recompute_normals: bool = param(
+        False, "estimate normals from depth even when normals are given")
 
 
 class GivenCues(CueProvider):
@@ -87,9 +95,7 @@ class GivenCues(CueProvider):
                 f"predict depth from the image use cues.plugin=onnx")
         notes = list(frame.notes)
         if frame.normals is None or cfg.recompute_normals:
-            normals = normals_from_depth(frame.depth, frame.K, radius=cfg.normals_radius or None,
-                                         stride=cfg.normals_stride or None,
-                                         max_jump=cfg.max_jump)
+            normals = normals_from_depth(frame.depth, frame.K, **cfg.normals_options())
             notes.append("normals: estimated from depth (edge-aware inverse-depth fits)")
         else:
             normals = orient_normals(frame.normals, frame.K)
@@ -102,7 +108,7 @@ class GivenCues(CueProvider):
 
 
 @dataclass
-class OnnxCuesConfig:
+class OnnxCuesConfig(NormalsFromDepthOptions):
     """Parameters of the ``onnx`` cue provider."""
 
     profile: str = param(
@@ -122,14 +128,6 @@ class OnnxCuesConfig:
     disparity_floor: float = param(
         0.01, "inverse-depth networks: disparities below this fraction of the median are "
               "invalid")
-    normals_radius: int = param(
-        0, "half-size in pixels of the window that estimates normals from depth "
-           "(0: about 1 % of the longer image side)")
-    normals_stride: int = param(
-        0, "spacing in pixels of the samples in that window, larger = wider at the same cost "
-           "(0: automatic)")
-    max_jump: float = param(
-        0.05, "relative depth jump between neighbouring pixels that marks a depth edge")
 
     def __post_init__(self) -> None:
         get_profile(self.profile)
@@ -144,7 +142,7 @@ class OnnxCuesConfig:
             raise ConfigError(f"hfov_deg must be in [0, 180), got {self.hfov_deg}")
         if not 0 < self.disparity_floor < 1:
             raise ConfigError(f"disparity_floor must be in (0, 1), got {self.disparity_floor}")
-        _check_normals_options(self.normals_radius, self.normals_stride, self.max_jump)
+        super().__post_init__()
         # Validates the overrides (axes, sizes) now, at config time.
         self.resolved_profile()
 
@@ -172,8 +170,7 @@ class OnnxCues(CueProvider):
             cfg.resolved_profile(), cfg.depth_model or None, cfg.normal_model or None,
             threads=cfg.threads, disparity_floor=cfg.disparity_floor,
             hfov_deg=cfg.hfov_deg or None,
-            normals_options={"radius": cfg.normals_radius or None,
-                             "stride": cfg.normals_stride or None, "max_jump": cfg.max_jump})
+            normals_options=cfg.normals_options())
 
     def provide(self, frame: Frame) -> Frame:
         """Predict the frame's missing depth and normals (see :meth:`CueNetwork.provide`)."""
