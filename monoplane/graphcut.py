@@ -179,8 +179,13 @@ class BinaryEnergy:
 
 def gc_ransac_energy(f0: np.ndarray, f1: np.ndarray, edges: np.ndarray,
                      cut_cost: np.ndarray | float, lambda_: float,
-                     g1: np.ndarray | None = None) -> BinaryEnergy:
-    """Assemble E = (1-λ)E_d + (1-λ)E_n + λE_s of (proximity) GC-RANSAC.
+                     g1: np.ndarray | None = None,
+                     pairwise_scale: float = 1.0) -> BinaryEnergy:
+    """Assemble E = (1-λ)E_d + (1-λ)E_n + λ·s·E_s of (proximity) GC-RANSAC.
+
+    ``s`` (``pairwise_scale``) is 1 in the paper. Labelers pass ``s = 1 / k̄``, the inverse mean
+    degree of the neighbourhood graph, to normalise E_s per point (see
+    :func:`degree_normalisation`).
 
     Parameters
     ----------
@@ -195,6 +200,8 @@ def gc_ransac_energy(f0: np.ndarray, f1: np.ndarray, edges: np.ndarray,
         Smoothness weight λ in [0, 1] (paper: 0.95).
     g1 : numpy.ndarray, optional
         (M,) normal cost of the inlier label, :func:`normal_costs`; ``None`` omits E_n.
+    pairwise_scale : float
+        Positive factor s on every pairwise table (the both-outlier cost included).
 
     Returns
     -------
@@ -202,6 +209,8 @@ def gc_ransac_energy(f0: np.ndarray, f1: np.ndarray, edges: np.ndarray,
     """
     if not 0.0 <= lambda_ <= 1.0:
         raise InvalidInput(f"lambda must lie in [0, 1], got {lambda_}")
+    if not pairwise_scale > 0:
+        raise InvalidInput(f"pairwise_scale must be positive, got {pairwise_scale}")
     data1 = f1 if g1 is None else f1 + g1
     unary = (1.0 - lambda_) * np.stack([f0, data1], axis=1)
     edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
@@ -210,8 +219,34 @@ def gc_ransac_energy(f0: np.ndarray, f1: np.ndarray, edges: np.ndarray,
     tables[:, 0, 0] = 0.5 * (f0[edges[:, 0]] + f0[edges[:, 1]])
     tables[:, 0, 1] = cut
     tables[:, 1, 0] = cut
-    tables *= lambda_
+    tables *= lambda_ * pairwise_scale
     return BinaryEnergy(unary=unary, edges=edges, tables=tables)
+
+
+def degree_normalisation(mean_degree: float) -> float:
+    """Pairwise scale ``1 / k̄`` that makes E_s independent of the graph's density.
+
+    Every edge charges its both-outlier cost ½(f(0,p) + f(0,q)) half to each end, so with k̄
+    neighbours per point the unnormalised E_s raises the cost of the outlier label of a point
+    within ε from ``(1-λ) f(0, p)`` to about ``(1-λ + λ k̄ / 2) f(0, p)``, and cutting a point off
+    all its neighbours costs ``λ k̄``, while labelling a point beyond ε an inlier still costs
+    only ``(1-λ) φ²/ε²``. On a dense cloud (k̄ ≈ 10) the smoothness term thus outweighs the data
+    term k̄ times more than λ says, and a plane swallows strips of its neighbours. Dividing E_s
+    by k̄ makes λ weigh one point's data cost against that point's share of the smoothness
+    cost, as in GC-RANSAC's sparse sphere neighbourhoods (a few neighbours per point), and
+    makes the labelling nearly independent of ``knn``.
+
+    Parameters
+    ----------
+    mean_degree : float
+        Mean number of neighbours per node of the full neighbourhood graph.
+
+    Returns
+    -------
+    float
+        ``1 / mean_degree``, or 1 when the graph has no edges.
+    """
+    return 1.0 / mean_degree if mean_degree > 0 else 1.0
 
 
 def energy(labels: np.ndarray, unary: np.ndarray, edges: np.ndarray,

@@ -9,7 +9,10 @@ One plane at a time, on the points not yet assigned (the *pool*):
    subgraph of the pool);
 3. local optimisation: least-squares refit on the inliers (model normal θ_n = mean predicted
    normal of the inliers), relabel, and keep the refit while the labeler's energy decreases;
-4. the plane is accepted if its support reaches ``min_support``, otherwise the search stops;
+4. with ``split_components``, only the largest connected component (in the neighbourhood graph)
+   of the inliers is kept; the other components return to the pool and can become planes of
+   their own later (two table tops at the same height are two planes);
+5. the plane is accepted if its support reaches ``min_support``, otherwise the search stops;
    its inliers leave the pool.
 
 The cloud and its neighbour graph are built once per frame. Afterwards labels are carried to
@@ -66,6 +69,8 @@ class RansacConfig:
     knn: int = param(8, "neighbours per point in the graph-cut neighbourhood graph")
     max_points: int = param(20000, "subsample the valid pixels to at most this many points")
     lo_iterations: int = param(3, "local optimisation rounds (refit + relabel) per plane")
+    split_components: bool = param(
+        False, "keep only the largest graph-connected component of each plane's inliers")
     score_points: int = param(
         5000, "score hypotheses on a random subset of at most this many pool points (0 = all)")
     seed: int = param(0, "seed of the random generator; equal seeds give equal results")
@@ -198,6 +203,9 @@ class SequentialRansac:
                 break
             t = time.perf_counter()
             plane, inliers = self._label(cloud, graph, pool, best[0], best[1], params)
+            if cfg.split_components and inliers.any():
+                members = np.flatnonzero(inliers)
+                inliers[members[~graph.largest_component(pool[members])]] = False
             timings["ransac.label"] += time.perf_counter() - t
             if inliers.sum() < min_support:
                 break

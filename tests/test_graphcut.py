@@ -9,6 +9,7 @@ from monoplane.errors import InvalidInput
 from monoplane.graphcut import (
     BinaryEnergy,
     check_submodular,
+    degree_normalisation,
     energy,
     gc_ransac_energy,
     minimize,
@@ -115,3 +116,24 @@ def test_energy_without_edges_is_sum_of_unaries():
     assert energy(np.array([0, 1]), u, np.zeros((0, 2), int), np.zeros((0, 2, 2))) == 1.5
     np.testing.assert_array_equal(minimize(u, np.zeros((0, 2), int), np.zeros((0, 2, 2))),
                                   [False, True])
+
+
+def test_pairwise_scale_multiplies_only_the_pairwise_term():
+    rng = np.random.default_rng(7)
+    f0, f1 = msac_costs(rng.uniform(0, 0.04, size=6), 0.02)
+    edges = np.array([[0, 1], [1, 2], [2, 3], [3, 4], [4, 5], [0, 5]])
+    base = gc_ransac_energy(f0, f1, edges, 1.0, 0.9)
+    half = gc_ransac_energy(f0, f1, edges, 1.0, 0.9, pairwise_scale=0.5)
+    np.testing.assert_allclose(half.unary, base.unary)
+    np.testing.assert_allclose(half.tables, 0.5 * base.tables)
+    for bits in itertools.product([0, 1], repeat=6):
+        lab = np.array(bits)
+        unary = base.unary[np.arange(6), lab].sum()
+        assert half.energy(lab) == pytest.approx(unary + 0.5 * (base.energy(lab) - unary))
+    with pytest.raises(InvalidInput):
+        gc_ransac_energy(f0, f1, edges, 1.0, 0.9, pairwise_scale=0.0)
+
+
+def test_degree_normalisation():
+    assert degree_normalisation(10.0) == pytest.approx(0.1)
+    assert degree_normalisation(0.0) == 1.0

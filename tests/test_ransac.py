@@ -163,3 +163,22 @@ def test_required_iterations():
     assert required_iterations(0.5, 0.99) == pytest.approx(np.log(0.01) / np.log(1 - 0.125))
     assert required_iterations(0.0, 0.99) == np.inf
     assert required_iterations(1.0, 0.99) == 1.0
+
+
+@pytest.mark.parametrize("split", [False, True])
+def test_split_components_separates_two_coplanar_patches(split):
+    # One fronto-parallel plane z = 3 seen through a 40-column gap of invalid pixels: the two
+    # halves are one plane geometrically, two surfaces spatially.
+    h, w = 48, 96
+    K = default_intrinsics(w, h, 60.0)
+    depth = np.full((h, w), 3.0, dtype=np.float32)
+    depth[:, 28:68] = 0.0
+    normals = np.tile(np.array([0, 0, -1], dtype=np.float32), (h, w, 1))
+    frame = Frame(rgb=None, K=K, depth=depth, normals=normals)
+    rec = make("monoplane-nocrf", split_components=split).run(frame)
+    left, right = rec.labels[:, :28], rec.labels[:, 68:]
+    assert np.all(left > 0) and np.all(right > 0)
+    assert len(np.unique(left)) == 1 and len(np.unique(right)) == 1
+    assert rec.num_planes == (2 if split else 1)
+    assert (left[0, 0] != right[0, 0]) == split
+    np.testing.assert_allclose(rec.params[:, 3], 3.0, rtol=1e-6)

@@ -11,6 +11,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from monoplane.errors import InvalidInput
@@ -97,6 +99,34 @@ class NeighbourGraph:
     def num_edges(self) -> int:
         """Number E of undirected edges."""
         return int(self.edges.shape[0])
+
+    @property
+    def mean_degree(self) -> float:
+        """Mean number of neighbours per node, ``2E / N`` (0 for an empty graph)."""
+        return 2.0 * self.num_edges / self.num_nodes if self.num_nodes else 0.0
+
+    def largest_component(self, nodes: np.ndarray) -> np.ndarray:
+        """Which of ``nodes`` lie in the largest connected component of their subgraph.
+
+        Parameters
+        ----------
+        nodes : numpy.ndarray
+            (M,) int64 distinct node indices.
+
+        Returns
+        -------
+        numpy.ndarray
+            (M,) bool, True on the nodes of the largest component of the subgraph induced by
+            ``nodes`` (the lowest-numbered one among equally large components).
+        """
+        nodes = np.asarray(nodes, dtype=np.int64)
+        if nodes.size == 0:
+            return np.zeros(0, dtype=bool)
+        edges, _ = self.subgraph(nodes)
+        adj = coo_matrix((np.ones(edges.shape[0]), (edges[:, 0], edges[:, 1])),
+                         shape=(nodes.size, nodes.size))
+        _, comp = connected_components(adj, directed=False)
+        return comp == np.argmax(np.bincount(comp))
 
     def neighbours(self, i: int) -> np.ndarray:
         """(deg,) int64 neighbours of node ``i``."""

@@ -2,7 +2,11 @@
 
 * ``threshold``: vanilla RANSAC, inliers are the points with φ < ε; energy = −|inliers|.
 * ``graph-cut``: GC-RANSAC with the paper's truncated-L2 data term and a constant Potts
-  pairwise term (cut cost 1, both-outliers cost ½(f(0,p) + f(0,q))), E = (1-λ)E_d + λE_s.
+  pairwise term (cut cost 1, both-outliers cost ½(f(0,p) + f(0,q))), E = (1-λ)E_d + λE_s;
+  by default E_s is divided by the mean degree k̄ of the kNN graph
+  (:func:`~monoplane.graphcut.degree_normalisation`): unnormalised, on a dense graph the
+  smoothness term outweighs the data term k̄ times more than λ says and a plane absorbs strips
+  of its neighbours.
 * ``proximity-graph-cut``: MonoPlane's labeler (§III-B2): the data term adds the normal energy
   E_n and the cut cost of an edge is 0.5 + k_p + k_c + k_n (eqs. kp, kc, kn), so
   E = (1-λ)E_d + (1-λ)E_n + λE_s. The colour term is dropped when the cloud has no colour.
@@ -19,6 +23,7 @@ import numpy as np
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.graphcut import (
+    degree_normalisation,
     gc_ransac_energy,
     msac_costs,
     normal_angles,
@@ -51,6 +56,8 @@ class GraphCutConfig:
     """Parameters of the GC-RANSAC labeler."""
 
     lambda_: float = param(0.95, "smoothness weight λ in E = (1-λ)E_d + λE_s")
+    normalise: bool = param(
+        True, "divide E_s by the graph's mean degree, so λ does not depend on knn")
 
 
 class GraphCutLabeler(Labeler):
@@ -64,7 +71,8 @@ class GraphCutLabeler(Labeler):
         """See :meth:`monoplane.stages.base.Labeler.label`."""
         f0, f1 = msac_costs(_pool_distances(cloud, pool, plane), params.epsilon)
         edges, _ = graph.subgraph(pool)
-        e = gc_ransac_energy(f0, f1, edges, 1.0, self.config.lambda_)
+        scale = degree_normalisation(graph.mean_degree) if self.config.normalise else 1.0
+        e = gc_ransac_energy(f0, f1, edges, 1.0, self.config.lambda_, pairwise_scale=scale)
         inliers = e.minimize()
         return Labeling(inliers=inliers, energy=e.energy(inliers))
 
@@ -81,6 +89,8 @@ class ProximityGraphCutConfig:
     w_c: float = param(1.0, "weight of the colour proximity term k_c (dropped without colour)")
     w_n: float = param(1.0, "weight of the normal proximity term k_n")
     normal_term: bool = param(True, "add the normal data energy E_n to the data term")
+    normalise: bool = param(
+        False, "divide E_s by the graph's mean degree (off: the paper's weights as given)")
 
 
 class ProximityGraphCutLabeler(Labeler):
@@ -110,7 +120,8 @@ class ProximityGraphCutLabeler(Labeler):
             g1 = normal_costs(normal_angles(cloud.normals[pool], model_normal), params.epsilon_n)
         edges, edge_ids = graph.subgraph(pool)
         cut = self._edge_weights(cloud, graph)[edge_ids]
-        e = gc_ransac_energy(f0, f1, edges, cut, self.config.lambda_, g1)
+        scale = degree_normalisation(graph.mean_degree) if self.config.normalise else 1.0
+        e = gc_ransac_energy(f0, f1, edges, cut, self.config.lambda_, g1, pairwise_scale=scale)
         inliers = e.minimize()
         return Labeling(inliers=inliers, energy=e.energy(inliers))
 

@@ -73,3 +73,24 @@ def test_duplicate_points_do_not_create_self_loops_and_tiny_clouds_work():
     assert np.all(g.edges[:, 0] != g.edges[:, 1])
     single = NeighbourGraph.build(np.zeros((1, 3)), k=3)
     assert single.num_edges == 0
+
+
+def test_mean_degree_is_twice_edges_over_nodes():
+    # On a line at 0, 1, 3, 7 each point's nearest neighbour gives the edges 0-1, 1-2, 2-3.
+    pts = np.array([[0.0, 0, 0], [1, 0, 0], [3, 0, 0], [7, 0, 0]])
+    g = NeighbourGraph.build(pts, k=1)
+    assert {tuple(e) for e in g.edges.tolist()} == {(0, 1), (1, 2), (2, 3)}
+    assert g.mean_degree == 1.5
+    assert NeighbourGraph.build(np.zeros((1, 3)), k=3).mean_degree == 0.0
+
+
+def test_largest_component_of_a_node_subset():
+    # Chain 0-1-2 and pair 3-4 far away.
+    pts = np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0], [10, 0, 0], [11, 0, 0]])
+    g = NeighbourGraph.build(pts, k=1)
+    np.testing.assert_array_equal(g.largest_component(np.arange(5)),
+                                  [True, True, True, False, False])
+    # Without node 1 the chain falls apart: {0}, {2}, {3, 4}.
+    np.testing.assert_array_equal(g.largest_component(np.array([0, 2, 3, 4])),
+                                  [False, False, True, True])
+    assert g.largest_component(np.zeros(0, dtype=np.int64)).shape == (0,)

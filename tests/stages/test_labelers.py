@@ -63,7 +63,10 @@ def test_threshold_labels_by_distance_and_reports_minus_count():
     assert lab.energy == -expected.sum()
 
 
-@pytest.mark.parametrize("labeler", [GraphCutLabeler(), ProximityGraphCutLabeler()])
+# The paper's unnormalised E_s: the bump is a 3x3 cluster 2.6 spacings off the grid, so few
+# edges tie it to the plane; only the unnormalised pairwise weight pulls it in.
+@pytest.mark.parametrize("labeler", [GraphCutLabeler(GraphCutLabeler.Config(normalise=False)),
+                                     ProximityGraphCutLabeler()])
 @pytest.mark.parametrize("colors", [True, False])
 def test_graph_cuts_close_holes_but_keep_far_points_out(labeler, colors):
     cloud, bump, far, _ = grid_cloud(colors=colors)
@@ -86,7 +89,8 @@ def test_graph_cut_labelling_is_a_local_minimum_of_its_energy(labeler):
         f0, f1 = msac_costs(d, EPS)
         edges = graph.edges
         if labeler.name == "graph-cut":
-            e = gc_ransac_energy(f0, f1, edges, 1.0, 0.95)
+            e = gc_ransac_energy(f0, f1, edges, 1.0, 0.95,
+                                 pairwise_scale=1.0 / graph.mean_degree)
         else:
             g1 = normal_costs(normal_angles(cloud.normals, PLANE[:3]), np.deg2rad(10))
             w = proximity_weights(cloud.points, edges, cloud.normals, cloud.colors)
@@ -121,3 +125,24 @@ def test_subgraph_pool_and_weight_cache():
     assert lab.inliers.shape == pool.shape
     assert not lab.inliers[np.isin(pool, far)].any()
     assert len(graph.cache) == 1
+
+
+@pytest.mark.parametrize("normalise", [False, True])
+def test_degree_normalisation_decides_whether_an_isolated_far_point_is_absorbed(normalise):
+    # A flat 20x20 grid (spacing 0.01) with one point lifted to 6ε: r = φ²/ε² = 36. All its
+    # neighbours are firm inliers, so it is an inlier iff (1-λ) r < λ s deg, with s = 1/k̄
+    # when normalised: 1.8 < 0.95 * deg without, and 1.8 > 0.95 * deg / k̄ ≈ 0.95 with.
+    u, v = np.meshgrid(np.arange(20) * 0.01, np.arange(20) * 0.01)
+    pts = np.stack([u.ravel(), v.ravel(), np.zeros(400)], axis=1)
+    lifted = 210
+    pts[lifted, 2] = 6 * EPS
+    nrm = np.tile([0.0, 0.0, -1.0], (400, 1))
+    cloud = PlaneCloud(points=pts, normals=nrm, colors=None, pixels=np.arange(400),
+                       center=np.zeros(3), scale=1.0, shape=(20, 20), all_points=pts,
+                       all_pixels=np.arange(400))
+    lab, graph = run(GraphCutLabeler(GraphCutLabeler.Config(normalise=normalise)), cloud)
+    deg = graph.neighbours(lifted).size
+    s = 1.0 / graph.mean_degree if normalise else 1.0
+    assert lab.inliers[lifted] == (0.05 * 36 < 0.95 * s * deg)
+    assert lab.inliers[lifted] != normalise
+    assert lab.inliers[np.arange(400) != lifted].all()
