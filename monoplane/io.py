@@ -29,9 +29,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from monoplane.cues.intrinsics import assume_intrinsics
 from monoplane.errors import InvalidInput
 from monoplane.geometry.polygons import plane_polygons, triangulate_on_plane
-from monoplane.cues.intrinsics import assume_intrinsics
 from monoplane.types import Frame, Reconstruction, intrinsics_matrix
 
 
@@ -174,7 +174,8 @@ def read_intrinsics(spec: str | Path) -> np.ndarray:
             data = json.loads(p.read_text())
         except json.JSONDecodeError as exc:
             raise InvalidInput(f"intrinsics {p} is not valid JSON: {exc}") from None
-        missing = [k for k in ("fx", "fy", "cx", "cy") if not isinstance(data, dict) or k not in data]
+        keys = ("fx", "fy", "cx", "cy")
+        missing = [k for k in keys if not isinstance(data, dict) or k not in data]
         if missing:
             raise InvalidInput(f"intrinsics {p} lacks {', '.join(missing)}; expected "
                                '{"fx": …, "fy": …, "cx": …, "cy": …}')
@@ -264,8 +265,9 @@ def check_output_dir(out_dir: str | Path, overwrite: bool = False) -> Path:
 def atomic_output_dir(out_dir: str | Path, overwrite: bool = False) -> Iterator[Path]:
     """Yield a temporary folder that becomes ``out_dir`` only if the block succeeds.
 
-    Missing parent folders are created. The temporary folder is a sibling of ``out_dir`` (same file system, so the final rename is
-    atomic). On any exception it is removed and ``out_dir`` is left untouched.
+    Missing parent folders are created. The temporary folder is a sibling of ``out_dir``
+    (same file system, so the final rename is atomic). On any exception it is removed and
+    ``out_dir`` is left untouched.
 
     Raises
     ------
@@ -348,8 +350,8 @@ def planes_document(rec: Reconstruction) -> dict:
 
 def write_reconstruction_files(rec: Reconstruction, folder: Path) -> None:
     """Write the single-view outputs into an existing folder (not atomic by itself)."""
-    from monoplane.config import dumps_toml
     from monoplane import __version__
+    from monoplane.config import dumps_toml
 
     if rec.num_planes > np.iinfo(np.uint16).max:
         raise InvalidInput(f"{rec.num_planes} planes do not fit in a uint16 labels.png")

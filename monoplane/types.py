@@ -1,4 +1,4 @@
-"""The data model that flows between stages: :class:`Frame`, :class:`Reconstruction`, :class:`Scene`.
+"""The data model that flows between stages: Frame, Reconstruction, Camera, Scene, SfmResult.
 
 Conventions used everywhere in monoplane
 ----------------------------------------

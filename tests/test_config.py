@@ -50,7 +50,8 @@ def test_bad_config_lists_valid_choices(overrides, match):
 
 
 def test_unknown_preset_lists_presets():
-    with pytest.raises(ConfigError, match=r"unknown preset 'monoplain'; valid presets: .*gc-ransac"):
+    with pytest.raises(ConfigError,
+                       match=r"unknown preset 'monoplain'; valid presets: .*gc-ransac"):
         config.load(preset="monoplain")
 
 

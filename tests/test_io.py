@@ -5,10 +5,14 @@ import numpy as np
 import pytest
 
 from monoplane.errors import InvalidInput
-from monoplane.io import (
-    atomic_output_dir, load_frame, read_depth, read_intrinsics, read_normals,
-)
 from monoplane.geometry.polygons import plane_polygons
+from monoplane.io import (
+    atomic_output_dir,
+    load_frame,
+    read_depth,
+    read_intrinsics,
+    read_normals,
+)
 from monoplane.types import Frame, Reconstruction
 from tests.conftest import box_corner_depth
 

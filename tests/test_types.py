@@ -3,8 +3,15 @@ import pytest
 
 from monoplane.errors import InvalidInput
 from monoplane.types import (
-    Camera, Frame, Reconstruction, default_intrinsics, intrinsics_matrix,
-    orient_towards_camera, pixel_rays, plane_to_camera, plane_to_world,
+    Camera,
+    Frame,
+    Reconstruction,
+    default_intrinsics,
+    intrinsics_matrix,
+    orient_towards_camera,
+    pixel_rays,
+    plane_to_camera,
+    plane_to_world,
 )
 from tests.conftest import box_corner_depth
 

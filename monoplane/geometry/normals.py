@@ -16,8 +16,8 @@ hypotheses. Each pixel's fit only uses neighbours on its own side of every depth
 2. valid, non-rim pixels are split into 4-connected components, which the rims separate;
 3. a non-rim pixel fits only neighbours of its own component whose relative inverse-depth
    difference stays within ``max_jump`` plus its own local step per pixel of offset (this also
-   catches edges that do not close a component); a rim pixel fits only neighbours within ``max_jump`` of its own
-   depth, which excludes the nearer (occluding) side.
+   catches edges that do not close a component); a rim pixel fits only neighbours within
+   ``max_jump`` of its own depth, which excludes the nearer (occluding) side.
 
 Windows that provably see one surface (no rim, one component, small depth range) are fitted
 for the whole image at once with separable filters of the masked moments; only the band near
