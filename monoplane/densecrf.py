@@ -20,6 +20,7 @@ import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 import scipy.sparse as sp
 
@@ -207,10 +208,14 @@ def _simplex_vertices(
         )
     place = np.concatenate([[1], np.cumprod(radix[:-1])]).astype(np.int64)
     base = (key0 - lo) @ place
-    _, base_id = np.unique(base, return_inverse=True)
     perm_code = rank[:, :d] @ (d1 ** np.arange(d, dtype=np.int64))
-    _, first, simplex_of = np.unique(base_id * d1**d + perm_code, return_index=True,
-                                     return_inverse=True)
+    if float(np.prod(radix.astype(np.float64))) * d1**d < 2.0**62:
+        # The simplex key (base vertex, permutation) fits in 64 bits: one sort finds simplices.
+        simplex_key = base * d1**d + perm_code
+    else:
+        _, base_id = np.unique(base, return_inverse=True)
+        simplex_key = base_id * d1**d + perm_code
+    _, first, simplex_of = np.unique(simplex_key, return_index=True, return_inverse=True)
     r = np.arange(d1)
     codes = base[first, None] + r[None, :] * int(place.sum())
     for k in range(d):
@@ -253,7 +258,8 @@ class GaussianKernel:
         return self.weight * self._norm * self.lattice.filter(self._norm * q)
 
 
-def unary_from_labels(labels: np.ndarray, num_labels: int, confidence: float) -> np.ndarray:
+def unary_from_labels(labels: np.ndarray, num_labels: int, confidence: float,
+                      uniform_label: int | None = None) -> np.ndarray:
     """Unary energies ψ_u from a hard label map ("difference to the original labels").
 
     The observed label gets probability ``confidence``, the other ``num_labels - 1`` labels
@@ -269,6 +275,11 @@ def unary_from_labels(labels: np.ndarray, num_labels: int, confidence: float) ->
         L >= 2.
     confidence : float
         Probability of the observed label, in ``(1/L, 1)``.
+    uniform_label : int, optional
+        Pixels observed with this label get the uniform distribution (energy ``log L`` for
+        every label) instead: the observation carries no evidence. The refiner passes 0, the
+        RANSAC's "no plane explains this point", which says nothing about which plane the pixel
+        belongs to, so the pairwise kernels decide.
 
     Returns
     -------
@@ -285,6 +296,8 @@ def unary_from_labels(labels: np.ndarray, num_labels: int, confidence: float) ->
     other = -np.log((1.0 - confidence) / (num_labels - 1))
     unary = np.full((lab.size, num_labels), other, dtype=np.float32)
     unary[np.arange(lab.size), lab] = -np.log(confidence)
+    if uniform_label is not None:
+        unary[lab == uniform_label] = np.log(num_labels)
     return unary
 
 
@@ -348,6 +361,14 @@ class CrfParams:
     across a plane; 0.1 (≈ 6°, under the RANSAC's ε_n = 10°) groups pixels of the same
     orientation. On depth normalised to (0, 1], 0.01 (1 % of the depth range) is a sharp,
     edge-preserving kernel that does not cross depth discontinuities.
+
+    ``uniform_nonplanar`` (not in the paper): pixels observed with label 0 (non-planar) get a
+    uniform unary (see :func:`unary_from_labels`), so the kernels alone decide their label.
+
+    ``max_pixels`` (not in the paper; 0 = no cap): above this many pixels, mean-field inference
+    runs on a grid coarsened by an integer factor (see :func:`dense_crf`), since building the
+    lattices costs time linear in the pixel count while the kernels (θ_s scales with the image)
+    are many pixels wide anyway.
     """
 
     theta_position: float = 10.0
@@ -360,6 +381,8 @@ class CrfParams:
     w_normal: float = 1.0
     confidence: float = 0.55
     iterations: int = 5
+    uniform_nonplanar: bool = False
+    max_pixels: int = 0
 
     def __post_init__(self) -> None:
         for name in ("theta_position", "theta_color", "theta_depth", "theta_normal"):
@@ -370,6 +393,8 @@ class CrfParams:
                 raise InvalidInput(f"{name} must be >= 0 (0 disables the kernel)")
         if self.iterations < 0:
             raise InvalidInput(f"iterations must be >= 0, got {self.iterations}")
+        if self.max_pixels < 0:
+            raise InvalidInput(f"max_pixels must be >= 0 (0: no cap), got {self.max_pixels}")
 
 
 def crf_features(
@@ -454,6 +479,16 @@ def dense_crf(
     numpy.ndarray
         (H, W) int32 MAP labels of the mean-field marginals. With fewer than 2 labels or 0
         iterations the input is returned unchanged (as int32).
+
+    Notes
+    -----
+    When ``H W > params.max_pixels > 0`` the image is cut into s x s blocks, with the smallest
+    integer ``s`` that brings the block count under the cap. Mean field runs on the block grid:
+    a block's unary is the negative log of its pixels' mean label probabilities, and its cues
+    are those of its centre pixel (sampling, not averaging, keeps depth and normal edges sharp).
+    The final labels are then taken at full resolution from each pixel's own unary plus the
+    pairwise energy of the last coarse marginals, bilinearly upsampled, i.e. one mean-field
+    update at full resolution with coarse messages, so boundaries keep pixel accuracy.
     """
     lab = np.asarray(labels)
     if lab.ndim != 2:
@@ -462,7 +497,35 @@ def dense_crf(
         raise InvalidInput(f"labels must lie in 0..{num_labels - 1}")
     if num_labels < 2 or params.iterations == 0:
         return lab.astype(np.int32)
-    unary = unary_from_labels(lab, num_labels, params.confidence)
-    kernels = crf_features(lab.shape, params, rgb=rgb, depth=depth, normals=normals)
-    q = mean_field(unary, kernels, params.iterations)
-    return q.argmax(axis=1).astype(np.int32).reshape(lab.shape)
+    unary = unary_from_labels(lab, num_labels, params.confidence,
+                              uniform_label=0 if params.uniform_nonplanar else None)
+    h, w = lab.shape
+    step = 1
+    if params.max_pixels:
+        while -(-h // step) * -(-w // step) > params.max_pixels:
+            step += 1
+    if step == 1:
+        kernels = crf_features(lab.shape, params, rgb=rgb, depth=depth, normals=normals)
+        q = mean_field(unary, kernels, params.iterations)
+        return q.argmax(axis=1).astype(np.int32).reshape(lab.shape)
+    hs, ws = -(-h // step), -(-w // step)
+
+    def blocks(a: np.ndarray) -> np.ndarray:
+        pad = [(0, hs * step - h), (0, ws * step - w)] + [(0, 0)] * (a.ndim - 2)
+        return np.pad(a, pad, mode="edge").reshape(hs, step, ws, step, *a.shape[2:])
+
+    def centres(a: np.ndarray | None) -> np.ndarray | None:
+        return None if a is None else blocks(np.asarray(a))[:, step // 2, :, step // 2]
+
+    prob = blocks(np.exp(-unary).reshape(h, w, num_labels)).mean(axis=(1, 3))
+    coarse_unary = -np.log(prob.reshape(-1, num_labels))
+    kernels = crf_features((hs, ws), params, rgb=centres(rgb), depth=centres(depth),
+                           normals=centres(normals))
+    q = mean_field(coarse_unary, kernels, params.iterations)
+    pairwise = np.zeros_like(q)
+    for kernel in kernels:
+        pairwise += kernel.message(q)
+    fine = cv2.resize(pairwise.reshape(hs, ws, num_labels), (ws * step, hs * step),
+                      interpolation=cv2.INTER_LINEAR).reshape(hs * step, ws * step, -1)[:h, :w]
+    energy = fine.reshape(-1, num_labels) - unary
+    return energy.argmax(axis=1).astype(np.int32).reshape(lab.shape)

@@ -136,6 +136,25 @@ def test_unary_from_labels_closed_form():
         unary_from_labels(np.array([0]), 1, 0.9)
 
 
+def test_unary_uniform_label_carries_no_evidence():
+    u = unary_from_labels(np.array([0, 2, 1]), 4, 0.7, uniform_label=0)
+    np.testing.assert_allclose(u[0], np.log(4.0), rtol=1e-6)
+    np.testing.assert_allclose(u[1], -np.log([0.1, 0.1, 0.7, 0.1]), rtol=1e-6)
+
+
+def test_uniform_nonplanar_fills_a_hole_from_its_surroundings():
+    # A 6x6 hole of label 0 inside plane 1, on one flat grey plane: with the paper's unary the
+    # hole's own evidence keeps most of it 0; with a uniform unary plane 1 fills it.
+    labels = np.ones((32, 32), dtype=np.int32)
+    labels[:, 16:] = 2
+    labels[8:14, 4:10] = 0
+    depth = np.full((32, 32), 2.0, dtype=np.float32)
+    paper = dense_crf(labels, 3, CrfParams(), depth=depth)
+    filled = dense_crf(labels, 3, CrfParams(uniform_nonplanar=True), depth=depth)
+    assert (paper[8:14, 4:10] == 0).mean() > 0.5
+    np.testing.assert_array_equal(filled, np.where(labels == 0, 1, labels))
+
+
 def test_mean_field_without_kernels_is_the_unary_softmax():
     labels = np.array([0, 1, 2, 1])
     q = mean_field(unary_from_labels(labels, 3, 0.6), [], iterations=5)
@@ -183,6 +202,23 @@ def test_feature_scaling_matches_documented_units():
     a = dense_crf(noisy, 6, p, rgb, depth, normals)
     b = dense_crf(noisy, 6, p, rgb, depth * 1000.0, normals)
     np.testing.assert_array_equal(a, b)
+
+
+def test_working_resolution_cap():
+    rgb, depth, normals, gt = room_cues(96, 128)
+    rng = np.random.default_rng(2)
+    noisy = np.where(rng.random(gt.shape) < 0.2, rng.integers(0, 6, gt.shape), gt)
+    full = dense_crf(noisy, 6, CrfParams(), rgb, depth, normals)
+    # A cap at or above the pixel count changes nothing.
+    same = dense_crf(noisy, 6, CrfParams(max_pixels=96 * 128), rgb, depth, normals)
+    np.testing.assert_array_equal(same, full)
+    # A cap of 3100 px: 2 x 2 blocks, a 48 x 64 = 3072 grid.
+    coarse = dense_crf(noisy, 6, CrfParams(max_pixels=3100), rgb, depth, normals)
+    assert (noisy == gt).mean() < 0.85
+    assert (coarse == gt).mean() > 0.99       # measured 0.993; full resolution 0.998
+    assert (coarse == full).mean() > 0.99
+    with pytest.raises(InvalidInput):
+        CrfParams(max_pixels=-1)
 
 
 # --- refinement on label maps with known answers --------------------------------------------

@@ -7,10 +7,15 @@ import pytest
 
 from monoplane.errors import InvalidInput
 from monoplane.regions import (
+    absorb_small_regions,
     clean_regions,
+    gate_filled_pixels,
+    merge_coplanar,
     refit_planes,
+    region_adjacency,
     remove_small_regions,
     scaled_min_area,
+    scene_radius,
     split_components,
 )
 from monoplane.types import Frame, Reconstruction, intrinsics_matrix, pixel_rays
@@ -181,3 +186,123 @@ def test_clean_regions_without_split_keeps_one_plane_per_label():
     split = clean_regions(rec, observed, min_area=10, split=True)
     assert split.num_planes == 3
     np.testing.assert_array_equal(np.unique(split.labels), [0, 1, 2, 3])
+
+
+# --- deviations from the paper: re-merging, absorbing, gating, scene radius -----------------
+
+def flat_points(z: np.ndarray) -> np.ndarray:
+    """(H, W, 3) points with x = column, y = row and the given z: planes z = const are exact."""
+    h, w = z.shape
+    v, u = np.mgrid[0:h, 0:w].astype(np.float64)
+    return np.stack([u, v, z], axis=-1)
+
+
+def test_scene_radius_exact():
+    pts = np.zeros((1, 4, 3))
+    pts[0, :, 0] = [0.0, 2.0, 4.0, 100.0]
+    valid = np.array([[True, True, True, False]])
+    assert scene_radius(pts, valid) == 2.0
+    assert scene_radius(pts, np.zeros_like(valid)) == 0.0
+
+
+def test_region_adjacency_exact():
+    # 1 touches 2 side by side; 3 touches 2 only at a corner; 0 never counts.
+    labels = np.array([
+        [1, 2, 0, 0],
+        [1, 2, 0, 0],
+        [0, 0, 3, 0],
+    ])
+    np.testing.assert_array_equal(region_adjacency(labels, 8), [[1, 2], [2, 3]])
+    np.testing.assert_array_equal(region_adjacency(labels, 4), [[1, 2]])
+
+
+def test_merge_coplanar_joins_only_agreeing_regions_of_one_label():
+    # Regions 1, 2, 3 came from label 1; 4 from label 2. 1 and 3 lie on z = 5 (cut apart by a
+    # column of 0), 2 lies on z = 5.5, 4 on z = 5 but from another label.
+    z = np.full((2, 7), 5.0)
+    z[:, 2] = 5.5
+    labels = np.array([
+        [1, 0, 2, 0, 3, 0, 4],
+        [1, 0, 2, 0, 3, 0, 4],
+    ], dtype=np.int32)
+    origin = np.array([1, 1, 1, 2])
+    params = np.array([[0, 0, -1, 5.0], [0, 0, -1, 5.5], [0, 0, -1, 5.0], [0, 0, -1, 5.0]])
+    pts, valid = flat_points(z), np.ones(z.shape, bool)
+    new, new_origin = merge_coplanar(pts, valid, labels, origin, params, 10.0, 0.1)
+    np.testing.assert_array_equal(new, [[1, 0, 2, 0, 1, 0, 3]] * 2)
+    np.testing.assert_array_equal(new_origin, [1, 1, 2])
+    # With a 1.0 tolerance region 2 is on the same plane too, and all of label 1 merges.
+    new, new_origin = merge_coplanar(pts, valid, labels, origin, params, 10.0, 1.0)
+    np.testing.assert_array_equal(new, [[1, 0, 1, 0, 1, 0, 2]] * 2)
+    np.testing.assert_array_equal(new_origin, [1, 2])
+    # Extra pairs are tested whatever their origin: 3 and 4 lie on z = 5 and join; the group
+    # takes its representative's origin (the lower label of two equal areas: 3, from label 1).
+    new, new_origin = merge_coplanar(pts, valid, labels, origin, params, 10.0, 0.1,
+                                     extra_pairs=np.array([[3, 4], [2, 3]]))
+    np.testing.assert_array_equal(new, [[1, 0, 2, 0, 1, 0, 1]] * 2)
+    np.testing.assert_array_equal(new_origin, [1, 1])
+    # A normal beyond the angle tolerance blocks the merge whatever the residuals.
+    tilted = params.copy()
+    tilted[2, :3] = [np.sin(0.3), 0.0, -np.cos(0.3)]  # 17 degrees
+    new, _ = merge_coplanar(pts, valid, labels, origin, tilted, 10.0, 1.0)
+    np.testing.assert_array_equal(new, [[1, 0, 1, 0, 2, 0, 3]] * 2)
+
+
+def test_absorb_small_regions_exact():
+    # Large regions 1 (z = 5) and 2 (z = 8); small region 3 lies on z = 5 and touches both: it
+    # joins 1. Small region 4 lies on z = 20 and touches 2 only: it becomes 0. Small region 5
+    # touches no large region: 0.
+    z = np.array([
+        [5.0, 5.0, 5.0, 8.0, 8.0, 8.0, 1.0],
+        [5.0, 5.0, 5.0, 8.0, 8.0, 20.0, 1.0],
+        [5.0, 5.0, 5.0, 8.0, 8.0, 8.0, 1.0],
+    ])
+    labels = np.array([
+        [1, 1, 1, 2, 2, 2, 0],
+        [1, 1, 3, 2, 2, 4, 0],
+        [1, 1, 1, 2, 2, 2, 5],
+    ], dtype=np.int32)
+    z[1, 2] = 5.0
+    params = np.array([[0, 0, -1, 5.0], [0, 0, -1, 8.0], [0, 0, -1, 9.0], [0, 0, -1, 20.0],
+                       [0, 0, -1, 1.0]])
+    out = absorb_small_regions(flat_points(z), np.ones(z.shape, bool), labels, params,
+                               min_area=3, max_distance=0.5)
+    expected = labels.copy()
+    expected[1, 2] = 1
+    expected[1, 5] = 0
+    expected[2, 6] = 0
+    np.testing.assert_array_equal(out, expected)
+
+
+def test_gate_filled_pixels_exact():
+    # Pixels (0, 1) and (0, 2) were 0 and the refinement gave them plane 1 (z = 5): the first
+    # lies on it and keeps it, the second is 1 away and goes back to 0. (0, 0) was already
+    # plane 1 and is never tested; (0, 3) was 0, stays 0.
+    z = np.array([[9.0, 5.0, 6.0, 5.0]])
+    before = np.array([[1, 0, 0, 0]])
+    after = np.array([[1, 1, 1, 0]])
+    out = gate_filled_pixels(flat_points(z), np.ones(z.shape, bool), before, after,
+                             np.array([[0.0, 0.0, -1.0, 5.0]]), 0.5)
+    np.testing.assert_array_equal(out, [[1, 1, 0, 0]])
+    invalid = np.array([[True, False, True, True]])
+    out = gate_filled_pixels(flat_points(z), invalid, before, after,
+                             np.array([[0.0, 0.0, -1.0, 5.0]]), 0.5)
+    np.testing.assert_array_equal(out, [[1, 0, 0, 0]])
+
+
+def test_clean_regions_merge_and_absorb_on_one_plane_cut_by_an_occluder():
+    frame, labels, planes = two_plane_frame()
+    # Plane 1 (left) is cut in two by a non-planar band; a 4-px fragment of plane 1 sits inside
+    # the left plane's region but is labelled 2. Paper mode: 3 planes, fragment dropped.
+    observed = labels.copy()
+    observed[18:22, :30] = 0
+    observed[0:2, 0:2] = 2
+    params = planes.copy()
+    rec = Reconstruction(frame=frame, labels=observed, params=params)
+    paper = clean_regions(rec, observed, min_area=10)
+    assert paper.num_planes == 3 and not paper.labels[0:2, 0:2].any()
+    out = clean_regions(rec, observed, min_area=10, merge=True, absorb=True)
+    expected = labels.copy()
+    expected[18:22, :30] = 0
+    np.testing.assert_array_equal(out.labels, expected)
+    np.testing.assert_allclose(out.params, planes, atol=1e-5)

@@ -10,10 +10,18 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from monoplane.densecrf import CrfParams, dense_crf
+import numpy as np
+
+from monoplane.densecrf import REFERENCE_AREA, CrfParams, dense_crf
 from monoplane.errors import ConfigError, InvalidInput
 from monoplane.hookspecs import hookimpl
-from monoplane.regions import MIN_AREA_AT_REFERENCE, clean_regions, scaled_min_area
+from monoplane.regions import (
+    MIN_AREA_AT_REFERENCE,
+    clean_regions,
+    gate_filled_pixels,
+    scaled_min_area,
+    scene_radius,
+)
 from monoplane.stages.base import Refiner, Stage, param
 from monoplane.types import Reconstruction
 
@@ -31,12 +39,30 @@ class NoRefiner(Refiner):
 class DenseCrfRefiner(Refiner):
     """Dense CRF over the label map, then connected components, small-region removal, refit.
 
-    The unary term gives each pixel's RANSAC label (non-planar is label 0) probability
-    ``confidence`` and spreads the rest evenly over the other labels. The pairwise term is a
-    Potts model weighted by four Gaussian kernels; see :class:`monoplane.densecrf.CrfParams`
+    The unary term gives each pixel's RANSAC label probability ``confidence`` and spreads the
+    rest evenly over the other labels. The pairwise term is a Potts model weighted by four
+    Gaussian kernels (weights 1, as in the paper); see :class:`monoplane.densecrf.CrfParams`
     for exactly what each θ divides. Kernels whose weight is 0, or whose cue is missing (no or
     grey RGB, no depth, no normals), are dropped. Positional θ and the minimum area are given
     at the paper's 256 x 192 and scale with the image.
+
+    Deviations from the paper, each a switch (all on by default; off gives the paper's
+    refiner), measured in ``docs/design.md`` ("Refiner: deviations from the paper"):
+
+    * ``uniform_nonplanar``: a pixel the RANSAC left non-planar (label 0) has a uniform unary,
+      so the kernels decide its label, instead of voting for "non-planar" like an observed
+      plane label. ``fill_distance`` optionally keeps such a pixel's new plane only when its
+      point lies within that distance of the plane.
+    * ``fit_inliers_only``: planes are refit on the pixels the RANSAC labelled planar, so
+      filled pixels (possibly on a non-planar object) do not bend them.
+    * ``merge``: regions split from one plane whose refit planes agree (normal within
+      ``merge_angle_deg``, cross RMS residuals within ``merge_distance``) are re-joined, so an
+      occluder does not cut a floor into several planes.
+    * ``absorb``: a region under the minimum area joins an adjacent plane its points fit
+      (RMS within ``merge_distance``) and is set non-planar only otherwise.
+
+    Distances are fractions of the scene radius (:func:`monoplane.regions.scene_radius`), like
+    the RANSAC's ε.
     """
 
     name = "dense-crf"
@@ -56,18 +82,44 @@ class DenseCrfRefiner(Refiner):
         confidence: float = param(
             0.55, "unary: probability of the RANSAC label, rest spread evenly over the others")
         iterations: int = param(5, "mean-field iterations (0 skips the CRF, keeps the clean-up)")
+        max_pixels: int = param(
+            2 * REFERENCE_AREA,
+            "above this many pixels the CRF runs on a coarser block grid (0: never)")
         min_area: int = param(
             MIN_AREA_AT_REFERENCE,
             "smallest region kept, pixels at 256x192 (scaled with image area); 0 keeps all")
         connectivity: int = param(8, "pixel connectivity of a region: 4 or 8")
         split: bool = param(
             True, "give each connected region its own plane (paper); false only drops small ones")
+        merge: bool = param(
+            True, "after the split, re-join regions of one plane whose refit planes agree")
+        merge_adjacent: bool = param(
+            True, "merge also joins touching regions of different planes that agree")
+        absorb: bool = param(
+            True, "a small region joins an adjacent plane its points fit instead of being dropped")
+        merge_angle_deg: float = param(10.0, "normal tolerance of merge, degrees (like ε_n)")
+        merge_distance: float = param(
+            0.04, "RMS point-to-plane tolerance of merge and absorb, fraction of scene radius")
+        uniform_nonplanar: bool = param(
+            True, "unary: pixels the RANSAC left non-planar get no preference, the kernels decide")
+        fill_distance: float = param(
+            0.1, "a filled non-planar pixel keeps its plane only within this distance "
+            "of it, fraction of scene radius (inf: no test)")
+        fit_inliers_only: bool = param(
+            True, "refit planes only on pixels the RANSAC labelled planar (not on filled holes)")
 
     def __init__(self, config: Config | None = None) -> None:
         super().__init__(config)
         c = self.config
         if c.connectivity not in (4, 8):
             raise ConfigError(f"refiner.connectivity must be 4 or 8, got {c.connectivity}")
+        if not 0 < c.merge_angle_deg <= 90:
+            raise ConfigError(
+                f"refiner.merge_angle_deg must lie in (0, 90], got {c.merge_angle_deg}")
+        if not c.merge_distance > 0:
+            raise ConfigError(f"refiner.merge_distance must be positive, got {c.merge_distance}")
+        if not c.fill_distance > 0:
+            raise ConfigError(f"refiner.fill_distance must be positive, got {c.fill_distance}")
         if c.min_area < 0:
             raise ConfigError(f"refiner.min_area must be >= 0, got {c.min_area}")
         # Above 1/2 the RANSAC label stays the most likely one whatever the number of planes.
@@ -80,6 +132,7 @@ class DenseCrfRefiner(Refiner):
                 w_smoothness=c.w_smoothness, w_appearance=c.w_appearance,
                 w_depth=c.w_depth, w_normal=c.w_normal,
                 confidence=c.confidence, iterations=c.iterations,
+                uniform_nonplanar=c.uniform_nonplanar, max_pixels=c.max_pixels,
             )
         except InvalidInput as exc:
             raise ConfigError(f"refiner: {exc}") from exc
@@ -99,11 +152,21 @@ class DenseCrfRefiner(Refiner):
             RMSE and support refit on each region's valid pixels (camera frame, depth units).
         """
         frame = rec.frame
+        if frame.depth is None:
+            raise InvalidInput(f"{frame.name}: the dense-crf refiner needs a depth map")
+        depth = frame.depth
         labels = dense_crf(rec.labels, rec.num_planes + 1, self.crf, rgb=frame.rgb,
                            depth=frame.depth, normals=frame.normals)
         min_area = scaled_min_area(frame.shape, self.config.min_area)
-        return clean_regions(rec, labels, min_area, self.config.connectivity,
-                             split=self.config.split)
+        c = self.config
+        if c.uniform_nonplanar and np.isfinite(c.fill_distance):
+            points, valid = frame.points(), depth > 0
+            labels = gate_filled_pixels(points, valid, rec.labels, labels, rec.params,
+                                        c.fill_distance * scene_radius(points, valid))
+        return clean_regions(rec, labels, min_area, c.connectivity, split=c.split, merge=c.merge,
+                             absorb=c.absorb, max_angle_deg=c.merge_angle_deg,
+                             max_distance=c.merge_distance, inliers_only=c.fit_inliers_only,
+                             merge_adjacent=c.merge_adjacent)
 
 
 @hookimpl

@@ -79,7 +79,12 @@ def test_dense_crf_refiner_recovers_the_room():
     # Planes refit on the final pixels: exact up to the float32 depth and the few wrong pixels.
     np.testing.assert_allclose(out.params[:, :3], ROOM[:, :3], atol=2e-3)
     np.testing.assert_allclose(out.params[:, 3], ROOM[:, 3], rtol=2e-3)
-    np.testing.assert_array_equal(out.support, out.area_px)
+    # Planes are fit on the RANSAC's planar pixels only (fit_inliers_only): the support counts
+    # those; in the paper's mode it counts every pixel of the region.
+    inliers = np.bincount(out.labels[rec.labels > 0], minlength=6)[1:]
+    np.testing.assert_array_equal(out.support, inliers)
+    paper = DenseCrfRefiner(DenseCrfRefiner.Config(fit_inliers_only=False)).refine(rec)
+    np.testing.assert_array_equal(paper.support, paper.area_px)
 
 
 @pytest.mark.parametrize("grey", [True, False])
@@ -97,15 +102,21 @@ def test_small_regions_and_splits_without_crf():
     labels = gt.copy()
     labels[:, 60:64] = 0               # cuts the floor, ceiling and back wall in two
     labels[10:14, 10:14] = 0
-    labels[10:13, 10:13] = 3           # 9-px fragment of the back wall inside the ceiling
+    labels[10:13, 10:13] = 3           # 9-px fragment of the back wall inside the left wall
     rec = Reconstruction(frame=frame, labels=labels, params=ROOM)
-    out = DenseCrfRefiner(DenseCrfRefiner.Config(iterations=0)).refine(rec)
+    paper = {"iterations": 0, "merge": False, "absorb": False}
+    out = DenseCrfRefiner(DenseCrfRefiner.Config(**paper)).refine(rec)
     assert out.num_planes == 8         # 3 planes split in two, plus the two side walls
     assert not np.any(out.labels[10:13, 10:13])
     areas = np.bincount(out.labels.ravel())[1:]
     assert areas.min() >= 75
-    keep_all = DenseCrfRefiner(DenseCrfRefiner.Config(iterations=0, min_area=0)).refine(rec)
+    keep_all = DenseCrfRefiner(DenseCrfRefiner.Config(**paper, min_area=0)).refine(rec)
     assert keep_all.num_planes == 9
+    # Default: the halves of each cut plane lie on one plane and are re-merged; the fragment
+    # labelled "back wall" lies on the left wall it touches and joins it. The room comes back.
+    merged = DenseCrfRefiner(DenseCrfRefiner.Config(iterations=0)).refine(rec)
+    np.testing.assert_array_equal(merged.labels, np.where(labels == 0, 0, gt))
+    np.testing.assert_allclose(merged.params[:, :3], ROOM[:, :3], atol=1e-4)
 
 
 @pytest.mark.parametrize("changes", [
@@ -116,6 +127,9 @@ def test_small_regions_and_splits_without_crf():
     {"w_depth": -1.0},
     {"iterations": -1},
     {"min_area": -5},
+    {"merge_angle_deg": 0.0},
+    {"merge_distance": 0.0},
+    {"fill_distance": -1.0},
 ])
 def test_bad_config_is_a_config_error(changes):
     with pytest.raises(ConfigError):
@@ -131,7 +145,8 @@ def test_dense_crf_on_a_synthetic_view(synthetic_view):
     noisy = np.where(rng.random(gt.shape) < 0.15, rng.integers(0, num + 1, gt.shape), gt)
     rec = Reconstruction(frame=view.frame, labels=noisy.astype(np.int32),
                          params=np.tile([0.0, 0.0, -1.0, 1.0], (num, 1)))
-    cfg = DenseCrfRefiner.Config(min_area=0)
+    # The speckle includes label 0 as an observed label, so 0 keeps the paper's unary here.
+    cfg = DenseCrfRefiner.Config(min_area=0, uniform_nonplanar=False)
     out = DenseCrfRefiner(cfg).refine(rec)
     # Splitting renumbers labels: map each output label to its majority ground-truth label.
     majority = np.zeros(out.num_planes + 1, dtype=np.int64)
@@ -139,3 +154,29 @@ def test_dense_crf_on_a_synthetic_view(synthetic_view):
         majority[k] = np.bincount(gt[out.labels == k]).argmax()
     assert (noisy == gt).mean() < 0.87
     assert (majority[out.labels] == gt).mean() > 0.98  # measured 0.998
+
+
+def test_nonplanar_pixels_are_filled_but_do_not_bend_the_planes():
+    """RANSAC left a 10-px band of the back wall non-planar. Without the fill gate the CRF
+    (uniform unary on label 0) gives the band back to the wall, and the wall is fit on its RANSAC
+    inliers only, so a non-planar object in the band does not tilt it. With the default gate
+    (0.1 of the scene radius) the band stays non-planar where the object is, and is filled where
+    its points lie on the wall."""
+    frame, gt = room()
+    labels = gt.copy()
+    cols = np.arange(gt.shape[1])[None, :]
+    band = (gt == 3) & (cols >= 56) & (cols < 66)
+    labels[band] = 0
+    obj = band & (np.arange(gt.shape[0])[:, None] < 48)
+    depth = frame.depth.copy()
+    depth[obj] *= 0.5                   # a non-planar object in front of the upper wall
+    rec = Reconstruction(frame=frame.with_(depth=depth), labels=labels, params=ROOM)
+    ungated = DenseCrfRefiner(DenseCrfRefiner.Config(fill_distance=float("inf"))).refine(rec)
+    assert ungated.num_planes == 5
+    assert np.all(ungated.labels[band] == 3)
+    np.testing.assert_allclose(ungated.params[2], ROOM[2], atol=1e-4)
+    gated = DenseCrfRefiner().refine(rec)
+    assert not np.any(gated.labels[obj])
+    assert np.all(gated.labels[band & ~obj] == 3)
+    np.testing.assert_array_equal(gated.labels[~band], ungated.labels[~band])
+    np.testing.assert_allclose(gated.params[2], ROOM[2], atol=1e-4)
