@@ -19,33 +19,7 @@ from monoplane.densecrf import (
     unary_from_labels,
 )
 from monoplane.errors import InvalidInput
-from monoplane.types import default_intrinsics, pixel_rays
-
-# A box room seen from inside: floor, ceiling, back wall, left and right walls (OpenCV axes,
-# y down), n·X + d = 0 with n facing the camera.
-ROOM = np.array([
-    [0.0, -1.0, 0.0, 1.5],
-    [0.0, 1.0, 0.0, 1.5],
-    [0.0, 0.0, -1.0, 5.0],
-    [1.0, 0.0, 0.0, 2.0],
-    [-1.0, 0.0, 0.0, 2.5],
-])
-ROOM_COLORS = np.array([[150, 100, 60], [230, 230, 230], [90, 140, 200], [200, 180, 120],
-                        [120, 200, 120]])
-
-
-def room_cues(height: int = 192, width: int = 256, noise: float = 6.0, seed: int = 0):
-    """RGB, depth, normals and the exact label map (1..5) of the box room."""
-    K = default_intrinsics(width, height, 70.0)
-    rays = pixel_rays(K, height, width)
-    with np.errstate(divide="ignore"):
-        z = -ROOM[:, 3] / (rays @ ROOM[:, :3].T)
-    z[~(z > 0)] = np.inf
-    idx = z.argmin(axis=-1)
-    rng = np.random.default_rng(seed)
-    rgb = np.clip(ROOM_COLORS[idx] + rng.normal(0, noise, (height, width, 3)), 0, 255)
-    return (rgb.astype(np.uint8), z.min(axis=-1).astype(np.float32),
-            ROOM[idx, :3].astype(np.float32), (idx + 1).astype(np.int32))
+from tests.conftest import room_cues
 
 
 def boundary_band(gt: np.ndarray, radius: int) -> np.ndarray:
@@ -176,7 +150,7 @@ def test_crf_params_validation():
 # --- kernels -------------------------------------------------------------------------------
 
 def test_kernels_follow_weights_and_available_cues():
-    rgb, depth, normals, _ = room_cues(24, 32)
+    rgb, depth, normals, _, _ = room_cues(24, 32)
     p = CrfParams()
     dims = [k.lattice.dim for k in crf_features((24, 32), p, rgb, depth, normals)]
     assert dims == [2, 5, 3, 5]  # smoothness, appearance, depth, normal
@@ -196,7 +170,7 @@ def test_feature_scaling_matches_documented_units():
     large = crf_features((384, 512), p)[0].lattice.num_vertices
     assert abs(large - small) <= 0.1 * small
     # Depth is normalised by its maximum: scaling the depth map changes nothing.
-    rgb, depth, normals, gt = room_cues(48, 64)
+    rgb, depth, normals, gt, _ = room_cues(48, 64)
     rng = np.random.default_rng(0)
     noisy = np.where(rng.random(gt.shape) < 0.2, rng.integers(0, 6, gt.shape), gt)
     a = dense_crf(noisy, 6, p, rgb, depth, normals)
@@ -205,7 +179,7 @@ def test_feature_scaling_matches_documented_units():
 
 
 def test_working_resolution_cap():
-    rgb, depth, normals, gt = room_cues(96, 128)
+    rgb, depth, normals, gt, _ = room_cues(96, 128)
     rng = np.random.default_rng(2)
     noisy = np.where(rng.random(gt.shape) < 0.2, rng.integers(0, 6, gt.shape), gt)
     full = dense_crf(noisy, 6, CrfParams(), rgb, depth, normals)
@@ -224,7 +198,7 @@ def test_working_resolution_cap():
 # --- refinement on label maps with known answers --------------------------------------------
 
 def test_crf_removes_speckle_and_keeps_edges():
-    rgb, depth, normals, gt = room_cues()
+    rgb, depth, normals, gt, _ = room_cues()
     rng = np.random.default_rng(1)
     speckle = rng.random(gt.shape) < 0.2
     noisy = np.where(speckle, rng.integers(0, 6, gt.shape), gt).astype(np.int32)
@@ -237,7 +211,7 @@ def test_crf_removes_speckle_and_keeps_edges():
 
 
 def test_crf_moves_ragged_boundaries_onto_the_room_edges():
-    rgb, depth, normals, gt = room_cues()
+    rgb, depth, normals, gt, _ = room_cues()
     rng = np.random.default_rng(3)
     ragged = np.stack([np.roll(row, rng.integers(-3, 4)) for row in gt])
     band = boundary_band(gt, 4)
@@ -287,7 +261,7 @@ def test_dense_crf_trivial_cases():
 
 def test_crf_timing_at_reference_resolution(record_property):
     """Measured, not asserted: the paper reports 0.22 s for its CRF at 256x192."""
-    rgb, depth, normals, gt = room_cues()
+    rgb, depth, normals, gt, _ = room_cues()
     rng = np.random.default_rng(1)
     noisy = np.where(rng.random(gt.shape) < 0.2, rng.integers(0, 6, gt.shape), gt)
     best = np.inf

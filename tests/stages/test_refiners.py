@@ -9,34 +9,16 @@ from scipy import ndimage
 from monoplane.errors import ConfigError
 from monoplane.stages.refiners import DenseCrfRefiner, NoRefiner, monoplane_register_refiners
 from monoplane.testing import check_stage_contract
-from monoplane.types import Frame, Reconstruction, default_intrinsics, pixel_rays
-
-# Box room (OpenCV axes, y down): floor, ceiling, back wall, left wall, right wall.
-ROOM = np.array([
-    [0.0, -1.0, 0.0, 1.5],
-    [0.0, 1.0, 0.0, 1.5],
-    [0.0, 0.0, -1.0, 5.0],
-    [1.0, 0.0, 0.0, 2.0],
-    [-1.0, 0.0, 0.0, 2.5],
-])
-COLORS = np.array([[150, 100, 60], [230, 230, 230], [90, 140, 200], [200, 180, 120],
-                   [120, 200, 120]])
+from monoplane.types import Frame, Reconstruction
+from tests.conftest import ROOM, room_cues
 
 
 def room(height: int = 96, width: int = 128, grey: bool = False, seed: int = 0):
     """Frame of the box room with exact depth and normals, and its true labels 1..5."""
-    K = default_intrinsics(width, height, 70.0)
-    rays = pixel_rays(K, height, width)
-    with np.errstate(divide="ignore"):
-        z = -ROOM[:, 3] / (rays @ ROOM[:, :3].T)
-    z[~(z > 0)] = np.inf
-    idx = z.argmin(axis=-1)
-    rng = np.random.default_rng(seed)
-    rgb = np.clip(COLORS[idx] + rng.normal(0, 6, (height, width, 3)), 0, 255).astype(np.uint8)
+    rgb, depth, normals, labels, K = room_cues(height, width, seed=seed)
     if grey:
         rgb = np.repeat(rgb.mean(axis=2, keepdims=True).astype(np.uint8), 3, axis=2)
-    frame = Frame(rgb=rgb, K=K, depth=z.min(axis=-1), normals=ROOM[idx, :3])
-    return frame, (idx + 1).astype(np.int32)
+    return Frame(rgb=rgb, K=K, depth=depth, normals=normals), labels
 
 
 def noisy_reconstruction(frame: Frame, gt: np.ndarray, seed: int = 1) -> Reconstruction:

@@ -3,16 +3,9 @@
 import numpy as np
 import pytest
 
-from monoplane.geometry.cloud import PlaneCloud
 from monoplane.stages.base import RansacParams
 from monoplane.stages.samplers import NapsacSampler, NormalConsistentSampler, UniformSampler
-
-
-def make_cloud(points, normals):
-    n = len(points)
-    return PlaneCloud(points=points, normals=normals, colors=None,
-                      pixels=np.arange(n, dtype=np.int64), center=np.zeros(3), scale=1.0,
-                      shape=(1, n), all_points=points, all_pixels=np.arange(n, dtype=np.int64))
+from tests.conftest import cloud_from_arrays
 
 
 @pytest.fixture
@@ -23,7 +16,7 @@ def cloud():
     # Every other point has a normal tilted by 30 degrees.
     t = np.deg2rad(30)
     nrm[1::2] = [np.sin(t), 0.0, -np.cos(t)]
-    return make_cloud(pts, nrm)
+    return cloud_from_arrays(pts, nrm)
 
 
 @pytest.mark.parametrize("sampler", [UniformSampler(), NormalConsistentSampler(),
@@ -63,7 +56,7 @@ def test_normal_consistent_sampler_gives_up_when_nothing_passes():
     pts = np.random.default_rng(0).uniform(size=(6, 3))
     nrm = np.eye(3)[[0, 1, 2, 0, 1, 2]]
     nrm[3:] *= -1
-    c = make_cloud(pts, nrm)
+    c = cloud_from_arrays(pts, nrm)
     pool = np.array([0, 1, 2], dtype=np.int64)
     s = NormalConsistentSampler().sample(c, pool, 10, np.random.default_rng(0), RansacParams())
     assert s.shape == (0, 3)

@@ -3,17 +3,10 @@
 import numpy as np
 import pytest
 
-from monoplane.geometry.cloud import PlaneCloud
 from monoplane.stages import scorers
 from monoplane.stages.base import RansacParams
 from monoplane.stages.scorers import InlierCountScorer, MsacNormalScorer, MsacScorer
-
-
-def make_cloud(points, normals):
-    n = len(points)
-    return PlaneCloud(points=points, normals=normals, colors=None,
-                      pixels=np.arange(n, dtype=np.int64), center=np.zeros(3), scale=1.0,
-                      shape=(1, n), all_points=points, all_pixels=np.arange(n, dtype=np.int64))
+from tests.conftest import cloud_from_arrays
 
 
 @pytest.fixture
@@ -24,7 +17,7 @@ def setup():
     nrm = rng.normal(size=(500, 3))
     nrm[:300] = [0.0, 0.0, -1.0] + rng.normal(0, 0.1, size=(300, 3))
     nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
-    cloud = make_cloud(pts, nrm)
+    cloud = cloud_from_arrays(pts, nrm)
     planes = rng.normal(size=(40, 4))
     planes[:, :3] /= np.linalg.norm(planes[:, :3], axis=1, keepdims=True)
     planes[:, 3] *= 0.2
