@@ -34,7 +34,7 @@ import numpy as np
 from monoplane.errors import ConfigError, StageError
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
-from monoplane.geometry.planes import fit_plane, planes_from_triplets
+from monoplane.geometry.planes import fit_plane, fit_planes_per_label, planes_from_triplets
 from monoplane.stages.base import (
     Labeler,
     Labeling,
@@ -284,23 +284,13 @@ class SequentialRansac:
     @staticmethod
     def _finalize(frame: Frame, labels: np.ndarray) -> Reconstruction:
         """Least-squares plane per label on all its pixels, camera frame and depth units."""
-        pts = frame.points().reshape(-1, 3)
-        flat = labels.ravel()
-        order = np.argsort(flat, kind="stable")
-        bounds = np.searchsorted(flat[order], np.arange(1, flat.max(initial=0) + 2))
-        out_labels = np.zeros_like(flat)
-        planes, rmses, supports = [], [], []
-        for k in range(1, len(bounds)):
-            idx = order[bounds[k - 1]:bounds[k]]
-            if idx.size < 3:
-                continue
-            plane, rmse = fit_plane(pts[idx])
-            planes.append(plane)
-            rmses.append(rmse)
-            supports.append(idx.size)
-            out_labels[idx] = len(planes)
-        params = (orient_towards_camera(np.array(planes)) if planes
-                  else np.zeros((0, 4)))
-        return Reconstruction(frame=frame, labels=out_labels.reshape(labels.shape),
-                              params=params, rmse=np.array(rmses, dtype=np.float64),
-                              support=np.array(supports, dtype=np.int64))
+        params, rmse, support = fit_planes_per_label(frame.points(), labels,
+                                                     int(labels.max(initial=0)))
+        kept = ~np.isnan(rmse)
+        # Labels too small to fit a plane become non-planar; the others are renumbered 1..P.
+        renumber = np.zeros(len(kept) + 1, dtype=np.int32)
+        renumber[1:][kept] = np.arange(1, kept.sum() + 1)
+        return Reconstruction(frame=frame, labels=renumber[labels],
+                              params=orient_towards_camera(params[kept]) if kept.any()
+                              else np.zeros((0, 4)),
+                              rmse=rmse[kept], support=support[kept])

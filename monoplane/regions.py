@@ -28,7 +28,7 @@ from scipy.sparse.csgraph import connected_components
 
 from monoplane.densecrf import REFERENCE_AREA
 from monoplane.errors import InvalidInput
-from monoplane.geometry.planes import fit_plane, point_plane_distances
+from monoplane.geometry.planes import fit_planes_per_label, point_plane_distances
 from monoplane.types import Reconstruction
 
 #: The paper's minimum region size, in pixels at 256 x 192 (appendix).
@@ -162,20 +162,15 @@ def refit_planes(points: np.ndarray, valid: np.ndarray, labels: np.ndarray,
     """
     fallback = np.asarray(fallback, dtype=np.float64).reshape(-1, 4)
     num = fallback.shape[0]
-    mask = valid & (labels > 0)
-    lab = labels[mask]
-    pts = points[mask].astype(np.float64)
-    order = np.argsort(lab, kind="stable")
-    support = np.bincount(lab, minlength=num + 1)[1:].astype(np.int64)
-    groups = np.split(pts[order], np.cumsum(support)[:-1])
-    params = fallback.copy()
-    rmse = np.zeros(num)
-    for k, group in enumerate(groups):
-        if len(group) >= 3:
-            params[k], rmse[k] = fit_plane(group)
-        elif len(group):
-            n, d = params[k, :3], params[k, 3]
-            rmse[k] = float(np.sqrt(np.mean((group @ n + d) ** 2)))
+    lab = np.where(valid, labels, 0)
+    params, rmse, support = fit_planes_per_label(points, lab, num)
+    unfit = np.isnan(rmse)
+    params[unfit] = fallback[unfit]
+    rmse[unfit] = 0.0
+    # A label with 1-2 valid points keeps its previous plane; its RMSE is measured against it.
+    for k in np.flatnonzero(unfit & (support > 0)):
+        group = points[lab == k + 1].astype(np.float64)
+        rmse[k] = float(np.sqrt(np.mean((group @ params[k, :3] + params[k, 3]) ** 2)))
     return params, rmse, support
 
 

@@ -103,3 +103,39 @@ def point_plane_distances(points: np.ndarray, planes: np.ndarray) -> np.ndarray:
     """
     p = np.atleast_2d(planes)
     return np.abs(p[:, :3] @ np.asarray(points, dtype=np.float64).T + p[:, 3:4])
+
+
+def fit_planes_per_label(points: np.ndarray, labels: np.ndarray, num_labels: int
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Total-least-squares plane of every label's points (see :func:`fit_plane`).
+
+    Parameters
+    ----------
+    points : numpy.ndarray
+        (N, 3) points.
+    labels : numpy.ndarray
+        (N,) int labels in 0..num_labels; label 0 is ignored.
+    num_labels : int
+        Number of labels P.
+
+    Returns
+    -------
+    params : numpy.ndarray
+        (P, 4) planes with ``d >= 0``; NaN rows for labels with fewer than 3 points.
+    rmse : numpy.ndarray
+        (P,) RMS point-to-plane distance (NaN where no plane was fit).
+    count : numpy.ndarray
+        (P,) int64 number of points of each label.
+    """
+    labels = np.asarray(labels).ravel()
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    keep = labels > 0
+    lab, pts = labels[keep], pts[keep]
+    order = np.argsort(lab, kind="stable")
+    count = np.bincount(lab, minlength=num_labels + 1)[1:num_labels + 1].astype(np.int64)
+    params = np.full((num_labels, 4), np.nan)
+    rmse = np.full(num_labels, np.nan)
+    for k, group in enumerate(np.split(pts[order], np.cumsum(count)[:-1])):
+        if len(group) >= 3:
+            params[k], rmse[k] = fit_plane(group)
+    return params, rmse, count

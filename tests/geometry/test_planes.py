@@ -1,0 +1,50 @@
+"""Plane primitives against closed-form answers."""
+
+import numpy as np
+
+from monoplane.geometry.planes import (
+    fit_plane,
+    fit_planes_per_label,
+    planes_from_triplets,
+    point_plane_distances,
+)
+
+
+def on_plane(n, d, count, seed=0):
+    rng = np.random.default_rng(seed)
+    n = np.asarray(n, float) / np.linalg.norm(n)
+    x = rng.normal(size=(count, 3))
+    return x - (x @ n + d)[:, None] * n, n
+
+
+def test_fit_plane_exact_points_and_orientation():
+    pts, n = on_plane([0.2, -1.0, 0.1], 1.5, 50)
+    plane, rmse = fit_plane(pts)
+    assert np.allclose(plane, [*n, 1.5]) and rmse < 1e-12
+
+
+def test_fit_plane_rmse_of_symmetric_offsets():
+    # Points at z = 2 +- 0.1: the plane z = 2, i.e. (0, 0, -1, 2) facing the camera, RMSE 0.1.
+    xy = np.array([[0, 0], [1, 0], [0, 1], [1, 1]], float)
+    pts = np.vstack([np.c_[xy, np.full(4, 2.1)], np.c_[xy, np.full(4, 1.9)]])
+    plane, rmse = fit_plane(pts)
+    assert np.allclose(plane, [0, 0, -1, 2]) and np.isclose(rmse, 0.1)
+
+
+def test_triplets_and_distances():
+    tri = np.array([[[0, 0, 1], [1, 0, 1], [0, 1, 1]], [[0, 0, 0], [1, 1, 1], [2, 2, 2]]], float)
+    planes, valid = planes_from_triplets(tri)
+    assert valid.tolist() == [True, False]
+    assert np.allclose(planes[0], [0, 0, -1, 1])
+    assert np.allclose(point_plane_distances(np.array([[5, 5, 3.0]]), planes[:1]), [[2.0]])
+
+
+def test_fit_planes_per_label():
+    a, na = on_plane([0, -1, 0], 1.0, 20, seed=1)
+    b, nb = on_plane([1, 0, -1], 2.0, 30, seed=2)
+    pts = np.vstack([a, b, [[9.0, 9, 9]] * 2])
+    labels = np.r_[np.full(20, 1), np.full(30, 3), [2, 2]]
+    params, rmse, count = fit_planes_per_label(pts, labels, 3)
+    assert count.tolist() == [20, 2, 30]
+    assert np.allclose(params[0], [*na, 1.0]) and np.allclose(params[2], [*nb, 2.0])
+    assert np.isnan(params[1]).all() and np.isnan(rmse[1])
