@@ -39,6 +39,7 @@ import numpy as np
 from monoplane.errors import InvalidInput
 from monoplane.geometry.alignment import ScaleAlignment, align_scale
 from monoplane.geometry.polygons import plane_basis, triangulate_on_plane
+from monoplane.stages.base import Fuser, Matcher
 from monoplane.types import Camera, Frame, Reconstruction, Scene, SfmResult, plane_to_camera
 
 if TYPE_CHECKING:
@@ -127,7 +128,7 @@ def reconstruct_multiview(frames: list[Frame], pipe: Pipeline, progress: bool = 
     timings: dict[str, float] = {}
     start = time.perf_counter()
     if sfm is None:
-        matcher = pipe.stage("matcher")
+        matcher = pipe.stage("matcher", Matcher)
         sfm = pipe.call("matcher", matcher.name, lambda: matcher.match(frames), "multiview",
                         timings)
     elif sfm.num_views != len(frames):
@@ -176,7 +177,7 @@ def reconstruct_multiview(frames: list[Frame], pipe: Pipeline, progress: bool = 
         views.append(pipe.segment(f))
     timings["single_view"] = time.perf_counter() - t0
 
-    fuser = pipe.stage("fuser")
+    fuser = pipe.stage("fuser", Fuser)
     # Fusers that can report their plane correspondences do so through fuse_with_matches.
     with_matches = getattr(fuser, "fuse_with_matches", None)
     plane_matches: list[Any] = []

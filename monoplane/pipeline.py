@@ -24,10 +24,11 @@ import pluggy
 from monoplane import config as config_mod
 from monoplane.errors import StageError
 from monoplane.plugin_manager import get_plugin_manager, get_registry
-from monoplane.stages.base import Stage
+from monoplane.stages.base import CueProvider, Labeler, Refiner, Sampler, Scorer, Stage
 from monoplane.types import Frame, Reconstruction
 
 T = TypeVar("T")
+S = TypeVar("S", bound=Stage)
 
 
 class Pipeline:
@@ -66,12 +67,24 @@ class Pipeline:
                                    registry=get_registry(pm))
         return cls(resolved, pm)
 
-    def stage(self, kind: str) -> Stage:
-        """The configured stage instance of ``kind`` (built on first use)."""
+    def stage(self, kind: str, base: type[S] = Stage) -> S:  # type: ignore[assignment]
+        """The configured stage instance of ``kind`` (built on first use).
+
+        Parameters
+        ----------
+        kind : str
+            Stage kind, e.g. ``"labeler"``.
+        base : type
+            The kind's base class (e.g. :class:`~monoplane.stages.base.Labeler`), which types
+            the result.
+        """
         if kind not in self._stages:
             name, cfg = self.config.stages[kind]
             self._stages[kind] = self.registry.get(kind, name).cls(cfg)
-        return self._stages[kind]
+        stage = self._stages[kind]
+        if not isinstance(stage, base):
+            raise TypeError(f"{kind} stage {stage.name!r} is not a {base.__name__}")
+        return stage
 
     def call(self, kind: str, label: str, fn: Callable[[], T], frame_name: str,
              timings: dict[str, float]) -> T:
@@ -91,7 +104,7 @@ class Pipeline:
 
     def prepare(self, frame: Frame) -> Frame:
         """Run the cue provider: the returned frame has depth and normals."""
-        cues = self.stage("cues")
+        cues = self.stage("cues", CueProvider)
         return self.call("cues", cues.name, lambda: cues.provide(frame), frame.name, {})
 
     def segment(self, frame: Frame, timings: dict[str, float] | None = None) -> Reconstruction:
@@ -99,11 +112,13 @@ class Pipeline:
         from monoplane.ransac import SequentialRansac
 
         timings = {} if timings is None else timings
-        sampler, scorer, labeler = (self.stage(k) for k in ("sampler", "scorer", "labeler"))
+        sampler = self.stage("sampler", Sampler)
+        scorer = self.stage("scorer", Scorer)
+        labeler = self.stage("labeler", Labeler)
         driver = SequentialRansac(sampler, scorer, labeler, self.config.host["ransac"])
         label = f"{sampler.name} + {scorer.name} + {labeler.name}"
         rec = self.call("ransac", label, lambda: driver.run(frame), frame.name, timings)
-        refiner = self.stage("refiner")
+        refiner = self.stage("refiner", Refiner)
         rec = self.call("refiner", refiner.name, lambda: refiner.refine(rec), frame.name,
                         timings)
         rec.config = self.config.to_dict()
@@ -125,7 +140,7 @@ class Pipeline:
         """
         timings: dict[str, float] = {}
         start = time.perf_counter()
-        cues = self.stage("cues")
+        cues = self.stage("cues", CueProvider)
         prepared = self.call("cues", cues.name, lambda: cues.provide(frame), frame.name, timings)
         rec = self.segment(prepared, timings)
         rec.timings["total"] = time.perf_counter() - start

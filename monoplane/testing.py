@@ -27,6 +27,7 @@ import pytest
 if TYPE_CHECKING:
     import pluggy
 
+    from monoplane.stages.base import Stage
     from monoplane.synth import SynthView
     from monoplane.types import Frame
 
@@ -47,8 +48,8 @@ def plugin_manager() -> pluggy.PluginManager:
     return get_plugin_manager(autoload=False)
 
 
-def _check_config(cls: type) -> Any:
-    from monoplane.stages.base import STAGE_KINDS, Stage
+def _check_config(cls: type[Stage]) -> Any:
+    from monoplane.stages.base import STAGE_KINDS, Stage  # noqa: F811 (runtime import)
 
     assert isinstance(cls, type) and issubclass(cls, Stage), f"{cls} is not a Stage"
     assert cls.kind in STAGE_KINDS, f"{cls.__name__}.kind {cls.kind!r} not in {STAGE_KINDS}"
@@ -59,7 +60,7 @@ def _check_config(cls: type) -> Any:
     return cls(cls.Config())
 
 
-def check_stage_contract(cls: type, frame: Frame | None = None, seed: int = 0) -> None:
+def check_stage_contract(cls: type[Stage], frame: Frame | None = None, seed: int = 0) -> None:
     """Assert that a stage class honours its kind's contract.
 
     Static checks (all kinds): subclass of the right base, a name, a dataclass ``Config`` whose

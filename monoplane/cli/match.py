@@ -37,6 +37,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from monoplane.errors import InvalidInput
     from monoplane.multiview import save_sfm
+    from monoplane.stages.base import Matcher
 
     check_output_dir(args.out, args.overwrite)  # fail before any work
     if len(args.images) < 2:
@@ -45,7 +46,7 @@ def run(args: argparse.Namespace) -> int:
         args.overrides = [*args.overrides, "matcher.fixed_intrinsics=true"]
     pipe = pipeline_from_args(args)
     frames = [load_frame(img, intrinsics=args.intrinsics) for img in args.images]
-    matcher = pipe.stage("matcher")
+    matcher = pipe.stage("matcher", Matcher)
     timings: dict[str, float] = {}
     sfm = pipe.call("matcher", matcher.name, lambda: matcher.match(frames), "match", timings)
     out = save_sfm(sfm, args.out, overwrite=args.overwrite)
