@@ -13,6 +13,7 @@ bounded (about :data:`CHUNK_ELEMENTS` floats at a time).
 from __future__ import annotations
 
 from collections.abc import Iterator
+from typing import ClassVar
 
 import numpy as np
 
@@ -54,67 +55,73 @@ def _columns(values: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(values.T, dtype=np.float32)
 
 
-class InlierCountScorer(Scorer):
+def _truncated_squares(coords: np.ndarray, planes: np.ndarray, epsilon: float) -> np.ndarray:
+    """(h, M) float32 MSAC costs min(φ²/ε², 1) of (3, M) points for (h, 4) planes."""
+    r = _distances(coords, planes)
+    r *= 1.0 / epsilon
+    np.minimum(r, 1.0, out=r)
+    r *= r
+    return r
+
+
+class _ChunkedScorer(Scorer):
+    """Evaluates hypotheses in chunks (bounded memory); subclasses give one chunk's costs."""
+
+    uses_normals: ClassVar[bool] = False
+
+    def score(self, cloud: PlaneCloud, pool: np.ndarray, planes: np.ndarray,
+              model_normals: np.ndarray, params: RansacParams) -> np.ndarray:
+        """See :meth:`monoplane.stages.base.Scorer.score`; (H,) float64 costs."""
+        pts = _columns(cloud.points[pool])
+        nrm = _columns(cloud.normals[pool]) if self.uses_normals else None
+        out = np.empty(planes.shape[0])
+        for sl in _chunks(planes.shape[0], pts.shape[1]):
+            out[sl] = self._chunk_costs(pts, nrm, planes[sl], model_normals[sl], params)
+        return out
+
+    def _chunk_costs(self, pts: np.ndarray, nrm: np.ndarray | None, planes: np.ndarray,
+                     model_normals: np.ndarray, params: RansacParams) -> np.ndarray:
+        """(h,) costs of (h, 4) planes on (3, M) points (and (3, M) normals when used)."""
+        raise NotImplementedError
+
+
+class InlierCountScorer(_ChunkedScorer):
     """Vanilla RANSAC: the negated number of points closer than ε."""
 
     name = "inliers"
 
-    def score(self, cloud: PlaneCloud, pool: np.ndarray, planes: np.ndarray,
-              model_normals: np.ndarray, params: RansacParams) -> np.ndarray:
-        """See :meth:`monoplane.stages.base.Scorer.score`; (H,) float64 costs."""
-        pts = _columns(cloud.points[pool])
-        out = np.empty(planes.shape[0])
-        for sl in _chunks(planes.shape[0], pts.shape[1]):
-            out[sl] = -(_distances(pts, planes[sl]) < params.epsilon).sum(axis=1)
-        return out
+    def _chunk_costs(self, pts: np.ndarray, nrm: np.ndarray | None, planes: np.ndarray,
+                     model_normals: np.ndarray, params: RansacParams) -> np.ndarray:
+        return -(_distances(pts, planes) < params.epsilon).sum(axis=1)
 
 
-class MsacScorer(Scorer):
+class MsacScorer(_ChunkedScorer):
     """MSAC: truncated quadratic cost Σ min(φ²/ε², 1)."""
 
     name = "msac"
 
-    def score(self, cloud: PlaneCloud, pool: np.ndarray, planes: np.ndarray,
-              model_normals: np.ndarray, params: RansacParams) -> np.ndarray:
-        """See :meth:`monoplane.stages.base.Scorer.score`; (H,) float64 costs."""
-        pts = _columns(cloud.points[pool])
-        out = np.empty(planes.shape[0])
-        inv_eps = 1.0 / params.epsilon
-        for sl in _chunks(planes.shape[0], pts.shape[1]):
-            r = _distances(pts, planes[sl])
-            r *= inv_eps
-            np.minimum(r, 1.0, out=r)
-            r *= r
-            out[sl] = r.sum(axis=1, dtype=np.float64)
-        return out
+    def _chunk_costs(self, pts: np.ndarray, nrm: np.ndarray | None, planes: np.ndarray,
+                     model_normals: np.ndarray, params: RansacParams) -> np.ndarray:
+        return _truncated_squares(pts, planes, params.epsilon).sum(axis=1, dtype=np.float64)
 
 
-class MsacNormalScorer(Scorer):
+class MsacNormalScorer(_ChunkedScorer):
     """MSAC plus the normal cost g of E_n: Σ min(φ²/ε² + g(1, p), 1)."""
 
     name = "msac-normal"
+    uses_normals = True
 
-    def score(self, cloud: PlaneCloud, pool: np.ndarray, planes: np.ndarray,
-              model_normals: np.ndarray, params: RansacParams) -> np.ndarray:
-        """See :meth:`monoplane.stages.base.Scorer.score`; (H,) float64 costs."""
-        pts = _columns(cloud.points[pool])
-        nrm = _columns(cloud.normals[pool])
+    def _chunk_costs(self, pts: np.ndarray, nrm: np.ndarray | None, planes: np.ndarray,
+                     model_normals: np.ndarray, params: RansacParams) -> np.ndarray:
+        assert nrm is not None  # uses_normals
         eps_n = params.epsilon_n
-        cos_n = np.cos(eps_n)
-        out = np.empty(planes.shape[0])
-        inv_eps = 1.0 / params.epsilon
-        for sl in _chunks(planes.shape[0], pts.shape[1]):
-            r = _distances(pts, planes[sl])
-            r *= inv_eps
-            np.minimum(r, 1.0, out=r)
-            r *= r
-            cos = _dots(model_normals[sl], nrm)
-            # g is non-zero only where the angle reaches ε_n; arccos only on inlier candidates.
-            hit = (r < 1.0) & (cos <= cos_n)
-            ang = np.arccos(np.clip(cos[hit], -1.0, 1.0))
-            r[hit] = np.minimum(r[hit] + np.exp(ang / eps_n - 1.0), 1.0)
-            out[sl] = r.sum(axis=1, dtype=np.float64)
-        return out
+        r = _truncated_squares(pts, planes, params.epsilon)
+        cos = _dots(model_normals, nrm)
+        # g is non-zero only where the angle reaches ε_n; arccos only on inlier candidates.
+        hit = (r < 1.0) & (cos <= np.cos(eps_n))
+        ang = np.arccos(np.clip(cos[hit], -1.0, 1.0))
+        r[hit] = np.minimum(r[hit] + np.exp(ang / eps_n - 1.0), 1.0)
+        return r.sum(axis=1, dtype=np.float64)
 
 
 @hookimpl
