@@ -8,7 +8,8 @@ test suite once monoplane is installed:
 * ``plugin_manager``: a fresh plugin manager with built-ins only (no entry-point autoload),
   plus whatever the test registers on it.
 
-and :func:`check_stage_contract`, which a plugin's own tests call on each of its stage classes::
+:func:`box_frame`, a frame of exact planes with its true labels, and
+:func:`check_stage_contract`, which a plugin's own tests call on each of its stage classes::
 
     from monoplane.testing import check_stage_contract
 
@@ -30,6 +31,44 @@ if TYPE_CHECKING:
     from monoplane.stages.base import Stage
     from monoplane.synth import SynthView
     from monoplane.types import Frame
+
+
+#: Inside a box, camera frame (OpenCV axes), metres: back wall 4 m ahead, floor 1 m below,
+#: left wall 1.5 m to the left; ``n · X + d = 0`` with n facing the camera.
+BOX_PLANES = np.array([[0.0, 0.0, -1.0, 4.0], [0.0, -1.0, 0.0, 1.0], [1.0, 0.0, 0.0, 1.5]])
+
+
+def box_frame(width: int = 128, height: int = 96, planes: np.ndarray = BOX_PLANES,
+              focal: float = 80.0) -> tuple[Frame, np.ndarray]:
+    """A depth-only frame of exact planes (the nearest plane along each ray), for tests.
+
+    Parameters
+    ----------
+    width, height : int
+        Image size in pixels.
+    planes : numpy.ndarray
+        (P, 4) camera-frame planes facing the camera.
+    focal : float
+        Focal length in pixels (principal point at the image centre).
+
+    Returns
+    -------
+    frame : Frame
+        Exact depth (metres) and normals, no RGB.
+    labels : numpy.ndarray
+        (H, W) int32 true labels, ``i`` = row ``i - 1`` of ``planes``.
+    """
+    from monoplane.types import Frame, intrinsics_matrix, pixel_rays
+
+    K = intrinsics_matrix(focal, focal, (width - 1) / 2, (height - 1) / 2)
+    rays = pixel_rays(K, height, width)
+    with np.errstate(divide="ignore"):
+        z = np.stack([-p[3] / (rays @ p[:3]) for p in planes])
+    z[z <= 0] = np.inf
+    labels = np.argmin(z, axis=0) + 1
+    frame = Frame(rgb=None, K=K, depth=np.min(z, axis=0).astype(np.float32),
+                  normals=planes[labels - 1, :3].astype(np.float32))
+    return frame, labels.astype(np.int32)
 
 
 @pytest.fixture

@@ -18,25 +18,7 @@ from monoplane.evaluation.baselines import (
 )
 from monoplane.evaluation.segmentation import segmentation_scores
 from monoplane.plugin_manager import AUTOLOAD_ENV
-from monoplane.types import Frame, intrinsics_matrix, pixel_rays
-
-# Inside a box: back wall 4 m ahead, floor 1 m below, left wall 1.5 m to the left, camera frame.
-BOX_PLANES = np.array([[0.0, 0.0, -1.0, 4.0], [0.0, -1.0, 0.0, 1.0], [1.0, 0.0, 0.0, 1.5]])
-
-
-def box_frame(width: int = 128, height: int = 96) -> tuple[Frame, np.ndarray]:
-    """Exact depth, normals and plane labels (1..3 = rows of BOX_PLANES) of the box."""
-    K = intrinsics_matrix(80.0, 80.0, (width - 1) / 2, (height - 1) / 2)
-    rays = pixel_rays(K, height, width)
-    with np.errstate(divide="ignore"):
-        z = np.stack([-p[3] / (rays @ p[:3]) for p in BOX_PLANES])
-    z[z <= 0] = np.inf
-    labels = np.argmin(z, axis=0) + 1
-    depth = np.min(z, axis=0)
-    normals = BOX_PLANES[labels - 1, :3]
-    frame = Frame(rgb=None, K=K, depth=depth.astype(np.float32),
-                  normals=normals.astype(np.float32))
-    return frame, labels.astype(np.int32)
+from monoplane.testing import BOX_PLANES, box_frame
 
 
 def test_open3d_ransac_finds_the_planes_of_an_exact_box() -> None:

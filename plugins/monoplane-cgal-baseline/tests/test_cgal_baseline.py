@@ -10,22 +10,7 @@ pytest.importorskip("CGAL.CGAL_Shape_detection", reason="the GPL 'cgal' package 
 from monoplane_cgal_baseline import CgalRansacConfig, cgal_efficient_ransac  # noqa: E402
 
 from monoplane.evaluation.segmentation import segmentation_scores  # noqa: E402
-from monoplane.types import Frame, intrinsics_matrix, pixel_rays  # noqa: E402
-
-# Back wall 4 m ahead, floor 1 m below, left wall 1.5 m to the left (camera frame, metres).
-BOX_PLANES = np.array([[0.0, 0.0, -1.0, 4.0], [0.0, -1.0, 0.0, 1.0], [1.0, 0.0, 0.0, 1.5]])
-
-
-def box_frame(width: int = 128, height: int = 96) -> tuple[Frame, np.ndarray]:
-    K = intrinsics_matrix(80.0, 80.0, (width - 1) / 2, (height - 1) / 2)
-    rays = pixel_rays(K, height, width)
-    with np.errstate(divide="ignore"):
-        z = np.stack([-p[3] / (rays @ p[:3]) for p in BOX_PLANES])
-    z[z <= 0] = np.inf
-    labels = np.argmin(z, axis=0) + 1
-    frame = Frame(rgb=None, K=K, depth=np.min(z, axis=0).astype(np.float32),
-                  normals=BOX_PLANES[labels - 1, :3].astype(np.float32))
-    return frame, labels.astype(np.int32)
+from monoplane.testing import BOX_PLANES, box_frame  # noqa: E402
 
 
 def test_finds_the_three_planes_of_an_exact_box() -> None:
