@@ -27,7 +27,7 @@ from typing import Any
 
 from monoplane.errors import ConfigError
 from monoplane.plugin_manager import Registry, get_registry
-from monoplane.stages.base import STAGE_KINDS
+from monoplane.stages.base import STAGE_KINDS, config_key
 
 DEFAULT_PRESET = "monoplane"
 #: Host tables (not stages) and the import path of their config dataclass.
@@ -130,11 +130,6 @@ def overrides_to_tables(overrides: dict[str, Any] | list[str] | None) -> dict[st
     return tables
 
 
-def _field_key(field: dataclasses.Field) -> str:
-    """User-facing key of a config field: Python keywords carry a trailing underscore."""
-    return field.name[:-1] if field.name.endswith("_") else field.name
-
-
 def _type_name(tp: Any) -> str:
     return getattr(tp, "__name__", None) or str(tp).replace("typing.", "")
 
@@ -193,7 +188,7 @@ def _coerce(value: Any, tp: Any, where: str) -> Any:
 
 def build_dataclass(cls: type, values: dict[str, Any], where: str) -> Any:
     """Instantiate a config dataclass from user keys, rejecting unknown or ill-typed ones."""
-    fields = {_field_key(f): f for f in dataclasses.fields(cls)}
+    fields = {config_key(f): f for f in dataclasses.fields(cls)}
     hints = typing.get_type_hints(cls)
     kwargs = {}
     for key, value in values.items():
@@ -215,7 +210,7 @@ def _host_config_class(table: str) -> type:
 
 def config_values(obj: Any) -> dict[str, Any]:
     """User-facing ``{key: value}`` of a config dataclass instance (keywords unescaped)."""
-    return {_field_key(f): getattr(obj, f.name) for f in dataclasses.fields(obj)}
+    return {config_key(f): getattr(obj, f.name) for f in dataclasses.fields(obj)}
 
 
 @dataclass

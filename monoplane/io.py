@@ -1,4 +1,4 @@
-"""Reading inputs and writing outputs (the on-disk contract of DESIGN §6).
+"""Reading inputs and writing outputs (the on-disk contract of the command line and API).
 
 Inputs
 ------

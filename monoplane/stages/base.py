@@ -44,6 +44,12 @@ def param(default: Any, doc: str, **kwargs: Any) -> Any:
     return field(default=default, metadata={"doc": doc}, **kwargs)
 
 
+def config_key(f: dataclasses.Field) -> str:
+    """User-facing key of a config field: a Python keyword is spelled with a trailing
+    underscore in the dataclass (``lambda_``) and without it in configs (``lambda``)."""
+    return f.name[:-1] if f.name.endswith("_") else f.name
+
+
 @dataclass
 class NoConfig:
     """A stage without parameters."""
@@ -99,7 +105,10 @@ class Stage:
 
     @classmethod
     def parameters(cls) -> list[tuple[str, str, Any, str]]:
-        """``(name, type, default, doc)`` for each config field, for listings and docs."""
+        """``(key, type, default, doc)`` for each config field, for listings and docs.
+
+        ``key`` is what a config or ``--set`` names (see :func:`config_key`).
+        """
         rows = []
         for f in dataclasses.fields(cls.Config):
             if f.default is not dataclasses.MISSING:
@@ -109,7 +118,7 @@ class Stage:
             else:
                 default = None
             type_name = f.type if isinstance(f.type, str) else getattr(f.type, "__name__", "")
-            rows.append((f.name, type_name, default, f.metadata.get("doc", "")))
+            rows.append((config_key(f), type_name, default, f.metadata.get("doc", "")))
         return rows
 
 
