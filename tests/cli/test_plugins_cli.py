@@ -25,7 +25,8 @@ def test_every_listed_key_is_accepted_by_set(capsys: pytest.CaptureFixture[str])
     for stage in listing:
         kind, name = stage["kind"], stage["name"]
         for p in stage["parameters"]:
-            overrides = [f"{kind}.plugin={name}", f"{kind}.{p['name']}={_toml_literal(p['default'])}"]
+            value = _toml_literal(p["default"])
+            overrides = [f"{kind}.plugin={name}", f"{kind}.{p['name']}={value}"]
             resolved = config.load(overrides=overrides).to_dict()
             assert resolved[kind]["plugin"] == name
             assert resolved[kind][p["name"]] == p["default"], (kind, name, p["name"])
