@@ -25,6 +25,8 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+import tomli_w
+
 from monoplane.errors import ConfigError
 from monoplane.plugin_manager import Registry, get_registry
 from monoplane.stages.base import STAGE_KINDS, config_key
@@ -299,28 +301,25 @@ def load(preset: str | None = None, config: str | Path | dict[str, Any] | None =
     return resolve(raw, registry)
 
 
-def _toml_value(value: Any) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, (int, float)):
-        return repr(value)
-    if isinstance(value, str):
-        escaped = value.replace("\\", "\\\\").replace('"', '\\"')
-        return f'"{escaped}"'
+def _without_none(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {str(k): _without_none(v) for k, v in value.items() if v is not None}
     if isinstance(value, (list, tuple)):
-        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
-    raise ConfigError(f"cannot write {value!r} to TOML")
+        return [_without_none(v) for v in value]
+    return value
 
 
 def dumps_toml(data: dict[str, Any]) -> str:
-    """Write a two-level dict (top-level scalars, then tables of scalars/lists) as TOML.
+    """Write config tables as TOML (with ``tomli-w``, so any string or key round-trips).
 
     ``None`` values are omitted (TOML has no null); they mean "use the default".
+
+    Raises
+    ------
+    ConfigError
+        If a value has no TOML form (a set, an arbitrary object).
     """
-    lines = [f"{k} = {_toml_value(v)}" for k, v in data.items()
-             if not isinstance(v, dict) and v is not None]
-    for table, values in data.items():
-        if isinstance(values, dict):
-            lines.append(f"\n[{table}]")
-            lines += [f"{k} = {_toml_value(v)}" for k, v in values.items() if v is not None]
-    return "\n".join(lines) + "\n"
+    try:
+        return tomli_w.dumps(_without_none(data))
+    except TypeError as exc:
+        raise ConfigError(f"cannot write the config as TOML: {exc}") from None
