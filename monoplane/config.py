@@ -59,7 +59,7 @@ def load_preset(name: str) -> dict[str, Any]:
     """
     presets = list_presets()
     if name not in presets:
-        raise ConfigError(f"unknown preset '{name}'; valid presets: {', '.join(presets)}")
+        raise ConfigError(f"unknown preset {name!r}; valid presets: {', '.join(presets)}")
     text = (resources.files("monoplane") / "presets" / f"{name}.toml").read_text()
     return _parse_toml(text, f"preset '{name}'")
 
@@ -79,10 +79,10 @@ def parse_override(expr: str) -> tuple[str, str, Any]:
     is not valid TOML is taken as a bare string, so ``cues.profile=zerodepth`` works unquoted.
     """
     if "=" not in expr:
-        raise ConfigError(f"override '{expr}' must look like table.key=value")
+        raise ConfigError(f"override {expr!r} must look like table.key=value")
     lhs, rhs = expr.split("=", 1)
     if lhs.count(".") != 1 or not all(lhs.split(".")):
-        raise ConfigError(f"override '{expr}': the key must be table.key, e.g. labeler.lambda")
+        raise ConfigError(f"override {expr!r}: the key must be table.key, e.g. labeler.lambda")
     table, key = (s.strip() for s in lhs.split("."))
     rhs = rhs.strip()
     try:
@@ -123,7 +123,7 @@ def overrides_to_tables(overrides: dict[str, Any] | list[str] | None) -> dict[st
             else:
                 table, _, field = key.partition(".")
                 if not table or not field or "." in field:
-                    raise ConfigError(f"override key '{key}' must be table.key")
+                    raise ConfigError(f"override key {key!r} must be table.key")
                 items.append((table, field, value))
     else:
         items = [parse_override(e) for e in overrides]
@@ -196,7 +196,7 @@ def build_dataclass(cls: type, values: dict[str, Any], where: str) -> Any:
     for key, value in values.items():
         if key not in fields:
             valid = ", ".join(sorted(fields)) or "(none)"
-            raise ConfigError(f"unknown key '{key}' in {where}; valid keys: {valid}")
+            raise ConfigError(f"unknown key {key!r} in {where}; valid keys: {valid}")
         f = fields[key]
         kwargs[f.name] = _coerce(value, hints[f.name], f"{where}.{key}")
     try:
@@ -267,10 +267,10 @@ def resolve(raw: dict[str, Any], registry: Registry | None = None) -> ResolvedCo
     valid_tables = list(STAGE_KINDS) + list(HOST_TABLES)
     for table, values in tables.items():
         if table not in valid_tables:
-            raise ConfigError(f"unknown config table '{table}'; valid tables: "
+            raise ConfigError(f"unknown config table {table!r}; valid tables: "
                               f"{', '.join(valid_tables)}")
         if not isinstance(values, dict):
-            raise ConfigError(f"'{table}' must be a table, e.g. [{table}]")
+            raise ConfigError(f"{table!r} must be a table, e.g. [{table}]")
     stages: dict[str, tuple[str, Any]] = {}
     for kind in STAGE_KINDS:
         values = dict(tables.get(kind, {}))

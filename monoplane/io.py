@@ -72,10 +72,13 @@ def read_image(path: str | Path) -> np.ndarray:
 def _load_npy(p: Path, what: str) -> np.ndarray:
     try:
         arr = np.load(p, allow_pickle=False)
-    except (ValueError, OSError, EOFError) as exc:
-        raise InvalidInput(f"cannot read {what} {p}: {exc}") from None
-    if not isinstance(arr, np.ndarray) or not np.issubdtype(arr.dtype, np.number):
-        raise InvalidInput(f"{what} {p} must hold a numeric array")
+    except Exception as exc:  # a damaged header surfaces as ValueError, SyntaxError, TokenError…
+        first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+        raise InvalidInput(f"cannot read {what} {p} as .npy: {first}") from None
+    if not isinstance(arr, np.ndarray) or not (np.issubdtype(arr.dtype, np.integer)
+                                               or np.issubdtype(arr.dtype, np.floating)):
+        kind = arr.dtype if isinstance(arr, np.ndarray) else type(arr).__name__
+        raise InvalidInput(f"{what} {p} must hold a real-valued numeric array, got {kind}")
     return arr
 
 
@@ -183,7 +186,7 @@ def read_intrinsics(spec: str | Path) -> np.ndarray:
         where = str(p)
     else:
         parts = text.split(",")
-        where = f"--intrinsics '{text}'"
+        where = f"--intrinsics {text!r}"
         if len(parts) != 4:
             raise InvalidInput(f"{where} must be fx,fy,cx,cy or a JSON file")
         values = parts

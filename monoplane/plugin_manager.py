@@ -165,7 +165,7 @@ class Registry:
             return self._stages[kind][name]
         except KeyError:
             choices = ", ".join(self.names(kind)) or "(none registered)"
-            raise ConfigError(f"unknown {kind} plugin '{name}'; valid choices: {choices}") from None
+            raise ConfigError(f"unknown {kind} plugin {name!r}; valid choices: {choices}") from None
 
     def all(self) -> list[StageInfo]:
         """Every registered stage, in pipeline order of kinds then by name."""
