@@ -11,9 +11,9 @@ Inputs
 
 Outputs (one folder, written atomically: a temporary sibling folder renamed into place)
 -------------------------------------------------------------------------------------------
-``labels.png`` (uint16, 0 = non-planar), ``planes.json``, ``planes.ply`` (one coloured polygon
-per plane region, triangulated so
-that any PLY reader loads it), ``depth_planar.npy`` and ``config.toml``.
+``labels.png`` (uint16, 0 = non-planar), ``planes.json``, ``planes.ply`` (every plane region
+triangulated on its plane with its holes left open, each face carrying its ``plane_id``; see
+:func:`write_plane_mesh_ply`), ``depth_planar.npy`` and ``config.toml``.
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ import numpy as np
 
 from monoplane.cues.intrinsics import assume_intrinsics
 from monoplane.errors import InvalidInput
-from monoplane.geometry.polygons import plane_polygons, triangulate_on_plane
+from monoplane.geometry.polygons import PlaneMesh, reconstruction_mesh
 from monoplane.types import Frame, Reconstruction, intrinsics_matrix
 
 
@@ -295,31 +295,47 @@ def atomic_output_dir(out_dir: str | Path, overwrite: bool = False) -> Iterator[
         raise
 
 
-def write_polygon_ply(path: Path, polygons: list[tuple[np.ndarray, np.ndarray]]) -> None:
-    """Write coloured polygons as an ASCII PLY (one face per polygon).
+def write_plane_mesh_ply(path: Path, mesh: PlaneMesh, colors: np.ndarray,
+                         first_id: int = 1) -> None:
+    """Write plane regions as an ASCII PLY triangle mesh, each face tagged with its plane id.
 
     Parameters
     ----------
     path : Path
         Output file.
-    polygons : list of (vertices, color)
-        ``(V, 3)`` float vertices and a (3,) uint8 RGB colour per polygon.
+    mesh : PlaneMesh
+        Triangles with their ``plane_ids``.
+    colors : numpy.ndarray
+        (P, 3) uint8 RGB of plane id ``p`` at row ``p - first_id``.
+    first_id : int
+        Id of the first plane: 1 for label values, 0 for a scene's global planes.
+
+    Notes
+    -----
+    Elements: ``vertex`` (float x, y, z; uchar red, green, blue) and ``face`` (uchar-counted
+    int list ``vertex_indices`` of 3 entries; uchar red, green, blue; int ``plane_id``). No
+    vertex is shared between planes, so the vertex colour is the plane colour too (Open3D reads
+    vertex colours, not face colours).
     """
-    n_vertices = sum(len(v) for v, _ in polygons)
-    lines = ["ply", "format ascii 1.0", f"element vertex {n_vertices}",
-             "property float x", "property float y", "property float z",
-             "property uchar red", "property uchar green", "property uchar blue",
-             f"element face {len(polygons)}", "property list uchar int vertex_indices",
-             "property uchar red", "property uchar green", "property uchar blue", "end_header"]
-    faces = []
-    start = 0
-    for verts, color in polygons:
-        r, g, b = (int(c) for c in color)
-        lines += [f"{x:.6g} {y:.6g} {z:.6g} {r} {g} {b}" for x, y, z in verts]
-        faces.append(f"{len(verts)} " + " ".join(str(start + i) for i in range(len(verts)))
-                     + f" {r} {g} {b}")
-        start += len(verts)
-    path.write_text("\n".join(lines + faces) + "\n")
+    colors = np.asarray(colors, dtype=np.uint8).reshape(-1, 3)
+    face_rgb = colors[mesh.plane_ids - first_id].reshape(-1, 3)
+    vertex_rgb = np.zeros((len(mesh.vertices), 3), np.uint8)
+    vertex_rgb[mesh.triangles.reshape(-1)] = np.repeat(face_rgb, 3, axis=0)
+    header = ["ply", "format ascii 1.0", "comment monoplane plane regions; "
+              "face plane_id = plane id in the accompanying JSON",
+              f"element vertex {len(mesh.vertices)}",
+              "property float x", "property float y", "property float z",
+              "property uchar red", "property uchar green", "property uchar blue",
+              f"element face {len(mesh.triangles)}", "property list uchar int vertex_indices",
+              "property uchar red", "property uchar green", "property uchar blue",
+              "property int plane_id", "end_header"]
+    vertices = [f"{x:.7g} {y:.7g} {z:.7g} {r} {g} {b}"
+                for (x, y, z), (r, g, b) in zip(mesh.vertices.tolist(), vertex_rgb.tolist(),
+                                                strict=True)]
+    faces = [f"3 {a} {b} {c} {r} {g} {bl} {pid}"
+             for (a, b, c), (r, g, bl), pid in zip(mesh.triangles.tolist(), face_rgb.tolist(),
+                                                   mesh.plane_ids.tolist(), strict=True)]
+    path.write_text("\n".join(header + vertices + faces) + "\n")
 
 
 def planes_document(rec: Reconstruction) -> dict:
@@ -354,7 +370,7 @@ def planes_document(rec: Reconstruction) -> dict:
 def write_reconstruction_files(rec: Reconstruction, folder: Path) -> None:
     """Write the single-view outputs into an existing folder (not atomic by itself)."""
     from monoplane import __version__
-    from monoplane.config import dumps_toml
+    from monoplane.config import dumps_toml  # config imports the plugin registry
 
     if rec.num_planes > np.iinfo(np.uint16).max:
         raise InvalidInput(f"{rec.num_planes} planes do not fit in a uint16 labels.png")
@@ -362,10 +378,7 @@ def write_reconstruction_files(rec: Reconstruction, folder: Path) -> None:
     doc = planes_document(rec)
     doc["monoplane_version"] = __version__
     (folder / "planes.json").write_text(json.dumps(doc, indent=2) + "\n")
-    colors = rec.colors
-    write_polygon_ply(folder / "planes.ply",
-                      [(tri, colors[pid - 1]) for pid, verts in plane_polygons(rec)
-                       for tri in triangulate_on_plane(verts, rec.params[pid - 1, :3])])
+    write_plane_mesh_ply(folder / "planes.ply", reconstruction_mesh(rec), rec.colors)
     np.save(folder / "depth_planar.npy", rec.planar_depth())
     (folder / "config.toml").write_text(
         "# Resolved monoplane config; rerun with: monoplane run ... --config config.toml\n"

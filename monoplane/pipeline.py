@@ -5,7 +5,7 @@ Python API first::
     import monoplane
     pipe = monoplane.Pipeline.from_preset("monoplane", overrides={"labeler.lambda": 0.9})
     rec = pipe.run(monoplane.load_frame("rgb.png", depth="depth.npy", intrinsics="K.json"))
-    rec.save("out/")
+    monoplane.save_reconstruction(rec, "out/")
 
 A stage that raises is reported as a :class:`~monoplane.errors.StageError` naming its kind and
 plugin. Per-stage wall times land in ``rec.timings`` and are announced through the
