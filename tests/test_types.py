@@ -99,3 +99,25 @@ def test_plane_world_round_trip():
     assert np.isclose(plane_w[:3] @ x_w + plane_w[3], 0)
     assert np.allclose(plane_to_camera(plane_w, R, t)[0], plane_c)
     assert np.allclose(cam.center, R.T @ -t)
+
+
+def test_data_model_imports_nothing_of_the_project_but_errors() -> None:
+    import subprocess
+    import sys
+
+    code = ("import sys, monoplane.types; "
+            "print(sorted(m for m in sys.modules if m.startswith('monoplane'))); "
+            "print('cv2' in sys.modules, 'pluggy' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split("\n")[:2] == ["['monoplane', 'monoplane.errors', 'monoplane.types']",
+                                          "False False"]
+
+
+def test_package_names_load_on_first_use() -> None:
+    import monoplane
+    from monoplane.pipeline import Pipeline
+
+    assert monoplane.Pipeline is Pipeline and "Pipeline" in dir(monoplane)
+    assert set(monoplane.__all__) <= set(dir(monoplane))
+    with pytest.raises(AttributeError, match="no attribute 'nope'"):
+        _ = monoplane.nope
