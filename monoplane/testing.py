@@ -28,6 +28,7 @@ import pytest
 if TYPE_CHECKING:
     import pluggy
 
+    from monoplane.geometry.cloud import PlaneCloud
     from monoplane.stages.base import Stage
     from monoplane.synth import SynthView
     from monoplane.types import Frame
@@ -37,19 +38,96 @@ if TYPE_CHECKING:
 #: left wall 1.5 m to the left; ``n · X + d = 0`` with n facing the camera.
 BOX_PLANES = np.array([[0.0, 0.0, -1.0, 4.0], [0.0, -1.0, 0.0, 1.0], [1.0, 0.0, 0.0, 1.5]])
 
+#: A room corner: floor 1 m below the camera and two walls meeting 3.75 m ahead.
+CORNER_PLANES = np.array([[0.0, -1.0, 0.0, 1.0], [0.6, 0.0, -0.8, 3.0],
+                          [-0.6, 0.0, -0.8, 3.0]])
 
-def box_frame(width: int = 128, height: int = 96, planes: np.ndarray = BOX_PLANES,
-              focal: float = 80.0) -> tuple[Frame, np.ndarray]:
-    """A depth-only frame of exact planes (the nearest plane along each ray), for tests.
+#: A closed box room seen from inside: floor, ceiling, back wall, left and right walls.
+ROOM = np.array([[0.0, -1.0, 0.0, 1.5], [0.0, 1.0, 0.0, 1.5], [0.0, 0.0, -1.0, 5.0],
+                 [1.0, 0.0, 0.0, 2.0], [-1.0, 0.0, 0.0, 2.5]])
+#: One flat RGB colour per :data:`ROOM` surface.
+ROOM_COLORS = np.array([[150, 100, 60], [230, 230, 230], [90, 140, 200], [200, 180, 120],
+                        [120, 200, 120]])
+
+
+@dataclasses.dataclass
+class PlaneScene:
+    """An exactly known view of planes.
+
+    Attributes
+    ----------
+    frame : Frame
+        Depth (0 where no plane is hit), normals (zero there) and, with colours, RGB.
+    labels : numpy.ndarray
+        (H, W) int32 true labels: ``i`` where plane row ``i - 1`` is the nearest hit, else 0.
+    planes : numpy.ndarray
+        (P, 4) the planes in the camera frame.
+    """
+
+    frame: Frame
+    labels: np.ndarray
+    planes: np.ndarray
+
+
+def plane_scene(planes: np.ndarray, K: np.ndarray, width: int, height: int, *,
+                R: np.ndarray | None = None, bounds: np.ndarray | None = None,
+                colors: np.ndarray | None = None, color_noise: float = 0.0, seed: int = 0,
+                name: str = "frame") -> PlaneScene:
+    """Ray-cast planes (optionally bounded rectangles) from a camera at the origin.
+
+    The one exact scene builder of the test suites: each pixel sees the nearest plane its ray
+    meets in front of the camera (within that plane's bounds, if any).
 
     Parameters
     ----------
+    planes : numpy.ndarray
+        (P, 4) ``(n, d)`` in the world frame, facing the camera.
+    K : numpy.ndarray
+        (3, 3) intrinsics.
     width, height : int
         Image size in pixels.
-    planes : numpy.ndarray
-        (P, 4) camera-frame planes facing the camera.
-    focal : float
-        Focal length in pixels (principal point at the image centre).
+    R : numpy.ndarray, optional
+        (3, 3) world-to-camera rotation (``x_cam = R x_world``); identity by default.
+    bounds : numpy.ndarray, optional
+        (P, 2, 3) lower and upper world corners of each plane's rectangle; unbounded if omitted.
+    colors : numpy.ndarray, optional
+        (P, 3) RGB per plane; the frame has no RGB without it.
+    color_noise : float
+        Standard deviation of Gaussian noise added to the colours (seeded by ``seed``).
+    name : str
+        Frame name.
+    """
+    from monoplane.types import Frame, pixel_rays, plane_to_camera, ray_plane_depth
+
+    planes = np.asarray(planes, dtype=np.float64)
+    R = np.eye(3) if R is None else np.asarray(R, dtype=np.float64)
+    rays = pixel_rays(K, height, width) @ R  # world directions, camera-z component 1
+    t = ray_plane_depth(rays[..., None, :], planes)  # (H, W, P)
+    if bounds is not None:
+        hits = rays[..., None, :] * t[..., None]
+        lo, hi = np.asarray(bounds)[:, 0] - 1e-9, np.asarray(bounds)[:, 1] + 1e-9
+        t[~np.all((hits >= lo) & (hits <= hi), axis=-1)] = 0.0
+    t[t <= 0] = np.inf
+    nearest = np.argmin(t, axis=-1)
+    depth = np.min(t, axis=-1)
+    hit = np.isfinite(depth)
+    labels = np.where(hit, nearest + 1, 0).astype(np.int32)
+    cam_planes = plane_to_camera(planes, R, np.zeros(3)) if bounds is not None or R is not None \
+        else planes
+    normals = np.where(hit[..., None], cam_planes[nearest, :3], 0.0)
+    rgb = None
+    if colors is not None:
+        noise = np.random.default_rng(seed).normal(0.0, color_noise, (height, width, 3))
+        rgb = np.where(hit[..., None], np.asarray(colors, np.float64)[nearest], 0.0) + noise
+        rgb = np.clip(rgb, 0, 255).astype(np.uint8)
+    frame = Frame(rgb=rgb, K=K, depth=np.where(hit, depth, 0.0).astype(np.float32),
+                  normals=normals.astype(np.float32), name=name)
+    return PlaneScene(frame=frame, labels=labels, planes=cam_planes)
+
+
+def box_frame(width: int = 128, height: int = 96, planes: np.ndarray = BOX_PLANES,
+              focal: float = 80.0) -> tuple[Frame, np.ndarray]:
+    """A depth-only frame of exact planes (:func:`plane_scene`), principal point centred.
 
     Returns
     -------
@@ -58,17 +136,40 @@ def box_frame(width: int = 128, height: int = 96, planes: np.ndarray = BOX_PLANE
     labels : numpy.ndarray
         (H, W) int32 true labels, ``i`` = row ``i - 1`` of ``planes``.
     """
-    from monoplane.types import Frame, intrinsics_matrix, pixel_rays
+    from monoplane.types import intrinsics_matrix
 
     K = intrinsics_matrix(focal, focal, (width - 1) / 2, (height - 1) / 2)
-    rays = pixel_rays(K, height, width)
-    with np.errstate(divide="ignore"):
-        z = np.stack([-p[3] / (rays @ p[:3]) for p in planes])
-    z[z <= 0] = np.inf
-    labels = np.argmin(z, axis=0) + 1
-    frame = Frame(rgb=None, K=K, depth=np.min(z, axis=0).astype(np.float32),
-                  normals=planes[labels - 1, :3].astype(np.float32))
-    return frame, labels.astype(np.int32)
+    scene = plane_scene(planes, K, width, height)
+    return scene.frame, scene.labels
+
+
+def room_cues(height: int = 192, width: int = 256, noise: float = 6.0, seed: int = 0
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Exact cues of the :data:`ROOM` (70° horizontal field of view), as arrays.
+
+    Returns
+    -------
+    rgb, depth, normals, labels, K
+        (H, W, 3) uint8 :data:`ROOM_COLORS` with Gaussian noise of std ``noise``; (H, W) float32
+        depth; (H, W, 3) float32 normals; (H, W) int32 labels in 1..5 (row ``i - 1`` of
+        :data:`ROOM`); (3, 3) intrinsics.
+    """
+    from monoplane.types import default_intrinsics
+
+    K = default_intrinsics(width, height, 70.0)
+    s = plane_scene(ROOM, K, width, height, colors=ROOM_COLORS, color_noise=noise, seed=seed)
+    return s.frame.rgb, s.frame.depth, s.frame.normals, s.labels, K  # type: ignore[return-value]
+
+
+def cloud_from_arrays(points: np.ndarray, normals: np.ndarray) -> PlaneCloud:
+    """A PlaneCloud over given (N, 3) points and normals, taken as already normalised."""
+    from monoplane.geometry.cloud import PlaneCloud
+
+    n = len(points)
+    pixels = np.arange(n, dtype=np.int64)
+    return PlaneCloud(points=points, normals=normals, colors=None, pixels=pixels,
+                      center=np.zeros(3), scale=1.0, shape=(1, n), all_points=points,
+                      all_pixels=pixels)
 
 
 @pytest.fixture

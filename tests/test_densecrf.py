@@ -19,7 +19,7 @@ from monoplane.densecrf import (
     unary_from_labels,
 )
 from monoplane.errors import InvalidInput
-from tests.conftest import room_cues
+from monoplane.testing import room_cues
 
 
 def boundary_band(gt: np.ndarray, radius: int) -> np.ndarray:
