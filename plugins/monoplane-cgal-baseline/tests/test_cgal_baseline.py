@@ -10,7 +10,7 @@ pytest.importorskip("CGAL.CGAL_Shape_detection", reason="the GPL 'cgal' package 
 from monoplane_cgal_baseline import CgalRansacConfig, cgal_efficient_ransac  # noqa: E402
 
 from monoplane.evaluation.segmentation import segmentation_scores  # noqa: E402
-from monoplane.testing import BOX_PLANES, box_frame  # noqa: E402
+from monoplane.testing import BOX_PLANES, box_frame, check_baseline_contract  # noqa: E402
 
 
 def test_finds_the_three_planes_of_an_exact_box() -> None:
@@ -22,6 +22,10 @@ def test_finds_the_three_planes_of_an_exact_box() -> None:
     assert segmentation_scores(rec.labels, gt).sc > 0.9
     for plane in BOX_PLANES:
         assert np.abs(rec.params - plane).max(axis=1).min() < 5e-3
+
+
+def test_baseline_contract() -> None:
+    check_baseline_contract(cgal_efficient_ransac)
 
 
 def test_minimum_support_drops_small_planes() -> None:
