@@ -11,21 +11,15 @@ from typing import TYPE_CHECKING, Any
 
 __version__ = "0.1.0"
 
-#: Public name -> module that defines it.
-_LAZY: dict[str, str] = {
-    "ConfigError": "monoplane.errors",
-    "InvalidInput": "monoplane.errors",
-    "MonoplaneError": "monoplane.errors",
-    "StageError": "monoplane.errors",
-    "hookimpl": "monoplane.hookspecs",
-    "load_frame": "monoplane.io",
-    "save_reconstruction": "monoplane.io",
-    "Pipeline": "monoplane.pipeline",
-    "Camera": "monoplane.types",
-    "Frame": "monoplane.types",
-    "Reconstruction": "monoplane.types",
-    "Scene": "monoplane.types",
+#: Module -> the public names it defines.
+_MODULES: dict[str, tuple[str, ...]] = {
+    "monoplane.errors": ("ConfigError", "InvalidInput", "MonoplaneError", "StageError"),
+    "monoplane.hookspecs": ("hookimpl",),
+    "monoplane.io": ("load_frame", "save_reconstruction"),
+    "monoplane.pipeline": ("Pipeline",),
+    "monoplane.types": ("Camera", "Frame", "Reconstruction", "Scene"),
 }
+_LAZY = {name: module for module, names in _MODULES.items() for name in names}
 
 __all__ = [
     "Camera", "ConfigError", "Frame", "InvalidInput", "MonoplaneError", "Pipeline",

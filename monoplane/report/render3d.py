@@ -41,7 +41,6 @@ RENDER_ENV = {"EGL_PLATFORM": "surfaceless"}
 DEFAULT_TIMEOUT = 120.0
 
 
-
 @dataclass
 class Mesh:
     """A triangle mesh to render.
