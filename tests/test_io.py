@@ -76,3 +76,12 @@ def test_atomic_dir_leaves_nothing_on_failure(tmp_path):
     with pytest.raises(InvalidInput, match="existing file"):
         with atomic_output_dir(tmp_path / "file"):
             pass
+
+
+def test_depth_outside_float32_range(tmp_path):
+    np.save(tmp_path / "big.npy", np.array([[1e300, 1.0]]))
+    with pytest.raises(InvalidInput, match=r"big.npy has values beyond 3.4e\+38"):
+        read_depth(tmp_path / "big.npy")
+    np.save(tmp_path / "tiny.npy", np.array([[1e-320, 0.0]]))
+    with pytest.raises(InvalidInput, match="no valid pixel"):
+        read_depth(tmp_path / "tiny.npy")
