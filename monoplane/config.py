@@ -278,6 +278,9 @@ def resolve(raw: dict[str, Any], registry: Registry | None = None) -> ResolvedCo
             raise ConfigError(f"[{kind}] needs a plugin; valid choices: "
                               f"{', '.join(registry.names(kind))}")
         name = values.pop("plugin")
+        if not isinstance(name, str):
+            raise ConfigError(f"[{kind}] plugin must be a plugin name; valid choices: "
+                              f"{', '.join(registry.names(kind))}; got {name!r}")
         info = registry.get(kind, name)
         stages[kind] = (name, build_dataclass(info.cls.Config, values, f"[{kind}] ({name})"))
     host = {t: build_dataclass(_host_config_class(t), tables.get(t, {}), f"[{t}]")
