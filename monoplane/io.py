@@ -134,9 +134,9 @@ def read_depth(path: str | Path, depth_scale: float | None = None,
         raise InvalidInput(f"depth {p} has values beyond {np.finfo(np.float32).max:.3g}; "
                            "store it in a larger unit (e.g. metres)")
     depth = depth.astype(np.float32)  # values below float32's range become 0 (invalid)
-    if not np.any(depth > 0):
-        raise InvalidInput(f"depth {p} has no valid pixel (all zero, NaN or inf)")
-    return depth
+    if np.any(depth > 0):
+        return depth
+    raise InvalidInput(f"depth {p} has no valid pixel (all zero, NaN or inf)")
 
 
 def read_normals(path: str | Path) -> np.ndarray:
