@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 
+from monoplane.errors import InvalidInput
 from monoplane.models import (
     CATALOGUE,
     cache_dir,
@@ -43,7 +44,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def _status(record: ModelRecord) -> str:
     try:
         return "cached" if cached_model(record.name) is not None else "-"
-    except Exception:  # a wrong-size copy: say so in the listing, do not fail it
+    except InvalidInput:  # a wrong-size copy: say so in the listing, do not fail it
         return "broken"
 
 
