@@ -93,13 +93,14 @@ def run_path(args: argparse.Namespace) -> int:
     return 0
 
 
-def prepare_cue_model(pipe: Pipeline, *, fetch_missing: bool, needed: bool,
-                      quiet: bool = False) -> None:
+def prepare_cue_model(pipe: Pipeline, *, fetch_missing: bool, has_depth: bool,
+                      has_normals: bool, quiet: bool = False) -> None:
     """Make sure the pipeline's catalogue model (``cues.model``) is in the cache.
 
     With ``fetch_missing`` a missing model is downloaded (the only download a run ever does);
-    otherwise, when the input needs the network (``needed``), a missing model is a one-line
-    error naming the fetch command, raised before any image is read.
+    otherwise, when the input needs the network (no given depth, or no given normals for a
+    network that predicts them), a missing model is a one-line error naming the fetch command,
+    raised before any image is read.
     """
     plugin, cfg = pipe.config.stages["cues"]
     name = getattr(cfg, "model", "") if plugin == "onnx" else ""
@@ -109,5 +110,7 @@ def prepare_cue_model(pipe: Pipeline, *, fetch_missing: bool, needed: bool,
         result = fetch(name)
         if not quiet:
             print(f"fetched {name} -> {result.path} (sha256 {result.sha256})")
-    elif needed:
+        return
+    joint = cfg.resolved_profile().depth.joint_normals
+    if not has_depth or (joint and not has_normals):
         require_model(name)

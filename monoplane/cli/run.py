@@ -47,8 +47,8 @@ def run(args: argparse.Namespace) -> int:
     if args.cues:
         args.overrides = ["cues.plugin=onnx", f"cues.model={args.cues}", *args.overrides]
     pipe = pipeline_from_args(args)
-    prepare_cue_model(pipe, fetch_missing=args.fetch, needed=args.depth is None,
-                      quiet=args.quiet)
+    prepare_cue_model(pipe, fetch_missing=args.fetch, has_depth=args.depth is not None,
+                      has_normals=args.normals is not None, quiet=args.quiet)
     frame = load_frame(args.image, depth=args.depth, normals=args.normals,
                        intrinsics=args.intrinsics, depth_scale=args.depth_scale,
                        nan_as_invalid=args.nan_as_invalid,

@@ -234,3 +234,19 @@ def test_config_model_key(cache: Path, tiny: ModelRecord) -> None:
         Pipeline.from_preset(overrides=["cues.model=tiny", "cues.depth_model=x.onnx"])
     with pytest.raises(ConfigError, match="unknown model"):
         Pipeline.from_preset(overrides=["cues.model=nope"])
+
+
+def test_run_with_given_depth_needs_no_depth_model(cache: Path, tiny: ModelRecord,
+                                                   tmp_path: Path) -> None:
+    import numpy as np
+
+    from monoplane.testing import box_frame
+
+    frame, _ = box_frame(96, 72)
+    np.save(tmp_path / "depth.npy", frame.depth)
+    out = tmp_path / "out"
+    # tiny's profile (depth-anything-v2) predicts no normals: they come from the given depth.
+    assert main(["run", "--depth", str(tmp_path / "depth.npy"), "--cues", "tiny",
+                 "--out", str(out), "--quiet"]) == 0
+    doc = json.loads((out / "planes.json").read_text())
+    assert len(doc["planes"]) >= 3 and not model_path(tiny).exists()
