@@ -59,13 +59,13 @@ def run_list(args: argparse.Namespace) -> int:
                 for r in records]
         print(json.dumps(rows, indent=2))
         return 0
-    rows = [("name", "task", "licence", "size", "profile", "cached", "source")]
+    table = [("name", "task", "licence", "size", "profile", "cached", "source")]
     for r in records:
         rev = r.revision[:10] if r.pinned else f"{r.revision} (unpinned)"
-        rows.append((r.name, r.task, r.licence.split(" ")[0], _size(r), r.profile, _status(r),
+        table.append((r.name, r.task, r.licence.split(" ")[0], _size(r), r.profile, _status(r),
                      f"{r.repo}@{rev}:{r.filename}"))
-    widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]) - 1)]
-    for row in rows:
+    widths = [max(len(row[i]) for row in table) for i in range(len(table[0]) - 1)]
+    for row in table:
         print("  ".join(c.ljust(w) for c, w in zip(row[:-1], widths, strict=False)) + "  "
               + row[-1])
     print(f"\ncache: {cache_dir()}")

@@ -235,6 +235,7 @@ class CueNetwork:
                 # Depth-only input (range images) has no image for a normals network.
                 normal_model = self._normal_model() if rgb is not None else None
                 if normal_model is not None:
+                    assert rgb is not None
                     normals = decode_normals(normal_model.predict(rgb, frame.K),
                                              normal_model.spec, frame.K)
                     notes.append(f"normals: from {self.profile.name} network "

@@ -133,16 +133,16 @@ class OnnxModel:
             raise self._mismatch(f"output {name!r} has shape {_shape_text(shape)}")
         # Further outputs of joint networks: name -> channels of the restored map (0: scalar).
         self.extra_outputs: dict[str, int] = {}
-        for extra, channels in ((spec.normals_output, 3), (spec.mask_output, 1),
-                                (spec.scale_output, 0)):
-            if extra is None:
+        for out_name, channels in ((spec.normals_output, 3), (spec.mask_output, 1),
+                                   (spec.scale_output, 0)):
+            if out_name is None:
                 continue
-            if extra not in outputs:
-                raise self._mismatch(f"no output named {extra!r}")
-            if channels == 3 and not _three_channels(outputs[extra].shape):
-                raise self._mismatch(f"output {extra!r} has shape "
-                                     f"{_shape_text(outputs[extra].shape)}")
-            self.extra_outputs[extra] = channels
+            if out_name not in outputs:
+                raise self._mismatch(f"no output named {out_name!r}")
+            if channels == 3 and not _three_channels(outputs[out_name].shape):
+                raise self._mismatch(f"output {out_name!r} has shape "
+                                     f"{_shape_text(outputs[out_name].shape)}")
+            self.extra_outputs[out_name] = channels
 
     def letterbox(self, height: int, width: int) -> Letterbox:
         """Where an image of this size sits inside the network input."""
