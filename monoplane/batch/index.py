@@ -12,6 +12,7 @@ import os
 import tempfile
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -20,6 +21,9 @@ from monoplane.batch.frame import REPORT_FILE
 from monoplane.batch.specs import FrameSpec
 from monoplane.report import figures as fig
 from monoplane.report import html
+
+if TYPE_CHECKING:
+    from monoplane.batch.runner import BatchSummary
 
 THUMB_WIDTH = 240
 ASSETS = "index_files"
@@ -46,7 +50,7 @@ def thumbnail(spec: FrameSpec, frame_dir: Path, dest: Path) -> bool:
     return True
 
 
-def svg_histogram(values: Sequence[float], title: str, unit: str, integer: bool = False,
+def svg_histogram(values: Sequence[float | None], title: str, unit: str, integer: bool = False,
                   bins: int = 20, width: int = 420, height: int = 220) -> str:
     """An inline SVG histogram of ``values`` with labelled axes (markup)."""
     vals = np.asarray([v for v in values if v is not None], dtype=float)
@@ -92,7 +96,7 @@ def svg_histogram(values: Sequence[float], title: str, unit: str, integer: bool 
     return "".join(parts)
 
 
-def write_index(summary, specs: Sequence[FrameSpec], out: Path) -> Path:  # summary: BatchSummary
+def write_index(summary: BatchSummary, specs: Sequence[FrameSpec], out: Path) -> Path:
     """Write ``out/index.html`` (atomically) and its thumbnails in ``out/index_files/``.
 
     Returns

@@ -101,10 +101,22 @@ def _portable_error(exc: BaseException) -> BaseException:
     return out
 
 
+def _die_with_parent() -> None:
+    """Ask Linux to send SIGTERM when the parent dies (even by SIGKILL), so that an orphan never
+    finishes a frame while the next run cleans up its temporary folder."""
+    try:
+        import ctypes
+
+        ctypes.CDLL(None).prctl(1, signal.SIGTERM)  # 1 = PR_SET_PDEATHSIG
+    except (OSError, AttributeError):  # not Linux: the closed pipe still stops idle workers
+        pass
+
+
 def _worker_main(conn: Connection, initializer: Callable[..., Any] | None,
                  initargs: tuple) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, _on_sigterm)
+    _die_with_parent()
     try:
         if initializer is not None:
             initializer(*initargs)

@@ -31,7 +31,7 @@ from monoplane.batch.frame import (
     is_complete,
     stored_result,
 )
-from monoplane.batch.specs import FrameSpec, read_frames
+from monoplane.batch.specs import FrameSpec, check_name, read_frames
 from monoplane.errors import InvalidInput
 
 LOCK_FILE = ".monoplane-batch.lock"
@@ -203,6 +203,8 @@ def run_batch(source: str | Path | Sequence[FrameSpec], out: str | Path,
     else:
         specs = list(source)
         source_text = f"{len(specs)} frame specs"
+        for spec in specs:
+            check_name(spec.name, "FrameSpec")
     names = [s.name for s in specs]
     if len(set(names)) != len(names):
         dup = next(n for n in names if names.count(n) > 1)
