@@ -79,6 +79,11 @@ class RayFrameWorker:
         return process_frame(self.job, spec)
 
 
+def _text(exc: BaseException) -> str:
+    """An exception's text on one line (Ray's are often multi-line)."""
+    return " ".join(str(exc).split()) or type(exc).__name__
+
+
 def _import_ray():  # -> module
     try:
         import ray
@@ -117,7 +122,7 @@ def run_ray(job: BatchJob, specs: Sequence[FrameSpec], workers: int | None,
                 ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False)
         except (ConnectionError, RayError, ValueError, RuntimeError) as exc:
             where = f"at {address}" if address else "locally"
-            raise EngineError(f"cannot start or join Ray {where}: {one_line(exc)}") from None
+            raise EngineError(f"cannot start or join Ray {where}: {_text(exc)}") from None
         started = True
     actors: list = []
     try:
@@ -128,7 +133,7 @@ def run_ray(job: BatchJob, specs: Sequence[FrameSpec], workers: int | None,
         try:
             ray.get([a.ready.remote() for a in actors])
         except RayError as exc:
-            raise EngineError(f"Ray workers could not start: {one_line(exc)}") from None
+            raise EngineError(f"Ray workers could not start: {_text(exc)}") from None
         queue = list(range(len(specs)))[::-1]  # pop() from the end = input order
         pending: dict = {}
 
