@@ -67,6 +67,14 @@ def test_local_engine_matches_run(frames_dir, reference_labels, tmp_path, capsys
     err = capsys.readouterr().err.strip()
     assert code == 2 and "\n" not in err
     assert "was made with a different config" in err and "--overwrite" in err
+    # --overwrite recomputes every frame with the new config.
+    code = main(["batch", str(frames_dir), "--out", str(out), "--set", "ransac.seed=1",
+                 "--overwrite", "--workers", "2", "--quiet"])
+    assert code == 1
+    doc = json.loads((out / "summary.json").read_text())
+    assert [f["status"] for f in doc["frames"]] == ["ok", "failed", "ok", "ok"]
+    assert doc["config"]["ransac"]["seed"] == 1
+    assert "seed = 1" in (out / GOOD[0] / "config.toml").read_text()
 
 
 @pytest.fixture(scope="module")

@@ -70,6 +70,9 @@ def test_resume_after_sigkill(frames_dir, reference_labels, tmp_path):
     assert frames and all(is_complete(p) for p in frames if p.is_dir())
     done_before = {p.name for p in frames if p.is_dir()}
     assert done_before < set(GOOD)  # the kill landed mid-batch
+    # What a kill during the final rename leaves behind; the next run must delete it.
+    (out / f".{GOOD[-1]}.x1y2z3.partial").mkdir(exist_ok=True)
+    (out / f".{GOOD[-1]}.x1y2z3.partial" / "labels.png").write_bytes(b"half")
 
     summary = run_batch(frames_dir, out, workers=2, progress=False)
     status = {f.name: f.status for f in summary.frames}

@@ -93,6 +93,17 @@ def test_bad_batch_input(tmp_path, capsys):
     assert "must be .jsonl or .csv" in capsys.readouterr().err
 
 
+def test_one_batch_per_output_folder(frames_dir, tmp_path, capsys):
+    from monoplane.batch.runner import batch_lock
+
+    out = tmp_path / "out"
+    out.mkdir()
+    with batch_lock(out):
+        assert main(["batch", str(frames_dir), "--out", str(out)]) == 2
+    assert f"another monoplane batch is writing to {out}" in capsys.readouterr().err
+    assert sorted(p.name for p in out.iterdir()) == [".monoplane-batch.lock"]
+
+
 def test_unsafe_frame_name(tmp_path):
     cv2.imwrite(str(tmp_path / "rgb.png"), np.zeros((8, 8, 3), np.uint8))
     (tmp_path / "m.jsonl").write_text('{"name": "../escape", "image": "rgb.png"}\n')
