@@ -56,13 +56,14 @@ def svg_histogram(values: Sequence[float | None], title: str, unit: str, integer
     vals = np.asarray([v for v in values if v is not None], dtype=float)
     if vals.size == 0:
         return html.paragraph(f"{title}: no data")
-    lo, hi = float(vals.min()), float(vals.max())
+    # Both quantities are non-negative; an axis from 0 shows spread relative to magnitude.
+    hi = float(vals.max())
     if integer:
-        edges = np.arange(np.floor(lo), np.ceil(hi) + 2) - 0.5
+        edges = np.arange(0, np.ceil(hi) + 2) - 0.5
         if edges.size - 1 > bins:
-            edges = np.linspace(lo - 0.5, hi + 0.5, bins + 1)
+            edges = np.linspace(-0.5, hi + 0.5, bins + 1)
     else:
-        edges = np.linspace(lo, hi if hi > lo else lo + 1e-3, bins + 1)
+        edges = np.linspace(0.0, hi * 1.05 if hi > 0 else 1.0, bins + 1)
     counts, edges = np.histogram(vals, bins=edges)
     left, right, top, bottom = 44, 12, 26, 40
     pw, ph = width - left - right, height - top - bottom
@@ -81,11 +82,14 @@ def svg_histogram(values: Sequence[float | None], title: str, unit: str, integer
     parts.append(f'<line x1="{left}" y1="{top + ph}" x2="{left + pw}" y2="{top + ph}" '
                  'stroke="#333"/>')
     parts.append(f'<line x1="{left}" y1="{top}" x2="{left}" y2="{top + ph}" stroke="#333"/>')
-    for frac in (0.0, 0.5, 1.0):
-        xv = edges[0] + frac * (edges[-1] - edges[0])
-        label = f"{xv:.0f}" if integer else f"{xv:.3g}"
-        parts.append(f'<text x="{left + frac * pw:.1f}" y="{top + ph + 14}" '
-                     f'text-anchor="middle">{label}</text>')
+    if integer:  # label bin centres: the first, middle and last bin
+        picks = sorted({0, len(counts) // 2, len(counts) - 1})
+        ticks = [((edges[i] + edges[i + 1]) / 2, left + (i + 0.5) * bw) for i in picks]
+    else:
+        ticks = [(edges[0] + f * (edges[-1] - edges[0]), left + f * pw) for f in (0.0, 0.5, 1.0)]
+    for value, x in ticks:
+        label = f"{value:.0f}" if integer else f"{value:.3g}"
+        parts.append(f'<text x="{x:.1f}" y="{top + ph + 14}" text-anchor="middle">{label}</text>')
     parts.append(f'<text x="{left + pw / 2}" y="{height - 6}" text-anchor="middle">'
                  f'{html.esc(unit)}</text>')
     for cv in sorted({0, cmax // 2, cmax}):

@@ -117,3 +117,16 @@ def test_folder_layout_finds_cues(frames_dir: Path):
     s = specs[0]
     assert s.image.endswith("frame_000/rgb.png") and s.depth.endswith("frame_000/depth.npy")
     assert s.normals.endswith("normals.npy") and s.intrinsics.endswith("intrinsics.json")
+
+
+def test_index_histogram_counts_every_value():
+    import re
+
+    from monoplane.batch.index import svg_histogram
+
+    svg = svg_histogram([3, 5, 5, 9, None], "planes per frame", "planes", integer=True)
+    bars = [(float(lo), int(n)) for lo, n in
+            re.findall(r"<title>([-\d.]+) to [-\d.]+ planes: (\d+)</title>", svg)]
+    assert sum(n for _, n in bars) == 4
+    assert dict(bars)[4.5] == 2  # the bin from 4.5 to 5.5 holds both fives
+    assert "no data" in svg_histogram([], "t", "s")
