@@ -170,15 +170,22 @@ def run_ray(job: BatchJob, specs: Sequence[FrameSpec], workers: int | None,
             ray.shutdown()
 
 
+def check_engine(engine: str, ray_address: str | None = None) -> None:
+    """Fail before any work on an unknown engine, a misplaced address or Ray not installed."""
+    if engine not in ENGINES:
+        raise InvalidInput(f"unknown engine {engine!r}; choose one of {', '.join(ENGINES)}")
+    if engine == "local" and ray_address:
+        raise InvalidInput("--ray-address needs --engine ray")
+    if engine == "ray":
+        _import_ray()
+
+
 def run_engine(engine: str, job: BatchJob, specs: Sequence[FrameSpec], workers: int | None,
                ray_address: str | None = None) -> Iterator[FrameResult]:
     """Dispatch to :func:`run_local` or :func:`run_ray`."""
     from monoplane.batch.pool import default_workers
 
+    check_engine(engine, ray_address)
     if engine == "local":
-        if ray_address:
-            raise InvalidInput("--ray-address needs --engine ray")
         return run_local(job, specs, workers or default_workers())
-    if engine == "ray":
-        return run_ray(job, specs, workers, ray_address)
-    raise InvalidInput(f"unknown engine {engine!r}; choose one of {', '.join(ENGINES)}")
+    return run_ray(job, specs, workers, ray_address)

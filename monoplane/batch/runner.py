@@ -23,7 +23,7 @@ from typing import Any
 
 from tqdm import tqdm
 
-from monoplane.batch.engines import run_engine
+from monoplane.batch.engines import check_engine, run_engine
 from monoplane.batch.frame import (
     BatchJob,
     FrameResult,
@@ -31,7 +31,7 @@ from monoplane.batch.frame import (
     is_complete,
     stored_result,
 )
-from monoplane.batch.specs import FrameSpec, check_name, read_frames
+from monoplane.batch.specs import FrameSpec, absolute_paths, check_name, read_frames
 from monoplane.errors import InvalidInput
 
 LOCK_FILE = ".monoplane-batch.lock"
@@ -201,7 +201,8 @@ def run_batch(source: str | Path | Sequence[FrameSpec], out: str | Path,
         specs = read_frames(source, depth_scale, depth_kind, nan_as_invalid, notes)
         source_text = str(source)
     else:
-        specs = list(source)
+        # Workers may run elsewhere (Ray) with another working directory: absolute paths.
+        specs = [absolute_paths(s) for s in source]
         source_text = f"{len(specs)} frame specs"
         for spec in specs:
             check_name(spec.name, "FrameSpec")
@@ -211,6 +212,7 @@ def run_batch(source: str | Path | Sequence[FrameSpec], out: str | Path,
         raise InvalidInput(f"frame name {dup!r} appears twice in {source_text}")
     if workers is not None and workers < 1:
         raise InvalidInput(f"--workers must be at least 1, got {workers}")
+    check_engine(engine, ray_address)
     cfg = Pipeline.from_config(config, preset=preset, overrides=overrides).config.to_dict()
     out = Path(out)
     if out.exists() and not out.is_dir():
@@ -230,13 +232,13 @@ def run_batch(source: str | Path | Sequence[FrameSpec], out: str | Path,
         bar = tqdm(total=len(specs), initial=len(decided), unit="frame", desc="batch",
                    disable=not progress, file=sys.stderr, dynamic_ncols=True)
         run_start = time.perf_counter()
+        ran = 0
         try:
             for res in run_engine(engine, job, todo, workers, ray_address):
                 results[res.name] = res
                 counts[res.status] += 1
-                done = counts["ok"] + counts["failed"] - sum(
-                    r.status == "failed" for r in decided.values())
-                fps = done / max(time.perf_counter() - run_start, 1e-9)
+                ran += 1
+                fps = ran / max(time.perf_counter() - run_start, 1e-9)
                 bar.set_postfix_str(f"done={counts['ok']} failed={counts['failed']} "
                                     f"skipped={counts['skipped']} {fps:.2f} fps")
                 bar.update()

@@ -18,7 +18,7 @@ from __future__ import annotations
 import csv
 import json
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -60,6 +60,18 @@ class FrameSpec:
     depth_scale: float | None = None
     depth_kind: str = "metric"
     nan_as_invalid: bool = False
+
+
+def absolute_paths(spec: FrameSpec) -> FrameSpec:
+    """The spec with its file paths made absolute (relative to the working directory)."""
+    def absolute(value: str | None) -> str | None:
+        return None if value is None else str(Path(value).expanduser().absolute())
+
+    intr = spec.intrinsics
+    if intr is not None and (intr.lower().endswith(".json") or Path(intr).is_file()):
+        intr = absolute(intr)
+    return replace(spec, image=absolute(spec.image), depth=absolute(spec.depth),
+                   normals=absolute(spec.normals), intrinsics=intr)
 
 
 def check_name(name: str, where: str) -> str:

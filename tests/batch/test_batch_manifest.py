@@ -93,6 +93,17 @@ def test_bad_batch_input(tmp_path, capsys):
     assert "must be .jsonl or .csv" in capsys.readouterr().err
 
 
+def test_bad_engine_arguments_fail_before_any_output(frames_dir, tmp_path, capsys):
+    out = tmp_path / "o"
+    assert main(["batch", str(frames_dir), "--out", str(out), "--ray-address", "auto"]) == 2
+    assert "--ray-address needs --engine ray" in capsys.readouterr().err
+    assert main(["batch", str(frames_dir), "--out", str(out), "--workers", "0"]) == 2
+    assert "--workers must be at least 1" in capsys.readouterr().err
+    assert main(["batch", str(frames_dir), "--out", str(out), "--set", "labeler.nope=1"]) == 2
+    assert "nope" in capsys.readouterr().err
+    assert not out.exists()
+
+
 def test_one_batch_per_output_folder(frames_dir, tmp_path, capsys):
     from monoplane.batch.runner import batch_lock
 
