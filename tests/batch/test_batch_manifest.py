@@ -141,3 +141,15 @@ def test_index_histogram_counts_every_value():
     assert sum(n for _, n in bars) == 4
     assert dict(bars)[4.5] == 2  # the bin from 4.5 to 5.5 holds both fives
     assert "no data" in svg_histogram([], "t", "s")
+
+
+def test_pipeline_is_built_once_per_process_and_config():
+    from monoplane.batch.frame import pipeline_for
+    from monoplane.pipeline import Pipeline
+
+    cfg = Pipeline.from_preset("monoplane").config.to_dict()
+    first = pipeline_for(cfg)
+    assert pipeline_for(dict(cfg)) is first
+    assert set(first._stages) == set(first.config.stages)  # every stage built up front
+    other = Pipeline.from_preset("monoplane", overrides={"ransac.seed": 3}).config.to_dict()
+    assert pipeline_for(other) is not first
