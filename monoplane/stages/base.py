@@ -114,9 +114,20 @@ class Stage:
 
 
 class CueProvider(Stage):
-    """Fills depth, normals (and possibly intrinsics) of a frame."""
+    """Fills depth, normals (and possibly intrinsics) of a frame.
+
+    The pipeline calls :meth:`provide` only for frames that :meth:`needs_cues`; a frame that
+    already has depth and normals (RGB-D with normals, precomputed cues, synthetic scenes) goes
+    through :func:`monoplane.cues.given.use_given_cues` instead, whatever provider the config
+    names, so host code never has to switch providers for such frames.
+    """
 
     kind = "cues"
+
+    def needs_cues(self, frame: Frame) -> bool:
+        """Whether this provider has work to do on the frame (default: depth or normals
+        missing). Override to also process complete frames (e.g. to recompute normals)."""
+        return frame.depth is None or frame.normals is None
 
     def provide(self, frame: Frame) -> Frame:
         """Return a frame with ``depth`` and ``normals`` set.
