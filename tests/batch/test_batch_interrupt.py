@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from conftest import BROKEN, GOOD, read_labels
+from batch_helpers import BROKEN, GOOD, read_labels
 
 from monoplane.batch import run_batch
 from monoplane.batch.frame import is_complete
