@@ -285,6 +285,11 @@ def atomic_output_dir(out_dir: str | Path, overwrite: bool = False) -> Iterator[
     parent = out.parent
     parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".partial", dir=parent))
+    # mkdtemp creates the folder 0700; the result is an ordinary output folder, so give it the
+    # permissions the user's umask gives any new folder.
+    umask = os.umask(0)
+    os.umask(umask)
+    tmp.chmod(0o777 & ~umask)
     try:
         yield tmp
         if out.exists():

@@ -1,4 +1,6 @@
 import json
+import os
+import stat
 
 import cv2
 import numpy as np
@@ -76,6 +78,16 @@ def test_atomic_dir_leaves_nothing_on_failure(tmp_path):
     with pytest.raises(InvalidInput, match="existing file"):
         with atomic_output_dir(tmp_path / "file"):
             pass
+
+
+def test_atomic_dir_gets_umask_permissions(tmp_path):
+    old = os.umask(0o022)
+    try:
+        with atomic_output_dir(tmp_path / "out") as tmp:
+            (tmp / "labels.png").write_text("x")
+    finally:
+        os.umask(old)
+    assert stat.S_IMODE((tmp_path / "out").stat().st_mode) == 0o755
 
 
 def test_depth_outside_float32_range(tmp_path):
