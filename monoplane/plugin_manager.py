@@ -30,6 +30,7 @@ DEFAULT_PLUGINS: tuple[str, ...] = (
     "monoplane.stages.scorers",
     "monoplane.stages.labelers",
     "monoplane.stages.refiners",
+    "monoplane.stages.graph_refiner",
     "monoplane.stages.matchers",
     "monoplane.stages.fusers",
 )

@@ -30,10 +30,15 @@ class NoRefiner(Refiner):
     """Keep the RANSAC labels and planes unchanged."""
 
     name = "none"
+    needs_pixels = False
 
     def refine(self, rec: Reconstruction) -> Reconstruction:
         """Return ``rec`` itself."""
         return rec
+
+    def refine_cloud(self, cloud, graph, labels, planes):  # noqa: ANN001, ANN201
+        """Return the cloud labels and planes unchanged."""
+        return labels, planes
 
 
 class DenseCrfRefiner(Refiner):
@@ -66,6 +71,8 @@ class DenseCrfRefiner(Refiner):
     """
 
     name = "dense-crf"
+    #: The CRF's kernels are over pixel positions and image colour: it cannot refine a cloud.
+    needs_pixels = True
 
     @dataclass
     class Config:
