@@ -18,7 +18,7 @@ from monoplane.errors import MonoplaneError
 
 #: Subcommand modules, in the order ``monoplane --help`` lists them.
 SUBCOMMANDS: tuple[str, ...] = (
-    "run", "multiview", "match", "eval", "bench", "plugins", "presets",
+    "run", "cloud", "multiview", "match", "eval", "bench", "plugins", "presets",
 )
 
 EXIT_USER_ERROR = 2
