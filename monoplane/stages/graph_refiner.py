@@ -166,6 +166,14 @@ class GraphCrfRefiner(Refiner):
         beta = c.beta / max(mean_degree, 1e-12)
         q = np.zeros(unary.shape, dtype=np.float64)
         q[np.arange(labels.size), labels] = 1.0
+        # "Non-planar" after RANSAC means no plane claimed the point, not evidence against
+        # every plane: such points start from their data term alone, so a strip the greedy
+        # search left over does not hold itself in place through the pairwise term.
+        free = labels == 0
+        if free.any():
+            e = unary[free] - unary[free].min(axis=1, keepdims=True)
+            q[free] = np.exp(-e / c.temperature)
+            q[free] /= q[free].sum(axis=1, keepdims=True)
         for _ in range(c.iterations):
             # Expected Potts cost of label l at i: Σ_j w_ij (1 - Q_j(l)) = deg_i - (W Q)_i(l);
             # deg_i is the same for every label and cancels in the softmax.
