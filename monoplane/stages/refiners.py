@@ -14,6 +14,8 @@ import numpy as np
 
 from monoplane.densecrf import REFERENCE_AREA, CrfParams, dense_crf
 from monoplane.errors import ConfigError, InvalidInput
+from monoplane.geometry.cloud import PlaneCloud
+from monoplane.geometry.graph import NeighbourGraph
 from monoplane.hookspecs import hookimpl
 from monoplane.regions import (
     MIN_AREA_AT_REFERENCE,
@@ -36,7 +38,8 @@ class NoRefiner(Refiner):
         """Return ``rec`` itself."""
         return rec
 
-    def refine_cloud(self, cloud, graph, labels, planes):  # noqa: ANN001, ANN201
+    def refine_cloud(self, cloud: PlaneCloud, graph: NeighbourGraph, labels: np.ndarray,
+                     planes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Return the cloud labels and planes unchanged."""
         return labels, planes
 
