@@ -32,6 +32,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from monoplane.errors import InvalidInput
+from monoplane.evaluation.segmentation import check_label_pair
 
 #: The tolerance of the published ABW tables.
 DEFAULT_TOLERANCE = 0.8
@@ -101,13 +102,7 @@ def segcomp(pred: np.ndarray, gt: np.ndarray, tolerance: float = DEFAULT_TOLERAN
     -------
     SegCompScores
     """
-    pred = np.asarray(pred)
-    gt = np.asarray(gt)
-    if pred.shape != gt.shape:
-        raise InvalidInput(f"prediction shape {pred.shape} differs from ground truth {gt.shape}")
-    for what, arr in (("prediction", pred), ("ground truth", gt)):
-        if not np.issubdtype(arr.dtype, np.integer):
-            raise InvalidInput(f"{what} labels must be integers, got {arr.dtype}")
+    pred, gt = check_label_pair(pred, gt)
     if not 0.5 < tolerance <= 1.0:
         raise InvalidInput(f"SegComp tolerance must lie in (0.5, 1], got {tolerance}")
     scored = gt.ravel() > 0
