@@ -48,6 +48,9 @@ class GraphCrfConfig:
     """Parameters of the ``graph-crf`` refiner (distances in unit-sphere units)."""
 
     epsilon: float = param(0.02, "distance scale ε of the plane cost (like ransac.epsilon)")
+    noise_factor: float = param(
+        0.0, "if > 0, ε = min(epsilon, noise_factor × σ), σ the sensor noise estimated from "
+        "the RANSAC planes' residuals (robust: 1.4826 × median |distance|)")
     epsilon_n_deg: float = param(10.0, "normal threshold ε_n of the plane cost, degrees")
     normal_weight: float = param(
         1.0, "weight of the normal cost in the data term (0: distance only, for range data "
@@ -73,6 +76,7 @@ class GraphCrfConfig:
     def __post_init__(self) -> None:
         checks = [
             (self.epsilon > 0, "epsilon must be positive"),
+            (self.noise_factor >= 0, "noise_factor must be >= 0"),
             (0 < self.epsilon_n_deg <= 180, "epsilon_n_deg must lie in (0, 180]"),
             (self.beta >= 0, "beta must be >= 0"),
             (self.normal_weight >= 0, "normal_weight must be >= 0"),
@@ -147,12 +151,26 @@ class GraphCrfRefiner(Refiner):
     Config = GraphCrfConfig
     needs_pixels = False
 
-    def unary(self, cloud: PlaneCloud, planes: np.ndarray) -> np.ndarray:
+    def distance_scale(self, cloud: PlaneCloud, labels: np.ndarray, planes: np.ndarray
+                       ) -> float:
+        """ε of the plane cost, normalised units: ``epsilon`` or the noise-based one."""
+        c = self.config
+        planar = labels > 0
+        if c.noise_factor == 0 or planar.sum() < 3:
+            return c.epsilon
+        p = planes[labels[planar] - 1]
+        resid = np.abs(np.einsum("ij,ij->i", cloud.points[planar], p[:, :3]) + p[:, 3])
+        sigma = 1.4826 * float(np.median(resid))
+        return min(c.epsilon, c.noise_factor * sigma) if sigma > 0 else c.epsilon
+
+    def unary(self, cloud: PlaneCloud, planes: np.ndarray, epsilon: float | None = None
+              ) -> np.ndarray:
         """(N, P + 1) data costs: column 0 non-planar, column p plane p (see module doc)."""
         c = self.config
+        epsilon = c.epsilon if epsilon is None else epsilon
         dist = np.abs(cloud.points @ planes[:, :3].T + planes[:, 3])
         cos = np.clip(cloud.normals @ planes[:, :3].T, -1.0, 1.0)
-        plane_cost = (dist / c.epsilon) ** 2
+        plane_cost = (dist / epsilon) ** 2
         if c.normal_weight > 0:
             plane_cost += c.normal_weight * normal_costs(np.arccos(cos),
                                                          math.radians(c.epsilon_n_deg))
@@ -252,7 +270,9 @@ class GraphCrfRefiner(Refiner):
         weights = proximity_weights(cloud.points, graph.edges, cloud.normals, cloud.colors,
                                     c.alpha_p2, c.alpha_c2, c.alpha_n2, c.w_p, c.w_c, c.w_n)
         adj = _adjacency(graph, weights)
-        labels = self._mean_field(self.unary(cloud, planes), adj, labels, graph.mean_degree)
+        epsilon = self.distance_scale(cloud, labels, planes)
+        labels = self._mean_field(self.unary(cloud, planes, epsilon), adj, labels,
+                                  graph.mean_degree)
         min_size = max(c.min_support_points, math.ceil(c.min_support * cloud.size))
         for _ in range(2):
             labels = self._components(graph, labels, min_size)
