@@ -75,3 +75,22 @@ def test_image_refinement_recovers_the_box():
 def test_bad_config():
     with pytest.raises(ConfigError, match="temperature"):
         GraphCrfConfig(temperature=0)
+
+
+def test_noise_based_distance_scale_is_three_sigma():
+    cloud, truth = crease_cloud()
+    rng = np.random.default_rng(0)
+    sigma = 0.001
+    pts = cloud.points.copy()
+    pts[truth == 1, 2] += rng.normal(0, sigma, (truth == 1).sum())
+    pts[truth == 2, 0] += rng.normal(0, sigma, (truth == 2).sum())
+    noisy = PlaneCloud(points=pts, normals=cloud.normals, colors=None, pixels=cloud.pixels,
+                       center=cloud.center, scale=1.0, shape=cloud.shape, all_points=pts,
+                       all_pixels=cloud.all_pixels)
+    planes = np.array([[0, 0, 1.0, 0], [1.0, 0, 0, 0]])
+    refiner = GraphCrfRefiner(GraphCrfConfig(noise_factor=3.0))
+    assert refiner.distance_scale(noisy, truth, planes) == pytest.approx(3 * sigma, rel=0.1)
+    # Never above the configured epsilon, and off by default.
+    assert GraphCrfRefiner(GraphCrfConfig(noise_factor=1e3)).distance_scale(
+        noisy, truth, planes) == 0.02
+    assert GraphCrfRefiner().distance_scale(noisy, truth, planes) == 0.02
