@@ -342,3 +342,100 @@ def minimize(unary: np.ndarray, edges: np.ndarray, tables: np.ndarray) -> np.nda
     g.add_grid_tedges(nodes, np.maximum(slope, 0.0), np.maximum(-slope, 0.0))
     g.maxflow()
     return np.asarray(g.get_grid_segments(nodes), dtype=bool)
+
+
+def minimize_gc_ransac(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray,
+                       cut_cost: np.ndarray | float, lambda_: float,
+                       pairwise_scale: float = 1.0) -> tuple[np.ndarray, float]:
+    """Exact minimiser and minimum of the (proximity) GC-RANSAC energy, without edge tables.
+
+    The same energy as ``gc_ransac_energy(f0, f1, edges, cut_cost, lambda_, g1,
+    pairwise_scale)`` with ``data1 = f1 + g1``, minimised as :func:`minimize` does, but built
+    straight from its structure (e(1,1) = 0, e(0,1) = e(1,0)) instead of (E, 2, 2) tables, and
+    on a smaller graph: a point whose extra data cost of the inlier label,
+    ``(1-λ)(data1 - f0)``, exceeds everything its edges can ever pay back, ``λ s Σ_q w_pq``,
+    is an outlier in *every* minimiser (turning it into an outlier always lowers the energy).
+    Such points are fixed to 0 before the max-flow and their edges become unaries of their
+    neighbours, which leaves the minimisers of the rest unchanged. With the normal term most
+    points of other planes are fixed this way, which halves the max-flow graph.
+
+    Parameters
+    ----------
+    f0 : numpy.ndarray
+        (M,) outlier costs f(0, p) in [0, 1] (:func:`msac_costs`).
+    data1 : numpy.ndarray
+        (M,) inlier costs f(1, p) + g(1, p) (:func:`msac_costs`, :func:`normal_costs`).
+    edges : numpy.ndarray
+        (E, 2) int node pairs among the M points.
+    cut_cost : numpy.ndarray or float
+        (E,) cost w_pq of labelling an edge's ends differently (or one for all edges).
+    lambda_ : float
+        Smoothness weight λ in [0, 1].
+    pairwise_scale : float
+        Positive factor s on the pairwise term.
+
+    Returns
+    -------
+    labels : numpy.ndarray
+        (M,) bool minimiser (True = inlier).
+    energy : float
+        Its energy.
+
+    Raises
+    ------
+    InvalidInput
+        If λ or s is out of range, or an edge's cut cost is below ¼(f(0,p) + f(0,q)), half
+        its both-outlier cost (the energy is then not submodular).
+    """
+    if not 0.0 <= lambda_ <= 1.0:
+        raise InvalidInput(f"lambda must lie in [0, 1], got {lambda_}")
+    if not pairwise_scale > 0:
+        raise InvalidInput(f"pairwise_scale must be positive, got {pairwise_scale}")
+    f0 = np.asarray(f0, dtype=np.float64)
+    m = f0.shape[0]
+    ls = lambda_ * pairwise_scale
+    u0 = (1.0 - lambda_) * f0
+    u1 = (1.0 - lambda_) * np.asarray(data1, dtype=np.float64)
+    edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    i, j = edges[:, 0], edges[:, 1]
+    both_out = (0.5 * ls) * (f0[i] + f0[j])  # e(0, 0)
+    differ = ls * np.broadcast_to(np.asarray(cut_cost, dtype=np.float64), i.shape)  # e(0, 1)
+    cap = 2.0 * differ - both_out
+    if np.any(cap < -1e-9 * np.maximum(1.0, both_out)):
+        raise InvalidInput(f"{int((cap < 0).sum())} edge tables are not submodular; graph cuts "
+                           "cannot minimise this energy")
+    # Submodularity makes e(0,1) the most an edge gives back when its end turns inlier, so
+    # points with u1 - u0 > Σ e(0,1) are outliers in every minimiser (kept with a margin).
+    payback = np.bincount(i, differ, m) + np.bincount(j, differ, m)
+    free = u1 - u0 <= payback * (1.0 + 1e-9) + 1e-12
+    labels = np.zeros(m, dtype=bool)
+    nodes = np.flatnonzero(free)
+    if nodes.size:
+        local = np.full(m, -1, dtype=np.int64)
+        local[nodes] = np.arange(nodes.size)
+        li, lj = local[i], local[j]
+        inner = (li >= 0) & (lj >= 0)
+        # An edge to a fixed outlier costs e(0, 0) or e(1, 0) = e(0, 1): unaries of its free end.
+        unary0 = u0[nodes]
+        unary1 = u1[nodes]
+        for end, other in ((li, lj), (lj, li)):
+            half = (end >= 0) & (other < 0)
+            unary0 += np.bincount(end[half], both_out[half], nodes.size)
+            unary1 += np.bincount(end[half], differ[half], nodes.size)
+        # e = A + (C - A) x_i + (D - C) x_j + (B + C - A - D)(1 - x_i) x_j, D = 0, B = C.
+        a, b = both_out[inner], differ[inner]
+        ei, ej = li[inner], lj[inner]
+        slope = (unary1 - unary0 + np.bincount(ei, b - a, nodes.size)
+                 - np.bincount(ej, b, nodes.size))
+        g = maxflow.Graph[float](nodes.size, max(ei.size, 1))
+        ids = g.add_nodes(nodes.size)
+        if ei.size:
+            c = np.maximum(cap[inner], 0.0)
+            g.add_edges(ei, ej, c, np.zeros_like(c))
+        g.add_grid_tedges(ids, np.maximum(slope, 0.0), np.maximum(-slope, 0.0))
+        g.maxflow()
+        labels[nodes] = g.get_grid_segments(ids)
+    li_, lj_ = labels[i], labels[j]
+    total = (u1[labels].sum() + u0[~labels].sum() + both_out[~(li_ | lj_)].sum()
+             + differ[li_ ^ lj_].sum())
+    return labels, float(total)

@@ -261,7 +261,7 @@ class SequentialRansac:
             plane, inliers = self._label(cloud, graph, pool, best[0], best[1], params)
             if cfg.split_components and inliers.any():
                 members = np.flatnonzero(inliers)
-                inliers[members[~graph.largest_component(pool[members])]] = False
+                inliers[members[~graph.largest_component_within(pool, inliers)]] = False
             timings["ransac.label"] += time.perf_counter() - t
             if inliers.sum() < min_support:
                 break

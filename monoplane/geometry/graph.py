@@ -47,6 +47,8 @@ class NeighbourGraph:
     tree: cKDTree
     spacing: float
     cache: dict = field(default_factory=dict, repr=False)
+    _last_subgraph: tuple[np.ndarray, np.ndarray, np.ndarray] | None = field(
+        default=None, init=False, repr=False, compare=False)
 
     @classmethod
     def build(cls, points: np.ndarray, k: int, tree: cKDTree | None = None) -> NeighbourGraph:
@@ -120,11 +122,34 @@ class NeighbourGraph:
             ``nodes`` (the lowest-numbered one among equally large components).
         """
         nodes = np.asarray(nodes, dtype=np.int64)
-        if nodes.size == 0:
+        return self.largest_component_within(nodes, np.ones(nodes.size, dtype=bool))
+
+    def largest_component_within(self, pool: np.ndarray, members: np.ndarray) -> np.ndarray:
+        """:meth:`largest_component` of ``pool[members]``, from the pool's (cached) subgraph.
+
+        Parameters
+        ----------
+        pool : numpy.ndarray
+            (M,) int64 distinct node indices.
+        members : numpy.ndarray
+            (M,) bool selection of the pool.
+
+        Returns
+        -------
+        numpy.ndarray
+            (K,) bool over ``pool[members]`` (K = ``members.sum()``), True on the largest
+            connected component of the subgraph they induce (lowest-numbered on ties).
+        """
+        members = np.asarray(members, dtype=bool)
+        count = int(members.sum())
+        if count == 0:
             return np.zeros(0, dtype=bool)
-        edges, _ = self.subgraph(nodes)
-        adj = coo_matrix((np.ones(edges.shape[0]), (edges[:, 0], edges[:, 1])),
-                         shape=(nodes.size, nodes.size))
+        edges, _ = self.subgraph(pool)
+        inside = members[edges[:, 0]] & members[edges[:, 1]]
+        rank = np.cumsum(members) - 1
+        ends = rank[edges[inside]]
+        adj = coo_matrix((np.ones(ends.shape[0]), (ends[:, 0], ends[:, 1])),
+                         shape=(count, count))
         _, comp = connected_components(adj, directed=False)
         return comp == np.argmax(np.bincount(comp))
 
@@ -135,6 +160,9 @@ class NeighbourGraph:
     def subgraph(self, pool: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Edges among a subset of nodes, renumbered to positions in ``pool``.
 
+        The result for the last pool asked for is kept: the RANSAC driver labels one pool
+        several times (local optimisation, component split) before it shrinks.
+
         Parameters
         ----------
         pool : numpy.ndarray
@@ -143,13 +171,22 @@ class NeighbourGraph:
         Returns
         -------
         edges : numpy.ndarray
-            (E', 2) int64 edges ``(a, b)`` with ``pool[a]``–``pool[b]`` an edge of the graph.
+            (E', 2) int64 edges ``(a, b)`` with ``pool[a]``–``pool[b]`` an edge of the graph,
+            in the order of :attr:`edges` (read-only).
         edge_ids : numpy.ndarray
-            (E',) int64 rows of :attr:`edges` they come from (to index per-edge caches).
+            (E',) int64 rows of :attr:`edges` they come from (to index per-edge caches;
+            read-only).
         """
         pool = np.asarray(pool, dtype=np.int64)
+        last = self._last_subgraph
+        if last is not None and np.array_equal(last[0], pool):
+            return last[1], last[2]
         local = np.full(self.num_nodes, -1, dtype=np.int64)
         local[pool] = np.arange(pool.size, dtype=np.int64)
         mapped = local[self.edges]
         edge_ids = np.flatnonzero((mapped[:, 0] >= 0) & (mapped[:, 1] >= 0))
-        return mapped[edge_ids], edge_ids
+        edges = mapped[edge_ids]
+        for a in (edges, edge_ids):
+            a.flags.writeable = False
+        self._last_subgraph = (pool.copy(), edges, edge_ids)
+        return edges, edge_ids

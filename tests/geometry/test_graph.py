@@ -94,3 +94,28 @@ def test_largest_component_of_a_node_subset():
     np.testing.assert_array_equal(g.largest_component(np.array([0, 2, 3, 4])),
                                   [False, False, True, True])
     assert g.largest_component(np.zeros(0, dtype=np.int64)).shape == (0,)
+
+
+def test_subgraph_of_the_same_pool_is_reused_and_read_only():
+    rng = np.random.default_rng(4)
+    g = NeighbourGraph.build(rng.uniform(size=(200, 3)), k=6)
+    pool = np.sort(rng.choice(200, size=120, replace=False))
+    a, ids = g.subgraph(pool)
+    b, _ = g.subgraph(pool.copy())
+    assert a is b and not a.flags.writeable and not ids.flags.writeable
+    other = pool[::2]
+    c, _ = g.subgraph(other)
+    np.testing.assert_array_equal(other[c], g.edges[np.isin(g.edges, other).all(axis=1)])
+
+
+def test_largest_component_within_a_pool_matches_the_subset_one():
+    # Two clusters along x, far apart; the larger one wins, computed from the pool's subgraph.
+    rng = np.random.default_rng(5)
+    pts = np.concatenate([rng.uniform(0, 1, (80, 3)), rng.uniform(0, 1, (50, 3)) + [10, 0, 0]])
+    g = NeighbourGraph.build(pts, k=5)
+    pool = np.sort(rng.choice(130, size=100, replace=False))
+    members = rng.random(100) < 0.7
+    within = g.largest_component_within(pool, members)
+    np.testing.assert_array_equal(within, g.largest_component(pool[members]))
+    assert np.all(pool[members][within] < 80)
+    assert g.largest_component_within(pool, np.zeros(100, bool)).shape == (0,)
