@@ -27,6 +27,7 @@ import maxflow
 import numpy as np
 
 from monoplane.errors import InvalidInput
+from monoplane.jit import kernel
 
 
 def msac_costs(dist: np.ndarray, epsilon: float) -> tuple[np.ndarray, np.ndarray]:
@@ -120,15 +121,41 @@ def proximity_weights(points: np.ndarray, edges: np.ndarray, normals: np.ndarray
     numpy.ndarray
         (E,) float64 cut costs, all >= 0.5.
     """
-    i, j = edges[:, 0], edges[:, 1]
-    pos = -((points[i] - points[j]) ** 2).sum(axis=1) / (2.0 * alpha_p2)
-    w = 0.5 + w_p * np.exp(pos)
-    if colors is not None:
-        w += w_c * np.exp(pos - ((colors[i] - colors[j]) ** 2).sum(axis=1) / (2.0 * alpha_c2))
-    if normals is not None:
-        ang = np.arccos(np.clip((normals[i] * normals[j]).sum(axis=1), -1.0, 1.0))
-        w += w_n * np.exp(pos - ang / (2.0 * alpha_n2))
-    return w
+    none = np.zeros((0, 3))
+    return _proximity_weights(
+        np.ascontiguousarray(points, dtype=np.float64),
+        np.ascontiguousarray(np.asarray(edges, dtype=np.int64).reshape(-1, 2)),
+        none if normals is None else np.ascontiguousarray(normals, dtype=np.float64),
+        none if colors is None else np.ascontiguousarray(colors, dtype=np.float64),
+        float(alpha_p2), float(alpha_c2), float(alpha_n2), float(w_p), float(w_c), float(w_n))
+
+
+@kernel
+def _proximity_weights(points: np.ndarray, edges: np.ndarray, normals: np.ndarray,
+                       colors: np.ndarray, alpha_p2: float, alpha_c2: float, alpha_n2: float,
+                       w_p: float, w_c: float, w_n: float) -> np.ndarray:
+    """:func:`proximity_weights` in one pass; empty (0, 3) ``normals``/``colors`` drop a term."""
+    use_n, use_c = normals.shape[0] > 0, colors.shape[0] > 0
+    out = np.empty(edges.shape[0])
+    for e in range(edges.shape[0]):
+        i, j = edges[e, 0], edges[e, 1]
+        d2 = 0.0
+        for c in range(3):
+            d2 += (points[i, c] - points[j, c]) ** 2
+        pos = -d2 / (2.0 * alpha_p2)
+        w = 0.5 + w_p * np.exp(pos)
+        if use_c:
+            c2 = 0.0
+            for c in range(3):
+                c2 += (colors[i, c] - colors[j, c]) ** 2
+            w += w_c * np.exp(pos - c2 / (2.0 * alpha_c2))
+        if use_n:
+            dot = 0.0
+            for c in range(3):
+                dot += normals[i, c] * normals[j, c]
+            w += w_n * np.exp(pos - np.arccos(min(max(dot, -1.0), 1.0)) / (2.0 * alpha_n2))
+        out[e] = w
+    return out
 
 
 @dataclass
@@ -391,51 +418,102 @@ def minimize_gc_ransac(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray,
         raise InvalidInput(f"lambda must lie in [0, 1], got {lambda_}")
     if not pairwise_scale > 0:
         raise InvalidInput(f"pairwise_scale must be positive, got {pairwise_scale}")
-    f0 = np.asarray(f0, dtype=np.float64)
-    m = f0.shape[0]
-    ls = lambda_ * pairwise_scale
-    u0 = (1.0 - lambda_) * f0
-    u1 = (1.0 - lambda_) * np.asarray(data1, dtype=np.float64)
+    f0 = np.ascontiguousarray(f0, dtype=np.float64)
+    data1 = np.ascontiguousarray(data1, dtype=np.float64)
     edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
-    i, j = edges[:, 0], edges[:, 1]
-    both_out = (0.5 * ls) * (f0[i] + f0[j])  # e(0, 0)
-    differ = ls * np.broadcast_to(np.asarray(cut_cost, dtype=np.float64), i.shape)  # e(0, 1)
-    cap = 2.0 * differ - both_out
-    if np.any(cap < -1e-9 * np.maximum(1.0, both_out)):
-        raise InvalidInput(f"{int((cap < 0).sum())} edge tables are not submodular; graph cuts "
-                           "cannot minimise this energy")
-    # Submodularity makes e(0,1) the most an edge gives back when its end turns inlier, so
-    # points with u1 - u0 > Σ e(0,1) are outliers in every minimiser (kept with a margin).
-    payback = np.bincount(i, differ, m) + np.bincount(j, differ, m)
-    free = u1 - u0 <= payback * (1.0 + 1e-9) + 1e-12
-    labels = np.zeros(m, dtype=bool)
-    nodes = np.flatnonzero(free)
+    ei, ej = np.ascontiguousarray(edges[:, 0]), np.ascontiguousarray(edges[:, 1])
+    cut = np.ascontiguousarray(np.broadcast_to(np.asarray(cut_cost, dtype=np.float64),
+                                               ei.shape))
+    lam, ls = float(lambda_), float(lambda_ * pairwise_scale)
+    bad, nodes, src, dst, cap, slope = _gc_ransac_graph(f0, data1, ei, ej, cut, lam, ls)
+    if bad:
+        raise InvalidInput(f"{bad} edge tables are not submodular; graph cuts cannot "
+                           "minimise this energy")
+    labels = np.zeros(f0.shape[0], dtype=bool)
     if nodes.size:
-        local = np.full(m, -1, dtype=np.int64)
-        local[nodes] = np.arange(nodes.size)
-        li, lj = local[i], local[j]
-        inner = (li >= 0) & (lj >= 0)
-        # An edge to a fixed outlier costs e(0, 0) or e(1, 0) = e(0, 1): unaries of its free end.
-        unary0 = u0[nodes]
-        unary1 = u1[nodes]
-        for end, other in ((li, lj), (lj, li)):
-            half = (end >= 0) & (other < 0)
-            unary0 += np.bincount(end[half], both_out[half], nodes.size)
-            unary1 += np.bincount(end[half], differ[half], nodes.size)
-        # e = A + (C - A) x_i + (D - C) x_j + (B + C - A - D)(1 - x_i) x_j, D = 0, B = C.
-        a, b = both_out[inner], differ[inner]
-        ei, ej = li[inner], lj[inner]
-        slope = (unary1 - unary0 + np.bincount(ei, b - a, nodes.size)
-                 - np.bincount(ej, b, nodes.size))
-        g = maxflow.Graph[float](nodes.size, max(ei.size, 1))
+        g = maxflow.Graph[float](nodes.size, max(src.size, 1))
         ids = g.add_nodes(nodes.size)
-        if ei.size:
-            c = np.maximum(cap[inner], 0.0)
-            g.add_edges(ei, ej, c, np.zeros_like(c))
+        if src.size:
+            g.add_edges(src, dst, cap, np.zeros_like(cap))
+        # A positive slope makes label 1 (sink side) dearer: capacity on the source edge.
         g.add_grid_tedges(ids, np.maximum(slope, 0.0), np.maximum(-slope, 0.0))
         g.maxflow()
         labels[nodes] = g.get_grid_segments(ids)
-    li_, lj_ = labels[i], labels[j]
-    total = (u1[labels].sum() + u0[~labels].sum() + both_out[~(li_ | lj_)].sum()
-             + differ[li_ ^ lj_].sum())
-    return labels, float(total)
+    return labels, float(_gc_ransac_energy(f0, data1, ei, ej, cut, lam, ls, labels))
+
+
+@kernel
+def _gc_ransac_graph(f0: np.ndarray, data1: np.ndarray, ei: np.ndarray, ej: np.ndarray,
+                     cut: np.ndarray, lam: float, ls: float
+                     ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Max-flow graph of :func:`minimize_gc_ransac` on its undecided points.
+
+    Inputs are float64 (M,) ``f0``, ``data1``, int64 (E,) ``ei``, ``ej``, float64 (E,) cut
+    costs, λ and λs. Returns the number of non-submodular edges (nothing else is meaningful
+    when it is not 0), the (F,) pool positions of the undecided points, the (E',) local ends
+    and capacities of the edges among them and their (F,) cost slopes ``U(1) - U(0)``.
+    """
+    m, n_edges = f0.shape[0], ei.shape[0]
+    keep = 1.0 - lam
+    payback = np.zeros(m)
+    bad = 0
+    for e in range(n_edges):
+        a = 0.5 * ls * (f0[ei[e]] + f0[ej[e]])
+        b = ls * cut[e]
+        if 2.0 * b - a < -1e-9 * max(1.0, a):
+            bad += 1
+        payback[ei[e]] += b
+        payback[ej[e]] += b
+    local = np.full(m, -1, dtype=np.int64)
+    nodes = np.empty(m, dtype=np.int64)
+    count = 0
+    for p in range(m):
+        # Submodularity makes e(0,1) the most an edge gives back when its end turns inlier,
+        # so u1 - u0 > Σ e(0,1) means outlier in every minimiser (kept with a margin).
+        if keep * (data1[p] - f0[p]) <= payback[p] * (1.0 + 1e-9) + 1e-12:
+            local[p] = count
+            nodes[count] = p
+            count += 1
+    slope = np.empty(count)
+    for q in range(count):
+        p = nodes[q]
+        slope[q] = keep * (data1[p] - f0[p])
+    src = np.empty(n_edges, dtype=np.int64)
+    dst = np.empty(n_edges, dtype=np.int64)
+    cap = np.empty(n_edges)
+    inner = 0
+    for e in range(n_edges):
+        li, lj = local[ei[e]], local[ej[e]]
+        if li < 0 and lj < 0:
+            continue
+        a = 0.5 * ls * (f0[ei[e]] + f0[ej[e]])
+        b = ls * cut[e]
+        if li >= 0 and lj >= 0:
+            # e = A + (C - A) x_i + (D - C) x_j + (B + C - A - D)(1 - x_i) x_j, D = 0, B = C.
+            src[inner] = li
+            dst[inner] = lj
+            cap[inner] = max(2.0 * b - a, 0.0)
+            inner += 1
+            slope[li] += b - a
+            slope[lj] -= b
+        else:
+            # An edge to a fixed outlier costs e(0,0) = a or e(1,0) = b: a unary of its free end.
+            slope[max(li, lj)] += b - a
+    return (bad, nodes[:count].copy(), src[:inner].copy(), dst[:inner].copy(),
+            cap[:inner].copy(), slope)
+
+
+@kernel
+def _gc_ransac_energy(f0: np.ndarray, data1: np.ndarray, ei: np.ndarray, ej: np.ndarray,
+                      cut: np.ndarray, lam: float, ls: float, labels: np.ndarray) -> float:
+    """Energy of a (M,) bool labelling for the inputs of :func:`_gc_ransac_graph`."""
+    total = 0.0
+    for p in range(f0.shape[0]):
+        total += (1.0 - lam) * (data1[p] if labels[p] else f0[p])
+    for e in range(ei.shape[0]):
+        li, lj = labels[ei[e]], labels[ej[e]]
+        if not li and not lj:
+            total += 0.5 * ls * (f0[ei[e]] + f0[ej[e]])
+        elif li != lj:
+            total += ls * cut[e]
+    return total

@@ -188,3 +188,35 @@ def test_fast_gc_ransac_minimiser_rejects_bad_input():
         minimize_gc_ransac(f0, f1, np.array([[0, 1]]), 1.0, 1.5)
     labels, value = minimize_gc_ransac(np.zeros(0), np.zeros(0), np.zeros((0, 2)), 1.0, 0.9)
     assert labels.shape == (0,) and value == 0.0
+
+
+def reference_proximity_weights(points, edges, normals, colors, ap2, ac2, an2, wp, wc, wn):
+    """Eqs. kp, kc, kn written out over all edges at once."""
+    i, j = edges[:, 0], edges[:, 1]
+    pos = -((points[i] - points[j]) ** 2).sum(axis=1) / (2.0 * ap2)
+    w = 0.5 + wp * np.exp(pos)
+    if colors is not None:
+        w += wc * np.exp(pos - ((colors[i] - colors[j]) ** 2).sum(axis=1) / (2.0 * ac2))
+    if normals is not None:
+        ang = np.arccos(np.clip((normals[i] * normals[j]).sum(axis=1), -1.0, 1.0))
+        w += wn * np.exp(pos - ang / (2.0 * an2))
+    return w
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_proximity_weight_kernel_matches_the_vectorised_formula(seed):
+    rng = np.random.default_rng(seed)
+    n = 200
+    pts = rng.normal(0, 0.05, (n, 3))
+    nrm = rng.normal(size=(n, 3))
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    nrm[:5] = nrm[5]  # dot products at exactly 1 (clipping)
+    col = rng.random((n, 3))
+    edges = rng.integers(0, n, size=(600, 2))
+    params = (0.005, 0.1, 5.0, *rng.uniform(0.5, 2.0, 3))
+    for normals in (nrm, None):
+        for colors in (col, None):
+            np.testing.assert_allclose(
+                proximity_weights(pts, edges, normals, colors, *params),
+                reference_proximity_weights(pts, edges, normals, colors, *params),
+                rtol=1e-12)
