@@ -148,12 +148,11 @@ class PlaneCloud:
         all_pixels = np.flatnonzero(valid).astype(np.int64)
         if all_pixels.size < 3:
             raise InvalidInput(f"{frame.name}: fewer than 3 valid pixels")
-        cam = frame.points().reshape(-1, 3)[all_pixels]
-        center = cam.mean(axis=0)
-        scale = float(np.sqrt(((cam - center) ** 2).sum(axis=1).max()))
+        all_points, center, scale = _normalised_points(
+            np.ascontiguousarray(frame.depth, dtype=np.float32),
+            np.linalg.inv(np.asarray(frame.K, dtype=np.float64)), all_pixels)
         if scale <= 0:
             raise InvalidInput(f"{frame.name}: all valid pixels unproject to the same point")
-        all_points = (cam - center) / scale
 
         keep = all_pixels
         points = all_points
@@ -277,6 +276,41 @@ class PlaneCloud:
         # Sampled pixels keep their own label even if a closer duplicate point exists.
         out[self.pixels] = labels
         return out.reshape(h, w)
+
+
+@kernel
+def _normalised_points(depth: np.ndarray, k_inv: np.ndarray, pixels: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray, float]:
+    """Unproject pixels and normalise them into the unit ball, in three passes.
+
+    ``depth`` (H, W) float32 z-depth, ``k_inv`` (3, 3) inverse intrinsics, ``pixels`` (V,)
+    int64 flat indices. Returns the (V, 3) normalised points ``(X - center) / scale``, the
+    (3,) centroid ``center`` of the camera-frame points ``X = z K^-1 [u, v, 1]`` and
+    ``scale``, the largest distance of a point from it.
+    """
+    w = depth.shape[1]
+    n = pixels.shape[0]
+    out = np.empty((n, 3))
+    center = np.zeros(3)
+    for i in range(n):
+        v, u = divmod(pixels[i], w)
+        z = np.float64(depth[v, u])
+        for c in range(3):
+            x = z * (k_inv[c, 0] * u + k_inv[c, 1] * v + k_inv[c, 2])
+            out[i, c] = x
+            center[c] += x
+    center /= max(n, 1)
+    far = 0.0
+    for i in range(n):
+        d2 = 0.0
+        for c in range(3):
+            out[i, c] -= center[c]
+            d2 += out[i, c] ** 2
+        far = max(far, d2)
+    scale = np.sqrt(far)
+    if scale > 0:
+        out /= scale
+    return out, center, scale
 
 
 def _closest_plane(x: np.ndarray, d_k: np.ndarray, n_k: np.ndarray, labels: np.ndarray,

@@ -179,3 +179,24 @@ def test_propagation_kernel_follows_its_rule_and_nearly_matches_exact_3d_neighbo
     valid = np.zeros(cloud.shape, bool).ravel()
     valid[cloud.all_pixels] = True
     assert np.mean(got.ravel()[valid] != exact.ravel()[valid]) < 0.005
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_unprojection_kernel_matches_frame_points(seed):
+    # Reference: Frame.points() (pixel rays times depth), centred and scaled with numpy; random
+    # intrinsics with skew, random depth with invalid pixels.
+    rng = np.random.default_rng(seed)
+    h, w = rng.integers(2, 40, size=2)
+    K = intrinsics_matrix(*rng.uniform(20, 80, 2), *rng.uniform(0, 30, 2))
+    K[0, 1] = rng.uniform(-2, 2)
+    depth = rng.uniform(0.5, 9.0, (h, w)).astype(np.float32)
+    depth[rng.random((h, w)) < 0.3] = 0.0
+    depth.flat[:3] = 1.0
+    frame = Frame(rgb=None, K=K, depth=depth, normals=np.tile(np.float32([0, 0, -1]), (h, w, 1)))
+    cloud = PlaneCloud.from_frame(frame)
+    cam = frame.points().reshape(-1, 3)[cloud.all_pixels]
+    center = cam.mean(axis=0)
+    scale = np.sqrt(((cam - center) ** 2).sum(axis=1).max())
+    np.testing.assert_allclose(cloud.center, center, rtol=1e-12, atol=1e-12)
+    assert cloud.scale == pytest.approx(scale, rel=1e-12)
+    np.testing.assert_allclose(cloud.all_points, (cam - center) / scale, atol=1e-12)
