@@ -33,10 +33,10 @@ from functools import cached_property
 
 import numpy as np
 from scipy.ndimage import distance_transform_edt
-from scipy.spatial import cKDTree
 
 from monoplane.errors import InvalidInput
 from monoplane.geometry.graph import NeighbourGraph
+from monoplane.geometry.neighbours import PointIndex
 from monoplane.jit import kernel
 from monoplane.types import Frame
 
@@ -105,9 +105,9 @@ class PlaneCloud:
         return int(self.points.shape[0])
 
     @cached_property
-    def tree(self) -> cKDTree:
-        """KD-tree over ``points`` (built on first use)."""
-        return cKDTree(self.points)
+    def tree(self) -> PointIndex:
+        """Nearest-neighbour index over ``points`` (built on first use)."""
+        return PointIndex(self.points)
 
     @property
     def subsampled(self) -> bool:

@@ -11,9 +11,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from monoplane.errors import InvalidInput
+from monoplane.geometry.neighbours import PointIndex
 from monoplane.jit import kernel
 
 
@@ -30,8 +30,8 @@ class NeighbourGraph:
     indptr, indices : numpy.ndarray
         Symmetric CSR adjacency: the neighbours of node ``i`` are
         ``indices[indptr[i]:indptr[i + 1]]`` (int64, ascending).
-    tree : scipy.spatial.cKDTree
-        KD-tree over the points the graph was built on.
+    tree : PointIndex
+        Nearest-neighbour index over the points the graph was built on.
     spacing : float
         Median distance from a point to its nearest other point, in the points' unit.
     cache : dict
@@ -43,14 +43,15 @@ class NeighbourGraph:
     edges: np.ndarray
     indptr: np.ndarray
     indices: np.ndarray
-    tree: cKDTree
+    tree: PointIndex
     spacing: float
     cache: dict = field(default_factory=dict, repr=False)
     _last_subgraph: tuple[np.ndarray, np.ndarray, np.ndarray] | None = field(
         default=None, init=False, repr=False, compare=False)
 
     @classmethod
-    def build(cls, points: np.ndarray, k: int, tree: cKDTree | None = None) -> NeighbourGraph:
+    def build(cls, points: np.ndarray, k: int, tree: PointIndex | None = None
+              ) -> NeighbourGraph:
         """Connect every point to its ``k`` nearest neighbours (symmetrised, deduplicated).
 
         Parameters
@@ -59,8 +60,8 @@ class NeighbourGraph:
             (N, 3) float points (normalised RANSAC frame).
         k : int
             Neighbours per point, >= 1; capped at N - 1.
-        tree : scipy.spatial.cKDTree, optional
-            An existing KD-tree over exactly these points, to avoid building another.
+        tree : PointIndex, optional
+            An existing index over exactly these points, to avoid building another.
 
         Returns
         -------
@@ -73,7 +74,7 @@ class NeighbourGraph:
             raise InvalidInput(f"k must be at least 1, got {k}")
         n = pts.shape[0]
         if tree is None:
-            tree = cKDTree(pts)
+            tree = PointIndex(pts)
         kk = min(k, n - 1)
         if kk < 1:
             empty = np.zeros((0, 2), dtype=np.int64)
