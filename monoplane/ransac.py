@@ -204,9 +204,9 @@ class SequentialRansac:
 
         t = time.perf_counter()
         # Pixels within ε/4 of their nearest sample's plane keep its label outright.
-        labels = cloud.propagate(result.labels, result.planes, spacing=graph.spacing,
-                                 tolerance=0.25 * cfg.epsilon)
-        rec = self._finalize(frame, labels)
+        labels = cloud.propagate(result.labels, result.planes, tolerance=0.25 * cfg.epsilon,
+                                 graph=graph)
+        rec = self._finalize(frame, cloud, labels)
         t_final = time.perf_counter() - t
         rec.timings.update({"ransac.cloud": t_cloud, "ransac.graph": t_graph,
                             **result.timings, "ransac.finalize": t_final})
@@ -261,7 +261,7 @@ class SequentialRansac:
             plane, inliers = self._label(cloud, graph, pool, best[0], best[1], params)
             if cfg.split_components and inliers.any():
                 members = np.flatnonzero(inliers)
-                inliers[members[~graph.largest_component(pool[members])]] = False
+                inliers[members[~graph.largest_component_within(pool, inliers)]] = False
             timings["ransac.label"] += time.perf_counter() - t
             if inliers.sum() < min_support:
                 break
@@ -331,10 +331,17 @@ class SequentialRansac:
         return plane, np.asarray(lab.inliers, dtype=bool)
 
     @staticmethod
-    def _finalize(frame: Frame, labels: np.ndarray) -> Reconstruction:
-        """Least-squares plane per label on all its pixels, camera frame and depth units."""
-        params, rmse, support = fit_planes_per_label(frame.points(), labels,
-                                                     int(labels.max(initial=0)))
+    def _finalize(frame: Frame, cloud: PlaneCloud, labels: np.ndarray) -> Reconstruction:
+        """Least-squares plane per label on all its pixels, camera frame and depth units.
+
+        The fit runs on the normalised points of all valid pixels, which the cloud holds
+        already; a total-least-squares fit commutes with the similarity that maps them back
+        to the camera frame, where planes and RMSE are then expressed.
+        """
+        params, rmse, support = fit_planes_per_label(
+            cloud.all_points, labels.ravel()[cloud.all_pixels], int(labels.max(initial=0)))
+        params = cloud.plane_to_camera(params)
+        rmse = rmse * cloud.scale
         kept = ~np.isnan(rmse)
         # Labels too small to fit a plane become non-planar; the others are renumbered 1..P.
         renumber = np.zeros(len(kept) + 1, dtype=np.int32)
