@@ -49,8 +49,8 @@ class GraphCrfConfig:
 
     epsilon: float = param(0.02, "distance scale ε of the plane cost (like ransac.epsilon)")
     noise_factor: float = param(
-        0.0, "if > 0, ε = min(epsilon, noise_factor × σ), σ the sensor noise estimated from "
-        "the RANSAC planes' residuals (robust: 1.4826 × median |distance|)")
+        0.0, "if > 0, ε = noise_factor × σ within [epsilon / 10, epsilon], σ the sensor noise "
+        "estimated from the RANSAC planes' residuals (robust: 1.4826 × median |distance|)")
     epsilon_n_deg: float = param(10.0, "normal threshold ε_n of the plane cost, degrees")
     normal_weight: float = param(
         1.0, "weight of the normal cost in the data term (0: distance only, for range data "
@@ -161,7 +161,9 @@ class GraphCrfRefiner(Refiner):
         p = planes[labels[planar] - 1]
         resid = np.abs(np.einsum("ij,ij->i", cloud.points[planar], p[:, :3]) + p[:, 3])
         sigma = 1.4826 * float(np.median(resid))
-        return min(c.epsilon, c.noise_factor * sigma) if sigma > 0 else c.epsilon
+        # Exact or synthetic data have σ ≈ 0: a tenth of ε keeps the cost finite and above
+        # the rounding of the plane fits.
+        return float(np.clip(c.noise_factor * sigma, 0.1 * c.epsilon, c.epsilon))
 
     def unary(self, cloud: PlaneCloud, planes: np.ndarray, epsilon: float | None = None
               ) -> np.ndarray:
