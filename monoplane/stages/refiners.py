@@ -8,7 +8,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -126,14 +126,8 @@ class DenseCrfRefiner(Refiner):
         if not 0.5 < c.confidence < 1.0:
             raise ConfigError(f"refiner.confidence must lie in (0.5, 1), got {c.confidence}")
         try:
-            self.crf = CrfParams(
-                theta_position=c.theta_position, theta_color=c.theta_color,
-                theta_depth=c.theta_depth, theta_normal=c.theta_normal,
-                w_smoothness=c.w_smoothness, w_appearance=c.w_appearance,
-                w_depth=c.w_depth, w_normal=c.w_normal,
-                confidence=c.confidence, iterations=c.iterations,
-                uniform_nonplanar=c.uniform_nonplanar, max_pixels=c.max_pixels,
-            )
+            # The CRF's parameters are a subset of this config, which alone holds defaults.
+            self.crf = CrfParams(**{f.name: getattr(c, f.name) for f in fields(CrfParams)})
         except InvalidInput as exc:
             raise ConfigError(f"refiner: {exc}") from exc
 
