@@ -16,10 +16,13 @@ install time: numba ships as wheels); the rest is numpy.
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
+from scipy import ndimage
 
 from monoplane import lattice_kernels as lk
 from monoplane.errors import InvalidInput
@@ -74,14 +77,16 @@ class PermutohedralLattice:
         d1 = d + 1
         lo = key0.min(axis=0) - 2 * d1 if n else np.zeros(d, np.int64)
         hi = key0.max(axis=0) + 2 * d1 if n else np.zeros(d, np.int64)
-        radix = hi - lo + 1
+        self._lo = lo
+        self._radix = radix = hi - lo + 1
         if float(np.prod(radix.astype(np.float64))) >= 2.0**62:
             raise InvalidInput(
                 "dense CRF features span too many lattice cells; a kernel deviation θ is too "
                 "small for the range of its feature"
             )
-        place = np.concatenate([[1], np.cumprod(radix[:-1])]).astype(np.int64)
-        self._vertex_of, codes = lk.insert_vertices(key0 - lo, rank, place)
+        self._place = place = np.concatenate([[1], np.cumprod(radix[:-1])]).astype(np.int64)
+        self._vertex_of, codes, self._table, self._index = lk.insert_vertices(key0 - lo, rank,
+                                                                                place)
         self.num_vertices = int(codes.size)
         self._neighbours = lk.lattice_neighbours(codes, place)
 
@@ -99,11 +104,40 @@ class PermutohedralLattice:
             (N, C) float32 filtered values, ``≈ c · Σ_j exp(-½|f_i-f_j|²) values_j`` for a
             constant ``c > 0``.
         """
+        return lk.slice_values(self._vertex_of, self._weights, self.blurred(values))
+
+    def blurred(self, values: np.ndarray) -> np.ndarray:
+        """(M, C) float32 lattice values: (N, C) ``values`` splatted and blurred, to be sliced
+        at these points (:meth:`filter`) or at others (:meth:`slice_at`)."""
         v = np.ascontiguousarray(values, dtype=np.float32)
         if v.ndim != 2 or v.shape[0] != self.num_points:
             raise InvalidInput(f"values must be ({self.num_points}, C), got {v.shape}")
-        return lk.splat_blur_slice(self._vertex_of, self._weights, self._neighbours, v,
-                                   self.num_vertices)
+        return lk.splat_blur(self._vertex_of, self._weights, self._neighbours, v,
+                             self.num_vertices)
+
+    def slice_at(self, features: np.ndarray, blurred: np.ndarray) -> np.ndarray:
+        """Interpolate lattice values at other points (e.g. full-resolution pixels).
+
+        Parameters
+        ----------
+        features : numpy.ndarray
+            (K, d) features in the lattice's units.
+        blurred : numpy.ndarray
+            (M, C) lattice values from :meth:`blurred`.
+
+        Returns
+        -------
+        numpy.ndarray
+            (K, C) float32 ``≈ c · Σ_j exp(-½|g_k - f_j|²) values_j`` over the lattice's own
+            points j; 0 where a point's simplex lies outside the lattice.
+        """
+        g = np.ascontiguousarray(features, dtype=np.float64)
+        if g.ndim != 2 or g.shape[1] != self.dim or not np.all(np.isfinite(g)):
+            raise InvalidInput(f"slice features must be finite (K, {self.dim}), got {g.shape}")
+        key0, rank, weights = lk.enclosing_simplices(g)
+        vertex_of, weights = lk.locate_vertices(key0 - self._lo, rank, weights, self._radix,
+                                                self._place, self._table, self._index)
+        return lk.slice_values(vertex_of, weights, blurred)
 
 
 @dataclass
@@ -131,12 +165,24 @@ class GaussianKernel:
         if not self.weight > 0:
             raise InvalidInput(f"kernel weight must be positive, got {self.weight}")
         self.lattice = PermutohedralLattice(self.features)
-        norm = self.lattice.filter(np.ones((self.lattice.num_points, 1), dtype=np.float32))
+        self._ones = self.lattice.blurred(np.ones((self.lattice.num_points, 1), np.float32))
+        norm = lk.slice_values(self.lattice._vertex_of, self.lattice._weights, self._ones)
         self._norm = (1.0 / np.sqrt(np.maximum(norm, 1e-20))).astype(np.float32)
 
     def message(self, q: np.ndarray) -> np.ndarray:
         """(N, L) float32 weighted, normalised kernel response to marginals ``q`` (N, L)."""
         return self.weight * self._norm * self.lattice.filter(self._norm * q)
+
+    def message_at(self, features: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """(K, L) float32 message that (K, d) other points get from this kernel's points.
+
+        The same normalised kernel as :meth:`message`, evaluated at points that are not in
+        the lattice (full-resolution pixels of a CRF run on a coarser grid): ``w · D_k^-½
+        Σ_j k(g_k, f_j) D_j^-½ q_j`` with ``D_k = Σ_j k(g_k, f_j)``.
+        """
+        num = self.lattice.slice_at(features, self.lattice.blurred(self._norm * q))
+        den = self.lattice.slice_at(features, self._ones)
+        return self.weight * num / np.sqrt(np.maximum(den, 1e-20))
 
 
 def unary_from_labels(labels: np.ndarray, num_labels: int, confidence: float,
@@ -206,11 +252,20 @@ def mean_field(unary: np.ndarray, kernels: list[GaussianKernel], iterations: int
     u = np.asarray(unary, dtype=np.float32)
     q = _softmax(-u)
     for _ in range(iterations):
-        energy = -u
-        for kernel in kernels:
-            energy = energy + kernel.message(q)
-        q = _softmax(energy)
+        q = _softmax(pairwise(kernels, q) - u)
     return q
+
+
+def pairwise(kernels: list[GaussianKernel], q: np.ndarray) -> np.ndarray:
+    """(N, L) float32 sum of every kernel's :meth:`~GaussianKernel.message` to marginals q.
+
+    The kernels' lattice filters are numba kernels that release the GIL, so they run in
+    parallel threads, one per kernel (up to the number of CPUs).
+    """
+    if len(kernels) < 2 or (os.cpu_count() or 1) < 2:
+        return sum((k.message(q) for k in kernels), np.zeros(q.shape, np.float32))
+    with ThreadPoolExecutor(min(len(kernels), os.cpu_count() or 1)) as pool:
+        return sum(pool.map(lambda k: k.message(q), kernels), np.zeros(q.shape, np.float32))
 
 
 def _softmax(x: np.ndarray) -> np.ndarray:
@@ -312,26 +367,59 @@ def crf_features(
         Kernels in the order smoothness, appearance, depth, normal (those enabled).
     """
     h, w = shape
-    theta_p = params.theta_position * np.sqrt(h * w / REFERENCE_AREA)
-    v, u = np.mgrid[0:h, 0:w].astype(np.float64)
-    pos = np.stack([u.ravel(), v.ravel()], axis=1) / theta_p
-    specs: list[tuple[np.ndarray, float]] = []
-    if params.w_smoothness > 0:
-        specs.append((pos, params.w_smoothness))
-    grey = rgb is None or not (np.any(rgb[..., 0] != rgb[..., 1])
-                               or np.any(rgb[..., 1] != rgb[..., 2]))
-    if params.w_appearance > 0 and not grey:
-        col = np.asarray(rgb, dtype=np.float64).reshape(-1, 3) / params.theta_color
-        specs.append((np.hstack([pos, col]), params.w_appearance))
-    if params.w_depth > 0 and depth is not None:
-        dep = np.asarray(depth, dtype=np.float64).reshape(-1, 1)
-        top = dep.max()
-        if top > 0:
-            specs.append((np.hstack([pos, dep / top / params.theta_depth]), params.w_depth))
-    if params.w_normal > 0 and normals is not None:
-        nor = np.asarray(normals, dtype=np.float64).reshape(-1, 3) / params.theta_normal
-        specs.append((np.hstack([pos, nor]), params.w_normal))
-    return [GaussianKernel(*spec) for spec in specs]
+    v, u = np.mgrid[0:h, 0:w]
+    cues = _Cues.of(params, rgb, depth, normals)
+    return _kernels(cues.features(params, u.ravel(), v.ravel(), h * w, np.arange(h * w)))
+
+
+def _kernels(specs: list[tuple[np.ndarray, float]]) -> list[GaussianKernel]:
+    """Build kernels from (features, weight) pairs, in parallel threads (numba, no GIL)."""
+    if len(specs) < 2 or (os.cpu_count() or 1) < 2:
+        return [GaussianKernel(f, weight) for f, weight in specs]
+    with ThreadPoolExecutor(min(len(specs), os.cpu_count() or 1)) as pool:
+        return list(pool.map(lambda spec: GaussianKernel(*spec), specs))
+
+
+@dataclass
+class _Cues:
+    """Flattened cues of a frame, with what decides which kernels exist (see crf_features)."""
+
+    rgb: np.ndarray | None
+    depth: np.ndarray | None
+    normals: np.ndarray | None
+
+    @classmethod
+    def of(cls, params: CrfParams, rgb: np.ndarray | None, depth: np.ndarray | None,
+           normals: np.ndarray | None) -> _Cues:
+        grey = rgb is None or not (np.any(rgb[..., 0] != rgb[..., 1])
+                                   or np.any(rgb[..., 1] != rgb[..., 2]))
+        col = None if grey or not params.w_appearance > 0 else (
+            np.asarray(rgb, dtype=np.float64).reshape(-1, 3) / params.theta_color)
+        dep = None
+        if depth is not None and params.w_depth > 0:
+            flat = np.asarray(depth, dtype=np.float64).ravel()
+            top = flat.max() if flat.size else 0.0
+            if top > 0:
+                dep = flat[:, None] / top / params.theta_depth
+        nor = None if normals is None or not params.w_normal > 0 else (
+            np.asarray(normals, dtype=np.float64).reshape(-1, 3) / params.theta_normal)
+        return cls(col, dep, nor)
+
+    def features(self, params: CrfParams, u: np.ndarray, v: np.ndarray, grid_area: int,
+                 pixels: np.ndarray) -> list[tuple[np.ndarray, float]]:
+        """(features, weight) of each enabled kernel at positions (u, v) of a grid of
+        ``grid_area`` cells (θ_s scales with it), with the cues of flat pixel indices
+        ``pixels``."""
+        theta_p = params.theta_position * np.sqrt(grid_area / REFERENCE_AREA)
+        pos = np.stack([u, v], axis=1).astype(np.float64) / theta_p
+        specs: list[tuple[np.ndarray, float]] = []
+        if params.w_smoothness > 0:
+            specs.append((pos, params.w_smoothness))
+        for cue, weight in ((self.rgb, params.w_appearance), (self.depth, params.w_depth),
+                            (self.normals, params.w_normal)):
+            if cue is not None:
+                specs.append((np.hstack([pos, cue[pixels]]), weight))
+        return specs
 
 
 def dense_crf(
@@ -368,8 +456,11 @@ def dense_crf(
     a block's unary is the negative log of its pixels' mean label probabilities, and its cues
     are those of its centre pixel (sampling, not averaging, keeps depth and normal edges sharp).
     The final labels are then taken at full resolution from each pixel's own unary plus the
-    pairwise energy of the last coarse marginals, bilinearly upsampled, i.e. one mean-field
-    update at full resolution with coarse messages, so boundaries keep pixel accuracy.
+    pairwise energy of the last coarse marginals, i.e. one mean-field update at full
+    resolution with coarse messages. Away from label changes of the coarse result those
+    messages are bilinearly upsampled; in the band of blocks next to a label change each pixel
+    gets them from the coarse lattices sliced at its own features
+    (:meth:`GaussianKernel.message_at`), so boundaries follow full-resolution edges.
     """
     lab = np.asarray(labels)
     if lab.ndim != 2:
@@ -390,23 +481,34 @@ def dense_crf(
         q = mean_field(unary, kernels, params.iterations)
         return q.argmax(axis=1).astype(np.int32).reshape(lab.shape)
     hs, ws = -(-h // step), -(-w // step)
-
-    def blocks(a: np.ndarray) -> np.ndarray:
-        pad = [(0, hs * step - h), (0, ws * step - w)] + [(0, 0)] * (a.ndim - 2)
-        return np.pad(a, pad, mode="edge").reshape(hs, step, ws, step, *a.shape[2:])
-
-    def centres(a: np.ndarray | None) -> np.ndarray | None:
-        return None if a is None else blocks(np.asarray(a))[:, step // 2, :, step // 2]
-
-    prob = blocks(np.exp(-unary).reshape(h, w, num_labels)).mean(axis=(1, 3))
-    coarse_unary = -np.log(prob.reshape(-1, num_labels))
-    kernels = crf_features((hs, ws), params, rgb=centres(rgb), depth=centres(depth),
-                           normals=centres(normals))
-    q = mean_field(coarse_unary, kernels, params.iterations)
-    pairwise = np.zeros_like(q)
-    for kernel in kernels:
-        pairwise += kernel.message(q)
-    fine = cv2.resize(pairwise.reshape(hs, ws, num_labels), (ws * step, hs * step),
+    # Block centres: the pixel at (step//2, step//2) of each block, clipped to the image.
+    cv, cu = np.mgrid[0:hs, 0:ws]
+    centre = (np.minimum(cv * step + step // 2, h - 1) * w
+              + np.minimum(cu * step + step // 2, w - 1)).ravel()
+    prob = np.exp(-unary)
+    block = (np.minimum(np.arange(h) // step, hs - 1)[:, None] * ws
+             + np.minimum(np.arange(w) // step, ws - 1)[None, :]).ravel()
+    mean = np.stack([np.bincount(block, prob[:, k], hs * ws) for k in range(num_labels)], 1)
+    mean /= np.bincount(block, minlength=hs * ws)[:, None]
+    cues = _Cues.of(params, rgb, depth, normals)
+    kernels = _kernels(cues.features(params, cu.ravel(), cv.ravel(), hs * ws, centre))
+    q = mean_field(-np.log(mean), kernels, params.iterations)
+    coarse_pairwise = pairwise(kernels, q)
+    # cv2 maps fine pixel u to coarse position (u + 0.5) / step - 0.5.
+    fine = cv2.resize(coarse_pairwise.reshape(hs, ws, num_labels), (ws * step, hs * step),
                       interpolation=cv2.INTER_LINEAR).reshape(hs * step, ws * step, -1)[:h, :w]
     energy = fine.reshape(-1, num_labels) - unary
+    # Near a label change of the coarse result the interpolated messages blur the edge: there
+    # each pixel gets its messages from the coarse lattices sliced at its own features, so
+    # the boundary follows the full-resolution colour, depth and normal edges.
+    coarse = q.argmax(axis=1).reshape(hs, ws)
+    edge = ndimage.maximum_filter(coarse, 3) != ndimage.minimum_filter(coarse, 3)
+    band = np.flatnonzero(edge.ravel()[block])
+    if band.size:
+        fu = (band % w + 0.5) / step - 0.5
+        fv = (band // w + 0.5) / step - 0.5
+        specs = cues.features(params, fu, fv, hs * ws, band)
+        exact = sum((k.message_at(f, q) for k, (f, _) in zip(kernels, specs, strict=True)),
+                    np.zeros((band.size, num_labels), np.float32))
+        energy[band] = exact - unary[band]
     return energy.argmax(axis=1).astype(np.int32).reshape(lab.shape)

@@ -125,6 +125,9 @@ def insert_vertices(key0: np.ndarray, rank: np.ndarray, place: np.ndarray
         (N, d+1) int32 index of each point's simplex vertex r.
     codes : numpy.ndarray
         (M,) int64 packed key of each vertex, in order of first use.
+    table, index : numpy.ndarray
+        The hash table: slot -> code (-1 = empty) and slot -> vertex index, for
+        :func:`locate_vertices`.
     """
     n, d = key0.shape
     d1 = d + 1
@@ -156,7 +159,7 @@ def insert_vertices(key0: np.ndarray, rank: np.ndarray, place: np.ndarray
                 codes[m] = code
                 m += 1
             vertex_of[i, r] = index[h]
-    return vertex_of, codes[:m].copy()
+    return vertex_of, codes[:m].copy(), table, index
 
 
 @numba.njit(cache=True, nogil=True)
@@ -195,9 +198,62 @@ def lattice_neighbours(codes: np.ndarray, place: np.ndarray) -> np.ndarray:
 
 
 @numba.njit(cache=True, nogil=True)
-def splat_blur_slice(vertex_of: np.ndarray, weights: np.ndarray, neighbours: np.ndarray,
-                     values: np.ndarray, m: int) -> np.ndarray:
-    """(N, C) float32 lattice-filtered ``values`` (N, C): splat, blur, slice."""
+def locate_vertices(key0: np.ndarray, rank: np.ndarray, weights: np.ndarray,
+                    span: np.ndarray, place: np.ndarray, table: np.ndarray,
+                    index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices of other points' simplices in an existing lattice (for slicing only).
+
+    Parameters
+    ----------
+    key0, rank, weights : numpy.ndarray
+        From :func:`enclosing_simplices` for the new points, ``key0`` shifted like the
+        lattice's own keys.
+    span : numpy.ndarray
+        (d,) int64 radix of each key coordinate; a vertex outside ``0 .. span-1`` cannot be in
+        the lattice (and its code would be meaningless).
+    place, table, index : numpy.ndarray
+        The lattice's place values and hash table (:func:`insert_vertices`).
+
+    Returns
+    -------
+    vertex_of : numpy.ndarray
+        (N, d+1) int32 vertex index, 0 where the vertex is not in the lattice.
+    weights : numpy.ndarray
+        (N, d+1) float32 barycentric weights, 0 where the vertex is not in the lattice (it
+        holds no value).
+    """
+    n, d = key0.shape
+    d1 = d + 1
+    bits = 0
+    while (1 << bits) < table.size:
+        bits += 1
+    shift = np.uint64(64 - bits)
+    vertex_of = np.zeros((n, d1), np.int32)
+    out = np.zeros((n, d1), np.float32)
+    for i in range(n):
+        for r in range(d1):
+            code = 0
+            inside = True
+            for k in range(d):
+                key = key0[i, k] + r
+                if rank[i, k] > d - r:
+                    key -= d1
+                if key < 0 or key >= span[k]:
+                    inside = False
+                code += key * place[k]
+            if not inside:
+                continue
+            h = _slot(table, code, shift)
+            if table[h] == code:
+                vertex_of[i, r] = index[h]
+                out[i, r] = weights[i, r]
+    return vertex_of, out
+
+
+@numba.njit(cache=True, nogil=True)
+def splat_blur(vertex_of: np.ndarray, weights: np.ndarray, neighbours: np.ndarray,
+               values: np.ndarray, m: int) -> np.ndarray:
+    """(M, C) float32 lattice values: ``values`` (N, C) splatted and blurred."""
     n, d1 = vertex_of.shape
     c = values.shape[1]
     lat = np.zeros((m, c), np.float32)
@@ -220,6 +276,14 @@ def splat_blur_slice(vertex_of: np.ndarray, weights: np.ndarray, neighbours: np.
                     s += np.float32(0.5) * lat[q, j]
                 tmp[v, j] = s
         lat, tmp = tmp, lat
+    return lat
+
+
+@numba.njit(cache=True, nogil=True)
+def slice_values(vertex_of: np.ndarray, weights: np.ndarray, lat: np.ndarray) -> np.ndarray:
+    """(N, C) float32 barycentric interpolation of lattice values ``lat`` (M, C)."""
+    n, d1 = vertex_of.shape
+    c = lat.shape[1]
     out = np.zeros((n, c), np.float32)
     for i in range(n):
         for r in range(d1):

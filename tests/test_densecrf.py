@@ -112,7 +112,7 @@ def test_lattice_kernels_against_slow_references(dim):
     lo = key0.min(axis=0) - 2 * d1
     radix = key0.max(axis=0) + 2 * d1 - lo + 1
     place = np.concatenate([[1], np.cumprod(radix[:-1])]).astype(np.int64)
-    vertex_of, codes = lk.insert_vertices(key0 - lo, rank, place)
+    vertex_of, codes, _, _ = lk.insert_vertices(key0 - lo, rank, place)
     ref_codes = ((vertices[:, :, :dim] - lo) @ place).astype(np.int64)
     np.testing.assert_array_equal(codes[vertex_of], ref_codes)
     assert len(set(codes.tolist())) == codes.size == np.unique(ref_codes).size
@@ -138,8 +138,31 @@ def test_lattice_kernels_against_slow_references(dim):
             hit = neighbours[a, :, side] >= 0
             blur[np.flatnonzero(hit), neighbours[a, hit, side]] += 0.5
         lattice = blur @ lattice
-    np.testing.assert_allclose(lk.splat_blur_slice(vertex_of, weights, neighbours, values, m),
-                               splat @ lattice, rtol=1e-4, atol=1e-5)
+    blurred = lk.splat_blur(vertex_of, weights, neighbours, values, m)
+    np.testing.assert_allclose(blurred, lattice, rtol=1e-4, atol=1e-5)
+    np.testing.assert_allclose(lk.slice_values(vertex_of, weights, blurred), splat @ lattice,
+                               rtol=1e-4, atol=1e-5)
+
+
+def test_slicing_at_other_points():
+    rng = np.random.default_rng(4)
+    f = rng.normal(size=(500, 3))
+    lat = PermutohedralLattice(f)
+    values = rng.random((500, 2))
+    blurred = lat.blurred(values)
+    # At the lattice's own points slicing is filtering, exactly.
+    np.testing.assert_array_equal(lat.slice_at(f, blurred), lat.filter(values))
+    # Far outside the data (outside the key range, or in cells without vertices) nothing.
+    far = np.array([[100.0, 0.0, 0.0], [0.0, -1e5, 3.0]])
+    np.testing.assert_array_equal(lat.slice_at(far, blurred), 0.0)
+    # Between the points, the normalised slice follows the exact normalised Gaussian.
+    g = rng.normal(size=(200, 3)) * 0.8
+    approx = lat.slice_at(g, blurred) / lat.slice_at(g, lat.blurred(np.ones((500, 1))))
+    k = np.exp(-0.5 * ((g[:, None] - f[None]) ** 2).sum(-1))
+    exact = k @ values / k.sum(axis=1, keepdims=True)
+    assert np.abs(approx - exact).mean() < 0.01
+    with pytest.raises(InvalidInput):
+        lat.slice_at(np.zeros((3, 2)), blurred)
 
 
 def test_lattice_is_nearly_symmetric_linear_and_local():

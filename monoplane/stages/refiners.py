@@ -83,8 +83,9 @@ class DenseCrfRefiner(Refiner):
             0.55, "unary: probability of the RANSAC label, rest spread evenly over the others")
         iterations: int = param(5, "mean-field iterations (0 skips the CRF, keeps the clean-up)")
         max_pixels: int = param(
-            2 * REFERENCE_AREA,
-            "above this many pixels the CRF runs on a coarser block grid (0: never)")
+            REFERENCE_AREA // 4,
+            "above this many pixels mean field runs on a coarser block grid, edges are decided "
+            "at full resolution (0: never)")
         min_area: int = param(
             MIN_AREA_AT_REFERENCE,
             "smallest region kept, pixels at 256x192 (scaled with image area); 0 keeps all")
