@@ -13,10 +13,10 @@ Time
     their on-disk cache (or compiles them once, the first time ever).
 
 Baselines
-    Every registered baseline (``monoplane_register_baselines``; e.g. ``cgal`` when the
-    optional CGAL plugin is installed) runs on the same frames in the same process, after the
-    preset. ``call`` is the baseline's own call alone (``timings["baseline.call"]``, e.g. CGAL's
-    ``efficient_RANSAC`` without building its point set), ``total`` the whole baseline call.
+    Every registered baseline (``monoplane_register_baselines``: the built-in one and those of
+    installed plugins) runs on the same frames in the same process, after the preset. ``call``
+    is the baseline's own call alone (``timings["baseline.call"]``, without converting the
+    cloud into the library's data structure), ``total`` the whole baseline call.
     The ratio is the preset's median ``total`` over the baseline's median ``call``.
 
 Memory

@@ -14,14 +14,13 @@ table: the median time of every pipeline stage and sub-step (from the reconstruc
 timings), the traced memory of each stage, throughput, the first call of a fresh process
 (numba kernels loaded from their cache), the peak RSS of each size (each size runs in its own
 process), and every registered baseline timed on the same frames in the same process: its own
-call (e.g. CGAL's efficient_RANSAC alone, when the optional CGAL plugin is installed), its
-whole call, and the ratio of the preset's total to the baseline's call. See monoplane/bench.py
+call (without converting the cloud into the library's data structure), its whole call, and the ratio of the preset's total to the baseline's call. See monoplane/bench.py
 for the method."""
 
 EPILOG = """examples:
   monoplane bench
   monoplane bench --preset monoplane-nocrf --sizes 256x192,640x480 --frames 5 --repeat 3
-  monoplane bench --baseline cgal --json bench.json
+  monoplane bench --baseline open3d-ransac --json bench.json
   monoplane bench --from-json bench.json --markdown     # re-render a saved run for the docs"""
 
 

@@ -13,8 +13,8 @@ The protocol of ``monoplane eval``:
    a pass-through; for baselines: the whole baseline call, data conversion included). The
    *core* time (``core s``) is what compares methods' algorithms: for presets the same
    pipeline time, for a baseline the time of its own call alone when it reports one
-   (``timings["baseline.call"]``, e.g. CGAL's ``efficient_RANSAC`` without building its point
-   set), else its whole call.
+   (``timings["baseline.call"]``, e.g. a library's detection call without converting the
+   cloud into its data structure), else its whole call.
 4. A method that raises a :class:`~monoplane.errors.MonoplaneError` on a frame is scored as if
    it had found no plane there (all pixels non-planar), and counted in ``n_failed``.
 """
