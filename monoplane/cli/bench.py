@@ -14,8 +14,9 @@ table: the median time of every pipeline stage and sub-step (from the reconstruc
 timings), the traced memory of each stage, throughput, the first call of a fresh process
 (numba kernels loaded from their cache), the peak RSS of each size (each size runs in its own
 process), and every registered baseline timed on the same frames in the same process: its own
-call (without converting the cloud into the library's data structure), its whole call, and the ratio of the preset's total to the baseline's call. See monoplane/bench.py
-for the method."""
+call (without converting the cloud into the library's data structure), its whole call, and
+the ratio of the preset's total to the baseline's call. See monoplane/bench.py for the
+method."""
 
 EPILOG = """examples:
   monoplane bench
