@@ -341,7 +341,8 @@ def format_bench(results: Sequence[BenchResult], markdown: bool = False) -> str:
         header += [f"{r.width}x{r.height} ms", "MiB"]
     rows = []
     for k in keys:
-        label = f"  {k.partition('.')[2]}" if "." in k else k
+        # Sub-steps are indented in text; Markdown cells drop leading spaces, so keep the key.
+        label = f"  {k.partition('.')[2]}" if "." in k and not markdown else k
         row = [label]
         for r in results:
             s = next((s for s in r.stages if s.name == k), None)
