@@ -274,10 +274,11 @@ def scene_radius(points: np.ndarray, valid: np.ndarray) -> float:
     float
         Radius in depth units; 0 when there are no valid points.
     """
-    pts = points[valid].astype(np.float64)
+    pts = np.asarray(points, dtype=np.float64)[valid]
     if not len(pts):
         return 0.0
-    return float(np.sqrt(((pts - pts.mean(axis=0)) ** 2).sum(axis=1).max()))
+    pts -= pts.mean(axis=0)
+    return float(np.sqrt(np.einsum("ij,ij->i", pts, pts).max()))
 
 
 def merge_coplanar(points: np.ndarray, valid: np.ndarray, labels: np.ndarray,
@@ -488,7 +489,8 @@ def clean_regions(rec: Reconstruction, labels: np.ndarray, min_area: int,
                   connectivity: int = 8, split: bool = True, merge: bool = False,
                   absorb: bool = False, max_angle_deg: float = 10.0,
                   max_distance: float = 0.02, inliers_only: bool = False,
-                  merge_adjacent: bool = False) -> Reconstruction:
+                  merge_adjacent: bool = False, points: np.ndarray | None = None
+                  ) -> Reconstruction:
     """Split, filter and refit the planes of a refined label map.
 
     Parameters
@@ -520,6 +522,8 @@ def clean_regions(rec: Reconstruction, labels: np.ndarray, min_area: int,
         Fit planes, and run the residual tests, only on pixels that ``rec`` labelled planar
         (its RANSAC inliers). Pixels the refinement moved from non-planar to a plane keep their
         new label but do not bend its plane; support and RMSE count the fitted pixels only.
+    points : numpy.ndarray, optional
+        (H, W, 3) ``rec.frame.points()``, when the caller has them already.
 
     Returns
     -------
@@ -532,7 +536,8 @@ def clean_regions(rec: Reconstruction, labels: np.ndarray, min_area: int,
     if frame.depth is None:
         raise InvalidInput(f"{frame.name}: refitting planes needs a depth map")
     pieces, origin = split_components(labels, connectivity)
-    points, valid = frame.points(), frame.depth > 0
+    points = frame.points() if points is None else points
+    valid = frame.depth > 0
     if inliers_only:
         # RANSAC outliers carry no evidence about any plane: they may be labelled, not fitted.
         valid = valid & (np.asarray(rec.labels) > 0)

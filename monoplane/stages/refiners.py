@@ -156,15 +156,16 @@ class DenseCrfRefiner(Refiner):
                            depth=frame.depth, normals=frame.normals)
         min_area = scaled_min_area(frame.shape, self.config.min_area)
         c = self.config
+        points = frame.points()
         if c.uniform_nonplanar and np.isfinite(c.fill_distance):
-            points, valid = frame.points(), depth > 0
+            valid = depth > 0
             labels = gate_filled_pixels(points, valid, rec.labels, labels, rec.params,
                                         c.fill_distance * scene_radius(points, valid))
         crf = time.perf_counter() - start
         out = clean_regions(rec, labels, min_area, c.connectivity, split=c.split, merge=c.merge,
                             absorb=c.absorb, max_angle_deg=c.merge_angle_deg,
                             max_distance=c.merge_distance, inliers_only=c.fit_inliers_only,
-                            merge_adjacent=c.merge_adjacent)
+                            merge_adjacent=c.merge_adjacent, points=points)
         # Sub-steps for 'monoplane bench': the CRF (with the fill gate), then the regions.
         out.timings["refiner.crf"] = crf
         out.timings["refiner.regions"] = time.perf_counter() - start - crf
