@@ -33,6 +33,7 @@ DEFAULT_PLUGINS: tuple[str, ...] = (
     "monoplane.stages.graph_refiner",
     "monoplane.stages.matchers",
     "monoplane.stages.fusers",
+    "monoplane.evaluation.baselines",
 )
 
 #: Set this environment variable to disable entry-point autoloading of third-party plugins.

@@ -27,8 +27,9 @@ EPILOG = """examples:
   monoplane eval --data abw-dev/ --as-cloud --preset cloud
 
 Scene i uses seed SEED+i, so equal arguments give equal tables (timings aside). Baselines come
-from the built-in table (open3d-ransac) and the 'monoplane.baselines' entry-point group (e.g.
-the optional monoplane-cgal-baseline package adds 'cgal'). See docs/evaluation.md."""
+registered through the 'monoplane_register_baselines' plugin hook: open3d-ransac is built in,
+installed plugins add more (--all scores every one). 's/frame' is the whole call, 'core s' a
+baseline's own call without data conversion when it reports one. See docs/evaluation.md."""
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
