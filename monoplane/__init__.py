@@ -13,6 +13,7 @@ __version__ = "0.1.0"
 
 #: Module -> the public names it defines.
 _MODULES: dict[str, tuple[str, ...]] = {
+    "monoplane.detect": ("detect_planes",),
     "monoplane.errors": ("ConfigError", "InvalidInput", "MonoplaneError", "StageError"),
     "monoplane.hookspecs": ("hookimpl",),
     "monoplane.io": ("load_frame", "save_reconstruction"),
@@ -23,11 +24,12 @@ _LAZY = {name: module for module, names in _MODULES.items() for name in names}
 
 __all__ = [
     "Camera", "ConfigError", "Frame", "InvalidInput", "MonoplaneError", "Pipeline",
-    "Reconstruction", "Scene", "StageError", "hookimpl", "load_frame", "save_reconstruction",
-    "__version__",
+    "Reconstruction", "Scene", "StageError", "detect_planes", "hookimpl", "load_frame",
+    "save_reconstruction", "__version__",
 ]
 
 if TYPE_CHECKING:
+    from monoplane.detect import detect_planes
     from monoplane.errors import ConfigError, InvalidInput, MonoplaneError, StageError
     from monoplane.hookspecs import hookimpl
     from monoplane.io import load_frame, save_reconstruction

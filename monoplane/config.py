@@ -33,7 +33,8 @@ from monoplane.stages.base import STAGE_KINDS, config_key
 
 DEFAULT_PRESET = "monoplane"
 #: Host tables (not stages) and the import path of their config dataclass.
-HOST_TABLES: dict[str, str] = {"ransac": "monoplane.ransac:RansacConfig"}
+HOST_TABLES: dict[str, str] = {"ransac": "monoplane.ransac:RansacConfig",
+                               "cloud": "monoplane.detect:CloudConfig"}
 
 
 def list_presets() -> list[str]:

@@ -30,8 +30,10 @@ DEFAULT_PLUGINS: tuple[str, ...] = (
     "monoplane.stages.scorers",
     "monoplane.stages.labelers",
     "monoplane.stages.refiners",
+    "monoplane.stages.graph_refiner",
     "monoplane.stages.matchers",
     "monoplane.stages.fusers",
+    "monoplane.evaluation.baselines",
 )
 
 #: Set this environment variable to disable entry-point autoloading of third-party plugins.

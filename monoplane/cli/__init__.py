@@ -18,7 +18,8 @@ from monoplane.errors import MonoplaneError
 
 #: Subcommand modules, in the order ``monoplane --help`` lists them.
 SUBCOMMANDS: tuple[str, ...] = (
-    "run", "batch", "multiview", "match", "eval", "bench", "plugins", "presets", "models",
+    "run", "batch", "cloud", "multiview", "match", "eval", "bench", "plugins", "presets",
+    "models",
 )
 
 EXIT_USER_ERROR = 2

@@ -239,13 +239,43 @@ class Labeler(Stage):
 
 
 class Refiner(Stage):
-    """Refines the multi-plane label map at image level."""
+    """Refines the multi-plane labelling.
+
+    A refiner that works on the pixel grid (``needs_pixels = True``, the default) only has
+    :meth:`refine`; a refiner that needs no image sets ``needs_pixels = False`` and also
+    implements :meth:`refine_cloud`, which is what :func:`monoplane.detect_planes` calls on
+    point clouds. The host rejects a pixel refiner on a cloud with a clear error.
+    """
 
     kind = "refiner"
+    #: True when the refiner works on the image grid and so cannot refine a bare point cloud.
+    needs_pixels: ClassVar[bool] = True
 
     def refine(self, rec: Reconstruction) -> Reconstruction:
         """Return a refined reconstruction (labels, and params refit on the final masks)."""
         raise NotImplementedError
+
+    def refine_cloud(self, cloud: PlaneCloud, graph: NeighbourGraph, labels: np.ndarray,
+                     planes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Refine per-point labels of a normalised cloud (refiners with ``needs_pixels=False``).
+
+        Parameters
+        ----------
+        cloud : PlaneCloud
+            Normalised oriented cloud (N points, unit sphere).
+        graph : NeighbourGraph
+            kNN graph over ``cloud.points``.
+        labels : numpy.ndarray
+            (N,) int32 RANSAC labels, 0 = non-planar, ``i`` = ``planes[i - 1]``.
+        planes : numpy.ndarray
+            (P, 4) unit-normal planes in the normalised frame.
+
+        Returns
+        -------
+        labels, planes : numpy.ndarray
+            Refined (N,) int32 labels 0..P' and (P', 4) planes, same frame.
+        """
+        raise NotImplementedError(f"refiner '{self.name}' works on images only")
 
 
 class Matcher(Stage):

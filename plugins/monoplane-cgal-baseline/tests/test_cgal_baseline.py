@@ -35,9 +35,26 @@ def test_minimum_support_drops_small_planes() -> None:
     np.testing.assert_allclose(rec.params[0], BOX_PLANES[0], atol=1e-3)
 
 
-def test_registered_in_the_baselines_entry_point_group(monkeypatch: pytest.MonkeyPatch) -> None:
-    from monoplane.evaluation.baselines import get_baseline
-    from monoplane.plugin_manager import AUTOLOAD_ENV
+def test_reports_the_efficient_ransac_call_time() -> None:
+    frame, _ = box_frame(64, 48)
+    rec = cgal_efficient_ransac(frame)
+    assert rec.timings["baseline.call"] > 0
 
-    monkeypatch.delenv(AUTOLOAD_ENV, raising=False)
-    assert get_baseline("cgal") is cgal_efficient_ransac
+
+def test_registered_through_the_baseline_hook() -> None:
+    import monoplane_cgal_baseline
+
+    from monoplane.evaluation.baselines import baseline_names, get_baseline
+    from monoplane.plugin_manager import get_plugin_manager
+
+    pm = get_plugin_manager(autoload=False, extra_plugins=(monoplane_cgal_baseline,))
+    assert "cgal" in baseline_names(pm)
+    assert get_baseline("cgal", pm) is cgal_efficient_ransac
+
+
+def test_shares_the_pipeline_ransac_defaults() -> None:
+    from monoplane.ransac import RansacConfig
+
+    cfg, ransac = CgalRansacConfig(), RansacConfig()
+    assert (cfg.epsilon, cfg.normal_deg, cfg.min_support, cfg.min_support_points) == (
+        ransac.epsilon, ransac.epsilon_n_deg, ransac.min_support, ransac.min_support_points)
