@@ -29,6 +29,7 @@ from monoplane.errors import ConfigError, InvalidInput
 from monoplane.geometry.cloud import PROPAGATION_NEIGHBOURS, PROPAGATION_RADIUS_FACTOR, PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.geometry.planes import fit_planes_per_label
+from monoplane.geometry.polygons import PlaneMesh, points_plane_mesh
 from monoplane.stages.base import Labeler, Refiner, Sampler, Scorer, param
 
 
@@ -123,24 +124,18 @@ class CloudPlaneResult:
         pcd.colors = o3d.utility.Vector3dVector(self.plane_colors()[self.labels[finite]])
         return pcd
 
-    def plane_meshes(self, cell: float | None = None) -> list:
-        """One Open3D triangle mesh per plane: its points projected and outlined.
+    def plane_mesh(self, cell: float | None = None) -> PlaneMesh:
+        """Every plane's area as triangles on the plane, holes left open, faces tagged by plane.
 
-        Each plane's points are projected into the plane's 2D basis and rasterised on a grid
-        of ``cell`` (default: twice the median point spacing); the grid's outer outlines are
-        lifted back onto the plane and triangulated
-        (:func:`monoplane.geometry.polygons.triangulate_on_plane`).
+        Each plane's points are projected onto it, rasterised on a grid of ``cell`` (default:
+        twice the median point spacing) and outlined with their holes
+        (:func:`monoplane.geometry.polygons.points_plane_mesh`).
 
         Returns
         -------
-        list of open3d.geometry.TriangleMesh
-            Index ``i`` is plane ``i + 1``; an empty mesh when a plane has no outline.
+        PlaneMesh
+            Vertices in the cloud's frame and units; ``plane_ids`` 1..P.
         """
-        import cv2
-        import open3d as o3d
-
-        from monoplane.geometry.polygons import plane_basis, triangulate_on_plane
-
         finite = np.isfinite(self.points).all(axis=1)
         if cell is None:
             pts = self.points[finite & (self.labels > 0)]
@@ -148,46 +143,37 @@ class CloudPlaneResult:
                 d, _ = cKDTree(pts).query(pts[:: max(1, len(pts) // 2000)], k=2)
                 cell = 2.0 * float(np.median(d[:, 1]))
             cell = cell if cell and cell > 0 else 1.0
+        parts = []
+        for pid in range(1, self.num_planes + 1):
+            verts, tris = points_plane_mesh(self.points[self.labels == pid],
+                                            self.planes[pid - 1], cell)
+            parts.append((pid, verts, tris))
+        return PlaneMesh.concatenate(parts)
+
+    def plane_meshes(self, cell: float | None = None) -> list:
+        """One Open3D triangle mesh per plane (see :meth:`plane_mesh`), coloured by plane.
+
+        Returns
+        -------
+        list of open3d.geometry.TriangleMesh
+            Index ``i`` is plane ``i + 1``; an empty mesh when a plane has no outline.
+        """
+        import open3d as o3d
+
+        mesh = self.plane_mesh(cell)
         colors = self.plane_colors()
         meshes = []
         for pid in range(1, self.num_planes + 1):
-            n, d = self.planes[pid - 1, :3], self.planes[pid - 1, 3]
-            pts = self.points[self.labels == pid]
-            mesh = o3d.geometry.TriangleMesh()
-            e1, e2 = plane_basis(n)
-            origin = -d * n
-            uv = np.stack([(pts - origin) @ e1, (pts - origin) @ e2], axis=1)
-            lo = uv.min(axis=0) - 2 * cell
-            ij = np.floor((uv - lo) / cell).astype(np.int64)
-            shape = ij.max(axis=0) + 3
-            if shape.prod() > 4e7:  # a plane far larger than its spacing: coarsen the grid
-                factor = math.sqrt(shape.prod() / 4e7)
-                ij = (ij / factor).astype(np.int64)
-                shape = ij.max(axis=0) + 3
-                local = cell * factor
-            else:
-                local = cell
-            grid = np.zeros((shape[1], shape[0]), dtype=np.uint8)
-            grid[ij[:, 1], ij[:, 0]] = 1
-            grid = cv2.morphologyEx(grid, cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8))
-            contours, _ = cv2.findContours(grid, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
-            verts, tris = [], []
-            for contour in contours:
-                poly = cv2.approxPolyDP(contour, 1.0, True).reshape(-1, 2).astype(np.float64)
-                if len(poly) < 3:
-                    continue
-                flat = lo + (poly + 0.5) * local
-                v3 = origin + flat[:, :1] * e1 + flat[:, 1:] * e2
-                for tri in triangulate_on_plane(v3, n):
-                    tris.append(np.arange(3) + 3 * len(tris))
-                    verts.append(tri)
-            if verts:
-                mesh.vertices = o3d.utility.Vector3dVector(np.concatenate(verts))
-                mesh.triangles = o3d.utility.Vector3iVector(np.array(tris, dtype=np.int32))
-                mesh.merge_close_vertices(1e-9 * max(1.0, abs(d)))
-                mesh.paint_uniform_color(colors[pid])
-                mesh.compute_vertex_normals()
-            meshes.append(mesh)
+            tris = mesh.triangles[mesh.plane_ids == pid]
+            used, inverse = np.unique(tris, return_inverse=True)
+            part = o3d.geometry.TriangleMesh()
+            if len(used):
+                part.vertices = o3d.utility.Vector3dVector(mesh.vertices[used])
+                part.triangles = o3d.utility.Vector3iVector(
+                    inverse.reshape(-1, 3).astype(np.int32))
+                part.paint_uniform_color(colors[pid])
+                part.compute_vertex_normals()
+            meshes.append(part)
         return meshes
 
     def planes_document(self) -> dict[str, Any]:

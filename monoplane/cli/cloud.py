@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from monoplane.errors import InvalidInput
-from monoplane.io import atomic_output_dir, check_output_dir
+from monoplane.io import atomic_output_dir, check_output_dir, write_plane_mesh_ply
 
 DESCRIPTION = """Detect the planes of a point cloud (PLY, PCD, XYZ or PTS) with MonoPlane's
 graph-cut RANSAC and the graph-crf refiner, and write into --out:
@@ -19,7 +19,7 @@ graph-cut RANSAC and the graph-crf refiner, and write into --out:
   planes.json   per plane: normal, offset (normal . X + offset = 0), num_points, rmse,
                 centroid, in the cloud's own frame and units
   labelled.ply  the points coloured by plane (grey = no plane)
-  planes.ply    one outlined polygon mesh per plane, coloured like the points
+  planes.ply    each plane's area triangulated with its holes, faces tagged plane_id
   config.toml   the resolved configuration
   report/       with --report: 3D renders of the planes
 
@@ -121,12 +121,8 @@ def run(args: argparse.Namespace) -> int:
         (tmp / "config.toml").write_text(dumps_toml(result.config))
         if not o3d.io.write_point_cloud(str(tmp / "labelled.ply"), result.to_open3d()):
             raise InvalidInput(f"cannot write {args.out}/labelled.ply")
-        combined = o3d.geometry.TriangleMesh()
-        for mesh in result.plane_meshes():
-            combined += mesh
-        if not o3d.io.write_triangle_mesh(str(tmp / "planes.ply"), combined,
-                                          write_vertex_normals=False):
-            raise InvalidInput(f"cannot write {args.out}/planes.ply")
+        colors = np.round(result.plane_colors()[1:] * 255).astype(np.uint8)
+        write_plane_mesh_ply(tmp / "planes.ply", result.plane_mesh(), colors)
         if args.report:
             reason = _render_report(result, tmp / "report")
     if not args.quiet:
