@@ -85,6 +85,14 @@ def monoplane_register_fusers() -> list[type[Stage]]:
 
 
 @hookspec
+def monoplane_register_adjusters() -> list[type[Stage]]:
+    """Joint refiners of a fused scene's cameras, per-view depth scales and global planes.
+
+    Config table ``[adjuster]``. Contract: :class:`monoplane.stages.base.Adjuster`.
+    """
+
+
+@hookspec
 def monoplane_stage_finished(kind: str, name: str, seconds: float, frame_name: str) -> None:
     """Observe a stage call finishing: its kind, plugin name, wall time and the frame name.
 

@@ -32,6 +32,7 @@ DEFAULT_PLUGINS: tuple[str, ...] = (
     "monoplane.stages.refiners",
     "monoplane.stages.matchers",
     "monoplane.stages.fusers",
+    "monoplane.stages.adjusters",
 )
 
 #: Set this environment variable to disable entry-point autoloading of third-party plugins.
@@ -46,6 +47,7 @@ REGISTRATION_HOOKS: dict[str, str] = {
     "refiner": "monoplane_register_refiners",
     "matcher": "monoplane_register_matchers",
     "fuser": "monoplane_register_fusers",
+    "adjuster": "monoplane_register_adjusters",
 }
 
 
