@@ -58,6 +58,7 @@ def run(args: argparse.Namespace) -> int:
         if missing:
             print(f"monoplane: warning: could not register {', '.join(missing)}",
                   file=sys.stderr)
-        print(f"{sfm.num_views - len(missing)} cameras, {len(sfm.points)} points, verified matches {pairs} "
+        print(f"{sfm.num_views - len(missing)} cameras, {len(sfm.points)} points, "
+              f"verified matches {pairs} "
               f"in {timings['matcher']:.2f} s -> {out}", file=sys.stdout)
     return 0

@@ -1,4 +1,4 @@
-"""N-view evaluation on synthetic walk-throughs and stars (``monoplane eval --multiview --views N``).
+"""N-view evaluation on synthetic walk-throughs and stars (``eval --multiview --views N``).
 
 For each sequence (:func:`monoplane.synth.sequence.generate_sequence`) it reports
 
