@@ -88,6 +88,14 @@ def monoplane_register_fusers() -> list[type[Stage]]:
 
 
 @hookspec
+def monoplane_register_adjusters() -> list[type[Stage]]:
+    """Joint refiners of a fused scene's cameras, per-view depth scales and global planes.
+
+    Config table ``[adjuster]``. Contract: :class:`monoplane.stages.base.Adjuster`.
+    """
+
+
+@hookspec
 def monoplane_register_baselines() -> dict[str, Callable[..., Reconstruction]]:
     """External plane detectors to compare against, by method name (``--baseline NAME``).
 

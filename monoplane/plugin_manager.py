@@ -33,6 +33,7 @@ DEFAULT_PLUGINS: tuple[str, ...] = (
     "monoplane.stages.graph_refiner",
     "monoplane.stages.matchers",
     "monoplane.stages.fusers",
+    "monoplane.stages.adjusters",
     "monoplane.evaluation.baselines",
 )
 
@@ -48,6 +49,7 @@ REGISTRATION_HOOKS: dict[str, str] = {
     "refiner": "monoplane_register_refiners",
     "matcher": "monoplane_register_matchers",
     "fuser": "monoplane_register_fusers",
+    "adjuster": "monoplane_register_adjusters",
 }
 
 

@@ -554,6 +554,12 @@ class SfmResult:
         (M, 3) uint8 RGB colour of each point.
     notes : list of str
         Provenance remarks (e.g. whether intrinsics were fixed or estimated).
+    registration : list of dict
+        How each camera's pose was obtained, one dict per camera with at least ``"method"``:
+        ``"sfm"`` (the matcher's model), ``"fallback"`` (a two-view estimate; then also
+        ``"reference"``, the view it was estimated against, and ``"inliers"``) or ``"none"``
+        (not registered: the camera is a placeholder and must not be used). Empty means every
+        camera came from the matcher's model.
     """
 
     cameras: list[Camera]
@@ -563,6 +569,14 @@ class SfmResult:
     matches: dict[tuple[int, int], np.ndarray] = field(default_factory=dict)
     colors: np.ndarray | None = None
     notes: list[str] = field(default_factory=list)
+    registration: list[dict] = field(default_factory=list)
+
+    @property
+    def registered(self) -> list[bool]:
+        """Per camera, whether its pose is usable (``method`` other than ``"none"``)."""
+        if not self.registration:
+            return [True] * len(self.cameras)
+        return [r.get("method") != "none" for r in self.registration]
 
     def __post_init__(self) -> None:
         n = len(self.cameras)
@@ -608,6 +622,9 @@ class SfmResult:
                 raise InvalidInput(f"SfM result: matches {key} index missing keypoints")
             checked[(i, j)] = pairs
         self.matches = checked
+        if self.registration and len(self.registration) != n:
+            raise InvalidInput(f"SfM result: {n} cameras but {len(self.registration)} "
+                               "registration records")
 
     @property
     def num_views(self) -> int:

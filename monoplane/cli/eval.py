@@ -25,6 +25,7 @@ EPILOG = """examples:
   monoplane eval --multiview --n 10
   monoplane eval --data abw-dev/ --preset range --baseline cgal
   monoplane eval --data abw-dev/ --as-cloud --preset cloud
+  monoplane eval --multiview --views 5 --path walk --n 10
 
 Scene i uses seed SEED+i, so equal arguments give equal tables (timings aside). Baselines come
 registered through the 'monoplane_register_baselines' plugin hook: open3d-ransac is built in,
@@ -55,7 +56,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     data.add_argument("--size", default="256x192", metavar="WxH",
                       help="image size (default: 256x192, the paper's)")
     data.add_argument("--multiview", action="store_true",
-                      help="two-view evaluation: relative pose error and plane AP")
+                      help="two-view evaluation: relative pose error and plane AP; with "
+                           "--views N > 2, N-view synthetic sequences")
     data.add_argument("--data", metavar="DIR",
                       help="score real frames instead: a folder of frame folders with "
                            "gt_labels.png and depth (VOI, RI, SC and SegComp counts)")
@@ -64,6 +66,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                            "shuffled 3D points")
     data.add_argument("--tolerance", type=float, default=0.8,
                       help="with --data: SegComp overlap tolerance T (default: 0.8)")
+    data.add_argument("--views", type=int, default=2, metavar="N",
+                      help="with --multiview: views per sequence (default: 2, the pair "
+                           "protocol)")
+    data.add_argument("--path", default="walk", choices=("walk", "star"),
+                      help="with --multiview --views N > 2: camera path (default: walk)")
     out = p.add_argument_group("outputs")
     out.add_argument("--json", metavar="FILE", help="also write every score as JSON")
     out.add_argument("--report", metavar="DIR", help="also write an HTML report into DIR")
@@ -100,6 +107,21 @@ def _run_multiview(args: argparse.Namespace, size: tuple[int, int]) -> int:
                               "overrides": args.overrides or None}
     if args.presets:
         kwargs["preset"] = args.presets[0]
+    if args.views < 2:
+        raise InvalidInput(f"--views must be at least 2, got {args.views}")
+    if args.views > 2:
+        from monoplane.evaluation import sequences
+
+        res = sequences.evaluate_sequences(args.n, args.views, args.path, args.level,
+                                           args.seed, not args.no_progress, **kwargs)
+        print(sequences.format_sequences(res))
+        if args.json:
+            _write_json(args.json, {"settings": {"level": args.level, "n": args.n,
+                                                 "seed": args.seed, "width": size[0],
+                                                 "height": size[1], "views": args.views,
+                                                 "path": args.path, "multiview": True},
+                                    **res})
+        return 0
     results = twoview.evaluate_pairs(args.n, args.level, args.seed, not args.no_progress,
                                      **kwargs)
     print(twoview.format_twoview(results))

@@ -29,7 +29,7 @@ if TYPE_CHECKING:
 
 #: Stage kinds, in pipeline order; each is also the name of its config table.
 STAGE_KINDS: tuple[str, ...] = (
-    "cues", "sampler", "scorer", "labeler", "refiner", "matcher", "fuser",
+    "cues", "sampler", "scorer", "labeler", "refiner", "matcher", "fuser", "adjuster",
 )
 
 
@@ -284,8 +284,23 @@ class Matcher(Stage):
     kind = "matcher"
 
     def match(self, frames: list[Frame]) -> SfmResult:
-        """Cameras, sparse points and pairwise keypoint matches for ``frames``."""
+        """Cameras, sparse points and pairwise keypoint matches for ``frames``.
+
+        A matcher that cannot register every frame may mark those frames ``{"method": "none"}``
+        in the result's ``registration`` (their cameras are then placeholders); the driver
+        tries its fallback pose on them or reconstructs the registered views only.
+        """
         raise NotImplementedError
+
+    @classmethod
+    def fixed_intrinsics_config(cls, config: Any) -> Any | None:
+        """This matcher's config changed to hold every frame's ``K`` fixed, or None.
+
+        The host calls it when the user gives calibrated intrinsics. The default says the
+        matcher cannot hold intrinsics fixed (None); a matcher that can returns a copy of
+        ``config`` with that option set, leaving ``config`` itself unchanged.
+        """
+        return None
 
 
 class Fuser(Stage):
@@ -295,4 +310,41 @@ class Fuser(Stage):
 
     def fuse(self, views: list[Reconstruction], sfm: SfmResult) -> Scene:
         """Fuse scale-aligned per-view reconstructions into a :class:`~monoplane.types.Scene`."""
+        raise NotImplementedError
+
+    def fuse_with_matches(self, views: list[Reconstruction],
+                          sfm: SfmResult) -> tuple[Scene, list[Any]]:
+        """:meth:`fuse`, also returning the plane correspondences it accepted.
+
+        The host calls this one. Each correspondence has attributes ``view_i``, ``plane_i``,
+        ``view_j``, ``plane_j`` (1-based local ids) and ``criterion`` (a short string); they are
+        written to ``scene.json``. The default returns no correspondences.
+        """
+        return self.fuse(views, sfm), []
+
+
+class Adjuster(Stage):
+    """Jointly refines the cameras, per-view depth scales and global planes of a fused scene."""
+
+    kind = "adjuster"
+
+    def adjust(self, scene: Scene, sfm: SfmResult) -> tuple[Scene, SfmResult, dict[str, Any]]:
+        """Refine a fused scene.
+
+        Parameters
+        ----------
+        scene : Scene
+            Fused scene: cameras (world-to-camera), per-view reconstructions whose ``frame``
+            holds the scale-aligned depth, global planes and the view-to-global links.
+        sfm : SfmResult
+            The sparse model the scene was built on (same cameras, world frame and units).
+
+        Returns
+        -------
+        (Scene, SfmResult, dict)
+            The refined scene (cameras, view depths and plane parameters rescaled by the
+            refined per-view scales, global planes), the SfM result with the refined cameras
+            and points, and a JSON-serialisable report (at least ``"before"`` and ``"after"``
+            residual summaries; empty when nothing was done).
+        """
         raise NotImplementedError
