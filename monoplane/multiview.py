@@ -10,7 +10,7 @@ Python API::
 
 Steps:
 
-1. the configured matcher (``[matcher]``, default ``colmap``) gives cameras, sparse points and
+1. the configured matcher (``[matcher]``) gives cameras, sparse points and
    keypoint matches;
 2. the cue provider fills each view's depth and normals (at the view's native resolution, with
    the SfM intrinsics);
@@ -18,7 +18,7 @@ Steps:
    align_scale`); when every view's depth is metric the SfM world is then rescaled to the views'
    median metric scale, so outputs keep the depth's units;
 4. the single-view pipeline segments each view;
-5. the configured fuser (``[fuser]``, default ``average``) matches and fuses planes into a
+5. the configured fuser (``[fuser]``) matches and fuses planes into a
    :class:`~monoplane.types.Scene`.
 
 Frames: cameras are world-to-camera ``x_cam = R x_world + t`` with OpenCV axes (x right, y down,
@@ -203,7 +203,7 @@ def reconstruct_multiview(frames: list[Frame], pipe: Pipeline, progress: bool = 
     Parameters
     ----------
     frames : list of Frame
-        Two or more colour frames, optionally with depth/normals (then the ``given`` cue
+        Two or more colour frames, optionally with depth/normals (then the cue
         provider uses them). ``K`` is held fixed in SfM only after
         :func:`hold_intrinsics_fixed`; otherwise it is the initial guess.
     pipe : Pipeline

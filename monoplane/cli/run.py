@@ -19,8 +19,8 @@ depth_planar.npy and config.toml into --out.
 
 Depth and normals come from --depth/--normals (RGB-D, precomputed network outputs), from a
 catalogue model (--cues NAME, see 'monoplane models list'; --fetch downloads it once) or from
-the configured cue provider (e.g. --set cues.plugin=onnx with model files). IMAGE may be
-omitted for depth-only range images."""
+the configured cue provider (see 'monoplane plugins'). IMAGE may be omitted for depth-only
+range images."""
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -32,7 +32,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     group = p.add_argument_group("monocular models")
     group.add_argument("--cues", metavar="NAME",
                        help="predict depth/normals with a catalogue model (same as --set "
-                            "cues.plugin=onnx --set cues.model=NAME)")
+                            "cues.model=NAME)")
     group.add_argument("--fetch", action="store_true",
                        help="download the configured catalogue model first if it is not "
                             "cached (nothing is downloaded without this flag)")
@@ -45,7 +45,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     check_output_dir(args.out, args.overwrite)  # fail before any work
     if args.cues:
-        args.overrides = ["cues.plugin=onnx", f"cues.model={args.cues}", *args.overrides]
+        args.overrides = [f"cues.model={args.cues}", *args.overrides]
     pipe = pipeline_from_args(args)
     prepare_cue_model(pipe, fetch_missing=args.fetch, has_depth=args.depth is not None,
                       has_normals=args.normals is not None, quiet=args.quiet)

@@ -7,8 +7,8 @@ A dataset is a folder of frame folders, each holding
 * ``intrinsics.json``: ``{"fx": ..., "fy": ..., "cx": ..., "cy": ...}`` (optional);
 * ``rgb.png`` / ``rgb.jpg`` / ``color.png`` / ``color.jpg`` (optional; depth-only otherwise).
 
-Every method sees the frame with its depth, and normals estimated from it by the ``given`` cue
-provider of the method's preset (baselines: that provider's defaults). Scores per frame:
+Every method sees the frame with its depth, and normals estimated from it by the cue
+provider of the method's preset (baselines: the default preset's provider). Scores per frame:
 VOI, RI and SC on ground-truth planar pixels (:mod:`~monoplane.evaluation.segmentation`) and
 Hoover et al.'s SegComp counts at tolerance T (:mod:`~monoplane.evaluation.segcomp`); tables
 report their means over frames.
@@ -175,8 +175,7 @@ def _methods(presets: Sequence[str], baselines: Sequence[str], overrides: list[s
             out.append((f"{name} (cloud)", "cloud",
                         lambda f, s, n=name: cloud_reconstruction(f, n, overrides, s)))
         else:
-            pipe = Pipeline.from_preset(name, overrides=["cues.plugin=given",
-                                                         *(overrides or [])])
+            pipe = Pipeline.from_preset(name, overrides=overrides)
             out.append((name, "preset", lambda f, s, p=pipe: p.run(f)))
     for name in baselines:
         fn = get_baseline(name)
@@ -215,20 +214,21 @@ def evaluate_dataset(folder: str | Path, presets: Sequence[str] = (),
     """
     from tqdm import tqdm
 
-    from monoplane.stages.cues import GivenCues
+    from monoplane.pipeline import Pipeline
 
     if not 0.5 < tolerance <= 1.0:
         raise InvalidInput(f"--tolerance must lie in (0.5, 1], got {tolerance}")
     frames = load_dataset(folder)
     methods = _methods(presets, baselines, overrides, as_cloud)
     results = [DatasetMethodResult(name, kind) for name, kind, _ in methods]
-    cues = GivenCues()
+    # Baselines get their normals from the default preset's cue provider, as any user would.
+    cues = Pipeline.from_preset()
     bar = tqdm(total=len(frames) * len(methods), disable=not progress, unit="run",
                desc="eval")
     try:
         for item in frames:
             # Baselines need normals; presets estimate their own with their cue settings.
-            with_normals = cues.provide(item.frame)
+            with_normals = cues.prepare(item.frame)
             for (name, kind, run), result in zip(methods, results, strict=True):
                 bar.set_postfix_str(f"{item.name} {name}")
                 frame = with_normals if kind == "baseline" else item.frame

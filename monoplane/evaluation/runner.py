@@ -9,8 +9,8 @@ The protocol of ``monoplane eval``:
    (``Σ recalled / Σ ground-truth planes``); see :mod:`~monoplane.evaluation.segmentation` and
    :mod:`~monoplane.evaluation.recall`.
 3. Time per frame (``s/frame``) is the wall time of the method's call on a frame that already
-   carries its cues (for presets: the whole :meth:`Pipeline.run`, whose ``given`` cue step is
-   a pass-through; for baselines: the whole baseline call, data conversion included). The
+   carries its cues (for presets: the whole :meth:`Pipeline.run`, whose cue step passes the
+   given cues through; for baselines: the whole baseline call, data conversion included). The
    *core* time (``core s``) is what compares methods' algorithms: for presets the same
    pipeline time, for a baseline the time of its own call alone when it reports one
    (``timings["baseline.call"]``, e.g. a library's detection call without converting the
@@ -65,12 +65,12 @@ class Method:
 def preset_method(name: str, overrides: list[str] | None = None) -> Method:
     """A pipeline preset as a method (the config is validated now, not on the first frame).
 
-    The synthetic frames carry their (corrupted) cues already, so the cue provider is forced to
-    ``given`` before the caller's ``table.key=value`` overrides apply.
+    The synthetic frames carry their (corrupted) cues already, so the pipeline skips the cue
+    provider for them (:meth:`~monoplane.stages.base.CueProvider.needs_cues`).
     """
     from monoplane.pipeline import Pipeline
 
-    pipe = Pipeline.from_preset(name, overrides=["cues.plugin=given", *(overrides or [])])
+    pipe = Pipeline.from_preset(name, overrides=overrides)
     return Method(name=name, kind="preset", run=lambda frame, seed: pipe.run(frame))
 
 

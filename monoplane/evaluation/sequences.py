@@ -138,7 +138,7 @@ def evaluate_sequences(n: int = 10, views: int = 5, path: str = "walk", level: s
         raise InvalidInput(f"n must be at least 1, got {n}")
     if views < 2:
         raise InvalidInput(f"--views must be at least 2, got {views}")
-    pipe = Pipeline.from_preset(preset, overrides=["cues.plugin=given", *(overrides or [])])
+    pipe = Pipeline.from_preset(preset, overrides=overrides)
     hold_intrinsics_fixed(pipe)
     rot, trans, times, failures = [], [], [], []
     reg_views = all_reg = g_pred = g_true = good = multi = 0

@@ -363,7 +363,7 @@ def evaluate_pairs(n: int = 20, level: str = "mild", seed: int = 0, progress: bo
 
     if n < 1:
         raise InvalidInput(f"n must be at least 1, got {n}")
-    pipe = Pipeline.from_preset(preset, overrides=["cues.plugin=given", *(overrides or [])])
+    pipe = Pipeline.from_preset(preset, overrides=overrides)
     hold_intrinsics_fixed(pipe)
     res = TwoViewResults(n_pairs=n, registered=0)
     judged_all, judged_ok = [], []

@@ -138,6 +138,12 @@ class CueProvider(Stage):
         missing). Override to also process complete frames (e.g. to recompute normals)."""
         return frame.depth is None or frame.normals is None
 
+    def catalogue_model(self, missing_depth: bool, missing_normals: bool) -> str | None:
+        """Name of the model-catalogue entry this provider would load for a frame that lacks
+        the given cues, or None when it would load none (default). The CLI uses it to check
+        the cache, or fetch on request, before any image is read."""
+        return None
+
     def provide(self, frame: Frame) -> Frame:
         """Return a frame with ``depth`` and ``normals`` set.
 

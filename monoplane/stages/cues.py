@@ -187,6 +187,14 @@ class OnnxCues(CueProvider):
             hfov_deg=cfg.hfov_deg or None,
             normals_options=cfg.normals_options())
 
+    def catalogue_model(self, missing_depth: bool, missing_normals: bool) -> str | None:
+        """``cues.model`` when a frame lacking these cues needs the network: always without
+        depth, and without normals when the network predicts them jointly."""
+        joint = self.config.resolved_profile().depth.joint_normals
+        if self.config.model and (missing_depth or (joint and missing_normals)):
+            return self.config.model
+        return None
+
     def provide(self, frame: Frame) -> Frame:
         """Predict the frame's missing depth and normals (see :meth:`CueNetwork.provide`).
 
