@@ -455,77 +455,29 @@ def _gc_ransac_graph(f0: np.ndarray, data1: np.ndarray, ei: np.ndarray, ej: np.n
     """
     m, n_edges = f0.shape[0], ei.shape[0]
     keep = 1.0 - lam
-    both_out = np.empty(n_edges)  # e(0, 0)
-    differ = np.empty(n_edges)  # e(0, 1) = e(1, 0)
     payback = np.zeros(m)
-    degree = np.zeros(m + 1, dtype=np.int64)
     bad = 0
     for e in range(n_edges):
-        i, j = ei[e], ej[e]
-        a = 0.5 * ls * (f0[i] + f0[j])
+        a = 0.5 * ls * (f0[ei[e]] + f0[ej[e]])
         b = ls * cut[e]
         if 2.0 * b - a < -1e-9 * max(1.0, a):
             bad += 1
-        both_out[e] = a
-        differ[e] = b
-        payback[i] += b
-        payback[j] += b
-        degree[i + 1] += 1
-        degree[j + 1] += 1
-    if bad:
-        empty = np.empty(0, dtype=np.int64)
-        return bad, empty, empty, empty, np.empty(0), np.empty(0)
-    # Incident edges of every point (CSR), to update the bounds of its neighbours.
-    for p in range(m):
-        degree[p + 1] += degree[p]
-    incident = np.empty(2 * n_edges, dtype=np.int64)
-    fill = degree[:m].copy()
-    for e in range(n_edges):
-        incident[fill[ei[e]]] = e
-        fill[ei[e]] += 1
-        incident[fill[ej[e]]] = e
-        fill[ej[e]] += 1
-    # A point whose extra inlier cost exceeds the most its edges can give back when it turns
-    # inlier is an outlier in every minimiser. The give-back of an edge is e(0,1) while the
-    # other end may be an inlier, and e(0,0) - e(1,0) once that end is known to be an outlier:
-    # fixing a point tightens its neighbours' bounds, so fixing spreads inwards from the far
-    # points until only the points around the plane's band remain.
-    excess = np.empty(m)
-    slack = np.empty(m)
-    fixed = np.zeros(m, dtype=np.bool_)
-    stack = np.empty(m, dtype=np.int64)
-    top = 0
-    for p in range(m):
-        excess[p] = keep * (data1[p] - f0[p])
-        slack[p] = 1e-9 * (payback[p] + abs(excess[p])) + 1e-12  # rounding of the sums
-        if excess[p] > payback[p] + slack[p]:
-            fixed[p] = True
-            stack[top] = p
-            top += 1
-    while top:
-        top -= 1
-        p = stack[top]
-        for x in range(degree[p], degree[p + 1]):
-            e = incident[x]
-            q = ej[e] if ei[e] == p else ei[e]
-            if fixed[q]:
-                continue
-            payback[q] += both_out[e] - 2.0 * differ[e]
-            if excess[q] > payback[q] + slack[q]:
-                fixed[q] = True
-                stack[top] = q
-                top += 1
+        payback[ei[e]] += b
+        payback[ej[e]] += b
     local = np.full(m, -1, dtype=np.int64)
     nodes = np.empty(m, dtype=np.int64)
     count = 0
     for p in range(m):
-        if not fixed[p]:
+        # Submodularity makes e(0,1) the most an edge gives back when its end turns inlier,
+        # so u1 - u0 > Σ e(0,1) means outlier in every minimiser (kept with a margin).
+        if keep * (data1[p] - f0[p]) <= payback[p] * (1.0 + 1e-9) + 1e-12:
             local[p] = count
             nodes[count] = p
             count += 1
     slope = np.empty(count)
     for q in range(count):
-        slope[q] = excess[nodes[q]]
+        p = nodes[q]
+        slope[q] = keep * (data1[p] - f0[p])
     src = np.empty(n_edges, dtype=np.int64)
     dst = np.empty(n_edges, dtype=np.int64)
     cap = np.empty(n_edges)
@@ -534,7 +486,8 @@ def _gc_ransac_graph(f0: np.ndarray, data1: np.ndarray, ei: np.ndarray, ej: np.n
         li, lj = local[ei[e]], local[ej[e]]
         if li < 0 and lj < 0:
             continue
-        a, b = both_out[e], differ[e]
+        a = 0.5 * ls * (f0[ei[e]] + f0[ej[e]])
+        b = ls * cut[e]
         if li >= 0 and lj >= 0:
             # e = A + (C - A) x_i + (D - C) x_j + (B + C - A - D)(1 - x_i) x_j, D = 0, B = C.
             src[inner] = li
