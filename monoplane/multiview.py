@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -38,9 +39,17 @@ import numpy as np
 
 from monoplane.errors import InvalidInput
 from monoplane.geometry.alignment import ScaleAlignment, align_scale
-from monoplane.geometry.polygons import plane_basis, triangulate_on_plane
+from monoplane.geometry.polygons import PlaneMesh, points_plane_mesh
 from monoplane.stages.base import Fuser, Matcher
-from monoplane.types import Camera, Frame, Reconstruction, Scene, SfmResult, plane_to_camera
+from monoplane.types import (
+    Camera,
+    Frame,
+    Reconstruction,
+    Scene,
+    SfmResult,
+    plane_to_camera,
+    ray_plane_depth,
+)
 
 if TYPE_CHECKING:
     from monoplane.pipeline import Pipeline
@@ -53,22 +62,35 @@ class MultiviewResult:
     Attributes
     ----------
     scene : Scene
-        Cameras, per-view reconstructions and fused global planes (world frame).
+        Cameras, per-view reconstructions and fused global planes (world frame), over the
+        registered views only (in input order).
     sfm : SfmResult
-        The matcher's output, in the scene's units.
+        The matcher's output restricted to the registered views, in the scene's units.
     alignments : list of ScaleAlignment
-        Per-view scale alignment of the monocular depth onto the SfM points.
+        Per registered view, the scale alignment of its monocular depth (for a view placed by
+        the fallback pose, the scale comes from the fallback's triangulated points).
     plane_matches : list
-        Plane correspondences the fuser accepted (objects with ``view_i``, ``plane_i``,
-        ``view_j``, ``plane_j``, ``criterion``), when the fuser exposes them.
+        Plane correspondences the fuser kept (objects with ``view_i``, ``plane_i``,
+        ``view_j``, ``plane_j``, ``criterion``), view indices into ``scene.views``.
     units : str
         Unit of the scene's coordinates: the depths' unit when all views had metric depth,
         otherwise ``"sfm"`` (the SfM model's arbitrary scale).
     timings : dict
         Seconds per step: ``matcher``, ``cues``, ``alignment``, ``single_view``, ``fuser``,
-        ``total``.
+        ``adjuster``, ``total``.
     config : dict
         The resolved pipeline config.
+    frame_indices : list of int
+        Input index of each scene view.
+    registration : list of dict
+        Per scene view, how its pose was found (``method`` ``"sfm"`` or ``"fallback"``, with
+        ``reference`` and ``inliers`` for the latter).
+    unregistered : list of str
+        Names of the input frames left out (no pose).
+    adjustment : dict
+        The adjuster's report (``before``/``after`` residuals), empty when none ran.
+    fused : Scene or None
+        The scene as fused, before the adjuster (for evaluation).
     """
 
     scene: Scene
@@ -78,6 +100,11 @@ class MultiviewResult:
     units: str = "sfm"
     timings: dict[str, float] = field(default_factory=dict)
     config: dict[str, Any] = field(default_factory=dict)
+    frame_indices: list[int] = field(default_factory=list)
+    registration: list[dict[str, Any]] = field(default_factory=list)
+    unregistered: list[str] = field(default_factory=list)
+    adjustment: dict[str, Any] = field(default_factory=dict)
+    fused: Scene | None = None
 
 
 def scale_sfm(sfm: SfmResult, factor: float) -> SfmResult:
@@ -91,23 +118,106 @@ def scale_sfm(sfm: SfmResult, factor: float) -> SfmResult:
     return replace(sfm, cameras=cameras, points=sfm.points * factor)
 
 
+def subset_sfm(sfm: SfmResult, views: list[int]) -> SfmResult:
+    """The SfM result restricted to ``views`` (indices, increasing), matches re-keyed."""
+    pos = {v: k for k, v in enumerate(views)}
+    matches = {(pos[i], pos[j]): m for (i, j), m in sfm.matches.items()
+               if i in pos and j in pos}
+    registration = [sfm.registration[v] for v in views] if sfm.registration else []
+    return replace(sfm, cameras=[sfm.cameras[v] for v in views],
+                   keypoints=[sfm.keypoints[v] for v in views],
+                   point_ids=[sfm.point_ids[v] for v in views], matches=matches,
+                   registration=registration)
+
+
+def hold_intrinsics_fixed(pipe: Pipeline) -> bool:
+    """Make the pipeline's matcher keep every frame's ``K`` fixed, if it can.
+
+    Asks the configured matcher class (:meth:`Matcher.fixed_intrinsics_config`); returns False
+    when it cannot, in which case the given intrinsics are only its starting guess.
+    """
+    name, cfg = pipe.config.stages["matcher"]
+    fixed = pipe.registry.get("matcher", name).cls.fixed_intrinsics_config(cfg)
+    if fixed is None:
+        return False
+    pipe.config.stages["matcher"] = (name, fixed)
+    pipe._stages.pop("matcher", None)  # rebuilt from the new config on next use
+    return True
+
+
+# Per-view work, as picklable top-level functions of (config, frame) so that views can run in
+# worker processes; each worker builds its pipeline once per config.
+_WORKER_PIPES: dict[str, Pipeline] = {}
+
+
+def _worker_pipe(config: dict[str, Any]) -> Pipeline:
+    from monoplane.pipeline import Pipeline
+
+    key = json.dumps(config, sort_keys=True, default=str)
+    if key not in _WORKER_PIPES:
+        _WORKER_PIPES[key] = Pipeline.from_config(config)
+    return _WORKER_PIPES[key]
+
+
+def prepare_view(config: dict[str, Any], frame: Frame) -> Frame:
+    """Run the cue provider of ``config`` on one frame (picklable per-view task)."""
+    return _worker_pipe(config).prepare(frame)
+
+
+def segment_view(config: dict[str, Any], frame: Frame) -> Reconstruction:
+    """Run RANSAC and the refiner of ``config`` on one frame with cues (picklable task)."""
+    return _worker_pipe(config).segment(frame)
+
+
+def map_views(fn: Callable[[dict[str, Any], Frame], Any], config: dict[str, Any],
+              frames: list[Frame], workers: int) -> list[Any]:
+    """``[fn(config, f) for f in frames]``, in ``workers`` processes when more than one.
+
+    Exceptions propagate from the first failing view.
+    """
+    if workers <= 1 or len(frames) <= 1:
+        return [fn(config, f) for f in frames]
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    # fork shares the already imported modules with the workers (spawn would re-import them).
+    ctx = multiprocessing.get_context("fork" if "fork" in multiprocessing.get_all_start_methods()
+                                      else "spawn")
+    with ProcessPoolExecutor(max_workers=min(workers, len(frames)), mp_context=ctx) as pool:
+        return list(pool.map(fn, [config] * len(frames), frames))
+
+
+def default_workers() -> int:
+    """Worker processes for per-view stages: the CPUs this process may use."""
+    import os
+
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (
+        os.cpu_count() or 1)
+
+
 def reconstruct_multiview(frames: list[Frame], pipe: Pipeline, progress: bool = False,
-                          sfm: SfmResult | None = None) -> MultiviewResult:
+                          sfm: SfmResult | None = None, strict: bool = False,
+                          workers: int | None = None) -> MultiviewResult:
     """Planes of a scene seen in a few views.
 
     Parameters
     ----------
     frames : list of Frame
         Two or more colour frames, optionally with depth/normals (then the ``given`` cue
-        provider uses them). ``K`` is fixed in SfM only when the config sets
-        ``matcher.fixed_intrinsics``; otherwise it is the initial guess.
+        provider uses them). ``K`` is held fixed in SfM only after
+        :func:`hold_intrinsics_fixed`; otherwise it is the initial guess.
     pipe : Pipeline
-        Configured pipeline; its ``matcher``, ``cues``, RANSAC stages, ``refiner`` and ``fuser``
-        are used.
+        Configured pipeline; its ``matcher``, ``cues``, RANSAC stages, ``refiner``, ``fuser``
+        and ``adjuster`` are used.
     progress : bool
-        Show tqdm progress bars on stderr.
+        Show progress messages on stderr.
     sfm : SfmResult, optional
         Skip the matcher and use this SfM result (e.g. known poses).
+    strict : bool
+        Fail when any view cannot be registered, instead of reconstructing the others.
+    workers : int, optional
+        Processes for the per-view stages (cues, RANSAC, refiner); default: the CPUs
+        available. 1 runs everything in this process.
 
     Returns
     -------
@@ -119,12 +229,17 @@ def reconstruct_multiview(frames: list[Frame], pipe: Pipeline, progress: bool = 
     monoplane.errors.StageError
         When a stage fails (the message names the stage and says why, e.g. no initial pair).
     InvalidInput
-        When a view cannot be scale-aligned (too few SfM points on valid depth).
+        When fewer than two views register, or (``strict``) when any view does not; when a
+        view cannot be scale-aligned (too few SfM points on valid depth).
     """
-    from tqdm import tqdm
+    import sys
+
+    from monoplane.geometry.relative_pose import fallback_relative_pose
+    from monoplane.stages.base import Adjuster
 
     if len(frames) < 2:
         raise InvalidInput(f"multi-view reconstruction needs at least 2 images, got {len(frames)}")
+    workers = default_workers() if workers is None else max(1, int(workers))
     timings: dict[str, float] = {}
     start = time.perf_counter()
     if sfm is None:
@@ -133,77 +248,132 @@ def reconstruct_multiview(frames: list[Frame], pipe: Pipeline, progress: bool = 
                         timings)
     elif sfm.num_views != len(frames):
         raise InvalidInput(f"{len(frames)} frames but the SfM result has {sfm.num_views} views")
+    registration = [dict(r) for r in sfm.registration] or [{"method": "sfm"} for _ in frames]
+    if strict and any(r["method"] == "none" for r in registration):
+        missing = [f.name for f, r in zip(frames, registration, strict=True)
+                   if r["method"] == "none"]
+        raise InvalidInput(f"could not register {len(missing)} of {len(frames)} images: "
+                           f"{', '.join(missing)}; they overlap too little with the others "
+                           "(drop --strict to reconstruct the registered views)")
+    if progress:
+        print(f"monoplane: SfM registered {sum(r['method'] != 'none' for r in registration)} "
+              f"of {len(frames)} views", file=sys.stderr)
 
-    prepared: list[Frame] = []
-    for v, frame in enumerate(tqdm(frames, desc="cues", disable=not progress, leave=False)):
+    config = pipe.config.to_dict()
+    with_k = []
+    for v, frame in enumerate(frames):
         cam = sfm.cameras[v]
         if (cam.height, cam.width) != frame.shape:
             raise InvalidInput(f"{frame.name}: SfM camera size differs from the image size")
-        f = frame.with_(K=cam.K) if not np.allclose(cam.K, frame.K) else frame
-        t0 = time.perf_counter()
-        prepared.append(pipe.prepare(f))
-        timings["cues"] = timings.get("cues", 0.0) + time.perf_counter() - t0
+        with_k.append(frame.with_(K=cam.K) if not np.allclose(cam.K, frame.K) else frame)
+    t0 = time.perf_counter()
+    prepared = map_views(prepare_view, config, with_k, workers)
+    timings["cues"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    alignments = []
+    alignments: dict[int, ScaleAlignment] = {}
     for v, frame in enumerate(prepared):
+        if registration[v]["method"] == "none":
+            continue
         pixels, depth = sfm.sparse_depth(v)
         try:
-            alignments.append(align_scale(frame.depth, pixels, depth))
+            alignments[v] = align_scale(frame.depth, pixels, depth)
         except InvalidInput as exc:
-            raise InvalidInput(f"{frame.name}: {exc}") from None
+            if strict:
+                raise InvalidInput(f"{frame.name}: {exc}") from None
+            registration[v] = {"method": "none", "reason": str(exc)}
+    if sum(r["method"] != "none" for r in registration) == 0:
+        raise InvalidInput("no view could be registered and scale-aligned")
+    # Fallback: place each left-over view against the registered view it matches best.
+    cameras = list(sfm.cameras)
+    for v in [v for v, r in enumerate(registration) if r["method"] == "none"]:
+        best = None
+        for ref in [u for u, r in enumerate(registration) if r["method"] != "none"]:
+            depth_ref = prepared[ref].depth * alignments[ref].scale
+            found = fallback_relative_pose(prepared[ref].rgb, cameras[ref].K, depth_ref,
+                                           prepared[v].rgb, cameras[v].K, prepared[v].depth)
+            if found is not None and (best is None or found.inliers > best[1].inliers):
+                best = (ref, found)
+        if best is None:
+            continue
+        ref, fb = best
+        cam_ref = cameras[ref]
+        cameras[v] = replace(cameras[v], R=fb.R @ cam_ref.R, t=fb.R @ cam_ref.t + fb.t)
+        alignments[v] = ScaleAlignment(scale=fb.depth_scale_j, num_points=fb.matches,
+                                       num_inliers=fb.inliers, residual=float("nan"),
+                                       relative_residual=float("nan"))
+        registration[v] = {"method": "fallback", "reference": frames[ref].name,
+                           "inliers": fb.inliers, "matches": fb.matches,
+                           "estimator": "essential matrix (OpenCV USAC MAGSAC++) with the "
+                                        "baseline from the reference view's depth"}
+    sfm = replace(sfm, cameras=cameras, registration=registration)
+    keep = [v for v, r in enumerate(registration) if r["method"] != "none"]
+    unregistered = [frames[v].name for v, r in enumerate(registration) if r["method"] == "none"]
+    if len(keep) < 2:
+        raise InvalidInput(f"only {len(keep)} of {len(frames)} images could be registered "
+                           f"({', '.join(unregistered)} could not); a scene needs two")
+    if unregistered:
+        print(f"monoplane: warning: {len(unregistered)} of {len(frames)} images could not be "
+              f"registered and are left out: {', '.join(unregistered)}", file=sys.stderr)
+    sfm = subset_sfm(sfm, keep)
+    prepared = [prepared[v] for v in keep]
+    aligns = [alignments[v] for v in keep]
+
     metric = all(f.depth_kind == "metric" for f in prepared)
     units = prepared[0].depth_units if metric and len(
         {f.depth_units for f in prepared}) == 1 else "sfm"
     world_factor = 1.0
     if units != "sfm":
         # Depth is metric: express the SfM world in the depth's unit instead of the reverse.
-        world_factor = float(np.median([1.0 / a.scale for a in alignments]))
+        world_factor = float(np.median([1.0 / a.scale for a in aligns]))
         sfm = scale_sfm(sfm, world_factor)
-    alignments = [replace(a, scale=a.scale * world_factor, residual=a.residual * world_factor)
-                  for a in alignments]
-    scales = [a.scale for a in alignments]
+    aligns = [replace(a, scale=a.scale * world_factor, residual=a.residual * world_factor)
+              for a in aligns]
+    scales = [a.scale for a in aligns]
     aligned = [
         f.with_(depth=(f.depth * s).astype(np.float32), depth_units=units,
                 notes=[*f.notes, f"depth scaled by {s:.6g} onto the SfM points "
                        f"({a.num_inliers}/{a.num_points} inliers)"])
-        for f, s, a in zip(prepared, scales, alignments, strict=True)
+        for f, s, a in zip(prepared, scales, aligns, strict=True)
     ]
     timings["alignment"] = time.perf_counter() - t0
 
-    views: list[Reconstruction] = []
     t0 = time.perf_counter()
-    for f in tqdm(aligned, desc="single-view planes", disable=not progress, leave=False):
-        views.append(pipe.segment(f))
+    views: list[Reconstruction] = map_views(segment_view, config, aligned, workers)
     timings["single_view"] = time.perf_counter() - t0
 
     fuser = pipe.stage("fuser", Fuser)
-    # Fusers that can report their plane correspondences do so through fuse_with_matches.
-    with_matches = getattr(fuser, "fuse_with_matches", None)
-    plane_matches: list[Any] = []
-    if with_matches is not None:
-        scene, plane_matches = pipe.call("fuser", fuser.name, lambda: with_matches(views, sfm),
-                                         "multiview", timings)
-    else:
-        scene = pipe.call("fuser", fuser.name, lambda: fuser.fuse(views, sfm), "multiview",
-                          timings)
+    scene, plane_matches = pipe.call("fuser", fuser.name,
+                                     lambda: fuser.fuse_with_matches(views, sfm), "multiview",
+                                     timings)
     scene.scales = scales
+    fused = scene
+    adjuster = pipe.stage("adjuster", Adjuster)
+    scene, sfm, adjustment = pipe.call("adjuster", adjuster.name,
+                                       lambda: adjuster.adjust(scene, sfm), "multiview",
+                                       timings)
     timings["total"] = time.perf_counter() - start
-    return MultiviewResult(scene=scene, sfm=sfm, alignments=alignments,
+    return MultiviewResult(scene=scene, sfm=sfm, alignments=aligns,
                            plane_matches=plane_matches, units=units, timings=timings,
-                           config=pipe.config.to_dict())
+                           config=config, frame_indices=keep,
+                           registration=[registration[v] for v in keep],
+                           unregistered=unregistered, adjustment=adjustment, fused=fused)
 
 
 # --------------------------------------------------------------------------------------------
 # Writers
 
 
-def cameras_document(cameras: list[Camera]) -> dict:
-    """``cameras.json`` content: ``{"cameras": [{"image", "K", "R", "t", "width", "height"}]}``.
+def cameras_document(cameras: list[Camera], registration: list[dict] | None = None,
+                     unregistered: list[str] | None = None) -> dict:
+    """``cameras.json`` content: ``{"cameras": [{"image", "K", "R", "t", "width", "height",
+    "registration"}], "unregistered": [...]}``.
 
-    Poses are world-to-camera, ``x_cam = R x_world + t``, OpenCV axes.
+    Poses are world-to-camera, ``x_cam = R x_world + t``, OpenCV axes. ``registration`` says
+    how each pose was found: ``{"method": "sfm"}`` or ``{"method": "fallback", "reference",
+    "inliers", ...}``.
     """
-    return {
+    doc = {
         "cameras": [{
             "image": c.name,
             "K": np.asarray(c.K).tolist(),
@@ -211,10 +381,13 @@ def cameras_document(cameras: list[Camera]) -> dict:
             "t": np.asarray(c.t).tolist(),
             "width": int(c.width),
             "height": int(c.height),
-        } for c in cameras],
+            "registration": dict(registration[k]) if registration else {"method": "sfm"},
+        } for k, c in enumerate(cameras)],
+        "unregistered": list(unregistered or []),
         "convention": "world-to-camera: x_cam = R x_world + t; camera axes x right, y down, "
                       "z forward (OpenCV); pixel centres at integer coordinates",
     }
+    return doc
 
 
 def write_points_ply(path: Path, points: np.ndarray, colors: np.ndarray | None = None) -> None:
@@ -245,7 +418,11 @@ def save_sfm(sfm: SfmResult, out_dir: str | Path, overwrite: bool = False) -> Pa
     from monoplane.io import atomic_output_dir
 
     with atomic_output_dir(out_dir, overwrite) as tmp:
-        doc = cameras_document(sfm.cameras)
+        keep = [v for v, ok in enumerate(sfm.registered) if ok]
+        doc = cameras_document([sfm.cameras[v] for v in keep],
+                               [sfm.registration[v] for v in keep] if sfm.registration else None,
+                               [c.name for c, ok in zip(sfm.cameras, sfm.registered,
+                                                        strict=True) if not ok])
         doc["num_points"] = int(len(sfm.points))
         doc["matches"] = [{"images": [sfm.cameras[i].name, sfm.cameras[j].name],
                            "verified_matches": int(len(m))}
@@ -256,15 +433,14 @@ def save_sfm(sfm: SfmResult, out_dir: str | Path, overwrite: bool = False) -> Pa
     return Path(out_dir)
 
 
-def scene_plane_polygons(scene: Scene, step: int = 2, max_cells: int = 512
-                         ) -> list[tuple[int, np.ndarray]]:
-    """Outline polygons of every global plane: the union of its views' masks on the fused plane.
+def scene_mesh(scene: Scene, step: int = 2, max_cells: int = 512) -> PlaneMesh:
+    """Every global plane's surface: the union of its views' masks on the fused plane.
 
     Every ``step``-th mask pixel of each linked view plane is lifted along its ray onto the
     fused plane (pixels whose lifted depth disagrees with the view's own plane by more than a
-    factor 2 are dropped, which removes grazing-angle slivers). The union is rasterised in
-    plane coordinates at about the pixel footprint, closed morphologically, and its outer
-    contours are simplified.
+    factor 2 are dropped, which removes grazing-angle slivers). The union is triangulated by
+    :func:`~monoplane.geometry.polygons.points_plane_mesh` at about the pixel footprint, holes
+    left open.
 
     Parameters
     ----------
@@ -277,8 +453,8 @@ def scene_plane_polygons(scene: Scene, step: int = 2, max_cells: int = 512
 
     Returns
     -------
-    list of (int, numpy.ndarray)
-        ``(global_id, (V, 3) world vertices)``, possibly several polygons per plane.
+    PlaneMesh
+        World-frame triangles; ``plane_ids`` are global plane ids (0-based, as in scene.json).
     """
     from monoplane.types import pixel_rays
 
@@ -287,60 +463,28 @@ def scene_plane_polygons(scene: Scene, step: int = 2, max_cells: int = 512
         for local, glob in table.items():
             members.setdefault(glob, []).append((v, local))
     rays_cache: dict[int, np.ndarray] = {}
-    out = []
+    parts = []
     for g, plane in enumerate(scene.planes):
-        n = plane[:3] / np.linalg.norm(plane[:3])
-        e1, e2 = plane_basis(n)
-        origin = -plane[3] * n
-        coords, footprints = [], []
+        points, footprints = [], []
         for v, local in members.get(g, []):
             rec, cam = scene.views[v], scene.cameras[v]
             if v not in rays_cache:
                 rays_cache[v] = pixel_rays(cam.K, cam.height, cam.width)[::step, ::step]
             mask = rec.labels[::step, ::step] == local
             rays = rays_cache[v][mask]
-            pc = plane_to_camera(plane, cam.R, cam.t)[0]
-            own = rec.params[local - 1]
-            with np.errstate(divide="ignore", invalid="ignore"):
-                z = -pc[3] / (rays @ pc[:3])
-                z_own = -own[3] / (rays @ own[:3])
-            ok = np.isfinite(z) & (z > 0) & np.isfinite(z_own) & (z_own > 0)
-            ok &= (z < 2 * z_own) & (z_own < 2 * z)
+            z = ray_plane_depth(rays, plane_to_camera(plane, cam.R, cam.t)[0])
+            z_own = ray_plane_depth(rays, rec.params[local - 1])
+            ok = (z > 0) & (z_own > 0) & (z < 2 * z_own) & (z_own < 2 * z)
             if not np.any(ok):
                 continue
             x_cam = rays[ok] * z[ok, None]
-            x_world = (x_cam - cam.t) @ cam.R
-            rel = x_world - origin
-            coords.append(np.stack([rel @ e1, rel @ e2], axis=1))
+            points.append((x_cam - cam.t) @ cam.R)
             footprints.append(np.median(z[ok]) * step / cam.K[0, 0])
-        if not coords:
-            continue
-        uv = np.concatenate(coords)
-        lo, hi = uv.min(axis=0), uv.max(axis=0)
-        cell = max(float(np.median(footprints)), float((hi - lo).max()) / max_cells, 1e-12)
-        ij = np.floor((uv - lo) / cell).astype(np.int64) + 2
-        shape = (int(ij[:, 1].max()) + 3, int(ij[:, 0].max()) + 3)
-        grid = np.zeros(shape, np.uint8)
-        grid[ij[:, 1], ij[:, 0]] = 1
-        grid = cv2.morphologyEx(grid, cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8))
-        contours, _ = cv2.findContours(grid, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
-        for contour in contours:
-            poly = cv2.approxPolyDP(contour, 1.0, True).reshape(-1, 2).astype(np.float64)
-            if len(poly) < 3:
-                continue
-            a, b = (poly[:, 0] - 2 + 0.5) * cell + lo[0], (poly[:, 1] - 2 + 0.5) * cell + lo[1]
-            out.append((g, origin + a[:, None] * e1 + b[:, None] * e2))
-    return out
-
-
-def scene_triangles(scene: Scene, colors: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Every global plane's outline polygons, triangulated, as ``(vertices (3, 3), colour)``.
-
-    Concave outlines are split into triangles so that any PLY reader (Open3D included) can load
-    the mesh; triangles wind counter-clockwise around the fused plane's normal.
-    """
-    return [(tri, colors[g]) for g, verts in scene_plane_polygons(scene)
-            for tri in triangulate_on_plane(verts, scene.planes[g, :3])]
+        if points:
+            verts, tris = points_plane_mesh(np.concatenate(points), plane,
+                                            float(np.median(footprints)), max_cells=max_cells)
+            parts.append((g, verts, tris))
+    return PlaneMesh.concatenate(parts)
 
 
 def scene_plane_colors(scene: Scene) -> np.ndarray:
@@ -363,10 +507,12 @@ def scene_document(result: MultiviewResult) -> dict:
     """``scene.json`` content."""
     scene = result.scene
     colors = scene_plane_colors(scene)
-    cams = cameras_document(scene.cameras)["cameras"]
+    cams = cameras_document(scene.cameras, result.registration)["cameras"]
     for v, cam in enumerate(cams):
         a = result.alignments[v]
         cam["view_folder"] = f"view_{v:03d}"
+        if result.frame_indices:
+            cam["input_index"] = int(result.frame_indices[v])
         cam["depth_scale"] = float(scene.scales[v]) if scene.scales else None
         cam["alignment"] = {"num_points": a.num_points, "num_inliers": a.num_inliers,
                             "residual": a.residual, "relative_residual": a.relative_residual}
@@ -391,21 +537,39 @@ def scene_document(result: MultiviewResult) -> dict:
                       "= 0, each normal facing the first camera that sees the plane; "
                       "x_cam = R x_world + t with OpenCV camera axes; local_id is the view's "
                       "labels.png value",
+        "unregistered": list(result.unregistered),
+        "adjustment": result.adjustment,
         "notes": list(result.sfm.notes),
         "timings_s": {k: round(float(v), 4) for k, v in result.timings.items()},
         "config": result.config,
     }
 
 
+def global_label_map(labels: np.ndarray, links: dict[int, int]) -> np.ndarray:
+    """(H, W) uint16 map of global plane ids + 1 (0 = non-planar) from a view's local labels."""
+    lut = np.zeros(int(labels.max()) + 1, dtype=np.uint16)
+    for local, glob in links.items():
+        if local < len(lut):
+            lut[local] = glob + 1
+    return lut[labels]
+
+
+def write_global_labels(path: Path, labels: np.ndarray, links: dict[int, int]) -> None:
+    """Write ``labels_global.png``: 16-bit PNG, value = global plane id + 1, 0 = non-planar."""
+    cv2.imwrite(str(path), global_label_map(labels, links))
+
+
 def save_scene(result: MultiviewResult, out_dir: str | Path, overwrite: bool = False,
                report: bool = False) -> Path:
     """Write a multi-view result atomically into ``out_dir``.
 
-    Layout: ``view_000/`` ... (the single-view outputs of each view), ``scene.json``,
-    ``scene.ply`` (each global plane's coloured outline, triangulated), ``cameras.json`` and
-    ``points.ply`` (sparse SfM points); with ``report``, ``report.html`` and its figures.
+    Layout: ``view_000/`` ... (the single-view outputs of each registered view, plus
+    ``labels_global.png``: global plane id + 1 per pixel, 16-bit), ``scene.json``,
+    ``scene.ply`` (each global plane's coloured surface, triangulated with holes open),
+    ``cameras.json`` and ``points.ply`` (sparse SfM points); with ``report``, ``report.html``
+    and its figures.
     """
-    from monoplane.io import atomic_output_dir, write_polygon_ply, write_reconstruction_files
+    from monoplane.io import atomic_output_dir, write_plane_mesh_ply, write_reconstruction_files
 
     scene = result.scene
     with atomic_output_dir(out_dir, overwrite) as tmp:
@@ -413,10 +577,11 @@ def save_scene(result: MultiviewResult, out_dir: str | Path, overwrite: bool = F
             folder = tmp / f"view_{v:03d}"
             folder.mkdir()
             write_reconstruction_files(rec, folder)
+            write_global_labels(folder / "labels_global.png", rec.labels, scene.links[v])
         (tmp / "scene.json").write_text(json.dumps(scene_document(result), indent=2) + "\n")
         colors = scene_plane_colors(scene)
-        write_polygon_ply(tmp / "scene.ply", scene_triangles(scene, colors))
-        cams = cameras_document(scene.cameras)
+        write_plane_mesh_ply(tmp / "scene.ply", scene_mesh(scene), colors, first_id=0)
+        cams = cameras_document(scene.cameras, result.registration, result.unregistered)
         (tmp / "cameras.json").write_text(json.dumps(cams, indent=2) + "\n")
         write_points_ply(tmp / "points.ply", result.sfm.points, result.sfm.colors)
         if report:

@@ -23,10 +23,14 @@ EPILOG = """examples:
   monoplane eval --preset monoplane --set labeler.lambda=0.9 --level strong --json out.json
   monoplane eval --all --n 50 --report eval_report/
   monoplane eval --multiview --n 10
+  monoplane eval --data abw-dev/ --preset range --baseline cgal
+  monoplane eval --data abw-dev/ --as-cloud --preset cloud
+  monoplane eval --multiview --views 5 --path walk --n 10
 
 Scene i uses seed SEED+i, so equal arguments give equal tables (timings aside). Baselines come
-from the built-in table (open3d-ransac) and the 'monoplane.baselines' entry-point group (e.g.
-the optional monoplane-cgal-baseline package adds 'cgal'). See docs/evaluation.md."""
+registered through the 'monoplane_register_baselines' plugin hook: open3d-ransac is built in,
+installed plugins add more (--all scores every one). 's/frame' is the whole call, 'core s' a
+baseline's own call without data conversion when it reports one. See docs/evaluation.md."""
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -52,7 +56,21 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     data.add_argument("--size", default="256x192", metavar="WxH",
                       help="image size (default: 256x192, the paper's)")
     data.add_argument("--multiview", action="store_true",
-                      help="two-view evaluation: relative pose error and plane AP")
+                      help="two-view evaluation: relative pose error and plane AP; with "
+                           "--views N > 2, N-view synthetic sequences")
+    data.add_argument("--data", metavar="DIR",
+                      help="score real frames instead: a folder of frame folders with "
+                           "gt_labels.png and depth (VOI, RI, SC and SegComp counts)")
+    data.add_argument("--as-cloud", action="store_true",
+                      help="with --data: run presets through detect_planes on the frames' "
+                           "shuffled 3D points")
+    data.add_argument("--tolerance", type=float, default=0.8,
+                      help="with --data: SegComp overlap tolerance T (default: 0.8)")
+    data.add_argument("--views", type=int, default=2, metavar="N",
+                      help="with --multiview: views per sequence (default: 2, the pair "
+                           "protocol)")
+    data.add_argument("--path", default="walk", choices=("walk", "star"),
+                      help="with --multiview --views N > 2: camera path (default: walk)")
     out = p.add_argument_group("outputs")
     out.add_argument("--json", metavar="FILE", help="also write every score as JSON")
     out.add_argument("--report", metavar="DIR", help="also write an HTML report into DIR")
@@ -89,6 +107,21 @@ def _run_multiview(args: argparse.Namespace, size: tuple[int, int]) -> int:
                               "overrides": args.overrides or None}
     if args.presets:
         kwargs["preset"] = args.presets[0]
+    if args.views < 2:
+        raise InvalidInput(f"--views must be at least 2, got {args.views}")
+    if args.views > 2:
+        from monoplane.evaluation import sequences
+
+        res = sequences.evaluate_sequences(args.n, args.views, args.path, args.level,
+                                           args.seed, not args.no_progress, **kwargs)
+        print(sequences.format_sequences(res))
+        if args.json:
+            _write_json(args.json, {"settings": {"level": args.level, "n": args.n,
+                                                 "seed": args.seed, "width": size[0],
+                                                 "height": size[1], "views": args.views,
+                                                 "path": args.path, "multiview": True},
+                                    **res})
+        return 0
     results = twoview.evaluate_pairs(args.n, args.level, args.seed, not args.no_progress,
                                      **kwargs)
     print(twoview.format_twoview(results))
@@ -113,8 +146,28 @@ def _write_report(results: Any, methods: list[Any], out_dir: str, progress: bool
     print(f"report written to {path}", file=sys.stderr)
 
 
+def _run_dataset(args: argparse.Namespace) -> int:
+    from monoplane.evaluation.dataset import evaluate_dataset, format_dataset_table
+
+    if args.multiview or args.all_methods or args.report:
+        raise InvalidInput("--data scores --preset/--baseline methods; drop --multiview, --all "
+                           "and --report")
+    results = evaluate_dataset(args.data, args.presets, args.baselines, args.overrides or None,
+                               as_cloud=args.as_cloud, tolerance=args.tolerance,
+                               seed=args.seed, progress=not args.no_progress)
+    print(format_dataset_table(results))
+    if args.json:
+        _write_json(args.json, results.to_dict())
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     from monoplane.evaluation.runner import evaluate, format_table, parse_size, resolve_methods
+
+    if args.data:
+        return _run_dataset(args)
+    if args.as_cloud:
+        raise InvalidInput("--as-cloud needs --data DIR")
 
     size = parse_size(args.size)
     if args.n < 1:

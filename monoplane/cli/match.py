@@ -36,15 +36,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from monoplane.errors import InvalidInput
-    from monoplane.multiview import save_sfm
+    from monoplane.multiview import hold_intrinsics_fixed, save_sfm
     from monoplane.stages.base import Matcher
 
     check_output_dir(args.out, args.overwrite)  # fail before any work
     if len(args.images) < 2:
         raise InvalidInput(f"match needs at least 2 images, got {len(args.images)}")
-    if args.intrinsics:
-        args.overrides = [*args.overrides, "matcher.fixed_intrinsics=true"]
     pipe = pipeline_from_args(args)
+    if args.intrinsics and not hold_intrinsics_fixed(pipe) and not args.quiet:
+        print(f"monoplane: note: matcher '{pipe.config.stages['matcher'][0]}' cannot hold "
+              "intrinsics fixed; --intrinsics is its starting guess", file=sys.stderr)
     frames = [load_frame(img, intrinsics=args.intrinsics) for img in args.images]
     matcher = pipe.stage("matcher", Matcher)
     timings: dict[str, float] = {}
@@ -53,6 +54,11 @@ def run(args: argparse.Namespace) -> int:
     if not args.quiet:
         pairs = ", ".join(f"{sfm.cameras[i].name}-{sfm.cameras[j].name}: {len(m)}"
                           for (i, j), m in sorted(sfm.matches.items()))
-        print(f"{sfm.num_views} cameras, {len(sfm.points)} points, verified matches {pairs} "
+        missing = [c.name for c, ok in zip(sfm.cameras, sfm.registered, strict=True) if not ok]
+        if missing:
+            print(f"monoplane: warning: could not register {', '.join(missing)}",
+                  file=sys.stderr)
+        print(f"{sfm.num_views - len(missing)} cameras, {len(sfm.points)} points, "
+              f"verified matches {pairs} "
               f"in {timings['matcher']:.2f} s -> {out}", file=sys.stdout)
     return 0

@@ -15,7 +15,13 @@ points, single-view planes per image, then plane matching and fusion into global
 Writes into --out: view_000/, view_001/, ... (the single-view outputs of each image, planes in
 that camera's frame), scene.json (cameras and global planes in the SfM world frame, with the
 links from view planes to global planes), scene.ply (one coloured polygon per global plane),
-cameras.json and points.ply (sparse SfM points).
+cameras.json and points.ply (sparse SfM points). Each view folder also holds
+labels_global.png (global plane id + 1 per pixel).
+
+Images that structure from motion cannot register are tried with a fallback two-view pose
+(essential matrix + monocular depth, marked "fallback" in cameras.json); those that still fail
+are left out, named in a warning and in scene.json ("unregistered"). --strict makes that an
+error instead.
 
 --depth/--normals, when given, take one file per image, in image order."""
 
@@ -39,6 +45,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="the given depths are correct only up to scale")
     add_pipeline_args(p)
     add_output_args(p)
+    p.add_argument("--strict", action="store_true",
+                   help="fail when any image cannot be registered (default: reconstruct the "
+                        "registered ones and name the others in scene.json and a warning)")
+    p.add_argument("--workers", type=int, metavar="N",
+                   help="processes for the per-view stages (default: the available CPUs)")
     p.add_argument("--quiet", action="store_true", help="no progress bars or summary")
     p.set_defaults(func=run)
 
@@ -55,7 +66,7 @@ def _per_image(files: list[str] | None, n: int, what: str) -> list[str | None]:
 
 def run(args: argparse.Namespace) -> int:
     from monoplane.errors import InvalidInput
-    from monoplane.multiview import reconstruct_multiview, save_scene
+    from monoplane.multiview import hold_intrinsics_fixed, reconstruct_multiview, save_scene
 
     check_output_dir(args.out, args.overwrite)  # fail before any work
     n = len(args.images)
@@ -63,9 +74,12 @@ def run(args: argparse.Namespace) -> int:
         raise InvalidInput(f"multiview needs at least 2 images, got {n}")
     depths = _per_image(args.depth, n, "--depth")
     normals = _per_image(args.normals, n, "--normals")
-    if args.intrinsics:
-        args.overrides = [*args.overrides, "matcher.fixed_intrinsics=true"]
+    if args.workers is not None and args.workers < 1:
+        raise InvalidInput(f"--workers must be at least 1, got {args.workers}")
     pipe = pipeline_from_args(args)
+    if args.intrinsics and not hold_intrinsics_fixed(pipe) and not args.quiet:
+        print(f"monoplane: note: matcher '{pipe.config.stages['matcher'][0]}' cannot hold "
+              "intrinsics fixed; --intrinsics is its starting guess", file=sys.stderr)
     frames = [
         load_frame(img, depth=d, normals=nm, intrinsics=args.intrinsics,
                    depth_scale=args.depth_scale,
@@ -78,11 +92,20 @@ def run(args: argparse.Namespace) -> int:
     if not args.quiet and not args.intrinsics:
         print("monoplane: note: intrinsics not given: the focal length is estimated by SfM "
               "from a 60 degree field-of-view start", file=sys.stderr)
-    result = reconstruct_multiview(frames, pipe, progress=not args.quiet)
+    result = reconstruct_multiview(frames, pipe, progress=not args.quiet, strict=args.strict,
+                                   workers=args.workers)
     out = save_scene(result, args.out, overwrite=args.overwrite, report=args.report)
     if not args.quiet:
         scene = result.scene
         per_view = ", ".join(str(v.num_planes) for v in scene.views)
+        adj = result.adjustment
+        refined = ""
+        if adj.get("before"):
+            refined = (f", refinement: point-to-plane {adj['before']['plane_rms_rel']:.4f} -> "
+                       f"{adj['after']['plane_rms_rel']:.4f} (relative RMS), reprojection "
+                       f"{adj['before']['reprojection_rms_px']:.2f} -> "
+                       f"{adj['after']['reprojection_rms_px']:.2f} px")
         print(f"{scene.planes.shape[0]} global planes from {per_view} view planes, "
-              f"{len(result.sfm.points)} SfM points, {result.timings['total']:.2f} s -> {out}")
+              f"{len(result.sfm.points)} SfM points{refined}, {result.timings['total']:.2f} s "
+              f"-> {out}")
     return 0

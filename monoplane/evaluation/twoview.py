@@ -357,14 +357,14 @@ def evaluate_pairs(n: int = 20, level: str = "mild", seed: int = 0, progress: bo
     """
     from tqdm import tqdm
 
-    from monoplane.multiview import reconstruct_multiview
+    from monoplane.multiview import hold_intrinsics_fixed, reconstruct_multiview
     from monoplane.pipeline import Pipeline
     from monoplane.synth import generate
 
     if n < 1:
         raise InvalidInput(f"n must be at least 1, got {n}")
-    pipe = Pipeline.from_preset(preset, overrides=[
-        "cues.plugin=given", "matcher.fixed_intrinsics=true", *(overrides or [])])
+    pipe = Pipeline.from_preset(preset, overrides=["cues.plugin=given", *(overrides or [])])
+    hold_intrinsics_fixed(pipe)
     res = TwoViewResults(n_pairs=n, registered=0)
     judged_all, judged_ok = [], []
     for k in tqdm(range(n), desc="two-view pairs", disable=not progress):

@@ -254,35 +254,44 @@ def fuse_planes(planes: np.ndarray) -> np.ndarray:
     return np.concatenate([fused, [float(np.mean(signs * d))]])
 
 
-class UnionFind:
-    """Disjoint sets over hashable items (used to group matched view planes)."""
+def consistent_groups(node_views: np.ndarray, edges: np.ndarray,
+                      strengths: np.ndarray) -> list[list[int]]:
+    """Group matched view planes into global planes, never two planes of one view together.
 
-    def __init__(self) -> None:
-        self._parent: dict = {}
+    Edges are merged greedily, strongest first (Kruskal-style); an edge whose two groups
+    already hold planes of a common view is skipped, so every group has at most one plane per
+    view. A weak wrong match therefore cannot chain two planes of one view into one global
+    plane, which a plain transitive closure would do.
 
-    def add(self, item: object) -> None:
-        """Make ``item`` a singleton set unless already present."""
-        self._parent.setdefault(item, item)
+    Parameters
+    ----------
+    node_views : numpy.ndarray
+        (N,) int view index of each node (view plane).
+    edges : numpy.ndarray
+        (E, 2) int node index pairs (accepted plane matches).
+    strengths : numpy.ndarray
+        (E,) float match strength, larger is more certain.
 
-    def find(self, item: object) -> object:
-        """Representative of ``item``'s set (with path halving)."""
-        parent = self._parent
-        while parent[item] != item:
-            parent[item] = parent[parent[item]]
-            item = parent[item]
-        return item
+    Returns
+    -------
+    list of list of int
+        Node indices of each group, every group sorted, groups ordered by their first node.
+    """
+    from scipy.cluster.hierarchy import DisjointSet
 
-    def union(self, a: object, b: object) -> None:
-        """Merge the sets of ``a`` and ``b``."""
-        self.add(a)
-        self.add(b)
-        ra, rb = self.find(a), self.find(b)
-        if ra != rb:
-            self._parent[rb] = ra
-
-    def groups(self) -> list[list]:
-        """All sets, each listed in insertion order, ordered by their first item."""
-        out: dict = {}
-        for item in self._parent:
-            out.setdefault(self.find(item), []).append(item)
-        return list(out.values())
+    node_views = np.asarray(node_views, dtype=np.int64).reshape(-1)
+    edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    strengths = np.asarray(strengths, dtype=np.float64).reshape(-1)
+    if len(edges) != len(strengths):
+        raise InvalidInput(f"{len(edges)} edges but {len(strengths)} strengths")
+    sets = DisjointSet(range(len(node_views)))
+    views: dict[int, set[int]] = {k: {int(v)} for k, v in enumerate(node_views)}
+    for e in np.argsort(-strengths, kind="stable"):
+        a, b = int(sets[int(edges[e, 0])]), int(sets[int(edges[e, 1])])
+        if a == b or views[a] & views[b]:
+            continue
+        sets.merge(a, b)
+        root = int(sets[a])
+        views[root] = views.pop(a if root == b else b) | views[root]
+    groups = [sorted(int(k) for k in subset) for subset in sets.subsets()]
+    return sorted(groups, key=lambda g: g[0])

@@ -29,7 +29,7 @@ if TYPE_CHECKING:
 
 #: Stage kinds, in pipeline order; each is also the name of its config table.
 STAGE_KINDS: tuple[str, ...] = (
-    "cues", "sampler", "scorer", "labeler", "refiner", "matcher", "fuser",
+    "cues", "sampler", "scorer", "labeler", "refiner", "matcher", "fuser", "adjuster",
 )
 
 
@@ -42,6 +42,12 @@ def param(default: Any, doc: str, **kwargs: Any) -> Any:
         return field(default_factory=lambda: type(default)(default), metadata={"doc": doc},
                      **kwargs)
     return field(default=default, metadata={"doc": doc}, **kwargs)
+
+
+def config_key(f: dataclasses.Field) -> str:
+    """User-facing key of a config field: a Python keyword is spelled with a trailing
+    underscore in the dataclass (``lambda_``) and without it in configs (``lambda``)."""
+    return f.name[:-1] if f.name.endswith("_") else f.name
 
 
 @dataclass
@@ -99,7 +105,10 @@ class Stage:
 
     @classmethod
     def parameters(cls) -> list[tuple[str, str, Any, str]]:
-        """``(name, type, default, doc)`` for each config field, for listings and docs."""
+        """``(key, type, default, doc)`` for each config field, for listings and docs.
+
+        ``key`` is what a config or ``--set`` names (see :func:`config_key`).
+        """
         rows = []
         for f in dataclasses.fields(cls.Config):
             if f.default is not dataclasses.MISSING:
@@ -109,14 +118,25 @@ class Stage:
             else:
                 default = None
             type_name = f.type if isinstance(f.type, str) else getattr(f.type, "__name__", "")
-            rows.append((f.name, type_name, default, f.metadata.get("doc", "")))
+            rows.append((config_key(f), type_name, default, f.metadata.get("doc", "")))
         return rows
 
 
 class CueProvider(Stage):
-    """Fills depth, normals (and possibly intrinsics) of a frame."""
+    """Fills depth, normals (and possibly intrinsics) of a frame.
+
+    The pipeline calls :meth:`provide` only for frames that :meth:`needs_cues`; a frame that
+    already has depth and normals (RGB-D with normals, precomputed cues, synthetic scenes) goes
+    through :func:`monoplane.cues.given.use_given_cues` instead, whatever provider the config
+    names, so host code never has to switch providers for such frames.
+    """
 
     kind = "cues"
+
+    def needs_cues(self, frame: Frame) -> bool:
+        """Whether this provider has work to do on the frame (default: depth or normals
+        missing). Override to also process complete frames (e.g. to recompute normals)."""
+        return frame.depth is None or frame.normals is None
 
     def provide(self, frame: Frame) -> Frame:
         """Return a frame with ``depth`` and ``normals`` set.
@@ -219,13 +239,43 @@ class Labeler(Stage):
 
 
 class Refiner(Stage):
-    """Refines the multi-plane label map at image level."""
+    """Refines the multi-plane labelling.
+
+    A refiner that works on the pixel grid (``needs_pixels = True``, the default) only has
+    :meth:`refine`; a refiner that needs no image sets ``needs_pixels = False`` and also
+    implements :meth:`refine_cloud`, which is what :func:`monoplane.detect_planes` calls on
+    point clouds. The host rejects a pixel refiner on a cloud with a clear error.
+    """
 
     kind = "refiner"
+    #: True when the refiner works on the image grid and so cannot refine a bare point cloud.
+    needs_pixels: ClassVar[bool] = True
 
     def refine(self, rec: Reconstruction) -> Reconstruction:
         """Return a refined reconstruction (labels, and params refit on the final masks)."""
         raise NotImplementedError
+
+    def refine_cloud(self, cloud: PlaneCloud, graph: NeighbourGraph, labels: np.ndarray,
+                     planes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Refine per-point labels of a normalised cloud (refiners with ``needs_pixels=False``).
+
+        Parameters
+        ----------
+        cloud : PlaneCloud
+            Normalised oriented cloud (N points, unit sphere).
+        graph : NeighbourGraph
+            kNN graph over ``cloud.points``.
+        labels : numpy.ndarray
+            (N,) int32 RANSAC labels, 0 = non-planar, ``i`` = ``planes[i - 1]``.
+        planes : numpy.ndarray
+            (P, 4) unit-normal planes in the normalised frame.
+
+        Returns
+        -------
+        labels, planes : numpy.ndarray
+            Refined (N,) int32 labels 0..P' and (P', 4) planes, same frame.
+        """
+        raise NotImplementedError(f"refiner '{self.name}' works on images only")
 
 
 class Matcher(Stage):
@@ -234,8 +284,23 @@ class Matcher(Stage):
     kind = "matcher"
 
     def match(self, frames: list[Frame]) -> SfmResult:
-        """Cameras, sparse points and pairwise keypoint matches for ``frames``."""
+        """Cameras, sparse points and pairwise keypoint matches for ``frames``.
+
+        A matcher that cannot register every frame may mark those frames ``{"method": "none"}``
+        in the result's ``registration`` (their cameras are then placeholders); the driver
+        tries its fallback pose on them or reconstructs the registered views only.
+        """
         raise NotImplementedError
+
+    @classmethod
+    def fixed_intrinsics_config(cls, config: Any) -> Any | None:
+        """This matcher's config changed to hold every frame's ``K`` fixed, or None.
+
+        The host calls it when the user gives calibrated intrinsics. The default says the
+        matcher cannot hold intrinsics fixed (None); a matcher that can returns a copy of
+        ``config`` with that option set, leaving ``config`` itself unchanged.
+        """
+        return None
 
 
 class Fuser(Stage):
@@ -245,4 +310,41 @@ class Fuser(Stage):
 
     def fuse(self, views: list[Reconstruction], sfm: SfmResult) -> Scene:
         """Fuse scale-aligned per-view reconstructions into a :class:`~monoplane.types.Scene`."""
+        raise NotImplementedError
+
+    def fuse_with_matches(self, views: list[Reconstruction],
+                          sfm: SfmResult) -> tuple[Scene, list[Any]]:
+        """:meth:`fuse`, also returning the plane correspondences it accepted.
+
+        The host calls this one. Each correspondence has attributes ``view_i``, ``plane_i``,
+        ``view_j``, ``plane_j`` (1-based local ids) and ``criterion`` (a short string); they are
+        written to ``scene.json``. The default returns no correspondences.
+        """
+        return self.fuse(views, sfm), []
+
+
+class Adjuster(Stage):
+    """Jointly refines the cameras, per-view depth scales and global planes of a fused scene."""
+
+    kind = "adjuster"
+
+    def adjust(self, scene: Scene, sfm: SfmResult) -> tuple[Scene, SfmResult, dict[str, Any]]:
+        """Refine a fused scene.
+
+        Parameters
+        ----------
+        scene : Scene
+            Fused scene: cameras (world-to-camera), per-view reconstructions whose ``frame``
+            holds the scale-aligned depth, global planes and the view-to-global links.
+        sfm : SfmResult
+            The sparse model the scene was built on (same cameras, world frame and units).
+
+        Returns
+        -------
+        (Scene, SfmResult, dict)
+            The refined scene (cameras, view depths and plane parameters rescaled by the
+            refined per-view scales, global planes), the SfM result with the refined cameras
+            and points, and a JSON-serialisable report (at least ``"before"`` and ``"after"``
+            residual summaries; empty when nothing was done).
+        """
         raise NotImplementedError

@@ -14,7 +14,7 @@ import numpy as np
 
 from monoplane.errors import InvalidInput
 from monoplane.geometry.plane_matching import (
-    UnionFind,
+    consistent_groups,
     fuse_planes,
     keypoint_counts,
     keypoint_plane_matches,
@@ -48,13 +48,19 @@ class AverageConfig:
 
 @dataclass
 class PlaneMatch:
-    """One accepted correspondence between planes of two views (1-based local ids)."""
+    """One accepted correspondence between planes of two views (1-based local ids).
+
+    ``strength`` orders matches when global planes are formed: ``1 + share`` for keypoint
+    matches (``share`` the smaller of the two mutual keypoint shares, so any keypoint match
+    outranks any reprojection match) and the IoU score for reprojection matches.
+    """
 
     view_i: int
     plane_i: int
     view_j: int
     plane_j: int
     criterion: str
+    strength: float = 1.0
 
 
 class AverageFuser(Fuser):
@@ -94,17 +100,23 @@ class AverageFuser(Fuser):
                     f"is {cam.width}x{cam.height}"
                 )
         matches = self.match_planes(views, sfm)
-        groups = UnionFind()
-        for v, rec in enumerate(views):
-            for local in range(1, rec.num_planes + 1):
-                groups.add((v, local))
-        for m in matches:
-            groups.union((m.view_i, m.plane_i), (m.view_j, m.plane_j))
+        nodes = [(v, local) for v, rec in enumerate(views)
+                 for local in range(1, rec.num_planes + 1)]
+        index = {node: k for k, node in enumerate(nodes)}
+        edges = np.array([(index[(m.view_i, m.plane_i)], index[(m.view_j, m.plane_j)])
+                          for m in matches], dtype=np.int64).reshape(-1, 2)
+        groups = consistent_groups(np.array([v for v, _ in nodes], dtype=np.int64), edges,
+                                   np.array([m.strength for m in matches]))
+        # Report only the matches the consistent grouping kept.
+        group_of = {nodes[k]: g for g, members in enumerate(groups) for k in members}
+        matches = [m for m in matches
+                   if group_of[(m.view_i, m.plane_i)] == group_of[(m.view_j, m.plane_j)]]
 
         world = [plane_to_world(rec.params, cam.R, cam.t) if rec.num_planes else
                  np.zeros((0, 4)) for rec, cam in zip(views, sfm.cameras, strict=True)]
         planes, links = [], [dict() for _ in views]
-        for members in groups.groups():
+        for group in groups:
+            members = [nodes[k] for k in group]
             fused = fuse_planes(np.array([world[v][local - 1] for v, local in members]))
             first = sfm.cameras[members[0][0]]
             if fused[:3] @ first.center + fused[3] < 0:
@@ -133,26 +145,32 @@ class AverageFuser(Fuser):
                     continue
                 ci, cj = sfm.cameras[i], sfm.cameras[j]
                 angles = normal_angles_deg(a.params[:, :3] @ ci.R, b.params[:, :3] @ cj.R)
-                found: dict[tuple[int, int], str] = {}
+                found: dict[tuple[int, int], tuple[str, float]] = {}
                 pairs = sfm.matches.get((i, j))
                 if cfg.use_keypoints and pairs is not None and len(pairs):
                     counts = keypoint_counts(a.labels, b.labels, sfm.keypoints[i],
                                              sfm.keypoints[j], pairs)
+                    rows = np.maximum(counts[1:, 1:].sum(axis=1), 1)
+                    cols = np.maximum(counts[1:, 1:].sum(axis=0), 1)
                     for p, q in keypoint_plane_matches(counts, cfg.min_keypoint_matches,
                                                        cfg.mutual_ratio):
-                        found[(int(p), int(q))] = "keypoints"
+                        c = counts[p, q]
+                        share = min(c / rows[p - 1], c / cols[q - 1])
+                        found[(int(p), int(q))] = ("keypoints", 1.0 + float(share))
                 if cfg.use_reprojection:
                     R_ji, t_ji = relative_pose(ci.R, ci.t, cj.R, cj.t)
                     iou_ij = reprojection_iou(a.labels, a.params, ci.K, b.labels, cj.K, R_ji,
                                               t_ji, self._step(b))
                     iou_ji = reprojection_iou(b.labels, b.params, cj.K, a.labels, ci.K,
                                               R_ji.T, -R_ji.T @ t_ji, self._step(a))
+                    score = np.maximum(iou_ij, iou_ji.T)
                     for p, q in reprojection_plane_matches(iou_ij, iou_ji,
                                                            cfg.min_reprojection_iou):
-                        found.setdefault((int(p), int(q)), "reprojection")
-                for (p, q), criterion in found.items():
+                        found.setdefault((int(p), int(q)),
+                                         ("reprojection", float(score[p - 1, q - 1])))
+                for (p, q), (criterion, strength) in found.items():
                     if angles[p - 1, q - 1] <= cfg.max_normal_angle_deg:
-                        out.append(PlaneMatch(i, p, j, q, criterion))
+                        out.append(PlaneMatch(i, p, j, q, criterion, strength))
         return out
 
     def _step(self, rec: Reconstruction) -> int:

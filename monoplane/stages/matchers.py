@@ -12,7 +12,7 @@ import contextlib
 import shutil
 import tempfile
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import cv2
@@ -73,6 +73,11 @@ class ColmapMatcher(Matcher):
 
     name = "colmap"
     Config = ColmapConfig
+
+    @classmethod
+    def fixed_intrinsics_config(cls, config: ColmapConfig) -> ColmapConfig:
+        """``config`` with ``fixed_intrinsics`` set: COLMAP holds PINHOLE cameras fixed."""
+        return replace(config, fixed_intrinsics=True)
 
     def match(self, frames: list[Frame]) -> SfmResult:
         """Reconstruct cameras and sparse points of ``frames``.
@@ -150,8 +155,43 @@ class ColmapMatcher(Matcher):
         matching.num_threads = int(cfg.num_threads)
         pycolmap.match_exhaustive(database, matching_options=matching, device=pycolmap.Device.cpu)
         matches = self._read_matches(database, names, ids)
-        self._check_connectivity(frames, matches)
+        if not any(len(m) >= cfg.min_num_matches for m in matches.values()):
+            counts = ", ".join(f"{frames[i].name}-{frames[j].name}: {len(p)}"
+                               for (i, j), p in matches.items())
+            raise SfmError(f"no image pair has the {cfg.min_num_matches} verified matches "
+                           f"structure from motion needs ({counts}); the images overlap too "
+                           "little or are too textureless")
+        model, attempts = self._map_with_retries(database, images, work, matches, len(frames))
+        if model is None:
+            best = max((len(m) for m in matches.values()), default=0)
+            raise SfmError(
+                "incremental mapping found no initial image pair: the best pair has "
+                f"{best} verified matches but too little parallax (the camera moved too "
+                "little for the scene depth) or too few inliers; use overlapping views taken "
+                "further apart"
+            )
+        result = self._to_result(model, frames, names, matches)
+        result.notes.append(
+            "intrinsics fixed to the given K" if cfg.fixed_intrinsics
+            else "focal length estimated by bundle adjustment"
+        )
+        if attempts > 1:
+            result.notes.append(f"registration needed {attempts} mapping attempts")
+        missing = [f.name for f, ok in zip(frames, result.registered, strict=True) if not ok]
+        if missing:
+            groups = self._components(len(frames), matches)
+            apart = [frames[i].name for i in range(len(frames))
+                     if not result.registered[i] and groups[i] != groups[
+                         int(np.flatnonzero(result.registered)[0])]]
+            why = f" ({', '.join(apart)} share too few matches with the rest)" if apart else ""
+            result.notes.append(f"COLMAP could not register {', '.join(missing)}{why}")
+        return result
 
+    def _options(self, relaxed: bool) -> object:
+        """Incremental-mapping options; ``relaxed`` lowers the image-registration thresholds."""
+        import pycolmap
+
+        cfg = self.config
         options = pycolmap.IncrementalPipelineOptions()
         options.min_model_size = 2
         options.min_num_matches = int(cfg.min_num_matches)
@@ -164,24 +204,84 @@ class ColmapMatcher(Matcher):
         options.ba_refine_extra_params = False
         options.ba_refine_focal_length = not cfg.fixed_intrinsics
         options.mapper.abs_pose_refine_focal_length = not cfg.fixed_intrinsics
-        output = work / "sparse"
-        output.mkdir()
-        models = pycolmap.incremental_mapping(database, images, output, options=options)
-        if not models:
-            best = max((len(m) for m in matches.values()), default=0)
-            raise SfmError(
-                "incremental mapping found no initial image pair: the best pair has "
-                f"{best} verified matches but too little parallax (the camera moved too "
-                "little for the scene depth) or too few inliers; use overlapping views taken "
-                "further apart"
-            )
-        model = max(models.values(), key=lambda m: m.num_reg_images())
-        result = self._to_result(model, frames, names, matches)
-        result.notes.append(
-            "intrinsics fixed to the given K" if cfg.fixed_intrinsics
-            else "focal length estimated by bundle adjustment"
-        )
-        return result
+        if relaxed:
+            # Small or low-texture views see few of the model's points: accept a pose from
+            # fewer 2D-3D inliers, and let the mapper try each view more often.
+            options.mapper.abs_pose_min_num_inliers = 12
+            options.mapper.abs_pose_min_inlier_ratio = 0.1
+            options.mapper.max_reg_trials = 6
+            options.mapper.init_min_num_inliers = 50
+            options.structure_less_registration_fallback = True
+        return options
+
+    def _map_with_retries(self, database: Path, images: Path, work: Path,
+                          matches: dict[tuple[int, int], np.ndarray],
+                          n: int) -> tuple[object | None, int]:
+        """Incremental mapping that tries harder when views are left out.
+
+        1. COLMAP's defaults. 2. If views are missing, continue from that model with relaxed
+        registration thresholds, so left-over views are re-attempted against the grown
+        model. 3. If views are still missing (or there was no model), map afresh from a
+        second initial pair: the best-matched pair that involves a missing view. The model
+        with the most registered views wins.
+
+        Returns
+        -------
+        (pycolmap.Reconstruction or None, int)
+            The best model and the number of mapping runs.
+        """
+        import pycolmap
+
+        def run(tag: str, options: object, input_path: Path | None = None) -> object | None:
+            out = work / f"sparse_{tag}"
+            out.mkdir()
+            kwargs = {"input_path": input_path} if input_path is not None else {}
+            models = pycolmap.incremental_mapping(database, images, out, options=options,
+                                                  **kwargs)
+            if not models:
+                return None
+            best = max(models.values(), key=lambda m: m.num_reg_images())
+            best_dir = out / "best"
+            best_dir.mkdir()
+            best.write(best_dir)
+            return best, best_dir
+
+        def count(entry: object | None) -> int:
+            return entry[0].num_reg_images() if entry is not None else 0
+
+        attempts = 1
+        best = run("a", self._options(relaxed=False))
+        if count(best) < n and best is not None:
+            attempts += 1
+            grown = run("b", self._options(relaxed=True), best[1])
+            if count(grown) > count(best):
+                best = grown
+        if count(best) < n:
+            db = pycolmap.Database.open(database)
+            try:
+                ids = {img.name: img.image_id for img in db.read_all_images()}
+            finally:
+                db.close()
+            names_by_id = {i: name for name, i in ids.items()}
+            registered = set()
+            if best is not None:
+                registered = {names_by_id[i] for i in best[0].reg_image_ids()}
+            order = sorted(matches.items(), key=lambda kv: -len(kv[1]))
+            for (i, j), pairs in order:
+                if len(pairs) < self.config.min_num_matches:
+                    break
+                name_i, name_j = f"{i:04d}.png", f"{j:04d}.png"
+                if name_i in registered and name_j in registered:
+                    continue
+                attempts += 1
+                options = self._options(relaxed=True)
+                options.init_image_id1 = int(ids[name_i])
+                options.init_image_id2 = int(ids[name_j])
+                second = run(f"c{attempts}", options)
+                if count(second) > count(best):
+                    best = second
+                break
+        return (best[0] if best is not None else None), attempts
 
     def _camera_groups(self, frames: list[Frame]) -> list[tuple[list[int], str, str]]:
         """Frames that share one COLMAP camera, with its model and parameter string."""
@@ -230,45 +330,22 @@ class ColmapMatcher(Matcher):
             db.close()
         return out
 
-    def _check_connectivity(self, frames: list[Frame],
-                            matches: dict[tuple[int, int], np.ndarray]) -> None:
-        """Fail early, naming the images, when the match graph cannot link every view."""
+    def _components(self, n: int, matches: dict[tuple[int, int], np.ndarray]) -> np.ndarray:
+        """(n,) component label of each view in the graph of pairs with enough matches."""
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import connected_components
+
         need = self.config.min_num_matches
-        parent = list(range(len(frames)))
-
-        def root(i: int) -> int:
-            while parent[i] != i:
-                i = parent[i]
-            return i
-
-        for (i, j), pairs in matches.items():
-            if len(pairs) >= need:
-                parent[root(i)] = root(j)
-        groups: dict[int, list[str]] = {}
-        for i, f in enumerate(frames):
-            groups.setdefault(root(i), []).append(f.name)
-        if len(groups) > 1:
-            counts = ", ".join(
-                f"{frames[i].name}-{frames[j].name}: {len(p)}" for (i, j), p in matches.items()
-            )
-            parts = " | ".join(", ".join(g) for g in groups.values())
-            raise SfmError(
-                f"too few verified matches to connect all images (need {need} per pair; "
-                f"{counts}); disconnected groups: {parts}"
-            )
+        pairs = np.array([key for key, m in matches.items() if len(m) >= need],
+                         dtype=np.int64).reshape(-1, 2)
+        graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+        return connected_components(graph, directed=False)[1]
 
     @staticmethod
     def _to_result(model: object, frames: list[Frame], names: list[str],
                    matches: dict[tuple[int, int], np.ndarray]) -> SfmResult:
         """Convert a pycolmap reconstruction to an :class:`SfmResult` in input order."""
-        by_name = {img.name: img for img in model.images.values()}
-        missing = [f.name for name, f in zip(names, frames, strict=True) if name not in by_name
-                   or not by_name[name].has_pose]
-        if missing:
-            raise SfmError(
-                f"could not register {len(missing)} of {len(frames)} images: "
-                f"{', '.join(missing)}; they overlap too little with the others"
-            )
+        by_name = {img.name: img for img in model.images.values() if img.has_pose}
         point_rows: dict[int, int] = {}
         xyz, rgb = [], []
         for pid, point in model.points3D.items():
@@ -276,8 +353,18 @@ class ColmapMatcher(Matcher):
             xyz.append(point.xyz)
             rgb.append(point.color)
         cameras, keypoints, point_ids = [], [], []
+        registration = []
         for name, f in zip(names, frames, strict=True):
-            img = by_name[name]
+            img = by_name.get(name)
+            if img is None:
+                # Placeholder camera (identity pose, the frame's K), marked unregistered.
+                cameras.append(Camera(K=f.K, R=np.eye(3), t=np.zeros(3), width=f.width,
+                                      height=f.height, name=f.name))
+                keypoints.append(np.zeros((0, 2)))
+                point_ids.append(np.zeros(0, np.int64))
+                registration.append({"method": "none"})
+                continue
+            registration.append({"method": "sfm"})
             cam = model.cameras[img.camera_id]
             K = cam.calibration_matrix()
             K = intrinsics_matrix(K[0, 0], K[1, 1], K[0, 2] - _COLMAP_PIXEL_OFFSET,
@@ -291,6 +378,10 @@ class ColmapMatcher(Matcher):
             point_ids.append(np.array(
                 [point_rows.get(p.point3D_id, -1) if p.has_point3D() else -1 for p in pts2d],
                 dtype=np.int64))
+        # Keypoints of unregistered views are not in the model: drop their matches.
+        usable = [r["method"] != "none" for r in registration]
+        matches = {(i, j): (m if usable[i] and usable[j] else np.zeros((0, 2), np.int64))
+                   for (i, j), m in matches.items()}
         return SfmResult(
             cameras=cameras,
             points=np.array(xyz, dtype=np.float64).reshape(-1, 3),
@@ -298,6 +389,7 @@ class ColmapMatcher(Matcher):
             point_ids=point_ids,
             matches=matches,
             colors=np.array(rgb, dtype=np.uint8).reshape(-1, 3),
+            registration=registration,
         )
 
 

@@ -23,9 +23,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from monoplane.errors import InvalidInput
+from monoplane.geometry.camera import look_at
 from monoplane.synth.corrupt import corrupt
 from monoplane.synth.render import make_raycaster, render_view, world_planes
-from monoplane.synth.scene import build_layout, extra_camera, look_at
+from monoplane.synth.scene import WORLD_UP, Layout, build_layout, extra_camera
 from monoplane.types import Frame, intrinsics_matrix
 
 LEVELS: tuple[str, ...] = ("clean", "mild", "strong")
@@ -123,6 +124,18 @@ def generate(seed: int, level: str = "mild", width: int = 256, height: int = 192
     InvalidInput
         On an unknown level or out-of-range argument.
     """
+    check_arguments(seed, level, width, height, n_views)
+    seed = int(seed)
+
+    layout = build_layout(np.random.default_rng([seed, _STREAM_LAYOUT]))
+    poses = [look_at(layout.camera_center, layout.camera_target, WORLD_UP)]
+    cam_rng = np.random.default_rng([seed, _STREAM_CAMERAS])
+    poses += [extra_camera(layout, cam_rng) for _ in range(n_views - 1)]
+    return render_scene(layout, poses, seed, level, width, height)
+
+
+def check_arguments(seed: int, level: str, width: int, height: int, n_views: int) -> None:
+    """Raise :class:`InvalidInput` on an unknown level or out-of-range argument."""
     if level not in LEVELS:
         raise InvalidInput(f"unknown synth level {level!r}; choose one of {', '.join(LEVELS)}")
     if int(seed) != seed or seed < 0:
@@ -131,12 +144,29 @@ def generate(seed: int, level: str = "mild", width: int = 256, height: int = 192
         raise InvalidInput(f"image size must be at least 16x16, got {width}x{height}")
     if n_views < 1:
         raise InvalidInput(f"n_views must be at least 1, got {n_views}")
-    seed = int(seed)
 
-    layout = build_layout(np.random.default_rng([seed, _STREAM_LAYOUT]))
-    poses = [look_at(layout.camera_center, layout.camera_target)]
-    cam_rng = np.random.default_rng([seed, _STREAM_CAMERAS])
-    poses += [extra_camera(layout, cam_rng) for _ in range(n_views - 1)]
+
+def render_scene(layout: Layout, poses: list[tuple[np.ndarray, np.ndarray]], seed: int,
+                 level: str, width: int, height: int) -> SynthScene:
+    """Render ``layout`` from the given world-to-camera ``poses`` with corrupted cues.
+
+    Parameters
+    ----------
+    layout : Layout
+        The furnished room.
+    poses : list of (R, t)
+        (3, 3) and (3,) world-to-camera pose of each view.
+    seed : int
+        Seed of the sensor-noise and cue-corruption streams.
+    level : str
+        Corruption level.
+    width, height : int
+        Image size in pixels.
+
+    Returns
+    -------
+    SynthScene
+    """
     f = 0.5 * width / math.tan(math.radians(layout.hfov_deg) / 2)
     K = intrinsics_matrix(f, f, (width - 1) / 2.0, (height - 1) / 2.0)
 

@@ -11,8 +11,8 @@ from monoplane.geometry.cloud import (
     nearest_true_pixel,
 )
 from monoplane.geometry.graph import NeighbourGraph
+from monoplane.testing import ROOM, room_cues
 from monoplane.types import Frame, intrinsics_matrix, pixel_rays
-from tests.conftest import ROOM, room_cues
 
 K = intrinsics_matrix(40.0, 40.0, 15.5, 11.5)
 

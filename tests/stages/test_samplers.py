@@ -10,7 +10,7 @@ from monoplane.stages.samplers import (
     UniformSampler,
     _consistent,
 )
-from tests.conftest import cloud_from_arrays
+from monoplane.testing import cloud_from_arrays
 
 
 @pytest.fixture

@@ -1,0 +1,130 @@
+"""Fallback relative pose of two views that structure from motion could not connect.
+
+SIFT keypoints (OpenCV) matched with Lowe's ratio test and a mutual check, then an essential
+matrix with OpenCV's USAC MAGSAC++ and the cheirality check (``recoverPose``) give the rotation
+and the translation direction. The translation's length, which two views alone cannot give,
+comes from the monocular depth: the inliers triangulated with a unit baseline are compared with
+the reference view's scale-aligned depth at the same pixels (median ratio), and the second
+view's own depth scale follows from the same points seen from it.
+
+Frames: ``x_j = R x_i + t`` with OpenCV camera axes; pixel centres at integer coordinates.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from monoplane.geometry.alignment import sample_depth
+
+
+@dataclass(frozen=True)
+class FallbackPose:
+    """Result of :func:`fallback_relative_pose`.
+
+    Attributes
+    ----------
+    R, t : numpy.ndarray
+        (3, 3), (3,) pose of view ``j`` relative to view ``i`` (``x_j = R x_i + t``), ``t`` in
+        the units of the reference depth.
+    depth_scale_j : float
+        Factor bringing view ``j``'s depth into the same units.
+    inliers : int
+        Essential-matrix inliers used.
+    matches : int
+        Putative matches before the robust fit.
+    """
+
+    R: np.ndarray
+    t: np.ndarray
+    depth_scale_j: float
+    inliers: int
+    matches: int
+
+
+def _gray(rgb: np.ndarray) -> np.ndarray:
+    return cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2GRAY)
+
+
+def match_sift(rgb_i: np.ndarray, rgb_j: np.ndarray, ratio: float = 0.8,
+               max_features: int = 4000) -> tuple[np.ndarray, np.ndarray]:
+    """Mutual ratio-test SIFT matches between two images.
+
+    Returns
+    -------
+    (numpy.ndarray, numpy.ndarray)
+        (m, 2) float64 pixel coordinates ``(u, v)`` in view ``i`` and in view ``j``.
+    """
+    sift = cv2.SIFT_create(nfeatures=max_features)
+    kp_i, des_i = sift.detectAndCompute(_gray(rgb_i), None)
+    kp_j, des_j = sift.detectAndCompute(_gray(rgb_j), None)
+    if des_i is None or des_j is None or len(kp_i) < 2 or len(kp_j) < 2:
+        return np.zeros((0, 2)), np.zeros((0, 2))
+    bf = cv2.BFMatcher(cv2.NORM_L2)
+    fwd = bf.knnMatch(des_i, des_j, k=2)
+    back = {m.queryIdx: m.trainIdx for m in bf.match(des_j, des_i)}
+    pairs = [(m.queryIdx, m.trainIdx) for m, n in (p for p in fwd if len(p) == 2)
+             if m.distance < ratio * n.distance and back.get(m.trainIdx) == m.queryIdx]
+    if not pairs:
+        return np.zeros((0, 2)), np.zeros((0, 2))
+    idx = np.array(pairs)
+    pi = np.array([kp_i[k].pt for k in idx[:, 0]], dtype=np.float64)
+    pj = np.array([kp_j[k].pt for k in idx[:, 1]], dtype=np.float64)
+    return pi, pj
+
+
+def fallback_relative_pose(rgb_i: np.ndarray, K_i: np.ndarray, depth_i: np.ndarray,
+                           rgb_j: np.ndarray, K_j: np.ndarray, depth_j: np.ndarray,
+                           min_inliers: int = 15) -> FallbackPose | None:
+    """Relative pose of view ``j`` to view ``i`` from an essential matrix and monocular depth.
+
+    Parameters
+    ----------
+    rgb_i, rgb_j : numpy.ndarray
+        (H, W, 3) uint8 images.
+    K_i, K_j : numpy.ndarray
+        (3, 3) intrinsics.
+    depth_i : numpy.ndarray
+        (H_i, W_i) z-depth of view ``i`` in the target units (0 = invalid).
+    depth_j : numpy.ndarray
+        (H_j, W_j) z-depth of view ``j`` in any scale (0 = invalid).
+    min_inliers : int
+        Fewest essential-matrix inliers (with valid depth in both views) accepted.
+
+    Returns
+    -------
+    FallbackPose or None
+        None when the views share too few consistent matches.
+    """
+    pi, pj = match_sift(rgb_i, rgb_j)
+    if len(pi) < max(min_inliers, 5):
+        return None
+    ni = cv2.undistortPoints(pi.reshape(-1, 1, 2), K_i, None).reshape(-1, 2)
+    nj = cv2.undistortPoints(pj.reshape(-1, 1, 2), K_j, None).reshape(-1, 2)
+    focal = 0.5 * (K_i[0, 0] + K_j[0, 0])
+    E, mask = cv2.findEssentialMat(ni, nj, np.eye(3), method=cv2.USAC_MAGSAC, prob=0.999,
+                                   threshold=1.0 / focal)
+    if E is None or E.shape != (3, 3):
+        return None
+    _, R, t, mask = cv2.recoverPose(E, ni, nj, np.eye(3), mask=mask)
+    inl = mask.reshape(-1) > 0
+    if inl.sum() < min_inliers:
+        return None
+    t = t.reshape(3)
+    P_i = np.hstack([np.eye(3), np.zeros((3, 1))])
+    P_j = np.hstack([R, t[:, None]])
+    X = cv2.triangulatePoints(P_i, P_j, ni[inl].T, nj[inl].T)
+    X = (X[:3] / X[3]).T                              # camera i, unit baseline
+    z_i = X[:, 2]
+    z_j = (X @ R.T + t)[:, 2]
+    d_i = sample_depth(depth_i, pi[inl])
+    d_j = sample_depth(depth_j, pj[inl])
+    ok = (z_i > 0) & (z_j > 0) & (d_i > 0) & (d_j > 0)
+    if ok.sum() < min_inliers:
+        return None
+    baseline = float(np.median(d_i[ok] / z_i[ok]))
+    scale_j = float(np.median(baseline * z_j[ok] / d_j[ok]))
+    return FallbackPose(R=R, t=t * baseline, depth_scale_j=scale_j, inliers=int(ok.sum()),
+                        matches=int(len(pi)))

@@ -1,0 +1,142 @@
+"""Built-in adjusters: joint plane–camera refinement of a fused multi-view scene.
+
+``plane-ba`` refines camera poses, per-view depth scales, global planes and the sparse SfM
+points together (:mod:`monoplane.geometry.plane_adjustment`): SfM reprojection errors plus the
+point-to-plane distances of a subsample of each view's plane pixels to their global plane.
+``none`` leaves the scene as fused (the paper stops there).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from monoplane.geometry.plane_adjustment import AdjustmentProblem, adjust
+from monoplane.geometry.plane_matching import fuse_planes
+from monoplane.hookspecs import hookimpl
+from monoplane.stages.base import Adjuster, Stage, param
+from monoplane.types import Scene, SfmResult, pixel_rays, plane_to_camera, plane_to_world
+
+
+@dataclass
+class PlaneBundleConfig:
+    """Parameters of the ``plane-ba`` adjuster."""
+
+    samples_per_plane: int = param(
+        64, "plane pixels sampled per view plane for the point-to-plane term")
+    sigma_px: float = param(1.0, "expected SfM reprojection noise (pixels)")
+    sigma_rel: float = param(
+        0.03, "expected relative depth noise of plane pixels (point-to-plane term weight)")
+    multi_view_only: bool = param(
+        True, "refine only global planes seen in two or more views (others follow their view)")
+    max_evaluations: int = param(60, "cap on the solver's residual evaluations")
+    seed: int = param(0, "seed of the plane-pixel subsampling")
+
+
+class NoAdjuster(Adjuster):
+    """Leave the fused scene unchanged (the paper's sparse-view pipeline)."""
+
+    name = "none"
+
+    def adjust(self, scene: Scene, sfm: SfmResult) -> tuple[Scene, SfmResult, dict[str, Any]]:
+        """Return the inputs unchanged and an empty report."""
+        return scene, sfm, {}
+
+
+class PlaneBundleAdjuster(Adjuster):
+    """Least squares over poses, depth scales, global planes and points (sparse Jacobian)."""
+
+    name = "plane-ba"
+    Config = PlaneBundleConfig
+
+    def adjust(self, scene: Scene, sfm: SfmResult) -> tuple[Scene, SfmResult, dict[str, Any]]:
+        """Refine ``scene``; see :meth:`monoplane.stages.base.Adjuster.adjust`."""
+        cfg = self.config
+        n_views = len(scene.cameras)
+        if n_views < 2 or scene.planes.shape[0] == 0:
+            return scene, sfm, {}
+        members: dict[int, list[tuple[int, int]]] = {}
+        for v, table in enumerate(scene.links):
+            for local, glob in table.items():
+                members.setdefault(glob, []).append((v, local))
+        refined = sorted(g for g, m in members.items()
+                         if len(m) >= (2 if cfg.multi_view_only else 1))
+        row = {g: k for k, g in enumerate(refined)}
+        rng = np.random.default_rng(cfg.seed)
+        samp_view, samp_plane, samp_x = [], [], []
+        for v, (rec, cam) in enumerate(zip(scene.views, scene.cameras, strict=True)):
+            depth = rec.frame.depth
+            rays = None
+            for local, glob in scene.links[v].items():
+                if glob not in row:
+                    continue
+                idx = np.flatnonzero((rec.labels.ravel() == local) & (depth.ravel() > 0))
+                if len(idx) == 0:
+                    continue
+                if rays is None:
+                    rays = pixel_rays(cam.K, cam.height, cam.width).reshape(-1, 3)
+                pick = rng.choice(idx, size=min(cfg.samples_per_plane, len(idx)), replace=False)
+                samp_x.append(rays[pick] * depth.ravel()[pick, None])
+                samp_view.append(np.full(len(pick), v))
+                samp_plane.append(np.full(len(pick), row[glob]))
+        obs_view, obs_point, obs_uv = [], [], []
+        for v in range(n_views):
+            ids = sfm.point_ids[v]
+            ok = ids >= 0
+            obs_view.append(np.full(int(ok.sum()), v))
+            obs_point.append(ids[ok])
+            obs_uv.append(sfm.keypoints[v][ok])
+        prob = AdjustmentProblem(
+            K=np.stack([c.K for c in scene.cameras]), R=np.stack([c.R for c in scene.cameras]),
+            t=np.stack([c.t for c in scene.cameras]), points=sfm.points.copy(),
+            obs_view=np.concatenate(obs_view).astype(np.int64),
+            obs_point=np.concatenate(obs_point).astype(np.int64),
+            obs_uv=np.concatenate(obs_uv).reshape(-1, 2),
+            planes=scene.planes[refined].copy(),
+            samp_view=np.concatenate(samp_view or [np.zeros(0)]).astype(np.int64),
+            samp_plane=np.concatenate(samp_plane or [np.zeros(0)]).astype(np.int64),
+            samp_x=np.concatenate(samp_x or [np.zeros((0, 3))]).reshape(-1, 3),
+            sigma_px=cfg.sigma_px, sigma_rel=cfg.sigma_rel,
+        )
+        res = adjust(prob, max_evaluations=cfg.max_evaluations)
+
+        cameras = [replace(c, R=res.R[v], t=res.t[v]) for v, c in enumerate(scene.cameras)]
+        views = []
+        for v, rec in enumerate(scene.views):
+            s = float(res.scales[v])
+            frame = rec.frame.with_(depth=(rec.frame.depth * s).astype(np.float32))
+            params = rec.params.copy()
+            params[:, 3] *= s
+            views.append(replace(rec, frame=frame, params=params))
+        planes = scene.planes.copy()
+        planes[refined] = res.planes
+        for g, mem in members.items():
+            if g in row:
+                continue
+            # Planes left out of the solve follow their views' new poses and scales.
+            world = np.array([plane_to_world(views[v].params[local - 1], cameras[v].R,
+                                             cameras[v].t).reshape(4) for v, local in mem])
+            planes[g] = fuse_planes(world)
+        for g in range(planes.shape[0]):
+            first = cameras[members[g][0][0]] if g in members else cameras[0]
+            if plane_to_camera(planes[g], first.R, first.t).reshape(4)[3] < 0:
+                planes[g] = -planes[g]
+        scales = list(scene.scales) if scene.scales else [1.0] * n_views
+        scales = [float(a * b) for a, b in zip(scales, res.scales, strict=True)]
+        new_scene = replace(scene, cameras=cameras, views=views, planes=planes, scales=scales,
+                            points=res.points)
+        new_sfm = replace(sfm, cameras=[replace(c, R=res.R[v], t=res.t[v])
+                                        for v, c in enumerate(sfm.cameras)],
+                          points=res.points)
+        report = {"before": res.before, "after": res.after, "converged": res.success,
+                  "message": res.message, "planes_refined": len(refined),
+                  "depth_scale_factors": [float(s) for s in res.scales]}
+        return new_scene, new_sfm, report
+
+
+@hookimpl
+def monoplane_register_adjusters() -> list[type[Stage]]:
+    """Register the built-in adjusters."""
+    return [NoAdjuster, PlaneBundleAdjuster]

@@ -1,0 +1,81 @@
+"""Joint plane-camera refinement recovers perturbed poses, scales and planes (known answer)."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from monoplane.geometry.plane_adjustment import AdjustmentProblem, adjust
+from monoplane.synth.scene import look_at
+from monoplane.types import intrinsics_matrix
+
+
+def _problem(rng: np.random.Generator, n_views: int = 4):
+    """Three orthogonal planes (floor, two walls) seen by a few cameras; exact data."""
+    K = intrinsics_matrix(200.0, 200.0, 127.5, 95.5)
+    planes = np.array([[0, 0, 1, 0.0], [1, 0, 0, 0.0], [0, 1, 0, 0.0]])
+    poses = [look_at(np.array([3.0 + 0.3 * k, 2.5 - 0.2 * k, 1.5]), np.array([0.5, 0.5, 0.5]))
+             for k in range(n_views)]
+    R = np.stack([p[0] for p in poses])
+    t = np.stack([p[1] for p in poses])
+    # Points on the planes, seen by every camera.
+    pts = []
+    for g in range(3):
+        uv = rng.uniform(0.2, 2.0, size=(40, 2))
+        p = np.zeros((40, 3))
+        free = [a for a in range(3) if a != np.argmax(planes[g, :3])]
+        p[:, free] = uv
+        pts.append(p)
+    points = np.concatenate(pts)
+    obs_view, obs_point, obs_uv = [], [], []
+    samp_view, samp_plane, samp_x = [], [], []
+    for v in range(n_views):
+        xc = points @ R[v].T + t[v]
+        uvw = xc @ K.T
+        obs_view.append(np.full(len(points), v))
+        obs_point.append(np.arange(len(points)))
+        obs_uv.append(uvw[:, :2] / uvw[:, 2:])
+        samp_view.append(np.full(len(points), v))
+        samp_plane.append(np.repeat(np.arange(3), 40))
+        samp_x.append(xc)
+    return dict(K=np.stack([K] * n_views), R=R, t=t, points=points,
+                obs_view=np.concatenate(obs_view), obs_point=np.concatenate(obs_point),
+                obs_uv=np.concatenate(obs_uv), planes=planes,
+                samp_view=np.concatenate(samp_view), samp_plane=np.concatenate(samp_plane),
+                samp_x=np.concatenate(samp_x))
+
+
+def test_recovers_perturbed_poses_scales_and_planes() -> None:
+    rng = np.random.default_rng(0)
+    truth = _problem(rng)
+    n = len(truth["R"])
+    true_scale = np.array([1.0, 1.15, 0.9, 1.05])
+    bad = dict(truth)
+    # Depth of view v is off by 1/true_scale: the solver must find the scale back.
+    bad["samp_x"] = truth["samp_x"] / true_scale[truth["samp_view"], None]
+    noise = Rotation.from_rotvec(rng.normal(0, 0.01, (n, 3))).as_matrix()
+    noise[0] = np.eye(3)
+    bad["R"] = noise @ truth["R"]
+    bad["t"] = truth["t"] + np.vstack([np.zeros(3), rng.normal(0, 0.03, (n - 1, 3))])
+    bad["points"] = truth["points"] + rng.normal(0, 0.02, truth["points"].shape)
+    normals = truth["planes"][:, :3] + rng.normal(0, 0.03, (3, 3))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    bad["planes"] = np.concatenate([normals, truth["planes"][:, 3:] + 0.05], axis=1)
+    res = adjust(AdjustmentProblem(**bad), max_evaluations=200, loss="linear")
+    assert res.after["reprojection_rms_px"] < 1e-3 < res.before["reprojection_rms_px"]
+    assert res.after["plane_rms_rel"] < 1e-4 < res.before["plane_rms_rel"]
+    np.testing.assert_allclose(res.scales, true_scale, rtol=1e-4)
+    for v in range(n):
+        angle = np.linalg.norm(Rotation.from_matrix(res.R[v] @ truth["R"][v].T).as_rotvec())
+        assert angle < 1e-4
+        np.testing.assert_allclose(res.t[v], truth["t"][v], atol=1e-4)
+    np.testing.assert_allclose(res.planes, truth["planes"], atol=1e-4)
+
+
+def test_exact_problem_stays_put_and_view_zero_is_fixed() -> None:
+    truth = _problem(np.random.default_rng(1), n_views=2)
+    res = adjust(AdjustmentProblem(**truth))
+    assert res.before["reprojection_rms_px"] < 1e-9
+    np.testing.assert_allclose(res.R[0], truth["R"][0])
+    np.testing.assert_allclose(res.t[0], truth["t"][0])
+    np.testing.assert_allclose(res.scales, [1.0, 1.0], atol=1e-9)
