@@ -22,8 +22,8 @@ import pluggy
 if TYPE_CHECKING:
     from collections.abc import Callable
 
+    from monoplane.datamodel import Reconstruction
     from monoplane.stages.base import Stage
-    from monoplane.types import Reconstruction
 
 PROJECT_NAME = "monoplane"
 
@@ -33,7 +33,7 @@ hookimpl = pluggy.HookimplMarker(PROJECT_NAME)
 
 @hookspec
 def monoplane_register_cue_providers() -> list[type[Stage]]:
-    """Cue providers: fill a :class:`~monoplane.types.Frame`'s depth, normals and intrinsics.
+    """Cue providers: fill a :class:`~monoplane.datamodel.Frame`'s depth, normals and intrinsics.
 
     Config table ``[cues]``. Contract: :class:`monoplane.stages.base.CueProvider`.
     """
@@ -81,7 +81,7 @@ def monoplane_register_matchers() -> list[type[Stage]]:
 
 @hookspec
 def monoplane_register_fusers() -> list[type[Stage]]:
-    """Fusers of per-view planes into a global planar :class:`~monoplane.types.Scene`.
+    """Fusers of per-view planes into a global planar :class:`~monoplane.datamodel.Scene`.
 
     Config table ``[fuser]``. Contract: :class:`monoplane.stages.base.Fuser`.
     """

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from monoplane.datamodel import Frame, Reconstruction, intrinsics_matrix, pixel_rays
 from monoplane.errors import InvalidInput
 from monoplane.regions import (
     absorb_small_regions,
@@ -18,7 +19,6 @@ from monoplane.regions import (
     scene_radius,
     split_components,
 )
-from monoplane.types import Frame, Reconstruction, intrinsics_matrix, pixel_rays
 
 # Label 1 has two regions touching only at a corner (joined by 8- but not by 4-connectivity)
 # plus a separate region on the right; label 2 has two regions; 0 is non-planar. New labels go

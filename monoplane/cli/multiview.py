@@ -6,7 +6,7 @@ import argparse
 import sys
 
 from monoplane.cli.common import add_output_args, add_pipeline_args, pipeline_from_args
-from monoplane.io import check_output_dir, load_frame
+from monoplane.fileio import check_output_dir, load_frame
 
 DESCRIPTION = """Sparse-view planar reconstruction (MonoPlane §III-C): structure from motion
 (pycolmap SIFT, CPU), monocular cues per image, scale alignment of each depth onto the SfM

@@ -11,7 +11,7 @@ from monoplane.cli.common import (
     pipeline_from_args,
 )
 from monoplane.cli.models import prepare_cue_model
-from monoplane.io import check_output_dir, load_frame, save_reconstruction
+from monoplane.fileio import check_output_dir, load_frame, save_reconstruction
 
 DESCRIPTION = """Recover the planes of one image and write labels.png (uint16, 0 = non-planar),
 planes.json (normal . X + offset = 0 in the camera frame and the depth's units), planes.ply,

@@ -1,7 +1,7 @@
 """External plane-detection baselines for ``monoplane eval`` and ``monoplane bench``.
 
 A *baseline* is a callable ``baseline(frame, *, seed=0) -> Reconstruction``: it receives the
-same cue-filled :class:`~monoplane.types.Frame` (depth, normals, intrinsics; OpenCV camera axes)
+same cue-filled :class:`~monoplane.datamodel.Frame` (depth, normals, intrinsics; OpenCV camera axes)
 the pipeline presets get and returns planes in the frame's camera frame and depth units. It may
 record in ``Reconstruction.timings["baseline.call"]`` the seconds of the method's own call
 alone, without converting data in and out; ``eval`` and ``bench`` compare against that.
@@ -38,12 +38,12 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import pluggy
 
+from monoplane.datamodel import Frame, Reconstruction
 from monoplane.errors import ConfigError, PluginError
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.planes import fit_plane
 from monoplane.hookspecs import hookimpl
 from monoplane.ransac import RansacConfig
-from monoplane.types import Frame, Reconstruction
 
 #: Type of a baseline: a frame with cues in, planes out.
 Baseline = Callable[..., Reconstruction]

@@ -29,10 +29,10 @@ from typing import Any
 
 import numpy as np
 
+from monoplane.datamodel import Frame, Reconstruction
 from monoplane.errors import InvalidInput, MonoplaneError
 from monoplane.evaluation.segcomp import DEFAULT_TOLERANCE, segcomp
 from monoplane.evaluation.segmentation import segmentation_scores
-from monoplane.types import Frame, Reconstruction
 
 _RGB_NAMES = ("rgb.png", "rgb.jpg", "color.png", "color.jpg")
 
@@ -64,7 +64,7 @@ def load_dataset(folder: str | Path) -> list[LabelledFrame]:
         When the folder does not exist, holds no frame with ``gt_labels.png``, or a frame's
         files do not agree in size.
     """
-    from monoplane.io import load_frame
+    from monoplane.fileio import load_frame
 
     root = Path(folder)
     if not root.is_dir():

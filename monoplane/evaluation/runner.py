@@ -29,11 +29,11 @@ from typing import Any
 
 import numpy as np
 
+from monoplane.datamodel import Frame, Reconstruction
 from monoplane.errors import InvalidInput, MonoplaneError
 from monoplane.evaluation.baselines import CALL_TIMING, baseline_names, get_baseline
 from monoplane.evaluation.recall import DEPTH_THRESHOLDS, plane_recall
 from monoplane.evaluation.segmentation import segmentation_scores
-from monoplane.types import Frame, Reconstruction
 
 #: The paper's ablation rows (Tab. IV), in table order.
 PAPER_PRESETS: tuple[str, ...] = (

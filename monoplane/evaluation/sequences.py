@@ -24,9 +24,9 @@ from typing import Any
 
 import numpy as np
 
+from monoplane.datamodel import Scene
 from monoplane.errors import InvalidInput, MonoplaneError
 from monoplane.evaluation.twoview import relative_pose_error
-from monoplane.types import Scene
 
 
 def similarity_to_truth(R_pred: np.ndarray, c_pred: np.ndarray, R_gt: np.ndarray,

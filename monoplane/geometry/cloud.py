@@ -33,11 +33,11 @@ from functools import cached_property
 
 import numpy as np
 
+from monoplane.datamodel import Frame
 from monoplane.errors import InvalidInput
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.geometry.neighbours import PointIndex
 from monoplane.jit import kernel
-from monoplane.types import Frame
 
 #: A non-sampled pixel inherits its nearest sample's label only within this many times the
 #: median sample-to-nearest-sample spacing.

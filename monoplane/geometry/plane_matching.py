@@ -21,8 +21,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from monoplane.datamodel import pixel_rays
 from monoplane.errors import InvalidInput
-from monoplane.types import pixel_rays
 
 
 def keypoint_counts(labels_i: np.ndarray, labels_j: np.ndarray, keypoints_i: np.ndarray,

@@ -10,13 +10,13 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from monoplane.datamodel import Reconstruction
 from monoplane.geometry.mesh import planar_mesh
 from monoplane.report import figures as fig
 from monoplane.report import html
 from monoplane.report.colors import colorize_normals, plane_palette, shade
 from monoplane.report.render3d import DEFAULT_TIMEOUT, Mesh, RenderResult, Shot, render
 from monoplane.report.viewpoints import facing_triangles, orbit_viewpoints, zoom_to_fit
-from monoplane.types import Reconstruction
 
 #: Width of the 3D renders in pixels (height follows the image's aspect ratio).
 RENDER_WIDTH = 640

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from monoplane.datamodel import Reconstruction, Scene, plane_to_camera, plane_to_world
 from monoplane.geometry.mesh import planar_mesh
 from monoplane.report import figures as fig
 from monoplane.report import html
@@ -16,7 +17,6 @@ from monoplane.report.colors import LIGHT_DIRECTION, plane_palette, shade
 from monoplane.report.frame import estimate_up, mesh_step, render_size
 from monoplane.report.render3d import DEFAULT_TIMEOUT, Lines, Mesh, RenderResult, Shot, render
 from monoplane.report.viewpoints import facing_triangles, orbit_viewpoints, zoom_to_fit
-from monoplane.types import Reconstruction, Scene, plane_to_camera, plane_to_world
 
 #: Colour of planes that no global plane claims, in 3D views and label maps.
 UNLINKED_GREY = np.array([170, 170, 170], dtype=np.uint8)

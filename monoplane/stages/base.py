@@ -23,9 +23,9 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import numpy as np
 
 if TYPE_CHECKING:
+    from monoplane.datamodel import Frame, Reconstruction, Scene, SfmResult
     from monoplane.geometry.cloud import PlaneCloud
     from monoplane.geometry.graph import NeighbourGraph
-    from monoplane.types import Frame, Reconstruction, Scene, SfmResult
 
 #: Stage kinds, in pipeline order; each is also the name of its config table.
 STAGE_KINDS: tuple[str, ...] = (
@@ -315,7 +315,8 @@ class Fuser(Stage):
     kind = "fuser"
 
     def fuse(self, views: list[Reconstruction], sfm: SfmResult) -> Scene:
-        """Fuse scale-aligned per-view reconstructions into a :class:`~monoplane.types.Scene`."""
+        """Fuse scale-aligned per-view reconstructions into a
+        :class:`~monoplane.datamodel.Scene`."""
         raise NotImplementedError
 
     def fuse_with_matches(self, views: list[Reconstruction],

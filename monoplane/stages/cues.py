@@ -32,12 +32,12 @@ import numpy as np
 from monoplane.cues.given import use_given_cues
 from monoplane.cues.network import CueNetwork
 from monoplane.cues.profiles import BUILTIN_PROFILES, OnnxProfile, get_profile
+from monoplane.datamodel import Frame
 from monoplane.errors import ConfigError, InvalidInput
 from monoplane.geometry.normals import normals_from_depth
 from monoplane.hookspecs import hookimpl
 from monoplane.models import get_model, require_model
 from monoplane.stages.base import CueProvider, Stage, param
-from monoplane.types import Frame
 
 
 @dataclass

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from monoplane.datamodel import Reconstruction, Scene, SfmResult, plane_to_world
 from monoplane.errors import InvalidInput
 from monoplane.geometry.plane_matching import (
     consistent_groups,
@@ -25,7 +26,6 @@ from monoplane.geometry.plane_matching import (
 )
 from monoplane.hookspecs import hookimpl
 from monoplane.stages.base import Fuser, Stage, param
-from monoplane.types import Reconstruction, Scene, SfmResult, plane_to_world
 
 
 @dataclass

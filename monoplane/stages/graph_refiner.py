@@ -33,6 +33,7 @@ import numpy as np
 from scipy.sparse import coo_matrix, csr_matrix
 from scipy.sparse.csgraph import connected_components
 
+from monoplane.datamodel import Reconstruction, orient_towards_camera
 from monoplane.errors import ConfigError
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
@@ -40,7 +41,6 @@ from monoplane.geometry.planes import fit_planes_per_label
 from monoplane.graphcut import normal_costs, proximity_weights
 from monoplane.hookspecs import hookimpl
 from monoplane.stages.base import Refiner, Stage, param
-from monoplane.types import Reconstruction, orient_towards_camera
 
 
 @dataclass

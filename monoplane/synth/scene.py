@@ -9,7 +9,7 @@ Open3D's ``RaycastingScene``.
 
 World frame: metres, z up, floor at ``z = 0``, room spanning ``[0, Lx] x [0, Ly] x [0, Lz]``.
 World planes ``n · x + d = 0`` have their unit normal on the side the surface is seen from (into
-the room for the room's faces, outwards for objects), so :func:`monoplane.types.plane_to_camera`
+the room for the room's faces, outwards for objects), so :func:`monoplane.datamodel.plane_to_camera`
 turns them directly into camera-facing planes for any camera inside the room.
 
 The camera of view 0 is drawn first, then objects keep a free disk around it, so that extra

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from monoplane.datamodel import Frame, intrinsics_matrix, pixel_rays
 from monoplane.errors import InvalidInput
 from monoplane.geometry.cloud import (
     PROPAGATION_NEIGHBOURS,
@@ -12,7 +13,6 @@ from monoplane.geometry.cloud import (
 )
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.testing import ROOM, room_cues
-from monoplane.types import Frame, intrinsics_matrix, pixel_rays
 
 K = intrinsics_matrix(40.0, 40.0, 15.5, 11.5)
 

@@ -18,10 +18,10 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from monoplane import hookimpl
+from monoplane.datamodel import Frame, Reconstruction
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.planes import fit_plane
 from monoplane.ransac import RansacConfig
-from monoplane.types import Frame, Reconstruction
 
 __version__ = "0.1.0"
 
