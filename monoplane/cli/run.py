@@ -8,6 +8,7 @@ from monoplane.cli.common import (
     add_input_args,
     add_output_args,
     add_pipeline_args,
+    depth_reading,
     pipeline_from_args,
 )
 from monoplane.cli.models import prepare_cue_model
@@ -50,9 +51,7 @@ def run(args: argparse.Namespace) -> int:
     prepare_cue_model(pipe, fetch_missing=args.fetch, has_depth=args.depth is not None,
                       has_normals=args.normals is not None, quiet=args.quiet)
     frame = load_frame(args.image, depth=args.depth, normals=args.normals,
-                       intrinsics=args.intrinsics, depth_scale=args.depth_scale,
-                       nan_as_invalid=args.nan_as_invalid,
-                       depth_kind="relative" if args.relative_depth else "metric")
+                       intrinsics=args.intrinsics, **depth_reading(args))
     rec = pipe.run(frame)
     out = save_reconstruction(rec, args.out, overwrite=args.overwrite, report=args.report,
                               progress=not args.quiet)

@@ -131,6 +131,30 @@ class FrameResult:
     error: str = ""
 
 
+class FrameMean:
+    """Read-only attribute of a result holding ``frames``: one per-frame field's mean.
+
+    ``NaN`` when there are no frames.
+
+    Parameters
+    ----------
+    attr : str
+        The per-frame field averaged.
+    doc : str
+        The attribute's docstring.
+    """
+
+    def __init__(self, attr: str, doc: str) -> None:
+        self.attr = attr
+        self.__doc__ = doc
+
+    def __get__(self, obj: Any, owner: type | None = None) -> Any:
+        if obj is None:  # looked up on the class: the descriptor itself, for help()
+            return self
+        values = [getattr(f, self.attr) for f in obj.frames]
+        return float(np.mean(values)) if values else float("nan")
+
+
 @dataclass
 class MethodResult:
     """Aggregated scores of one method.
@@ -150,24 +174,13 @@ class MethodResult:
     thresholds: list[float]
     frames: list[FrameResult] = field(default_factory=list)
 
-    def _mean(self, attr: str) -> float:
-        values = [getattr(f, attr) for f in self.frames]
-        return float(np.mean(values)) if values else float("nan")
-
-    @property
-    def voi(self) -> float:
-        """Mean VOI (nats)."""
-        return self._mean("voi")
-
-    @property
-    def ri(self) -> float:
-        """Mean Rand index."""
-        return self._mean("ri")
-
-    @property
-    def sc(self) -> float:
-        """Mean segmentation covering."""
-        return self._mean("sc")
+    voi = FrameMean("voi", "Mean VOI (nats).")
+    ri = FrameMean("ri", "Mean Rand index.")
+    sc = FrameMean("sc", "Mean segmentation covering.")
+    seconds_per_frame = FrameMean("seconds", "Mean wall time per frame, seconds.")
+    core_seconds_per_frame = FrameMean(
+        "core_seconds", "Mean core time per frame, seconds (see the module docstring).")
+    planes_per_frame = FrameMean("n_planes", "Mean number of predicted planes.")
 
     @property
     def recall(self) -> list[float]:
@@ -177,21 +190,6 @@ class MethodResult:
             return [float("nan")] * len(self.thresholds)
         return [sum(f.recalled[k] for f in self.frames) / total
                 for k in range(len(self.thresholds))]
-
-    @property
-    def seconds_per_frame(self) -> float:
-        """Mean wall time per frame, seconds."""
-        return self._mean("seconds")
-
-    @property
-    def core_seconds_per_frame(self) -> float:
-        """Mean core time per frame, seconds (see the module docstring)."""
-        return self._mean("core_seconds")
-
-    @property
-    def planes_per_frame(self) -> float:
-        """Mean number of predicted planes."""
-        return self._mean("n_planes")
 
     @property
     def n_failed(self) -> int:
