@@ -99,11 +99,18 @@ def monoplane_register_adjusters() -> list[type[Stage]]:
 def monoplane_register_baselines() -> dict[str, Callable[..., Reconstruction]]:
     """External plane detectors to compare against, by method name (``--baseline NAME``).
 
-    Each value is a callable ``baseline(frame, *, seed=0) -> Reconstruction`` that takes a
-    cue-filled frame and returns planes in its camera frame and depth units. It may record
-    ``timings["baseline.call"]``: the seconds of its core call alone (data conversion
-    excluded), which ``monoplane bench`` and ``monoplane eval`` compare against. Used by
-    :mod:`monoplane.evaluation.baselines`; names must be unique across plugins.
+    Each value is a callable ``baseline(frame, *, seed=0, **options) -> Reconstruction`` that
+    takes a cue-filled frame and returns planes in its camera frame and depth units. It may
+    record ``timings["baseline.call"]``: the seconds of its core call alone (data conversion
+    excluded), which ``monoplane bench`` and ``monoplane eval`` compare against.
+
+    The keyword ``options`` override fields of the baseline's settings (``monoplane eval
+    --baseline-set NAME.FIELD=VALUE``); an unknown option or an ill-typed value raises a
+    one-line :class:`~monoplane.errors.ConfigError` listing the valid ones
+    (:func:`monoplane.evaluation.baselines.baseline_config` does this for a settings
+    dataclass). A callable that exposes that dataclass as ``config_class`` has its options
+    checked before the first frame. Used by :mod:`monoplane.evaluation.baselines`; names must be
+    unique across plugins.
     """
 
 

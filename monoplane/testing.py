@@ -412,12 +412,16 @@ def _check_multiview_stage(stage: Stage, room: TwoViewRoom) -> None:
 def check_baseline_contract(baseline: Callable[..., Reconstruction], seed: int = 0) -> None:
     """Assert that a ``monoplane eval`` baseline honours the baseline contract.
 
-    A baseline is ``baseline(frame, *, seed=0) -> Reconstruction``. It is run on the exact
-    :func:`box_frame` (depth and normals, no RGB): the result must cover the frame, label with
-    ``0..P``, give ``P`` finite planes with unit normals, and find the back wall, which covers
-    most of the image.
+    A baseline is ``baseline(frame, *, seed=0, **options) -> Reconstruction``. It is run on the
+    exact :func:`box_frame` (depth and normals, no RGB): the result must cover the frame, label
+    with ``0..P``, give ``P`` finite planes with unit normals, and find the back wall, which
+    covers most of the image. An unknown keyword option must raise a one-line
+    :class:`~monoplane.errors.ConfigError` naming it; a ``config_class`` attribute, when
+    present, must be a dataclass whose defaults build.
     """
     from monoplane.datamodel import Reconstruction
+    from monoplane.errors import ConfigError
+    from monoplane.evaluation.baselines import baseline_config
 
     frame, _ = box_frame(64, 48)
     rec = baseline(frame, seed=seed)
@@ -429,3 +433,19 @@ def check_baseline_contract(baseline: Callable[..., Reconstruction], seed: int =
     np.testing.assert_allclose(np.linalg.norm(rec.params[:, :3], axis=1), 1.0, atol=1e-6)
     assert rec.num_planes and np.abs(rec.params - BOX_PLANES[0]).max(axis=1).min() < 0.02, \
         f"{name} misses the back wall of an exact box"
+    try:
+        baseline(frame, seed=seed, no_such_option=1)
+    except ConfigError as exc:
+        message = str(exc)
+        assert "no_such_option" in message and "\n" not in message, \
+            f"{name}: the error on an unknown option must be one line naming it: {message!r}"
+    except TypeError as exc:
+        raise AssertionError(f"{name} must take keyword options (baseline(frame, *, seed=0, "
+                             f"**options)) and reject unknown ones with a ConfigError: {exc}"
+                             ) from None
+    else:
+        raise AssertionError(f"{name} accepts an unknown option without a ConfigError")
+    config_class = getattr(baseline, "config_class", None)
+    if config_class is not None:
+        assert dataclasses.is_dataclass(config_class), f"{name}.config_class must be a dataclass"
+        baseline_config(config_class, {}, name)

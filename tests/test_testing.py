@@ -103,3 +103,14 @@ def test_baseline_contract_accepts_the_builtin_and_rejects_a_broken_one() -> Non
 
     with pytest.raises(AssertionError, match="misses the back wall"):
         check_baseline_contract(floor_only)
+
+    def no_options(frame, *, seed=0):
+        return open3d_ransac(frame, seed=seed)
+
+    def ignores_options(frame, *, seed=0, **options):
+        return open3d_ransac(frame, seed=seed)
+
+    with pytest.raises(AssertionError, match="must take keyword options"):
+        check_baseline_contract(no_options)
+    with pytest.raises(AssertionError, match="accepts an unknown option"):
+        check_baseline_contract(ignores_options)

@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from monoplane.datamodel import Frame, Reconstruction
-from monoplane.errors import InvalidInput, MonoplaneError
+from monoplane.errors import ConfigError, InvalidInput, MonoplaneError
 from monoplane.evaluation.segcomp import DEFAULT_TOLERANCE, segcomp
 from monoplane.evaluation.segmentation import segmentation_scores
 
@@ -163,8 +163,9 @@ def cloud_reconstruction(frame: Frame, preset: str, overrides: list[str] | None,
 
 
 def _methods(presets: Sequence[str], baselines: Sequence[str], overrides: list[str] | None,
-             as_cloud: bool) -> list[tuple[str, str, Any]]:
-    from monoplane.evaluation.baselines import get_baseline
+             as_cloud: bool, baseline_options: dict[str, dict[str, Any]]
+             ) -> list[tuple[str, str, Any]]:
+    from monoplane.evaluation.baselines import bind_baseline
     from monoplane.pipeline import Pipeline
 
     out: list[tuple[str, str, Any]] = []
@@ -178,7 +179,7 @@ def _methods(presets: Sequence[str], baselines: Sequence[str], overrides: list[s
             pipe = Pipeline.from_preset(name, overrides=overrides)
             out.append((name, "preset", lambda f, s, p=pipe: p.run(f)))
     for name in baselines:
-        fn = get_baseline(name)
+        fn = bind_baseline(name, baseline_options.get(name))
         out.append((name, "baseline", lambda f, s, fn=fn: fn(f, seed=s)))
     if not out:
         raise InvalidInput("nothing to evaluate: give --preset or --baseline")
@@ -188,7 +189,9 @@ def _methods(presets: Sequence[str], baselines: Sequence[str], overrides: list[s
 def evaluate_dataset(folder: str | Path, presets: Sequence[str] = (),
                      baselines: Sequence[str] = (), overrides: list[str] | None = None,
                      as_cloud: bool = False, tolerance: float = DEFAULT_TOLERANCE,
-                     seed: int = 0, progress: bool = True) -> DatasetResults:
+                     seed: int = 0, progress: bool = True,
+                     baseline_options: dict[str, dict[str, Any]] | None = None
+                     ) -> DatasetResults:
     """Score methods on every frame of a dataset folder.
 
     Parameters
@@ -207,6 +210,10 @@ def evaluate_dataset(folder: str | Path, presets: Sequence[str] = (),
         Seed of baselines and of the cloud shuffling.
     progress : bool
         Show a progress bar on stderr.
+    baseline_options : dict, optional
+        Baseline name -> keyword options (fields of its settings), e.g.
+        ``{"cgal": {"min_support": 0.001}}``; checked before the first frame when the baseline
+        exposes its settings class.
 
     Returns
     -------
@@ -219,7 +226,8 @@ def evaluate_dataset(folder: str | Path, presets: Sequence[str] = (),
     if not 0.5 < tolerance <= 1.0:
         raise InvalidInput(f"--tolerance must lie in (0.5, 1], got {tolerance}")
     frames = load_dataset(folder)
-    methods = _methods(presets, baselines, overrides, as_cloud)
+    baseline_options = baseline_options or {}
+    methods = _methods(presets, baselines, overrides, as_cloud, baseline_options)
     results = [DatasetMethodResult(name, kind) for name, kind, _ in methods]
     # Baselines get their normals from the default preset's cue provider, as any user would.
     cues = Pipeline.from_preset()
@@ -237,6 +245,8 @@ def evaluate_dataset(folder: str | Path, presets: Sequence[str] = (),
                 try:
                     rec = run(frame, seed)
                     labels = rec.labels
+                except ConfigError:
+                    raise  # a wrong option fails the run, not one frame
                 except MonoplaneError as exc:
                     failed, error = True, str(exc)
                     warnings.warn(f"{name} failed on {item.name}: {exc}", stacklevel=2)
@@ -253,7 +263,8 @@ def evaluate_dataset(folder: str | Path, presets: Sequence[str] = (),
     finally:
         bar.close()
     settings = {"data": str(folder), "n_frames": len(frames), "tolerance": tolerance,
-                "as_cloud": as_cloud, "seed": seed, "overrides": list(overrides or [])}
+                "as_cloud": as_cloud, "seed": seed, "overrides": list(overrides or []),
+                "baseline_options": baseline_options}
     return DatasetResults(results, settings)
 
 

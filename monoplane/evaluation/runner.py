@@ -30,8 +30,8 @@ from typing import Any
 import numpy as np
 
 from monoplane.datamodel import Frame, Reconstruction
-from monoplane.errors import InvalidInput, MonoplaneError
-from monoplane.evaluation.baselines import CALL_TIMING, baseline_names, get_baseline
+from monoplane.errors import ConfigError, InvalidInput, MonoplaneError
+from monoplane.evaluation.baselines import CALL_TIMING, baseline_names, bind_baseline
 from monoplane.evaluation.recall import DEPTH_THRESHOLDS, plane_recall
 from monoplane.evaluation.segmentation import segmentation_scores
 
@@ -74,15 +74,18 @@ def preset_method(name: str, overrides: list[str] | None = None) -> Method:
     return Method(name=name, kind="preset", run=lambda frame, seed: pipe.run(frame))
 
 
-def baseline_method(name: str) -> Method:
-    """A registered baseline as a method (see :mod:`monoplane.evaluation.baselines`)."""
-    fn = get_baseline(name)
+def baseline_method(name: str, options: dict[str, Any] | None = None) -> Method:
+    """A registered baseline as a method (see :mod:`monoplane.evaluation.baselines`), with its
+    keyword ``options`` (checked now when the baseline exposes its settings class)."""
+    fn = bind_baseline(name, options)
     return Method(name=name, kind="baseline", run=lambda frame, seed: fn(frame, seed=seed))
 
 
 def resolve_methods(presets: Sequence[str] = (), baselines: Sequence[str] = (),
                     all_methods: bool = False,
-                    overrides: list[str] | None = None) -> list[Method]:
+                    overrides: list[str] | None = None,
+                    baseline_options: dict[str, dict[str, Any]] | None = None
+                    ) -> list[Method]:
     """Build the method list of an evaluation run.
 
     Parameters
@@ -96,6 +99,9 @@ def resolve_methods(presets: Sequence[str] = (), baselines: Sequence[str] = (),
         (:func:`~monoplane.evaluation.baselines.baseline_names`).
     overrides : list of str, optional
         ``table.key=value`` overrides applied to every preset.
+    baseline_options : dict, optional
+        Baseline name -> keyword options (see
+        :func:`~monoplane.evaluation.baselines.parse_baseline_options`).
 
     Returns
     -------
@@ -110,7 +116,8 @@ def resolve_methods(presets: Sequence[str] = (), baselines: Sequence[str] = (),
     if not preset_names and not baseline_list:
         raise InvalidInput("nothing to evaluate: give --preset, --baseline or --all")
     methods = [preset_method(p, overrides) for p in preset_names]
-    methods += [baseline_method(b) for b in dict.fromkeys(baseline_list)]
+    options = baseline_options or {}
+    methods += [baseline_method(b, options.get(b)) for b in dict.fromkeys(baseline_list)]
     return methods
 
 
@@ -330,6 +337,8 @@ def evaluate(methods: Sequence[Method], n: int = 50, level: str = "mild", seed: 
                 start = time.perf_counter()
                 try:
                     rec = method.run(view.frame, scene_seed)
+                except ConfigError:
+                    raise  # a wrong option fails the run, not one scene
                 except MonoplaneError as exc:
                     failed, error = True, str(exc)
                     warnings.warn(f"{method.name} failed on scene seed {scene_seed}: {exc}",
