@@ -99,42 +99,59 @@ def baseline_config(cls: type[_Config], options: Mapping[str, Any], name: str) -
 
 
 @dataclass(frozen=True)
-class Open3DRansacConfig:
-    """Settings of the ``open3d-ransac`` baseline.
+class RansacBaselineSettings:
+    """Settings every RANSAC-type baseline shares with the pipeline, in unit-sphere units.
+
+    The defaults are read from :class:`~monoplane.ransac.RansacConfig`, so a baseline and the
+    presets are compared at the same thresholds unless a user overrides them
+    (``--baseline-set NAME.FIELD=VALUE``). Baselines subclass it with their own fields.
 
     Attributes
     ----------
     epsilon : float
-        Inlier distance in unit-sphere units (paper: 0.02).
-    num_iterations : int
-        Maximum RANSAC iterations per plane.
-    probability : float
-        Confidence at which Open3D stops early (its default).
-    max_planes : int
-        Stop after this many planes (as the pipeline's ``ransac.max_planes``).
+        Inlier point-to-plane distance (paper's ε = 0.02).
     min_support : float
-        Stop when the best plane has fewer inliers than this fraction of the valid pixels (as
-        the pipeline's ``ransac.min_support``: the paper's 300 px at 256×192).
+        Smallest plane as a fraction of the valid points (the pipeline's
+        ``ransac.min_support``: the paper's 300 px at 256×192).
     min_support_points : int
-        ... and never accept a plane with fewer inliers than this.
+        Smallest plane in points, whatever the fraction.
     """
 
     epsilon: float = _RANSAC.epsilon
-    num_iterations: int = _RANSAC.max_iterations
-    probability: float = 0.99999999
-    max_planes: int = _RANSAC.max_planes
     min_support: float = _RANSAC.min_support
     min_support_points: int = _RANSAC.min_support_points
 
     def __post_init__(self) -> None:
         if not self.epsilon > 0:
             raise ValueError(f"epsilon must be positive, got {self.epsilon}")
+        if not 0 <= self.min_support < 1 or self.min_support_points < 0:
+            raise ValueError("min_support must lie in [0, 1) and min_support_points be >= 0")
+
+
+@dataclass(frozen=True)
+class Open3DRansacConfig(RansacBaselineSettings):
+    """Settings of the ``open3d-ransac`` baseline (plus :class:`RansacBaselineSettings`).
+
+    Attributes
+    ----------
+    num_iterations : int
+        Maximum RANSAC iterations per plane (the pipeline's ``ransac.max_iterations``).
+    probability : float
+        Confidence at which Open3D stops early (its default).
+    max_planes : int
+        Stop after this many planes (as the pipeline's ``ransac.max_planes``).
+    """
+
+    num_iterations: int = _RANSAC.max_iterations
+    probability: float = 0.99999999
+    max_planes: int = _RANSAC.max_planes
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
         if self.num_iterations < 1 or self.max_planes < 1:
             raise ValueError("num_iterations and max_planes must be at least 1")
         if not 0 < self.probability <= 1:
             raise ValueError(f"probability must lie in (0, 1], got {self.probability}")
-        if not 0 <= self.min_support < 1 or self.min_support_points < 0:
-            raise ValueError("min_support must lie in [0, 1) and min_support_points be >= 0")
 
 
 def open3d_ransac(frame: Frame, *, seed: int = 0, **options: Any) -> Reconstruction:

@@ -22,7 +22,7 @@ import numpy as np
 
 from monoplane import hookimpl
 from monoplane.datamodel import Frame, Reconstruction
-from monoplane.evaluation.baselines import baseline_config
+from monoplane.evaluation.baselines import RansacBaselineSettings, baseline_config
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.planes import fit_plane
 from monoplane.ransac import RansacConfig
@@ -34,13 +34,12 @@ _RANSAC = RansacConfig()
 
 
 @dataclass(frozen=True)
-class CgalRansacConfig:
-    """Settings of CGAL's ``efficient_RANSAC`` (plane shapes only), in unit-sphere units.
+class CgalRansacConfig(RansacBaselineSettings):
+    """Settings of CGAL's ``efficient_RANSAC`` (plane shapes only), in unit-sphere units, plus
+    the ε and minimum plane size every RANSAC baseline shares with the pipeline.
 
     Attributes
     ----------
-    epsilon : float
-        Largest point-to-plane distance of a shape's points (paper's ε).
     normal_deg : float
         Largest angle between a point's normal and the plane normal (paper's ε_n), degrees.
     cluster_epsilon : float
@@ -48,28 +47,20 @@ class CgalRansacConfig:
         component of a candidate).
     probability : float
         CGAL's probability of missing the largest candidate shape (its default).
-    min_support : float
-        Smallest shape as a fraction of the points (the pipeline's ``ransac.min_support``).
-    min_support_points : int
-        Smallest shape in points, whatever the fraction.
     """
 
-    epsilon: float = _RANSAC.epsilon
     normal_deg: float = _RANSAC.epsilon_n_deg
     cluster_epsilon: float = 0.03
     probability: float = 0.01
-    min_support: float = _RANSAC.min_support
-    min_support_points: int = _RANSAC.min_support_points
 
     def __post_init__(self) -> None:
-        if not (self.epsilon > 0 and self.cluster_epsilon > 0):
-            raise ValueError("epsilon and cluster_epsilon must be positive")
+        super().__post_init__()
+        if not self.cluster_epsilon > 0:
+            raise ValueError("cluster_epsilon must be positive")
         if not 0 < self.normal_deg < 90:
             raise ValueError(f"normal_deg must lie in (0, 90), got {self.normal_deg}")
         if not 0 < self.probability < 1:
             raise ValueError(f"probability must lie in (0, 1), got {self.probability}")
-        if not 0 <= self.min_support < 1 or self.min_support_points < 0:
-            raise ValueError("min_support must lie in [0, 1) and min_support_points be >= 0")
 
 
 def _point_set(points: np.ndarray, normals: np.ndarray) -> object:
