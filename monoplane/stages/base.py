@@ -51,6 +51,26 @@ def config_key(f: dataclasses.Field) -> str:
 
 
 @dataclass
+class ProximityAffinities:
+    """The paper's proximity affinities between neighbouring points (§III-B, eq. of k_p, k_c,
+    k_n): config fields shared by every stage that weighs graph edges with them (the
+    ``proximity-graph-cut`` labeler, the ``graph-crf`` refiner). Positions are in unit-sphere
+    units, colours RGB in [0, 1], normal angles in radians."""
+
+    alpha_p2: float = param(0.005, "α_p², squared position bandwidth of k_p, k_c, k_n")
+    alpha_c2: float = param(0.1, "α_c², squared colour bandwidth of k_c (RGB in [0, 1])")
+    alpha_n2: float = param(5.0, "α_n², bandwidth of the normal angle (radians) in k_n")
+    w_p: float = param(1.0, "weight of the position proximity term k_p")
+    w_c: float = param(1.0, "weight of the colour proximity term k_c (dropped without colour)")
+    w_n: float = param(1.0, "weight of the normal proximity term k_n")
+
+    def affinities(self) -> tuple[float, float, float, float, float, float]:
+        """``(alpha_p2, alpha_c2, alpha_n2, w_p, w_c, w_n)``, in the order
+        :func:`monoplane.graphcut.proximity_weights` takes them."""
+        return (self.alpha_p2, self.alpha_c2, self.alpha_n2, self.w_p, self.w_c, self.w_n)
+
+
+@dataclass
 class NoConfig:
     """A stage without parameters."""
 

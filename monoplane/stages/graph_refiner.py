@@ -40,11 +40,11 @@ from monoplane.geometry.graph import NeighbourGraph
 from monoplane.geometry.planes import fit_planes_per_label
 from monoplane.graphcut import normal_costs, proximity_weights
 from monoplane.hookspecs import hookimpl
-from monoplane.stages.base import Refiner, Stage, param
+from monoplane.stages.base import ProximityAffinities, Refiner, Stage, param
 
 
 @dataclass
-class GraphCrfConfig:
+class GraphCrfConfig(ProximityAffinities):
     """Parameters of the ``graph-crf`` refiner (distances in unit-sphere units)."""
 
     epsilon: float = param(0.02, "distance scale ε of the plane cost (like ransac.epsilon)")
@@ -60,12 +60,6 @@ class GraphCrfConfig:
     iterations: int = param(8, "mean-field iterations (0 keeps the labels, still splits/merges)")
     max_jump: float = param(
         0.05, "image input: relative depth jump that cuts the pixel-grid graph")
-    alpha_p2: float = param(0.005, "α_p², squared position bandwidth of the affinities")
-    alpha_c2: float = param(0.1, "α_c², squared colour bandwidth (RGB in [0, 1])")
-    alpha_n2: float = param(5.0, "α_n², normal-angle bandwidth (radians)")
-    w_p: float = param(1.0, "weight of the position affinity")
-    w_c: float = param(1.0, "weight of the colour affinity (dropped without colour)")
-    w_n: float = param(1.0, "weight of the normal affinity")
     min_support: float = param(
         0.001, "smallest region kept, fraction of the cloud's points")
     min_support_points: int = param(20, "smallest region kept, points")
@@ -284,7 +278,7 @@ class GraphCrfRefiner(Refiner):
         if planes.shape[0] == 0:
             return labels, planes
         weights = proximity_weights(cloud.points, graph.edges, cloud.normals, cloud.colors,
-                                    c.alpha_p2, c.alpha_c2, c.alpha_n2, c.w_p, c.w_c, c.w_n)
+                                    *c.affinities())
         adj = _adjacency(graph, weights)
         epsilon = self.distance_scale(cloud, labels, planes)
         labels = self._mean_field(self.unary(cloud, planes, epsilon), adj, labels,

@@ -29,7 +29,14 @@ from monoplane.graphcut import (
     proximity_weights,
 )
 from monoplane.hookspecs import hookimpl
-from monoplane.stages.base import Labeler, Labeling, RansacParams, Stage, param
+from monoplane.stages.base import (
+    Labeler,
+    Labeling,
+    ProximityAffinities,
+    RansacParams,
+    Stage,
+    param,
+)
 
 
 def _pool_distances(cloud: PlaneCloud, pool: np.ndarray, plane: np.ndarray) -> np.ndarray:
@@ -75,16 +82,10 @@ class GraphCutLabeler(Labeler):
 
 
 @dataclass
-class ProximityGraphCutConfig:
+class ProximityGraphCutConfig(ProximityAffinities):
     """Parameters of MonoPlane's proximity-guided graph-cut labeler (paper §IV-A values)."""
 
     lambda_: float = param(0.95, "smoothness weight λ in E = (1-λ)(E_d + E_n) + λE_s")
-    alpha_p2: float = param(0.005, "α_p², squared position bandwidth of k_p, k_c, k_n")
-    alpha_c2: float = param(0.1, "α_c², squared colour bandwidth of k_c (RGB in [0, 1])")
-    alpha_n2: float = param(5.0, "α_n², bandwidth of the normal angle (radians) in k_n")
-    w_p: float = param(1.0, "weight of the position proximity term k_p")
-    w_c: float = param(1.0, "weight of the colour proximity term k_c (dropped without colour)")
-    w_n: float = param(1.0, "weight of the normal proximity term k_n")
     normal_term: bool = param(True, "add the normal data energy E_n to the data term")
     normalise: bool = param(
         False, "divide E_s by the graph's mean degree (off: the paper's weights as given)")
@@ -100,12 +101,11 @@ class ProximityGraphCutLabeler(Labeler):
     def _edge_weights(self, cloud: PlaneCloud, graph: NeighbourGraph) -> np.ndarray:
         """(E,) cut costs of every graph edge; they depend on the frame only, so cached."""
         c = self.config
-        key = ("proximity-graph-cut", id(cloud), c.alpha_p2, c.alpha_c2, c.alpha_n2,
-               c.w_p, c.w_c, c.w_n)
+        key = ("proximity-graph-cut", id(cloud), *c.affinities())
         w = graph.cache.get(key)
         if w is None:
             w = proximity_weights(cloud.points, graph.edges, cloud.normals, cloud.colors,
-                                  c.alpha_p2, c.alpha_c2, c.alpha_n2, c.w_p, c.w_c, c.w_n)
+                                  *c.affinities())
             graph.cache[key] = w
         return w
 
