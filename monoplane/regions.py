@@ -264,10 +264,9 @@ def scene_radius(points: np.ndarray, valid: np.ndarray) -> float:
 
     Parameters
     ----------
-    points : numpy.ndarray
-        (H, W, 3) camera-frame points (OpenCV axes), depth units.
-    valid : numpy.ndarray
-        (H, W) bool, pixels with a valid depth.
+    points, valid : numpy.ndarray
+        (H, W, 3) camera-frame points (OpenCV axes, depth units) and the (H, W) bool mask of
+        pixels with a valid depth.
 
     Returns
     -------
@@ -295,10 +294,9 @@ def merge_coplanar(points: np.ndarray, valid: np.ndarray, labels: np.ndarray,
 
     Parameters
     ----------
-    points : numpy.ndarray
-        (H, W, 3) camera-frame points (OpenCV axes), depth units.
-    valid : numpy.ndarray
-        (H, W) bool, pixels with a valid depth.
+    points, valid : numpy.ndarray
+        (H, W, 3) camera-frame points (OpenCV axes, depth units) and the (H, W) bool mask of
+        pixels with a valid depth.
     labels : numpy.ndarray
         (H, W) int region labels 0..R (0 = non-planar), e.g. from :func:`split_components`.
     origin : numpy.ndarray
@@ -399,10 +397,9 @@ def absorb_small_regions(points: np.ndarray, valid: np.ndarray, labels: np.ndarr
 
     Parameters
     ----------
-    points : numpy.ndarray
-        (H, W, 3) camera-frame points (OpenCV axes), depth units.
-    valid : numpy.ndarray
-        (H, W) bool, pixels with a valid depth.
+    points, valid : numpy.ndarray
+        (H, W, 3) camera-frame points (OpenCV axes, depth units) and the (H, W) bool mask of
+        pixels with a valid depth.
     labels : numpy.ndarray
         (H, W) int labels 0..R.
     params : numpy.ndarray
@@ -457,10 +454,9 @@ def gate_filled_pixels(points: np.ndarray, valid: np.ndarray, before: np.ndarray
 
     Parameters
     ----------
-    points : numpy.ndarray
-        (H, W, 3) camera-frame points (OpenCV axes), depth units.
-    valid : numpy.ndarray
-        (H, W) bool, pixels with a valid depth.
+    points, valid : numpy.ndarray
+        (H, W, 3) camera-frame points (OpenCV axes, depth units) and the (H, W) bool mask of
+        pixels with a valid depth.
     before : numpy.ndarray
         (H, W) int labels 0..P before refinement (the RANSAC's).
     after : numpy.ndarray
