@@ -6,7 +6,7 @@ residuals, each divided by its expected noise so that they are unitless and comp
 
 * **reprojection**: ``(π(K_v (R_v X_p + t_v)) − u_vp) / σ_px`` for every SfM observation
   (pixels);
-* **point-to-plane**: ``(n_g · R_vᵀ (s_v x_vi − t_v) + d_g) / (σ_rel · s_v z_vi)`` for a
+* **point-to-plane**: ``(n_g · R_vᵀ (s_v x_vi − t_v) + d_g) / (σ_rel · z_vi)`` for a
   subsample of each view's plane pixels, where ``x_vi`` is the pixel lifted with the view's
   (scale-aligned) depth ``z_vi`` in camera ``v``, ``s_v`` the view's depth scale and ``g`` the
   global plane its local plane is linked to. Dividing by the depth makes the term a relative
@@ -59,10 +59,16 @@ class AdjustmentProblem:
         (S,) int view and global plane of each plane-pixel sample.
     samp_x : numpy.ndarray
         (S, 3) sample lifted into its camera with the current depth (scale 1), ``z > 0``.
+    norm_view, norm_plane : numpy.ndarray
+        (L,) int view and global plane of each view-plane normal.
+    norm_m : numpy.ndarray
+        (L, 3) unit normal of that view plane in its camera frame.
     sigma_px : float
         Expected reprojection noise (pixels).
     sigma_rel : float
         Expected relative depth noise of plane pixels.
+    sigma_normal_deg : float
+        Expected angle between a view plane's normal and its global plane's (degrees).
     """
 
     K: np.ndarray
@@ -76,8 +82,12 @@ class AdjustmentProblem:
     samp_view: np.ndarray
     samp_plane: np.ndarray
     samp_x: np.ndarray
+    norm_view: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    norm_plane: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    norm_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     sigma_px: float = 1.0
     sigma_rel: float = 0.03
+    sigma_normal_deg: float = 2.0
 
     def __post_init__(self) -> None:
         v = len(self.R)
@@ -88,8 +98,11 @@ class AdjustmentProblem:
         if len(self.samp_view) != len(self.samp_plane) or len(self.samp_x) != len(
                 self.samp_view):
             raise InvalidInput("plane adjustment: plane sample arrays differ in length")
-        if not self.sigma_px > 0 or not self.sigma_rel > 0:
-            raise InvalidInput("plane adjustment: sigma_px and sigma_rel must be positive")
+        if len(self.norm_view) != len(self.norm_plane) or len(self.norm_m) != len(
+                self.norm_view):
+            raise InvalidInput("plane adjustment: normal arrays differ in length")
+        if not (self.sigma_px > 0 and self.sigma_rel > 0 and self.sigma_normal_deg > 0):
+            raise InvalidInput("plane adjustment: the sigmas must be positive")
 
 
 @dataclass
@@ -169,8 +182,8 @@ def _unpack(x: np.ndarray, lay: _Layout, prob: AdjustmentProblem, bases: np.ndar
 
 
 def _residuals(x: np.ndarray, lay: _Layout, prob: AdjustmentProblem, bases: np.ndarray
-               ) -> tuple[np.ndarray, np.ndarray]:
-    """(reprojection (O, 2) in σ units, point-to-plane (S,) in σ units)."""
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(reprojection (O, 2), point-to-plane (S,), normal (L, 3)), all in σ units."""
     R, t, scales, planes, points = _unpack(x, lay, prob, bases)
     v, p = prob.obs_view, prob.obs_point
     xc = np.einsum("oij,oj->oi", R[v], points[p]) + t[v]
@@ -181,13 +194,19 @@ def _residuals(x: np.ndarray, lay: _Layout, prob: AdjustmentProblem, bases: np.n
     s = scales[sv]
     xw = np.einsum("sji,sj->si", R[sv], s[:, None] * prob.samp_x - t[sv])  # Rᵀ (s x − t)
     dist = np.einsum("si,si->s", planes[sg, :3], xw) + planes[sg, 3]
-    plane = dist / (prob.sigma_rel * s * prob.samp_x[:, 2])
-    return reproj, plane
+    # Fixed weights (the initial depth), so that no scale can lower its residuals by growing.
+    plane = dist / (prob.sigma_rel * prob.samp_x[:, 2])
+    lv, lg = prob.norm_view, prob.norm_plane
+    m_world = np.einsum("lji,lj->li", R[lv], prob.norm_m)
+    normal = (m_world - planes[lg, :3]) / np.radians(prob.sigma_normal_deg)
+    return reproj, plane, normal
 
 
-def residual_summary(reproj: np.ndarray, plane: np.ndarray, prob: AdjustmentProblem
-                     ) -> dict[str, float]:
-    """RMS reprojection error (pixels) and RMS / median relative point-to-plane distance."""
+def residual_summary(reproj: np.ndarray, plane: np.ndarray, normal: np.ndarray,
+                     prob: AdjustmentProblem) -> dict[str, float]:
+    """RMS reprojection error (pixels), RMS / median relative point-to-plane distance and
+    RMS view-to-global normal angle (degrees)."""
+    ang = np.linalg.norm(normal, axis=1) * prob.sigma_normal_deg
     px = np.linalg.norm(reproj, axis=1) * prob.sigma_px if len(reproj) else np.zeros(0)
     rel = np.abs(plane) * prob.sigma_rel
     return {
@@ -195,6 +214,7 @@ def residual_summary(reproj: np.ndarray, plane: np.ndarray, prob: AdjustmentProb
         "reprojection_median_px": float(np.median(px)) if len(px) else 0.0,
         "plane_rms_rel": float(np.sqrt(np.mean(rel**2))) if len(rel) else 0.0,
         "plane_median_rel": float(np.median(rel)) if len(rel) else 0.0,
+        "normal_rms_deg": float(np.sqrt(np.mean(ang**2))) if len(ang) else 0.0,
         "observations": int(len(reproj)),
         "plane_samples": int(len(plane)),
     }
@@ -217,10 +237,18 @@ def _sparsity(lay: _Layout, prob: AdjustmentProblem) -> coo_matrix:
                                axis=1)
     rows.append(np.repeat(2 * o + np.arange(s), samp_cols.shape[1]))
     cols.append(samp_cols.reshape(-1))
+    # Normal rows 3k..3k+2: the view's rotation (pose) and the plane's normal.
+    n_l = len(prob.norm_view)
+    norm_cols = np.concatenate([lay.pose_cols(prob.norm_view),
+                                lay.plane + 3 * prob.norm_plane[:, None] + np.arange(3)],
+                               axis=1)
+    for r in range(3):
+        rows.append(np.repeat(2 * o + s + 3 * np.arange(n_l) + r, norm_cols.shape[1]))
+        cols.append(norm_cols.reshape(-1))
     r, c = np.concatenate(rows), np.concatenate(cols)
     keep = c >= 0
     return coo_matrix((np.ones(int(keep.sum())), (r[keep], c[keep])),
-                      shape=(2 * o + s, lay.size))
+                      shape=(2 * o + s + 3 * n_l, lay.size))
 
 
 def adjust(prob: AdjustmentProblem, max_evaluations: int = 100, loss: str = "soft_l1"
@@ -250,8 +278,8 @@ def adjust(prob: AdjustmentProblem, max_evaluations: int = 100, loss: str = "sof
     x0[lay.point:] = prob.points.reshape(-1)
 
     def fun(x: np.ndarray) -> np.ndarray:
-        reproj, plane = _residuals(x, lay, prob, bases)
-        return np.concatenate([reproj.reshape(-1), plane])
+        reproj, plane, normal = _residuals(x, lay, prob, bases)
+        return np.concatenate([reproj.reshape(-1), plane, normal.reshape(-1)])
 
     before = residual_summary(*_residuals(x0, lay, prob, bases), prob)
     if lay.size == 0 or (len(prob.obs_view) + len(prob.samp_view)) == 0:

@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from monoplane.errors import InvalidInput
 from monoplane.geometry.plane_adjustment import AdjustmentProblem, adjust
 from monoplane.geometry.plane_matching import fuse_planes
 from monoplane.hookspecs import hookimpl
@@ -29,6 +30,11 @@ class PlaneBundleConfig:
     sigma_px: float = param(1.0, "expected SfM reprojection noise (pixels)")
     sigma_rel: float = param(
         0.03, "expected relative depth noise of plane pixels (point-to-plane term weight)")
+    lift: str = param(
+        "planar", "depth that lifts the plane pixels: 'planar' (each view's own plane fit, "
+        "which carries its normal cues) or 'cues' (the scale-aligned monocular depth)")
+    sigma_normal_deg: float = param(
+        2.0, "expected angle between a view plane's normal and its global plane's (degrees)")
     multi_view_only: bool = param(
         True, "refine only global planes seen in two or more views (others follow their view)")
     max_evaluations: int = param(60, "cap on the solver's residual evaluations")
@@ -66,12 +72,20 @@ class PlaneBundleAdjuster(Adjuster):
         row = {g: k for k, g in enumerate(refined)}
         rng = np.random.default_rng(cfg.seed)
         samp_view, samp_plane, samp_x = [], [], []
+        norm_view, norm_plane, norm_m = [], [], []
+        if cfg.lift not in ("planar", "cues"):
+            raise InvalidInput(f"adjuster.lift must be 'planar' or 'cues', got {cfg.lift!r}")
         for v, (rec, cam) in enumerate(zip(scene.views, scene.cameras, strict=True)):
-            depth = rec.frame.depth
+            depth = rec.planar_depth() if cfg.lift == "planar" else rec.frame.depth
             rays = None
             for local, glob in scene.links[v].items():
                 if glob not in row:
                     continue
+                norm_view.append(v)
+                norm_plane.append(row[glob])
+                m = rec.params[local - 1, :3]
+                # Same side as the global plane (both normally face the cameras).
+                norm_m.append(m if (cam.R.T @ m) @ scene.planes[glob, :3] >= 0 else -m)
                 idx = np.flatnonzero((rec.labels.ravel() == local) & (depth.ravel() > 0))
                 if len(idx) == 0:
                     continue
@@ -98,7 +112,11 @@ class PlaneBundleAdjuster(Adjuster):
             samp_view=np.concatenate(samp_view or [np.zeros(0)]).astype(np.int64),
             samp_plane=np.concatenate(samp_plane or [np.zeros(0)]).astype(np.int64),
             samp_x=np.concatenate(samp_x or [np.zeros((0, 3))]).reshape(-1, 3),
+            norm_view=np.array(norm_view, dtype=np.int64),
+            norm_plane=np.array(norm_plane, dtype=np.int64),
+            norm_m=np.array(norm_m, dtype=np.float64).reshape(-1, 3),
             sigma_px=cfg.sigma_px, sigma_rel=cfg.sigma_rel,
+            sigma_normal_deg=cfg.sigma_normal_deg,
         )
         res = adjust(prob, max_evaluations=cfg.max_evaluations)
 

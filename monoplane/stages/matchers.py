@@ -158,8 +158,8 @@ class ColmapMatcher(Matcher):
         if not any(len(m) >= cfg.min_num_matches for m in matches.values()):
             counts = ", ".join(f"{frames[i].name}-{frames[j].name}: {len(p)}"
                                for (i, j), p in matches.items())
-            raise SfmError(f"no image pair has the {cfg.min_num_matches} verified matches "
-                           f"structure from motion needs ({counts}); the images overlap too "
+            raise SfmError(f"too few verified matches to connect any two images (need "
+                           f"{cfg.min_num_matches} per pair; {counts}); the images overlap too "
                            "little or are too textureless")
         model, attempts = self._map_with_retries(database, images, work, matches, len(frames))
         if model is None:

@@ -38,7 +38,11 @@ def _problem(rng: np.random.Generator, n_views: int = 4):
         samp_view.append(np.full(len(points), v))
         samp_plane.append(np.repeat(np.arange(3), 40))
         samp_x.append(xc)
+    norm_view = np.repeat(np.arange(n_views), 3)
+    norm_plane = np.tile(np.arange(3), n_views)
+    norm_m = np.einsum("lij,lj->li", R[norm_view], planes[norm_plane, :3])
     return dict(K=np.stack([K] * n_views), R=R, t=t, points=points,
+                norm_view=norm_view, norm_plane=norm_plane, norm_m=norm_m,
                 obs_view=np.concatenate(obs_view), obs_point=np.concatenate(obs_point),
                 obs_uv=np.concatenate(obs_uv), planes=planes,
                 samp_view=np.concatenate(samp_view), samp_plane=np.concatenate(samp_plane),
