@@ -7,9 +7,11 @@ For each sequence (:func:`monoplane.synth.sequence.generate_sequence`) it report
   translation-direction angle, degrees (:func:`~monoplane.evaluation.twoview.
   relative_pose_error`);
 * **global planes** with any pixel, against the distinct ground-truth planes the views see;
-* **cross-view consistency**: over the ground-truth planes labelled in two or more registered
-  views, the share whose views all give it the same global id (in each view, the global id
-  covering most of the plane's true mask, none when that is non-planar);
+* **cross-view consistency**: over the ground-truth planes detected in two or more registered
+  views, the share whose views all give it the same global id. A view's id for a true plane is
+  the global id covering most of its true mask; a view where that majority is non-planar did
+  not detect the plane and casts no vote (missed planes are the single-view recall's
+  business, not fusion's);
 * **plane parameter error after similarity alignment**: the predicted world is mapped onto the
   true one by the similarity ``x_gt = s A x_pred + b`` fitted to the cameras (``A`` the
   rotation average of ``R_gt,kᵀ R_pred,k``, then ``s`` and ``b`` by least squares on the camera
@@ -93,7 +95,7 @@ def plane_errors(scene: Scene, views: list[Any], gt_planes: np.ndarray,
 
 def consistency(scene: Scene, views: list[Any], gt_links: list[dict[int, int]]
                 ) -> tuple[int, int]:
-    """(consistent, total) true planes seen in two or more views (see module docstring)."""
+    """(consistent, total) true planes detected in two or more views (module docstring)."""
     votes: dict[int, list[int]] = {}
     for v, (rec, view) in enumerate(zip(scene.views, views, strict=True)):
         lut = np.full(int(rec.labels.max()) + 1, -1)
@@ -103,9 +105,11 @@ def consistency(scene: Scene, views: list[Any], gt_links: list[dict[int, int]]
             mask = view.gt_labels == local
             ids = lut[rec.labels[mask]]
             values, counts = np.unique(ids, return_counts=True)
-            votes.setdefault(glob_gt, []).append(int(values[np.argmax(counts)]))
+            vote = int(values[np.argmax(counts)])
+            if vote >= 0:
+                votes.setdefault(glob_gt, []).append(vote)
     multi = [v for v in votes.values() if len(v) >= 2]
-    good = sum(1 for v in multi if v[0] >= 0 and all(x == v[0] for x in v))
+    good = sum(1 for v in multi if all(x == v[0] for x in v))
     return good, len(multi)
 
 
