@@ -37,7 +37,7 @@ from typing import TYPE_CHECKING, Any
 import cv2
 import numpy as np
 
-from monoplane.errors import InvalidInput
+from monoplane.errors import InvalidInput, StageError
 from monoplane.geometry.alignment import ScaleAlignment, align_scale
 from monoplane.geometry.polygons import plane_basis, triangulate_on_plane
 from monoplane.stages.base import Fuser, Matcher
@@ -75,8 +75,9 @@ class MultiviewResult:
     frame_indices : list of int
         Input index of each scene view.
     registration : list of dict
-        Per scene view, how its pose was found (``method`` ``"sfm"`` or ``"fallback"``, with
-        ``reference`` and ``inliers`` for the latter).
+        Per scene view, how its pose was found: ``method`` ``"sfm"``, ``"fallback"`` (with
+        ``reference`` and ``inliers``) or ``"origin"`` (SfM built no model; this view's camera
+        is the world frame and the others were placed by fallback poses).
     unregistered : list of str
         Names of the input frames left out (no pose).
     adjustment : dict
@@ -120,6 +121,22 @@ def subset_sfm(sfm: SfmResult, views: list[int]) -> SfmResult:
                    keypoints=[sfm.keypoints[v] for v in views],
                    point_ids=[sfm.point_ids[v] for v in views], matches=matches,
                    registration=registration)
+
+
+def origin_sfm(frames: list[Frame], reason: str) -> SfmResult:
+    """A point-less SfM result whose world frame is view 0's camera; other views unplaced.
+
+    Used when the matcher builds no model at all, so that the fallback pose can still place
+    the views (each frame's ``K`` is taken as is).
+    """
+    n = len(frames)
+    cameras = [Camera(K=f.K, R=np.eye(3), t=np.zeros(3), width=f.width, height=f.height,
+                      name=f.name) for f in frames]
+    return SfmResult(cameras=cameras, points=np.zeros((0, 3)),
+                     keypoints=[np.zeros((0, 2)) for _ in frames],
+                     point_ids=[np.zeros(0, np.int64) for _ in frames],
+                     registration=[{"method": "origin"}] + [{"method": "none"}] * (n - 1),
+                     notes=[f"structure from motion failed: {reason}"])
 
 
 def hold_intrinsics_fixed(pipe: Pipeline) -> bool:
@@ -234,10 +251,21 @@ def reconstruct_multiview(frames: list[Frame], pipe: Pipeline, progress: bool = 
     workers = default_workers() if workers is None else max(1, int(workers))
     timings: dict[str, float] = {}
     start = time.perf_counter()
+    sfm_failure = ""
     if sfm is None:
         matcher = pipe.stage("matcher", Matcher)
-        sfm = pipe.call("matcher", matcher.name, lambda: matcher.match(frames), "multiview",
-                        timings)
+        try:
+            sfm = pipe.call("matcher", matcher.name, lambda: matcher.match(frames), "multiview",
+                            timings)
+        except StageError as exc:
+            if strict:
+                raise
+            # No model at all: view 0 becomes the world frame and every other view is
+            # tried with the two-view fallback pose below.
+            sfm_failure = str(exc)
+            print(f"monoplane: warning: {exc}; placing the views by two-view fallback poses",
+                  file=sys.stderr)
+            sfm = origin_sfm(frames, sfm_failure)
     elif sfm.num_views != len(frames):
         raise InvalidInput(f"{len(frames)} frames but the SfM result has {sfm.num_views} views")
     registration = [dict(r) for r in sfm.registration] or [{"method": "sfm"} for _ in frames]
@@ -266,6 +294,12 @@ def reconstruct_multiview(frames: list[Frame], pipe: Pipeline, progress: bool = 
     alignments: dict[int, ScaleAlignment] = {}
     for v, frame in enumerate(prepared):
         if registration[v]["method"] == "none":
+            continue
+        if registration[v]["method"] == "origin":
+            # The world frame's own depth sets the units.
+            alignments[v] = ScaleAlignment(scale=1.0, num_points=0, num_inliers=0,
+                                           residual=float("nan"),
+                                           relative_residual=float("nan"))
             continue
         pixels, depth = sfm.sparse_depth(v)
         try:
@@ -302,8 +336,9 @@ def reconstruct_multiview(frames: list[Frame], pipe: Pipeline, progress: bool = 
     keep = [v for v, r in enumerate(registration) if r["method"] != "none"]
     unregistered = [frames[v].name for v, r in enumerate(registration) if r["method"] == "none"]
     if len(keep) < 2:
+        why = f"; {sfm_failure}" if sfm_failure else ""
         raise InvalidInput(f"only {len(keep)} of {len(frames)} images could be registered "
-                           f"({', '.join(unregistered)} could not); a scene needs two")
+                           f"({', '.join(unregistered)} could not){why}; a scene needs two")
     if unregistered:
         print(f"monoplane: warning: {len(unregistered)} of {len(frames)} images could not be "
               f"registered and are left out: {', '.join(unregistered)}", file=sys.stderr)
