@@ -3,9 +3,9 @@
 SIFT keypoints (OpenCV) matched with Lowe's ratio test and a mutual check, then an essential
 matrix with OpenCV's USAC MAGSAC++ and the cheirality check (``recoverPose``) give the rotation
 and the translation direction. The translation's length, which two views alone cannot give,
-comes from the monocular depth: the inliers triangulated with a unit baseline are compared with
-the reference view's scale-aligned depth at the same pixels (median ratio), and the second
-view's own depth scale follows from the same points seen from it.
+comes from the monocular depth: the inliers lifted with the reference view's scale-aligned
+depth must reproject onto their matches, which fixes the length per point (median over the
+inliers); the second view's own depth scale follows from the same points seen from it.
 
 Frames: ``x_j = R x_i + t`` with OpenCV camera axes; pixel centres at integer coordinates.
 """
@@ -113,18 +113,26 @@ def fallback_relative_pose(rgb_i: np.ndarray, K_i: np.ndarray, depth_i: np.ndarr
     if inl.sum() < min_inliers:
         return None
     t = t.reshape(3)
-    P_i = np.hstack([np.eye(3), np.zeros((3, 1))])
-    P_j = np.hstack([R, t[:, None]])
-    X = cv2.triangulatePoints(P_i, P_j, ni[inl].T, nj[inl].T)
-    X = (X[:3] / X[3]).T                              # camera i, unit baseline
-    z_i = X[:, 2]
-    z_j = (X @ R.T + t)[:, 2]
+    # Baseline length: lift the inliers with view i's depth and, per point, find the length
+    # along t that makes them reproject onto their match in j (least squares of the cross
+    # product); the median is robust to depth outliers. Triangulating instead would make
+    # the length hostage to the small angle errors of a short baseline.
     d_i = sample_depth(depth_i, pi[inl])
     d_j = sample_depth(depth_j, pj[inl])
-    ok = (z_i > 0) & (z_j > 0) & (d_i > 0) & (d_j > 0)
+    X = np.concatenate([ni[inl], np.ones((int(inl.sum()), 1))], axis=1) * d_i[:, None]
+    u = np.concatenate([nj[inl], np.ones((int(inl.sum()), 1))], axis=1)
+    A = X @ R.T
+    ub, ua = np.cross(u, t), np.cross(u, A)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lam = -np.einsum("ij,ij->i", ub, ua) / np.einsum("ij,ij->i", ub, ub)
+    ok = (d_i > 0) & (d_j > 0) & np.isfinite(lam) & (lam > 0)
     if ok.sum() < min_inliers:
         return None
-    baseline = float(np.median(d_i[ok] / z_i[ok]))
-    scale_j = float(np.median(baseline * z_j[ok] / d_j[ok]))
+    baseline = float(np.median(lam[ok]))
+    z_j = (A + baseline * t)[:, 2]
+    ok &= z_j > 0
+    if ok.sum() < min_inliers:
+        return None
+    scale_j = float(np.median(z_j[ok] / d_j[ok]))
     return FallbackPose(R=R, t=t * baseline, depth_scale_j=scale_j, inliers=int(ok.sum()),
                         matches=int(len(pi)))

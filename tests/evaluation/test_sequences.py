@@ -6,7 +6,11 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from monoplane.evaluation.sequences import consistency, plane_errors, similarity_to_truth
-from monoplane.evaluation.twoview import ground_truth_sfm, rotation_error_deg
+from monoplane.evaluation.twoview import (
+    ground_truth_sfm,
+    rotation_error_deg,
+    translation_angle_deg,
+)
 from monoplane.geometry.relative_pose import fallback_relative_pose
 from monoplane.stages.fusers import AverageFuser
 from monoplane.synth import generate
@@ -43,14 +47,15 @@ def test_exact_scene_is_consistent_with_zero_plane_error() -> None:
 
 
 def test_fallback_pose_of_a_known_pair() -> None:
-    synth = generate(5, level="clean", width=320, height=240, n_views=2)
+    synth = generate(6, level="clean", width=320, height=240, n_views=2)
     v0, v1 = synth.views
     fb = fallback_relative_pose(v0.frame.rgb, v0.frame.K, v0.gt_depth, v1.frame.rgb,
                                 v1.frame.K, 0.5 * v1.gt_depth)
     assert fb is not None and fb.inliers >= 15
     R_true = v1.R @ v0.R.T
     t_true = v1.t - R_true @ v0.t
-    assert rotation_error_deg(fb.R, R_true) < 2.5  # coarse: the adjuster refines it
+    assert rotation_error_deg(fb.R, R_true) < 1.0
     # Metric baseline from view 0's depth; view 1's depth was halved, so its scale is 2.
-    np.testing.assert_allclose(fb.t, t_true, atol=0.1 * np.linalg.norm(t_true))
+    assert translation_angle_deg(fb.t, t_true) < 5.0
+    assert abs(np.linalg.norm(fb.t) / np.linalg.norm(t_true) - 1.0) < 0.1
     assert abs(fb.depth_scale_j - 2.0) < 0.1
