@@ -330,8 +330,11 @@ def reconstruct_multiview(frames: list[Frame], pipe: Pipeline, progress: bool = 
                                        relative_residual=float("nan"))
         registration[v] = {"method": "fallback", "reference": frames[ref].name,
                            "inliers": fb.inliers, "matches": fb.matches,
-                           "estimator": "essential matrix (OpenCV USAC MAGSAC++) with the "
-                                        "baseline from the reference view's depth"}
+                           "estimator": {"essential": "essential matrix (OpenCV USAC MAGSAC++), "
+                                                       "baseline from the reference view's "
+                                                       "depth",
+                                         "pnp": "PnP RANSAC on the reference view's "
+                                                "depth-lifted keypoints"}[fb.estimator]}
     sfm = replace(sfm, cameras=cameras, registration=registration)
     keep = [v for v, r in enumerate(registration) if r["method"] != "none"]
     unregistered = [frames[v].name for v, r in enumerate(registration) if r["method"] == "none"]

@@ -35,6 +35,8 @@ class FallbackPose:
         Essential-matrix inliers used.
     matches : int
         Putative matches before the robust fit.
+    estimator : str
+        ``"essential"`` or ``"pnp"``.
     """
 
     R: np.ndarray
@@ -42,6 +44,7 @@ class FallbackPose:
     depth_scale_j: float
     inliers: int
     matches: int
+    estimator: str = "essential"
 
 
 def _gray(rgb: np.ndarray) -> np.ndarray:
@@ -101,6 +104,44 @@ def fallback_relative_pose(rgb_i: np.ndarray, K_i: np.ndarray, depth_i: np.ndarr
     pi, pj = match_sift(rgb_i, rgb_j)
     if len(pi) < max(min_inliers, 5):
         return None
+    found = _essential_pose(pi, pj, K_i, depth_i, K_j, depth_j, min_inliers)
+    if found is None:
+        # A very short baseline makes the essential matrix degenerate; with view i's depth
+        # the matches are 2D-3D correspondences, and PnP needs no parallax.
+        found = _pnp_pose(pi, pj, K_i, depth_i, K_j, depth_j, min_inliers)
+    return found
+
+
+def _pnp_pose(pi: np.ndarray, pj: np.ndarray, K_i: np.ndarray, depth_i: np.ndarray,
+              K_j: np.ndarray, depth_j: np.ndarray, min_inliers: int) -> FallbackPose | None:
+    """Pose of j from view i's depth-lifted keypoints and their matches in j (PnP RANSAC)."""
+    d_i = sample_depth(depth_i, pi)
+    ok = d_i > 0
+    if ok.sum() < min_inliers:
+        return None
+    ni = cv2.undistortPoints(pi[ok].reshape(-1, 1, 2), K_i, None).reshape(-1, 2)
+    X = np.concatenate([ni, np.ones((len(ni), 1))], axis=1) * d_i[ok, None]
+    done, rvec, tvec, inliers = cv2.solvePnPRansac(
+        X, pj[ok].reshape(-1, 1, 2), K_j, None, reprojectionError=2.0, iterationsCount=500,
+        confidence=0.999, flags=cv2.SOLVEPNP_SQPNP)
+    if not done or inliers is None or len(inliers) < min_inliers:
+        return None
+    R = cv2.Rodrigues(rvec)[0]
+    t = tvec.reshape(3)
+    idx = inliers.reshape(-1)
+    z_j = (X[idx] @ R.T + t)[:, 2]
+    d_j = sample_depth(depth_j, pj[ok][idx])
+    good = (z_j > 0) & (d_j > 0)
+    if good.sum() < min_inliers:
+        return None
+    return FallbackPose(R=R, t=t, depth_scale_j=float(np.median(z_j[good] / d_j[good])),
+                        inliers=int(len(idx)), matches=int(len(pi)), estimator="pnp")
+
+
+def _essential_pose(pi: np.ndarray, pj: np.ndarray, K_i: np.ndarray, depth_i: np.ndarray,
+                    K_j: np.ndarray, depth_j: np.ndarray, min_inliers: int
+                    ) -> FallbackPose | None:
+    """Essential matrix (USAC MAGSAC++) rotation and direction, baseline from the depth."""
     ni = cv2.undistortPoints(pi.reshape(-1, 1, 2), K_i, None).reshape(-1, 2)
     nj = cv2.undistortPoints(pj.reshape(-1, 1, 2), K_j, None).reshape(-1, 2)
     focal = 0.5 * (K_i[0, 0] + K_j[0, 0])
