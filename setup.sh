@@ -15,7 +15,8 @@ $SUDO apt-get update -qq
 DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends $APT_PACKAGES >/dev/null
 
 PYTHON="${PYTHON:-python3}"
-"$PYTHON" -m pip install --quiet -e ".[dev]"
+# The ray extra is installed too, so that the tests exercise `monoplane batch --engine ray`.
+"$PYTHON" -m pip install --quiet -e ".[dev,ray]"
 for plugin in plugins/*/; do
   if [ -f "$plugin/pyproject.toml" ]; then
     "$PYTHON" -m pip install --quiet -e "$plugin"

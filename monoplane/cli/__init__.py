@@ -18,7 +18,7 @@ from monoplane.errors import MonoplaneError
 
 #: Subcommand modules, in the order ``monoplane --help`` lists them.
 SUBCOMMANDS: tuple[str, ...] = (
-    "run", "multiview", "match", "eval", "bench", "plugins", "presets",
+    "run", "batch", "multiview", "match", "eval", "bench", "plugins", "presets",
 )
 
 EXIT_USER_ERROR = 2
@@ -28,6 +28,7 @@ EPILOG = """examples:
   monoplane run data_samples/room_000/rgb.png --depth data_samples/room_000/depth.npy \\
       --normals data_samples/room_000/normals.npy \\
       --intrinsics data_samples/room_000/intrinsics.json --out out/room_000 --report
+  monoplane batch data_samples --out out/batch --report
   monoplane run photo.jpg --set cues.plugin=onnx --set cues.depth_model=omnidata_depth.onnx \\
       --set cues.normal_model=omnidata_normal.onnx --out out/photo
   monoplane eval --all --level mild --n 50

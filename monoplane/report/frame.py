@@ -170,10 +170,10 @@ def write_frame_report(rec: Reconstruction, out_dir: Path, render_3d: bool = Tru
     bar.set_postfix_str("planes")
     fig.save_png(out / "labels_overlay.png", fig.overlay_labels(frame.rgb, rec.labels,
                                                                 n_planes=rec.num_planes))
-    fig.save_png(out / "labels.png", fig.label_map(rec.labels, rec.num_planes))
+    fig.save_png(out / "label_map.png", fig.label_map(rec.labels, rec.num_planes))
     planes_figs = [
         html.Figure("labels_overlay.png", "planes over the image, with plane ids"),
-        html.Figure("labels.png", "label map (dark: non-planar)"),
+        html.Figure("label_map.png", "label map (dark: non-planar)"),
     ]
     depth_figs = []
     if frame.depth is not None:

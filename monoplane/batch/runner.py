@@ -1,0 +1,257 @@
+"""``run_batch``: frames in, one output folder per frame plus ``summary.json`` out.
+
+Order of work: read and check every frame spec (a bad manifest fails before any work), resolve
+the config once (a bad key fails before any work), lock the output folder, delete temporary
+folders a killed run left behind, skip complete frames, run the rest on the chosen engine with a
+progress bar, then write ``summary.json`` (and ``index.html`` with ``report``) atomically.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import json
+import os
+import sys
+import tempfile
+import time
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+from tqdm import tqdm
+
+from monoplane.batch.engines import check_engine, run_engine
+from monoplane.batch.frame import (
+    BatchJob,
+    FrameResult,
+    clean_stale,
+    is_complete,
+    stored_result,
+)
+from monoplane.batch.specs import FrameSpec, absolute_paths, check_name, read_frames
+from monoplane.errors import InvalidInput
+
+LOCK_FILE = ".monoplane-batch.lock"
+
+
+@dataclass
+class BatchSummary:
+    """What ``summary.json`` holds.
+
+    Attributes
+    ----------
+    frames : list of FrameResult
+        One per input frame, in input order (frames an interrupt left undone are absent).
+    config : dict
+        The resolved pipeline config every frame ran with.
+    interrupted : bool
+        The run was stopped (Ctrl-C) before every frame was done.
+    """
+
+    frames: list[FrameResult]
+    config: dict[str, Any]
+    engine: str = "local"
+    workers: int | None = None
+    seconds: float = 0.0
+    interrupted: bool = False
+    notes: list[str] = field(default_factory=list)
+    info: dict[str, Any] = field(default_factory=dict)
+
+    def count(self, status: str) -> int:
+        """Number of frames with ``status`` (``"ok"``, ``"failed"`` or ``"skipped"``)."""
+        return sum(f.status == status for f in self.frames)
+
+    @property
+    def failed(self) -> list[FrameResult]:
+        return [f for f in self.frames if f.status == "failed"]
+
+    def to_dict(self) -> dict[str, Any]:
+        from monoplane import __version__
+
+        return {
+            "monoplane_version": __version__,
+            **self.info,
+            "engine": self.engine,
+            "workers": self.workers,
+            "seconds": round(self.seconds, 3),
+            "interrupted": self.interrupted,
+            "notes": self.notes,
+            "counts": {s: self.count(s) for s in ("ok", "failed", "skipped")},
+            "frames": [f.to_dict() for f in self.frames],
+            "config": self.config,
+        }
+
+
+def write_json_atomic(path: Path, doc: dict[str, Any]) -> None:
+    """Write JSON to a temporary sibling and rename it over ``path``."""
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        os.fchmod(fd, 0o644)  # mkstemp makes it private; a summary is meant to be shared
+        with os.fdopen(fd, "w") as fh:
+            json.dump(doc, fh, indent=2)
+            fh.write("\n")
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+@contextlib.contextmanager
+def batch_lock(out: Path) -> Iterator[None]:
+    """Hold an exclusive lock on ``out`` so two batches never write (or clean) it at once."""
+    with open(out / LOCK_FILE, "w") as fh:
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise InvalidInput(f"another monoplane batch is writing to {out}") from None
+        yield
+
+
+def _json_roundtrip(doc: dict[str, Any]) -> dict[str, Any]:
+    return json.loads(json.dumps(doc, default=str))
+
+
+def plan(specs: Sequence[FrameSpec], out: Path, config: dict[str, Any], overwrite: bool,
+         report: bool) -> tuple[list[FrameSpec], dict[str, FrameResult]]:
+    """Split frames into those to run and those already decided (skipped or failed).
+
+    Raises
+    ------
+    InvalidInput
+        If a complete frame folder was made with a different config (resuming would mix two
+        configs in one batch).
+    """
+    todo: list[FrameSpec] = []
+    decided: dict[str, FrameResult] = {}
+    wanted = _json_roundtrip(config)
+    for spec in specs:
+        folder = out / spec.name
+        if overwrite or not folder.exists():
+            todo.append(spec)
+        elif is_complete(folder):
+            planes, stored = stored_result(folder)
+            if stored is not None and _json_roundtrip(stored) != wanted:
+                raise InvalidInput(
+                    f"{folder} was made with a different config; pass --overwrite to recompute "
+                    "every frame, or choose another --out")
+            if report and not is_complete(folder, report=True):
+                todo.append(spec)  # our own output, only the report is missing
+            else:
+                decided[spec.name] = FrameResult(spec.name, "skipped", planes=planes)
+        else:
+            decided[spec.name] = FrameResult(
+                spec.name, "failed",
+                error=f"{folder} exists but is not a complete frame output; pass --overwrite")
+    return todo, decided
+
+
+def run_batch(source: str | Path | Sequence[FrameSpec], out: str | Path,
+              config: str | Path | dict[str, Any] | None = None, preset: str | None = None,
+              overrides: dict[str, Any] | list[str] | None = None, *, workers: int | None = None,
+              engine: str = "local", ray_address: str | None = None, overwrite: bool = False,
+              report: bool = False, depth_scale: float | None = None,
+              depth_kind: str = "metric", nan_as_invalid: bool = False,
+              progress: bool = True) -> BatchSummary:
+    """Reconstruct every frame of a folder or manifest into ``out/<name>/``.
+
+    Parameters
+    ----------
+    source : path or sequence of FrameSpec
+        A folder of frame folders, a ``.jsonl``/``.csv`` manifest (see
+        :mod:`monoplane.batch.specs`), or specs built in Python.
+    out : path
+        Batch output folder (created if missing).
+    config, preset, overrides
+        Pipeline configuration, as :meth:`monoplane.Pipeline.from_config`.
+    workers : int, optional
+        Worker processes (local) or actors (ray); default: all cores (local), all cluster
+        CPUs (ray).
+    engine : {"local", "ray"}
+    ray_address : str, optional
+        ``"auto"`` or ``"ray://host:port"``; default: a local Ray instance.
+    overwrite : bool
+        Recompute every frame; by default complete frame folders are skipped.
+    report : bool
+        Write each frame's ``report.html`` and the batch's ``index.html``.
+    depth_scale, depth_kind, nan_as_invalid
+        Defaults for every frame (a manifest's ``depth_scale`` column wins).
+    progress : bool
+        Show a progress bar on stderr.
+
+    Returns
+    -------
+    BatchSummary
+        Also written to ``out/summary.json``.
+
+    Raises
+    ------
+    InvalidInput, ConfigError
+        Bad input list, config or output folder, before any frame runs.
+    KeyboardInterrupt
+        After stopping the workers and writing ``summary.json`` (``interrupted: true``).
+    """
+    from monoplane.pipeline import Pipeline
+
+    start = time.perf_counter()
+    notes: list[str] = []
+    if isinstance(source, (str, Path)):
+        specs = read_frames(source, depth_scale, depth_kind, nan_as_invalid, notes)
+        source_text = str(source)
+    else:
+        # Workers may run elsewhere (Ray) with another working directory: absolute paths.
+        specs = [absolute_paths(s) for s in source]
+        source_text = f"{len(specs)} frame specs"
+        for spec in specs:
+            check_name(spec.name, "FrameSpec")
+    names = [s.name for s in specs]
+    if len(set(names)) != len(names):
+        dup = next(n for n in names if names.count(n) > 1)
+        raise InvalidInput(f"frame name {dup!r} appears twice in {source_text}")
+    if workers is not None and workers < 1:
+        raise InvalidInput(f"--workers must be at least 1, got {workers}")
+    check_engine(engine, ray_address)
+    cfg = Pipeline.from_config(config, preset=preset, overrides=overrides).config.to_dict()
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise InvalidInput(f"output path {out} is an existing file, not a folder")
+    out.mkdir(parents=True, exist_ok=True)
+    summary = BatchSummary([], cfg, engine=engine, workers=workers,
+                           notes=notes, info={"input": source_text,
+                                 "started": datetime.now(UTC).isoformat(
+                                     timespec="seconds")})
+    with batch_lock(out):
+        clean_stale(out)
+        todo, decided = plan(specs, out, cfg, overwrite, report)
+        job = BatchJob(config=cfg, out=str(out.resolve()), report=report)
+        results = dict(decided)
+        counts = {"ok": 0, "failed": sum(r.status == "failed" for r in decided.values()),
+                  "skipped": sum(r.status == "skipped" for r in decided.values())}
+        bar = tqdm(total=len(specs), initial=len(decided), unit="frame", desc="batch",
+                   disable=not progress, file=sys.stderr, dynamic_ncols=True)
+        run_start = time.perf_counter()
+        ran = 0
+        try:
+            for res in run_engine(engine, job, todo, workers, ray_address):
+                results[res.name] = res
+                counts[res.status] += 1
+                ran += 1
+                fps = ran / max(time.perf_counter() - run_start, 1e-9)
+                bar.set_postfix_str(f"done={counts['ok']} failed={counts['failed']} "
+                                    f"skipped={counts['skipped']} {fps:.2f} fps")
+                bar.update()
+        except KeyboardInterrupt:
+            summary.interrupted = True
+            raise
+        finally:
+            bar.close()
+            summary.frames = [results[n] for n in names if n in results]
+            summary.seconds = time.perf_counter() - start
+            write_json_atomic(out / "summary.json", summary.to_dict())
+        if report:
+            from monoplane.batch.index import write_index
+
+            write_index(summary, specs, out)
+    return summary
