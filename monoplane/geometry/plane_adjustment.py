@@ -69,6 +69,11 @@ class AdjustmentProblem:
         Expected relative depth noise of plane pixels.
     sigma_normal_deg : float
         Expected angle between a view plane's normal and its global plane's (degrees).
+    prior_rot_deg : float
+        Pose prior: expected rotation change (degrees).
+    prior_t : numpy.ndarray or None
+        (V,) pose prior: expected translation change of each view (world units); None
+        disables the prior.
     """
 
     K: np.ndarray
@@ -88,6 +93,8 @@ class AdjustmentProblem:
     sigma_px: float = 1.0
     sigma_rel: float = 0.03
     sigma_normal_deg: float = 2.0
+    prior_rot_deg: float = 1.0
+    prior_t: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         v = len(self.R)
@@ -181,6 +188,16 @@ def _unpack(x: np.ndarray, lay: _Layout, prob: AdjustmentProblem, bases: np.ndar
     return R, t, scales, planes, points
 
 
+def _prior(x: np.ndarray, lay: _Layout, prob: AdjustmentProblem) -> np.ndarray:
+    """(V - 1, 6) pose-prior residuals in σ units (empty without a prior)."""
+    if prob.prior_t is None or lay.v < 2:
+        return np.zeros((0, 6))
+    pose = x[lay.pose:lay.scale].reshape(-1, 6)
+    rot = pose[:, :3] / np.radians(prob.prior_rot_deg)
+    trans = (pose[:, 3:] - prob.t[1:]) / np.asarray(prob.prior_t)[1:, None]
+    return np.concatenate([rot, trans], axis=1)
+
+
 def _residuals(x: np.ndarray, lay: _Layout, prob: AdjustmentProblem, bases: np.ndarray
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(reprojection (O, 2), point-to-plane (S,), normal (L, 3)), all in σ units."""
@@ -245,10 +262,16 @@ def _sparsity(lay: _Layout, prob: AdjustmentProblem) -> coo_matrix:
     for r in range(3):
         rows.append(np.repeat(2 * o + s + 3 * np.arange(n_l) + r, norm_cols.shape[1]))
         cols.append(norm_cols.reshape(-1))
+    n_rows = 2 * o + s + 3 * n_l
+    if prob.prior_t is not None and lay.v > 1:
+        # Prior rows: 6 per view 1..V-1, each on one pose parameter.
+        rows.append(n_rows + np.arange(6 * (lay.v - 1)))
+        cols.append(lay.pose + np.arange(6 * (lay.v - 1)))
+        n_rows += 6 * (lay.v - 1)
     r, c = np.concatenate(rows), np.concatenate(cols)
     keep = c >= 0
     return coo_matrix((np.ones(int(keep.sum())), (r[keep], c[keep])),
-                      shape=(2 * o + s + 3 * n_l, lay.size))
+                      shape=(n_rows, lay.size))
 
 
 def adjust(prob: AdjustmentProblem, max_evaluations: int = 100, loss: str = "soft_l1"
@@ -279,7 +302,8 @@ def adjust(prob: AdjustmentProblem, max_evaluations: int = 100, loss: str = "sof
 
     def fun(x: np.ndarray) -> np.ndarray:
         reproj, plane, normal = _residuals(x, lay, prob, bases)
-        return np.concatenate([reproj.reshape(-1), plane, normal.reshape(-1)])
+        return np.concatenate([reproj.reshape(-1), plane, normal.reshape(-1),
+                               _prior(x, lay, prob).reshape(-1)])
 
     before = residual_summary(*_residuals(x0, lay, prob, bases), prob)
     if lay.size == 0 or (len(prob.obs_view) + len(prob.samp_view)) == 0:

@@ -35,6 +35,11 @@ class PlaneBundleConfig:
         "which carries its normal cues) or 'cues' (the scale-aligned monocular depth)")
     sigma_normal_deg: float = param(
         2.0, "expected angle between a view plane's normal and its global plane's (degrees)")
+    prior_rot_deg: float = param(
+        1.0, "pose prior: expected rotation change of a view (degrees)")
+    prior_t_rel: float = param(
+        0.01, "pose prior: expected translation change, as a share of the view's median "
+        "plane depth")
     multi_view_only: bool = param(
         True, "refine only global planes seen in two or more views (others follow their view)")
     max_evaluations: int = param(60, "cap on the solver's residual evaluations")
@@ -116,7 +121,8 @@ class PlaneBundleAdjuster(Adjuster):
             norm_plane=np.array(norm_plane, dtype=np.int64),
             norm_m=np.array(norm_m, dtype=np.float64).reshape(-1, 3),
             sigma_px=cfg.sigma_px, sigma_rel=cfg.sigma_rel,
-            sigma_normal_deg=cfg.sigma_normal_deg,
+            sigma_normal_deg=cfg.sigma_normal_deg, prior_rot_deg=cfg.prior_rot_deg,
+            prior_t=self._prior_t(samp_view, samp_x, n_views),
         )
         res = adjust(prob, max_evaluations=cfg.max_evaluations)
 
@@ -152,6 +158,19 @@ class PlaneBundleAdjuster(Adjuster):
                   "message": res.message, "planes_refined": len(refined),
                   "depth_scale_factors": [float(s) for s in res.scales]}
         return new_scene, new_sfm, report
+
+
+    def _prior_t(self, samp_view: list[np.ndarray], samp_x: list[np.ndarray],
+                 n_views: int) -> np.ndarray:
+        """(V,) translation prior sigma: ``prior_t_rel`` times each view's median plane depth."""
+        views = np.concatenate(samp_view or [np.zeros(0)]).astype(np.int64)
+        z = np.concatenate(samp_x or [np.zeros((0, 3))]).reshape(-1, 3)[:, 2]
+        overall = float(np.median(z)) if len(z) else 1.0
+        out = np.full(n_views, overall)
+        for v in range(n_views):
+            if np.any(views == v):
+                out[v] = float(np.median(z[views == v]))
+        return self.config.prior_t_rel * np.maximum(out, 1e-9)
 
 
 @hookimpl
