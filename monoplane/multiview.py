@@ -215,7 +215,19 @@ class ViewPool:
         """``[fn(f) for f in frames]`` in input order; the first failure propagates."""
         global _PIPE
         if self.pool is not None:
-            return self.pool.map(fn, frames)
+            from monoplane.batch import WorkerInitError
+
+            try:
+                return self.pool.map(fn, frames)
+            except WorkerInitError as exc:
+                # E.g. a script without an ``if __name__ == "__main__":`` guard, which
+                # spawned workers cannot import: run the views here instead.
+                import sys
+
+                print(f"monoplane: warning: per-view workers could not start ({exc}); "
+                      "running the views in this process", file=sys.stderr)
+                self.pool.__exit__(None, None, None)
+                self.pool = None
         previous, _PIPE = _PIPE, self.pipe
         try:
             return [fn(f) for f in frames]
