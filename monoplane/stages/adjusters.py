@@ -29,16 +29,17 @@ class PlaneBundleConfig:
         64, "plane pixels sampled per view plane for the point-to-plane term")
     sigma_px: float = param(1.0, "expected SfM reprojection noise (pixels)")
     sigma_rel: float = param(
-        0.03, "expected relative depth noise of plane pixels (point-to-plane term weight)")
+        0.1, "expected relative depth noise of plane pixels (point-to-plane term weight); "
+        "monocular depth warps by several percent, so this is loose")
     lift: str = param(
         "planar", "depth that lifts the plane pixels: 'planar' (each view's own plane fit, "
         "which carries its normal cues) or 'cues' (the scale-aligned monocular depth)")
     sigma_normal_deg: float = param(
         2.0, "expected angle between a view plane's normal and its global plane's (degrees)")
     prior_rot_deg: float = param(
-        1.0, "pose prior: expected rotation change of a view (degrees)")
+        0.5, "pose prior: expected rotation change of a view (degrees)")
     prior_t_rel: float = param(
-        0.01, "pose prior: expected translation change, as a share of the view's median "
+        0.003, "pose prior: expected translation change, as a share of the view's median "
         "plane depth")
     multi_view_only: bool = param(
         True, "refine only global planes seen in two or more views (others follow their view)")
