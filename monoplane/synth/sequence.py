@@ -51,6 +51,13 @@ def _camera_ok(layout: Layout, center: np.ndarray) -> bool:
                                    margin=0.3)
 
 
+def _view_zero(layout: Layout) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray, np.ndarray]:
+    """View 0's pose and its horizontal forward and sideways unit directions (world xy)."""
+    c0, tgt0 = layout.camera_center, layout.camera_target
+    fwd = (tgt0 - c0)[:2] / np.linalg.norm((tgt0 - c0)[:2])
+    return look_at(c0, tgt0), fwd, np.array([-fwd[1], fwd[0]])
+
+
 def walk_poses(layout: Layout, n_views: int, rng: np.random.Generator
                ) -> list[tuple[np.ndarray, np.ndarray]]:
     """World-to-camera poses of a walk-through starting at view 0's camera.
@@ -70,9 +77,7 @@ def walk_poses(layout: Layout, n_views: int, rng: np.random.Generator
         (3, 3) rotation and (3,) translation per view.
     """
     c0, tgt0 = layout.camera_center, layout.camera_target
-    first = look_at(c0, tgt0)
-    fwd = (tgt0 - c0)[:2] / np.linalg.norm((tgt0 - c0)[:2])
-    side = np.array([-fwd[1], fwd[0]])
+    first, fwd, side = _view_zero(layout)
     for _attempt in range(100):
         sign = 1.0 if rng.uniform() < 0.5 else -1.0
         poses, centers, targets = [first], [c0], [tgt0]
@@ -119,9 +124,7 @@ def star_poses(layout: Layout, n_views: int, rng: np.random.Generator
     list of (R, t)
     """
     c0, tgt0 = layout.camera_center, layout.camera_target
-    first = look_at(c0, tgt0)
-    fwd = (tgt0 - c0)[:2] / np.linalg.norm((tgt0 - c0)[:2])
-    side = np.array([-fwd[1], fwd[0]])
+    first, fwd, side = _view_zero(layout)
     poses = [first]
     for _k in range(1, n_views):
         for _try in range(500):
