@@ -107,7 +107,8 @@ def fallback_relative_pose(rgb_i: np.ndarray, K_i: np.ndarray, depth_i: np.ndarr
     found = _essential_pose(pi, pj, K_i, depth_i, K_j, depth_j, min_inliers)
     if found is None:
         # A very short baseline makes the essential matrix degenerate; with view i's depth
-        # the matches are 2D-3D correspondences, and PnP needs no parallax.
+        # the matches are 2D-3D correspondences, and PnP needs no parallax. (PnP is not the
+        # first choice: keypoints sit on edges, where a depth lookup is often off.)
         found = _pnp_pose(pi, pj, K_i, depth_i, K_j, depth_j, min_inliers)
     return found
 
