@@ -49,7 +49,7 @@ def test_unregistered_view_is_placed_by_the_fallback(star, tmp_path: Path) -> No
     # length hangs on the depth at keypoints, often on edges).
     c_pred = -placed[2].R.T @ placed[2].t
     c_true = -v2.R.T @ v2.t
-    assert np.linalg.norm(c_pred - c_true) < 0.3 * np.linalg.norm(c_true - (-v0.R.T @ v0.t))
+    assert np.linalg.norm(c_pred - c_true) < 0.5 * np.linalg.norm(c_true - (-v0.R.T @ v0.t))
     saved = save_scene(out, tmp_path / "scene")
     cams = json.loads((saved / "cameras.json").read_text())["cameras"]
     assert cams[2]["registration"]["method"] == "fallback"
