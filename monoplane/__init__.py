@@ -1,15 +1,50 @@
-"""monoplane: planar 3D reconstruction from one or a few images (MonoPlane, IROS 2024)."""
+"""monoplane: planar 3D reconstruction from one or a few images (MonoPlane, IROS 2024).
 
-__version__ = "0.1.0"  # before the imports: submodules read it lazily
+The names below are loaded on first use, so that ``import monoplane.types`` (or any other
+small module) does not pull in the pipeline, OpenCV and the plugin system.
+"""
 
-from monoplane.errors import ConfigError, InvalidInput, MonoplaneError, StageError  # noqa: E402
-from monoplane.hookspecs import hookimpl  # noqa: E402
-from monoplane.io import load_frame, save_reconstruction  # noqa: E402
-from monoplane.pipeline import Pipeline  # noqa: E402
-from monoplane.types import Camera, Frame, Reconstruction, Scene  # noqa: E402
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+__version__ = "0.1.0"
+
+#: Module -> the public names it defines.
+_MODULES: dict[str, tuple[str, ...]] = {
+    "monoplane.detect": ("detect_planes",),
+    "monoplane.errors": ("ConfigError", "InvalidInput", "MonoplaneError", "StageError"),
+    "monoplane.hookspecs": ("hookimpl",),
+    "monoplane.io": ("load_frame", "save_reconstruction"),
+    "monoplane.pipeline": ("Pipeline",),
+    "monoplane.types": ("Camera", "Frame", "Reconstruction", "Scene"),
+}
+_LAZY = {name: module for module, names in _MODULES.items() for name in names}
 
 __all__ = [
     "Camera", "ConfigError", "Frame", "InvalidInput", "MonoplaneError", "Pipeline",
-    "Reconstruction", "Scene", "StageError", "hookimpl", "load_frame", "save_reconstruction",
-    "__version__",
+    "Reconstruction", "Scene", "StageError", "detect_planes", "hookimpl", "load_frame",
+    "save_reconstruction", "__version__",
 ]
+
+if TYPE_CHECKING:
+    from monoplane.detect import detect_planes
+    from monoplane.errors import ConfigError, InvalidInput, MonoplaneError, StageError
+    from monoplane.hookspecs import hookimpl
+    from monoplane.io import load_frame, save_reconstruction
+    from monoplane.pipeline import Pipeline
+    from monoplane.types import Camera, Frame, Reconstruction, Scene
+
+
+def __getattr__(name: str) -> Any:
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'monoplane' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value  # later look-ups skip this function
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))

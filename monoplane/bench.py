@@ -1,32 +1,45 @@
-"""Per-stage timing and memory of a pipeline preset on synthetic frames (``monoplane bench``).
+"""Per-stage timing, throughput and memory of a preset against baselines (``monoplane bench``).
+
+Frames
+    Each size runs the preset on ``frames`` synthetic frames (seeds ``seed .. seed+frames-1``,
+    ``monoplane.synth.generate(seed, level, width, height)``, view 0), each ``repeat`` times.
+    Medians are over all those runs.
 
 Time
-    Each size runs ``repeat`` timed pipeline calls on the same synthetic frame
-    (``monoplane.synth.generate(seed, level, width, height)``, view 0) and reports the median of
-    every entry of ``Reconstruction.timings``: the stage kinds the pipeline times (``cues``,
-    ``ransac``, ``refiner``), the RANSAC driver's sub-steps (``ransac.cloud``, ``ransac.graph``,
-    ``ransac.search``, ``ransac.label``, ``ransac.finalize``) and the wall time of the whole
-    call (``total``). Timed runs do not trace memory.
+    Every entry of ``Reconstruction.timings``: the stage kinds the pipeline times (``cues``,
+    ``ransac``, ``refiner``), their sub-steps (``ransac.graph``, ``refiner.crf``, ...) and the
+    wall time of the whole call (``total``); throughput is ``1 / median total``. The first call
+    of a fresh process is reported apart (``first call``): it loads the numba kernels from
+    their on-disk cache (or compiles them once, the first time ever).
+
+Baselines
+    Every registered baseline (``monoplane_register_baselines``: the built-in one and those of
+    installed plugins) runs on the same frames in the same process, after the preset. ``call``
+    is the baseline's own call alone (``timings["baseline.call"]``, without converting the
+    cloud into the library's data structure), ``total`` the whole baseline call.
+    The ratio is the preset's median ``total`` over the baseline's median ``call``.
 
 Memory
-    One extra, untimed run comes first (it also warms caches and imports). It traces
+    Each size runs in a fresh child process, so that its peak resident set size
+    (``ru_maxrss``, read right after the preset's runs and before any baseline runs) is that
+    size's own: imports, the frames and the preset's peak. One extra untimed run traces
     allocations with :mod:`tracemalloc` and listens to the ``monoplane_stage_finished`` hook:
-    a stage's figure is the peak of traced memory while it ran, *above* what was allocated when
-    it started (the peak is reset at every stage boundary). tracemalloc sees every allocation
-    made through Python's allocators, numpy arrays included, but not memory that C++ libraries
-    (Open3D, the max-flow solver, the dense-CRF lattice) allocate for themselves. As a coarse
-    complement the process's peak resident set size (``ru_maxrss``) after the size's runs is
-    reported too; it only ever grows, so it bounds rather than measures each size.
+    a stage's ``MiB`` is the peak of traced memory while it ran, above what was allocated when
+    it started. tracemalloc sees Python and numpy allocations, not memory that C++ libraries
+    (Open3D, the max-flow solver) allocate for themselves; the RSS covers those.
 """
 
 from __future__ import annotations
 
+import importlib
+import multiprocessing
 import resource
 import sys
 import time
 import tracemalloc
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
@@ -94,6 +107,15 @@ class StageBench:
 
 
 @dataclass
+class BaselineBench:
+    """Same-run timing of one baseline: median seconds of its core call and of the whole call."""
+
+    name: str
+    call_s: float
+    total_s: float
+
+
+@dataclass
 class BenchResult:
     """Benchmark of one preset at one image size."""
 
@@ -102,15 +124,43 @@ class BenchResult:
     height: int
     repeat: int
     stages: list[StageBench] = field(default_factory=list)
-    planes: int = 0
+    planes: float = 0.0
     max_rss_mib: float = 0.0
+    frames: int = 1
+    first_call_s: float = 0.0
+    baselines: list[BaselineBench] = field(default_factory=list)
+
+    @property
+    def total_s(self) -> float:
+        """Median seconds of the whole pipeline call."""
+        return next((s.median_s for s in self.stages if s.name == "total"), float("nan"))
+
+    @property
+    def fps(self) -> float:
+        """Throughput, frames per second (1 / median total)."""
+        return 1.0 / self.total_s if self.total_s > 0 else float("nan")
+
+    def ratio(self, baseline: BaselineBench) -> float:
+        """Median pipeline time over the baseline's median core-call time."""
+        return self.total_s / baseline.call_s if baseline.call_s > 0 else float("nan")
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain-data form for JSON."""
+        """Plain-data form for JSON (with the derived throughput and ratios)."""
         return {"preset": self.preset, "width": self.width, "height": self.height,
-                "repeat": self.repeat, "planes": self.planes, "max_rss_mib": self.max_rss_mib,
-                "stages": [{"name": s.name, "median_s": s.median_s, "peak_mib": s.peak_mib}
-                           for s in self.stages]}
+                "repeat": self.repeat, "frames": self.frames, "planes": self.planes,
+                "max_rss_mib": self.max_rss_mib, "first_call_s": self.first_call_s,
+                "fps": self.fps,
+                "stages": [asdict(s) for s in self.stages],
+                "baselines": [{**asdict(b), "ratio": self.ratio(b)} for b in self.baselines]}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> BenchResult:
+        """Inverse of :meth:`to_dict` (derived fields are recomputed)."""
+        return cls(data["preset"], data["width"], data["height"], data["repeat"],
+                   [StageBench(**s) for s in data["stages"]], data["planes"],
+                   data["max_rss_mib"], data.get("frames", 1), data.get("first_call_s", 0.0),
+                   [BaselineBench(b["name"], b["call_s"], b["total_s"])
+                    for b in data.get("baselines", [])])
 
 
 def _order(key: str) -> tuple[int, str, int]:
@@ -137,27 +187,36 @@ def _max_rss_mib() -> float:
 
 
 def bench(preset: str = "monoplane", sizes: Sequence[tuple[int, int]] = DEFAULT_SIZES,
-          repeat: int = 5, seed: int = 0, level: str = "mild",
-          overrides: list[str] | None = None, progress: bool = True) -> list[BenchResult]:
-    """Time and profile a preset at several image sizes.
+          repeat: int = 3, seed: int = 0, level: str = "mild",
+          overrides: list[str] | None = None, progress: bool = True, frames: int = 5,
+          baselines: Sequence[str] | None = None, plugins: Sequence[str] = (),
+          isolate: bool = True) -> list[BenchResult]:
+    """Time and profile a preset, and the baselines on the same frames, at several sizes.
 
     Parameters
     ----------
     preset : str
-        Pipeline preset (the cue provider is forced to ``given``: the synthetic frame carries
-        its cues, so ``cues`` measures the pass-through only).
+        Pipeline preset (the frames carry their cues, so the cue step is a pass-through).
     sizes : sequence of (int, int)
         ``(width, height)`` pairs in pixels.
     repeat : int
-        Timed runs per size (median reported).
+        Timed runs per frame.
     seed : int
-        Synthetic scene seed.
+        Seed of the first synthetic frame.
     level : str
         Cue corruption level of :func:`monoplane.synth.generate`.
     overrides : list of str, optional
         Extra ``table.key=value`` overrides.
     progress : bool
-        Show a tqdm progress bar on stderr.
+        Show a tqdm progress bar (one step per size) on stderr.
+    frames : int
+        Synthetic frames per size (seeds ``seed .. seed + frames - 1``).
+    baselines : sequence of str, optional
+        Baselines to time on the same frames; ``None``: every registered one, ``[]``: none.
+    plugins : sequence of str
+        Extra plugin modules to register (by import name), e.g. a baseline not installed.
+    isolate : bool
+        Run each size in a fresh child process (its own peak RSS; see the module docstring).
 
     Returns
     -------
@@ -166,51 +225,98 @@ def bench(preset: str = "monoplane", sizes: Sequence[tuple[int, int]] = DEFAULT_
     """
     from tqdm import tqdm
 
-    from monoplane.pipeline import Pipeline
-    from monoplane.plugin_manager import get_plugin_manager
-    from monoplane.synth import generate
-
     if repeat < 1:
         raise InvalidInput(f"--repeat must be at least 1, got {repeat}")
+    if frames < 1:
+        raise InvalidInput(f"--frames must be at least 1, got {frames}")
     if not sizes:
         raise InvalidInput("no image size to benchmark")
-    tracker = StagePeakTracker()
-    pm = get_plugin_manager(extra_plugins=(tracker,))
-    pipe = Pipeline.from_preset(preset, overrides=["cues.plugin=given", *(overrides or [])],
-                                pm=pm)
+    # Resolve names now, in this process, so that bad input fails before any child starts.
+    from monoplane.evaluation.baselines import baseline_names
+    from monoplane.pipeline import Pipeline
+
+    Pipeline.from_preset(preset, overrides=list(overrides or []))
+    names = baseline_names(_plugin_manager(plugins))
+    chosen = names if baselines is None else list(baselines)
+    unknown = [b for b in chosen if b not in names]
+    if unknown:
+        raise InvalidInput(f"unknown baseline '{unknown[0]}'; valid choices: "
+                           f"{', '.join(names) or '(none)'}")
+    args = [(preset, list(overrides or []), size, seed, frames, level, repeat, chosen,
+             list(plugins)) for size in sizes]
     results = []
-    bar = tqdm(total=len(sizes) * (repeat + 1), disable=not progress, unit="run", desc="bench")
+    for arg in tqdm(args, disable=not progress, unit="size", desc="bench"):
+        if isolate:
+            ctx = multiprocessing.get_context("spawn")
+            with ProcessPoolExecutor(max_workers=1, mp_context=ctx) as pool:
+                results.append(pool.submit(_bench_size, *arg).result())
+        else:
+            results.append(_bench_size(*arg))
+    return results
+
+
+def _plugin_manager(plugins: Sequence[str], *extra: object) -> Any:
+    from monoplane.plugin_manager import get_plugin_manager
+
     try:
-        for width, height in sizes:
-            bar.set_postfix_str(f"{width}x{height}")
-            frame = generate(seed, level, width=width, height=height, n_views=1).views[0].frame
-            tracemalloc.start()
-            try:
-                tracker.start()
-                pipe.run(frame)
-                total_peak = tracker.run_peak()
-            finally:
-                tracemalloc.stop()
-            peaks = {**tracker.peaks, "total": total_peak}
-            bar.update(1)
-            runs: list[dict[str, float]] = []
-            planes = 0
+        modules = tuple(importlib.import_module(name) for name in plugins)
+    except ImportError as exc:
+        raise InvalidInput(f"cannot import plugin module: {exc}") from exc
+    return get_plugin_manager(extra_plugins=(*modules, *extra))
+
+
+def _bench_size(preset: str, overrides: list[str], size: tuple[int, int], seed: int,
+                frames: int, level: str, repeat: int, baselines: list[str],
+                plugins: list[str]) -> BenchResult:
+    """One size of :func:`bench` (in a child process when isolated)."""
+    from monoplane.evaluation.baselines import CALL_TIMING, get_baseline
+    from monoplane.pipeline import Pipeline
+    from monoplane.synth import generate
+
+    tracker = StagePeakTracker()
+    pm = _plugin_manager(plugins, tracker)
+    pipe = Pipeline.from_preset(preset, overrides=["cues.plugin=given", *overrides], pm=pm)
+    width, height = size
+    views = [generate(seed + i, level, width=width, height=height, n_views=1).views[0].frame
+             for i in range(frames)]
+    start = time.perf_counter()
+    pipe.run(views[0])
+    first_call = time.perf_counter() - start
+    tracemalloc.start()
+    try:
+        tracker.start()
+        pipe.run(views[0])
+        total_peak = tracker.run_peak()
+    finally:
+        tracemalloc.stop()
+    peaks = {**tracker.peaks, "total": total_peak}
+    runs: list[dict[str, float]] = []
+    planes = []
+    for frame in views:
+        for _ in range(repeat):
+            start = time.perf_counter()
+            rec = pipe.run(frame)
+            timings = dict(rec.timings)
+            timings.setdefault("total", time.perf_counter() - start)
+            runs.append(timings)
+            planes.append(rec.num_planes)
+    rss = _max_rss_mib()  # before any baseline runs: the preset's own peak
+    keys = _ordered([k for r in runs for k in r])
+    stages = [StageBench(k, float(np.median([r.get(k, 0.0) for r in runs])),
+                         peaks[k] / 2**20 if k in peaks else None) for k in keys]
+    timed = []
+    for name in baselines:
+        fn = get_baseline(name, pm)
+        calls, totals = [], []
+        for i, frame in enumerate(views):
             for _ in range(repeat):
                 start = time.perf_counter()
-                rec = pipe.run(frame)
-                timings = dict(rec.timings)
-                timings.setdefault("total", time.perf_counter() - start)
-                runs.append(timings)
-                planes = rec.num_planes
-                bar.update(1)
-            keys = _ordered([k for r in runs for k in r])
-            stages = [StageBench(k, float(np.median([r.get(k, 0.0) for r in runs])),
-                                 peaks[k] / 2**20 if k in peaks else None) for k in keys]
-            results.append(BenchResult(preset, width, height, repeat, stages, planes,
-                                       _max_rss_mib()))
-    finally:
-        bar.close()
-    return results
+                rec = fn(frame, seed=seed + i)
+                totals.append(time.perf_counter() - start)
+                calls.append(rec.timings.get(CALL_TIMING, totals[-1]))
+        timed.append(BaselineBench(name, float(np.median(calls)), float(np.median(totals))))
+    return BenchResult(preset, width, height, repeat, stages, float(np.mean(planes)), rss,
+                       frames, first_call, timed)
 
 
 def parse_sizes(text: str) -> list[tuple[int, int]]:
@@ -223,8 +329,10 @@ def parse_sizes(text: str) -> list[tuple[int, int]]:
     return sizes
 
 
-def format_bench(results: Sequence[BenchResult]) -> str:
-    """Aligned text table: one column pair (median ms, peak MiB) per size, one row per stage."""
+def format_bench(results: Sequence[BenchResult], markdown: bool = False) -> str:
+    """One table: a column pair (median ms, traced MiB) per size; a row per stage and sub-step,
+    then throughput, first call, peak RSS and, per baseline, its call, its whole call and the
+    ratio of the preset's total to the baseline's call."""
     if not results:
         return ""
     keys = _ordered([s.name for r in results for s in r.stages])
@@ -233,23 +341,40 @@ def format_bench(results: Sequence[BenchResult]) -> str:
         header += [f"{r.width}x{r.height} ms", "MiB"]
     rows = []
     for k in keys:
-        label = f"  {k.partition('.')[2]}" if "." in k else k
+        # Sub-steps are indented in text; Markdown cells drop leading spaces, so keep the key.
+        label = f"  {k.partition('.')[2]}" if "." in k and not markdown else k
         row = [label]
         for r in results:
             s = next((s for s in r.stages if s.name == k), None)
             row.append(f"{1000 * s.median_s:.1f}" if s else "-")
             row.append(f"{s.peak_mib:.1f}" if s and s.peak_mib is not None else "")
         rows.append(row)
+    rows.append(["throughput (frames/s)", *[c for r in results for c in (f"{r.fps:.2f}", "")]])
+    rows.append(["first call (fresh process)",
+                 *[c for r in results for c in (f"{1000 * r.first_call_s:.1f}", "")]])
+    rows.append(["peak RSS (MiB)", *[c for r in results for c in ("", f"{r.max_rss_mib:.0f}")]])
+    names = list(dict.fromkeys(b.name for r in results for b in r.baselines))
+    for name in names:
+        found = [next((b for b in r.baselines if b.name == name), None) for r in results]
+        rows.append([f"{name}: call", *[c for b in found for c in
+                                        (f"{1000 * b.call_s:.1f}" if b else "-", "")]])
+        rows.append([f"{name}: whole call", *[c for b in found for c in
+                                              (f"{1000 * b.total_s:.1f}" if b else "-", "")]])
+        rows.append([f"ratio total / {name} call",
+                     *[c for r, b in zip(results, found, strict=True)
+                       for c in (f"{r.ratio(b):.2f}x" if b else "-", "")]])
+    r0 = results[0]
+    title = (f"preset {r0.preset}: median over {r0.frames} frames x {r0.repeat} runs per size; "
+             f"MiB = traced peak above the stage's start (tracemalloc); mean planes "
+             + ", ".join(f"{r.planes:.1f}" for r in results))
+    if markdown:
+        lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+        lines += ["| " + " | ".join(c.strip() or " " for c in row) + " |" for row in rows]
+        return "\n".join([title, "", *lines])
     widths = [max(len(row[c]) for row in [header, *rows]) for c in range(len(header))]
 
     def line(cells: list[str]) -> str:
         return "  ".join([cells[0].ljust(widths[0]),
                           *[c.rjust(w) for c, w in zip(cells[1:], widths[1:], strict=True)]])
 
-    r0 = results[0]
-    title = (f"preset {r0.preset}: median of {r0.repeat} runs per size; MiB = traced peak "
-             f"above the stage's start (tracemalloc)")
-    foot = "; ".join(f"{r.width}x{r.height}: {r.planes} planes, process max RSS "
-                     f"{r.max_rss_mib:.0f} MiB" for r in results)
-    return "\n".join([title, line(header), "-" * len(line(header)), *[line(r) for r in rows],
-                      foot])
+    return "\n".join([title, line(header), "-" * len(line(header)), *[line(r) for r in rows]])

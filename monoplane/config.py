@@ -25,13 +25,16 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+import tomli_w
+
 from monoplane.errors import ConfigError
 from monoplane.plugin_manager import Registry, get_registry
-from monoplane.stages.base import STAGE_KINDS
+from monoplane.stages.base import STAGE_KINDS, config_key
 
 DEFAULT_PRESET = "monoplane"
 #: Host tables (not stages) and the import path of their config dataclass.
-HOST_TABLES: dict[str, str] = {"ransac": "monoplane.ransac:RansacConfig"}
+HOST_TABLES: dict[str, str] = {"ransac": "monoplane.ransac:RansacConfig",
+                               "cloud": "monoplane.detect:CloudConfig"}
 
 
 def list_presets() -> list[str]:
@@ -57,7 +60,7 @@ def load_preset(name: str) -> dict[str, Any]:
     """
     presets = list_presets()
     if name not in presets:
-        raise ConfigError(f"unknown preset '{name}'; valid presets: {', '.join(presets)}")
+        raise ConfigError(f"unknown preset {name!r}; valid presets: {', '.join(presets)}")
     text = (resources.files("monoplane") / "presets" / f"{name}.toml").read_text()
     return _parse_toml(text, f"preset '{name}'")
 
@@ -77,10 +80,10 @@ def parse_override(expr: str) -> tuple[str, str, Any]:
     is not valid TOML is taken as a bare string, so ``cues.profile=zerodepth`` works unquoted.
     """
     if "=" not in expr:
-        raise ConfigError(f"override '{expr}' must look like table.key=value")
+        raise ConfigError(f"override {expr!r} must look like table.key=value")
     lhs, rhs = expr.split("=", 1)
     if lhs.count(".") != 1 or not all(lhs.split(".")):
-        raise ConfigError(f"override '{expr}': the key must be table.key, e.g. labeler.lambda")
+        raise ConfigError(f"override {expr!r}: the key must be table.key, e.g. labeler.lambda")
     table, key = (s.strip() for s in lhs.split("."))
     rhs = rhs.strip()
     try:
@@ -121,18 +124,13 @@ def overrides_to_tables(overrides: dict[str, Any] | list[str] | None) -> dict[st
             else:
                 table, _, field = key.partition(".")
                 if not table or not field or "." in field:
-                    raise ConfigError(f"override key '{key}' must be table.key")
+                    raise ConfigError(f"override key {key!r} must be table.key")
                 items.append((table, field, value))
     else:
         items = [parse_override(e) for e in overrides]
     for table, key, value in items:
         tables.setdefault(table, {})[key] = value
     return tables
-
-
-def _field_key(field: dataclasses.Field) -> str:
-    """User-facing key of a config field: Python keywords carry a trailing underscore."""
-    return field.name[:-1] if field.name.endswith("_") else field.name
 
 
 def _type_name(tp: Any) -> str:
@@ -193,13 +191,13 @@ def _coerce(value: Any, tp: Any, where: str) -> Any:
 
 def build_dataclass(cls: type, values: dict[str, Any], where: str) -> Any:
     """Instantiate a config dataclass from user keys, rejecting unknown or ill-typed ones."""
-    fields = {_field_key(f): f for f in dataclasses.fields(cls)}
+    fields = {config_key(f): f for f in dataclasses.fields(cls)}
     hints = typing.get_type_hints(cls)
     kwargs = {}
     for key, value in values.items():
         if key not in fields:
             valid = ", ".join(sorted(fields)) or "(none)"
-            raise ConfigError(f"unknown key '{key}' in {where}; valid keys: {valid}")
+            raise ConfigError(f"unknown key {key!r} in {where}; valid keys: {valid}")
         f = fields[key]
         kwargs[f.name] = _coerce(value, hints[f.name], f"{where}.{key}")
     try:
@@ -215,7 +213,7 @@ def _host_config_class(table: str) -> type:
 
 def config_values(obj: Any) -> dict[str, Any]:
     """User-facing ``{key: value}`` of a config dataclass instance (keywords unescaped)."""
-    return {_field_key(f): getattr(obj, f.name) for f in dataclasses.fields(obj)}
+    return {config_key(f): getattr(obj, f.name) for f in dataclasses.fields(obj)}
 
 
 @dataclass
@@ -270,10 +268,10 @@ def resolve(raw: dict[str, Any], registry: Registry | None = None) -> ResolvedCo
     valid_tables = list(STAGE_KINDS) + list(HOST_TABLES)
     for table, values in tables.items():
         if table not in valid_tables:
-            raise ConfigError(f"unknown config table '{table}'; valid tables: "
+            raise ConfigError(f"unknown config table {table!r}; valid tables: "
                               f"{', '.join(valid_tables)}")
         if not isinstance(values, dict):
-            raise ConfigError(f"'{table}' must be a table, e.g. [{table}]")
+            raise ConfigError(f"{table!r} must be a table, e.g. [{table}]")
     stages: dict[str, tuple[str, Any]] = {}
     for kind in STAGE_KINDS:
         values = dict(tables.get(kind, {}))
@@ -281,6 +279,9 @@ def resolve(raw: dict[str, Any], registry: Registry | None = None) -> ResolvedCo
             raise ConfigError(f"[{kind}] needs a plugin; valid choices: "
                               f"{', '.join(registry.names(kind))}")
         name = values.pop("plugin")
+        if not isinstance(name, str):
+            raise ConfigError(f"[{kind}] plugin must be a plugin name; valid choices: "
+                              f"{', '.join(registry.names(kind))}; got {name!r}")
         info = registry.get(kind, name)
         stages[kind] = (name, build_dataclass(info.cls.Config, values, f"[{kind}] ({name})"))
     host = {t: build_dataclass(_host_config_class(t), tables.get(t, {}), f"[{t}]")
@@ -304,28 +305,25 @@ def load(preset: str | None = None, config: str | Path | dict[str, Any] | None =
     return resolve(raw, registry)
 
 
-def _toml_value(value: Any) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, (int, float)):
-        return repr(value)
-    if isinstance(value, str):
-        escaped = value.replace("\\", "\\\\").replace('"', '\\"')
-        return f'"{escaped}"'
+def _without_none(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {str(k): _without_none(v) for k, v in value.items() if v is not None}
     if isinstance(value, (list, tuple)):
-        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
-    raise ConfigError(f"cannot write {value!r} to TOML")
+        return [_without_none(v) for v in value]
+    return value
 
 
 def dumps_toml(data: dict[str, Any]) -> str:
-    """Write a two-level dict (top-level scalars, then tables of scalars/lists) as TOML.
+    """Write config tables as TOML (with ``tomli-w``, so any string or key round-trips).
 
     ``None`` values are omitted (TOML has no null); they mean "use the default".
+
+    Raises
+    ------
+    ConfigError
+        If a value has no TOML form (a set, an arbitrary object).
     """
-    lines = [f"{k} = {_toml_value(v)}" for k, v in data.items()
-             if not isinstance(v, dict) and v is not None]
-    for table, values in data.items():
-        if isinstance(values, dict):
-            lines.append(f"\n[{table}]")
-            lines += [f"{k} = {_toml_value(v)}" for k, v in values.items() if v is not None]
-    return "\n".join(lines) + "\n"
+    try:
+        return tomli_w.dumps(_without_none(data))
+    except TypeError as exc:
+        raise ConfigError(f"cannot write the config as TOML: {exc}") from None

@@ -9,9 +9,9 @@ marginals with each kernel, and the high-dimensional Gaussian filtering is done 
 permutohedral lattice (Adams, Baek & Davis, Eurographics 2010), linear in the pixel count,
 instead of the O(N²) dense sum.
 
-Everything here is plain numpy/scipy so that no compiler is needed at install time; the
-lattice's splat, blur and slice steps are sparse matrix products (``scipy.sparse``), which keeps
-the inner loop in C.
+The lattice's construction and its splat, blur and slice steps are numba kernels
+(:mod:`monoplane.lattice_kernels`, compiled once and cached on disk, no compiler needed at
+install time: numba ships as wheels); the rest is numpy.
 """
 
 from __future__ import annotations
@@ -22,8 +22,9 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-import scipy.sparse as sp
+from scipy import ndimage
 
+from monoplane import lattice_kernels as lk
 from monoplane.errors import InvalidInput
 
 #: Image area (256 x 192) at which the paper's pixel-valued parameters (θ_s = 10 px, minimum
@@ -42,6 +43,11 @@ class PermutohedralLattice:
     differs from the exact sum by a roughly constant factor, which normalisation (see
     :class:`GaussianKernel`) removes.
 
+    The lattice is built once (a hash table of the vertices in use and each vertex's two
+    neighbours along every direction) and reused by every :meth:`filter` call, i.e. by every
+    mean-field iteration. Construction and filtering are numba kernels
+    (:mod:`monoplane.lattice_kernels`), compiled on first use and cached on disk.
+
     Parameters
     ----------
     features : numpy.ndarray
@@ -53,11 +59,11 @@ class PermutohedralLattice:
     ------
     InvalidInput
         If the features are not finite, or span so many lattice cells that the vertex keys do
-        not fit in 64 bits (a deviation θ absurdly small for the data).
+        not fit in 62 bits (a deviation θ absurdly small for the data).
     """
 
     def __init__(self, features: np.ndarray) -> None:
-        f = np.asarray(features, dtype=np.float64)
+        f = np.ascontiguousarray(features, dtype=np.float64)
         if f.ndim != 2 or not 1 <= f.shape[1] <= 8:
             raise InvalidInput(f"lattice features must be (N, d) with 1 <= d <= 8, got {f.shape}")
         if not np.all(np.isfinite(f)):
@@ -65,45 +71,24 @@ class PermutohedralLattice:
         n, d = f.shape
         self.num_points = n
         self.dim = d
-        vertex_of, vertex_codes, weights, place = _simplex_vertices(f, margin=d + 1)
-        self.num_vertices = int(vertex_codes.size)
-        # S (N x M): point i's barycentric weight on each of its simplex's d+1 (distinct)
-        # vertices; built directly in CSR form, one row of d+1 entries per point.
-        self._splat = sp.csr_matrix(
-            (weights.ravel().astype(np.float32), vertex_of.ravel(),
-             np.arange(0, n * (d + 1) + 1, d + 1)),
-            shape=(n, self.num_vertices),
-        )
-        self._splat_t = self._splat.T.tocsr()
-        self._blur = [self._blur_matrix(vertex_codes, place, axis) for axis in range(d + 1)]
-
-    def _blur_matrix(self, codes: np.ndarray, place: np.ndarray, axis: int) -> sp.csr_matrix:
-        """(M, M) sparse [½, 1, ½] blur along lattice direction ``axis``.
-
-        In key coordinates (the first d of the d+1 elevated coordinates) the step along
-        direction ``axis`` adds ``d+1`` to coordinate ``axis`` (when ``axis < d``) and subtracts
-        1 from every coordinate; neighbours that are not lattice vertices hold zero and drop out.
-        """
-        d = self.dim
-        step = -np.ones(d, dtype=np.int64)
-        if axis < d:
-            step[axis] += d + 1
-        delta = int(step @ place)
-        m = codes.size
-        rows = [np.arange(m)]
-        cols = [np.arange(m)]
-        vals = [np.ones(m, dtype=np.float32)]
-        for shift in (delta, -delta):
-            target = codes + shift
-            pos = np.searchsorted(codes, target)
-            pos_c = np.minimum(pos, m - 1)
-            hit = codes[pos_c] == target
-            rows.append(np.nonzero(hit)[0])
-            cols.append(pos_c[hit])
-            vals.append(np.full(int(hit.sum()), 0.5, dtype=np.float32))
-        return sp.csr_matrix(
-            (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(m, m)
-        )
+        key0, rank, self._weights = lk.enclosing_simplices(f)
+        # Vertex keys (first d elevated coordinates) packed into one int64 with a mixed radix,
+        # with room for the neighbour offsets (±1 and ±(d+1) per coordinate) around the data.
+        d1 = d + 1
+        lo = key0.min(axis=0) - 2 * d1 if n else np.zeros(d, np.int64)
+        hi = key0.max(axis=0) + 2 * d1 if n else np.zeros(d, np.int64)
+        self._lo = lo
+        self._radix = radix = hi - lo + 1
+        if float(np.prod(radix.astype(np.float64))) >= 2.0**62:
+            raise InvalidInput(
+                "dense CRF features span too many lattice cells; a kernel deviation θ is too "
+                "small for the range of its feature"
+            )
+        self._place = place = np.concatenate([[1], np.cumprod(radix[:-1])]).astype(np.int64)
+        self._vertex_of, codes, self._table, self._index = lk.insert_vertices(key0 - lo, rank,
+                                                                                place)
+        self.num_vertices = int(codes.size)
+        self._neighbours = lk.lattice_neighbours(codes, place)
 
     def filter(self, values: np.ndarray) -> np.ndarray:
         """Apply the lattice Gaussian to per-point values.
@@ -119,110 +104,40 @@ class PermutohedralLattice:
             (N, C) float32 filtered values, ``≈ c · Σ_j exp(-½|f_i-f_j|²) values_j`` for a
             constant ``c > 0``.
         """
-        v = np.asarray(values, dtype=np.float32)
+        return lk.slice_values(self._vertex_of, self._weights, self.blurred(values))
+
+    def blurred(self, values: np.ndarray) -> np.ndarray:
+        """(M, C) float32 lattice values: (N, C) ``values`` splatted and blurred, to be sliced
+        at these points (:meth:`filter`) or at others (:meth:`slice_at`)."""
+        v = np.ascontiguousarray(values, dtype=np.float32)
         if v.ndim != 2 or v.shape[0] != self.num_points:
             raise InvalidInput(f"values must be ({self.num_points}, C), got {v.shape}")
-        lat = self._splat_t @ v
-        for blur in self._blur:
-            lat = blur @ lat
-        return np.asarray(self._splat @ lat, dtype=np.float32)
+        return lk.splat_blur(self._vertex_of, self._weights, self._neighbours, v,
+                             self.num_vertices)
 
+    def slice_at(self, features: np.ndarray, blurred: np.ndarray) -> np.ndarray:
+        """Interpolate lattice values at other points (e.g. full-resolution pixels).
 
-def _simplex_vertices(
-    f: np.ndarray, margin: int
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Enclosing-simplex vertices of each point, with barycentric weights.
+        Parameters
+        ----------
+        features : numpy.ndarray
+            (K, d) features in the lattice's units.
+        blurred : numpy.ndarray
+            (M, C) lattice values from :meth:`blurred`.
 
-    Follows Adams et al. (2010, §3): elevate onto the hyperplane ``Σ x = 0`` of R^(d+1), find
-    the nearest remainder-0 lattice point, sort the residuals to get the simplex, and read the
-    barycentric weights off the sorted residuals. A vertex is identified by its first d
-    elevated coordinates, packed into one int64 with a mixed radix.
-
-    Parameters
-    ----------
-    f : numpy.ndarray
-        (N, d) float64 features with unit Gaussian deviation.
-    margin : int
-        Extra room per coordinate for neighbour offsets added to codes later.
-
-    Returns
-    -------
-    vertex_of : numpy.ndarray
-        (N, d+1) int64 index of each simplex vertex into ``vertex_codes``.
-    vertex_codes : numpy.ndarray
-        (M,) int64 sorted, distinct codes of the lattice vertices in use.
-    weights : numpy.ndarray
-        (N, d+1) float64 barycentric weights (non-negative, summing to 1).
-    place : numpy.ndarray
-        (d,) int64 place value of each key coordinate in the codes.
-
-    Raises
-    ------
-    InvalidInput
-        If the keys do not fit in 62 bits.
-    """
-    n, d = f.shape
-    d1 = d + 1
-    # Scale so that the lattice's [1,2,1]^(d+1) blur approximates a unit-deviation Gaussian.
-    i = np.arange(1, d + 1, dtype=np.float64)
-    cf = f * (np.sqrt(2.0 / 3.0) * d1 / np.sqrt(i * (i + 1)))
-    # x_0 = Σ_k cf_k and x_j = Σ_{k>=j} cf_k - j cf_{j-1} (0-based k over the d inputs).
-    tail = np.cumsum(cf[:, ::-1], axis=1)[:, ::-1]
-    elevated = np.empty((n, d1))
-    elevated[:, 0] = tail[:, 0]
-    elevated[:, 1:d] = tail[:, 1:] - i[:-1] * cf[:, :-1]
-    elevated[:, d] = -d * cf[:, -1]
-    # Nearest remainder-0 lattice point (coordinates multiples of d+1), then fix its sum to 0.
-    down = np.floor(elevated / d1) * d1
-    rem0 = np.where(down + d1 - elevated < elevated - down, down + d1, down)
-    total = np.rint(rem0.sum(axis=1) / d1).astype(np.int64)
-    diff = elevated - rem0
-    # rank_k = number of coordinates with a larger residual; ties rank the later index higher.
-    rank = np.repeat(total[:, None], d1, axis=1)
-    for j in range(d1):
-        rank += diff[:, j : j + 1] > diff
-        rank[:, j + 1 :] += diff[:, j : j + 1] == diff[:, j + 1 :]
-    low = rank < 0
-    high = rank > d
-    shift = d1 * (low.astype(np.int64) - high)
-    rem0 = rem0 + shift
-    rank = rank + shift
-    diff = (elevated - rem0) / d1
-    bary = np.zeros((n, d1 + 1))
-    rows = np.arange(n)[:, None]
-    # d - rank is a permutation of 0..d in each row, so plain fancy assignment cannot collide.
-    bary[rows, d - rank] += diff
-    bary[rows, d - rank + 1] -= diff
-    bary[:, 0] += 1.0 + bary[:, d1]
-    # Vertex r of the simplex: rem0 + r on every coordinate, minus (d+1) where rank > d - r.
-    # Neighbouring pixels mostly share a simplex, so vertex codes are built once per distinct
-    # simplex (rem0, rank) rather than once per point: three small sorts beat one of N (d+1).
-    key0 = rem0[:, :d].astype(np.int64)
-    lo = key0.min(axis=0) - d1 - margin
-    hi = key0.max(axis=0) + d + margin
-    radix = hi - lo + 1
-    if float(np.prod(radix.astype(np.float64))) >= 2.0**62:
-        raise InvalidInput(
-            "dense CRF features span too many lattice cells; a kernel deviation θ is too small "
-            "for the range of its feature"
-        )
-    place = np.concatenate([[1], np.cumprod(radix[:-1])]).astype(np.int64)
-    base = (key0 - lo) @ place
-    perm_code = rank[:, :d] @ (d1 ** np.arange(d, dtype=np.int64))
-    if float(np.prod(radix.astype(np.float64))) * d1**d < 2.0**62:
-        # The simplex key (base vertex, permutation) fits in 64 bits: one sort finds simplices.
-        simplex_key = base * d1**d + perm_code
-    else:
-        _, base_id = np.unique(base, return_inverse=True)
-        simplex_key = base_id * d1**d + perm_code
-    _, first, simplex_of = np.unique(simplex_key, return_index=True, return_inverse=True)
-    r = np.arange(d1)
-    codes = base[first, None] + r[None, :] * int(place.sum())
-    for k in range(d):
-        codes -= (d1 * place[k]) * (rank[first, k, None] > d - r[None, :])
-    vertex_codes, vertex_index = np.unique(codes.ravel(), return_inverse=True)
-    vertex_of = vertex_index.reshape(codes.shape)[simplex_of]
-    return vertex_of, vertex_codes, bary[:, :d1], place
+        Returns
+        -------
+        numpy.ndarray
+            (K, C) float32 ``≈ c · Σ_j exp(-½|g_k - f_j|²) values_j`` over the lattice's own
+            points j; 0 where a point's simplex lies outside the lattice.
+        """
+        g = np.ascontiguousarray(features, dtype=np.float64)
+        if g.ndim != 2 or g.shape[1] != self.dim or not np.all(np.isfinite(g)):
+            raise InvalidInput(f"slice features must be finite (K, {self.dim}), got {g.shape}")
+        key0, rank, weights = lk.enclosing_simplices(g)
+        vertex_of, weights = lk.locate_vertices(key0 - self._lo, rank, weights, self._radix,
+                                                self._place, self._table, self._index)
+        return lk.slice_values(vertex_of, weights, blurred)
 
 
 @dataclass
@@ -250,12 +165,24 @@ class GaussianKernel:
         if not self.weight > 0:
             raise InvalidInput(f"kernel weight must be positive, got {self.weight}")
         self.lattice = PermutohedralLattice(self.features)
-        norm = self.lattice.filter(np.ones((self.lattice.num_points, 1), dtype=np.float32))
+        self._ones = self.lattice.blurred(np.ones((self.lattice.num_points, 1), np.float32))
+        norm = lk.slice_values(self.lattice._vertex_of, self.lattice._weights, self._ones)
         self._norm = (1.0 / np.sqrt(np.maximum(norm, 1e-20))).astype(np.float32)
 
     def message(self, q: np.ndarray) -> np.ndarray:
         """(N, L) float32 weighted, normalised kernel response to marginals ``q`` (N, L)."""
         return self.weight * self._norm * self.lattice.filter(self._norm * q)
+
+    def message_at(self, features: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """(K, L) float32 message that (K, d) other points get from this kernel's points.
+
+        The same normalised kernel as :meth:`message`, evaluated at points that are not in
+        the lattice (full-resolution pixels of a CRF run on a coarser grid): ``w · D_k^-½
+        Σ_j k(g_k, f_j) D_j^-½ q_j`` with ``D_k = Σ_j k(g_k, f_j)``.
+        """
+        num = self.lattice.slice_at(features, self.lattice.blurred(self._norm * q))
+        den = self.lattice.slice_at(features, self._ones)
+        return self.weight * num / np.sqrt(np.maximum(den, 1e-20))
 
 
 def unary_from_labels(labels: np.ndarray, num_labels: int, confidence: float,
@@ -325,11 +252,20 @@ def mean_field(unary: np.ndarray, kernels: list[GaussianKernel], iterations: int
     u = np.asarray(unary, dtype=np.float32)
     q = _softmax(-u)
     for _ in range(iterations):
-        energy = -u
-        for kernel in kernels:
-            energy = energy + kernel.message(q)
-        q = _softmax(energy)
+        q = _softmax(pairwise(kernels, q) - u)
     return q
+
+
+def pairwise(kernels: list[GaussianKernel], q: np.ndarray) -> np.ndarray:
+    """(N, L) float32 sum of every kernel's :meth:`~GaussianKernel.message` to marginals q.
+
+    The kernels' lattice filters are numba kernels that release the GIL, so they run in
+    parallel threads, one per kernel (up to the number of CPUs).
+    """
+    if len(kernels) < 2 or (os.cpu_count() or 1) < 2:
+        return sum((k.message(q) for k in kernels), np.zeros(q.shape, np.float32))
+    with ThreadPoolExecutor(min(len(kernels), os.cpu_count() or 1)) as pool:
+        return sum(pool.map(lambda k: k.message(q), kernels), np.zeros(q.shape, np.float32))
 
 
 def _softmax(x: np.ndarray) -> np.ndarray:
@@ -339,7 +275,10 @@ def _softmax(x: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class CrfParams:
-    """Parameters of the image-level dense CRF (paper appendix; defaults are the paper's).
+    """Parameters of the image-level dense CRF (paper appendix).
+
+    There are no defaults here: they live once, in the ``dense-crf`` refiner's config
+    (:class:`monoplane.stages.refiners.DenseCrfRefiner.Config`), which builds this object.
 
     Feature scaling (what each θ divides)
     -------------------------------------
@@ -371,18 +310,18 @@ class CrfParams:
     are many pixels wide anyway.
     """
 
-    theta_position: float = 10.0
-    theta_color: float = 10.0
-    theta_depth: float = 0.01
-    theta_normal: float = 0.1
-    w_smoothness: float = 1.0
-    w_appearance: float = 1.0
-    w_depth: float = 1.0
-    w_normal: float = 1.0
-    confidence: float = 0.55
-    iterations: int = 5
-    uniform_nonplanar: bool = False
-    max_pixels: int = 0
+    theta_position: float
+    theta_color: float
+    theta_depth: float
+    theta_normal: float
+    w_smoothness: float
+    w_appearance: float
+    w_depth: float
+    w_normal: float
+    confidence: float
+    iterations: int
+    uniform_nonplanar: bool
+    max_pixels: int
 
     def __post_init__(self) -> None:
         for name in ("theta_position", "theta_color", "theta_depth", "theta_normal"):
@@ -428,29 +367,59 @@ def crf_features(
         Kernels in the order smoothness, appearance, depth, normal (those enabled).
     """
     h, w = shape
-    theta_p = params.theta_position * np.sqrt(h * w / REFERENCE_AREA)
-    v, u = np.mgrid[0:h, 0:w].astype(np.float64)
-    pos = np.stack([u.ravel(), v.ravel()], axis=1) / theta_p
-    specs: list[tuple[np.ndarray, float]] = []
-    if params.w_smoothness > 0:
-        specs.append((pos, params.w_smoothness))
-    grey = rgb is None or not (np.any(rgb[..., 0] != rgb[..., 1])
-                               or np.any(rgb[..., 1] != rgb[..., 2]))
-    if params.w_appearance > 0 and not grey:
-        col = np.asarray(rgb, dtype=np.float64).reshape(-1, 3) / params.theta_color
-        specs.append((np.hstack([pos, col]), params.w_appearance))
-    if params.w_depth > 0 and depth is not None:
-        dep = np.asarray(depth, dtype=np.float64).reshape(-1, 1)
-        top = dep.max()
-        if top > 0:
-            specs.append((np.hstack([pos, dep / top / params.theta_depth]), params.w_depth))
-    if params.w_normal > 0 and normals is not None:
-        nor = np.asarray(normals, dtype=np.float64).reshape(-1, 3) / params.theta_normal
-        specs.append((np.hstack([pos, nor]), params.w_normal))
-    # Lattice construction is mostly numpy sorting, which releases the GIL: build in parallel.
-    workers = max(1, min(len(specs), os.cpu_count() or 1))
-    with ThreadPoolExecutor(workers) as pool:
+    v, u = np.mgrid[0:h, 0:w]
+    cues = _Cues.of(params, rgb, depth, normals)
+    return _kernels(cues.features(params, u.ravel(), v.ravel(), h * w, np.arange(h * w)))
+
+
+def _kernels(specs: list[tuple[np.ndarray, float]]) -> list[GaussianKernel]:
+    """Build kernels from (features, weight) pairs, in parallel threads (numba, no GIL)."""
+    if len(specs) < 2 or (os.cpu_count() or 1) < 2:
+        return [GaussianKernel(f, weight) for f, weight in specs]
+    with ThreadPoolExecutor(min(len(specs), os.cpu_count() or 1)) as pool:
         return list(pool.map(lambda spec: GaussianKernel(*spec), specs))
+
+
+@dataclass
+class _Cues:
+    """Flattened cues of a frame, with what decides which kernels exist (see crf_features)."""
+
+    rgb: np.ndarray | None
+    depth: np.ndarray | None
+    normals: np.ndarray | None
+
+    @classmethod
+    def of(cls, params: CrfParams, rgb: np.ndarray | None, depth: np.ndarray | None,
+           normals: np.ndarray | None) -> _Cues:
+        grey = rgb is None or not (np.any(rgb[..., 0] != rgb[..., 1])
+                                   or np.any(rgb[..., 1] != rgb[..., 2]))
+        col = None if grey or not params.w_appearance > 0 else (
+            np.asarray(rgb, dtype=np.float64).reshape(-1, 3) / params.theta_color)
+        dep = None
+        if depth is not None and params.w_depth > 0:
+            flat = np.asarray(depth, dtype=np.float64).ravel()
+            top = flat.max() if flat.size else 0.0
+            if top > 0:
+                dep = flat[:, None] / top / params.theta_depth
+        nor = None if normals is None or not params.w_normal > 0 else (
+            np.asarray(normals, dtype=np.float64).reshape(-1, 3) / params.theta_normal)
+        return cls(col, dep, nor)
+
+    def features(self, params: CrfParams, u: np.ndarray, v: np.ndarray, grid_area: int,
+                 pixels: np.ndarray) -> list[tuple[np.ndarray, float]]:
+        """(features, weight) of each enabled kernel at positions (u, v) of a grid of
+        ``grid_area`` cells (θ_s scales with it), with the cues of flat pixel indices
+        ``pixels``."""
+        theta_p = params.theta_position * np.sqrt(grid_area / REFERENCE_AREA)
+        pos = np.stack([u, v], axis=1).astype(np.float64) / theta_p
+        specs: list[tuple[np.ndarray, float]] = []
+        if params.w_smoothness > 0:
+            specs.append((pos, params.w_smoothness))
+        for cue, weight in ((self.rgb, params.w_appearance), (self.depth, params.w_depth),
+                            (self.normals, params.w_normal)):
+            if cue is not None:
+                specs.append((np.hstack([pos, cue[pixels]]), weight))
+        return specs
 
 
 def dense_crf(
@@ -487,8 +456,11 @@ def dense_crf(
     a block's unary is the negative log of its pixels' mean label probabilities, and its cues
     are those of its centre pixel (sampling, not averaging, keeps depth and normal edges sharp).
     The final labels are then taken at full resolution from each pixel's own unary plus the
-    pairwise energy of the last coarse marginals, bilinearly upsampled, i.e. one mean-field
-    update at full resolution with coarse messages, so boundaries keep pixel accuracy.
+    pairwise energy of the last coarse marginals, i.e. one mean-field update at full
+    resolution with coarse messages. Away from label changes of the coarse result those
+    messages are bilinearly upsampled; in the band of blocks next to a label change each pixel
+    gets them from the coarse lattices sliced at its own features
+    (:meth:`GaussianKernel.message_at`), so boundaries follow full-resolution edges.
     """
     lab = np.asarray(labels)
     if lab.ndim != 2:
@@ -509,23 +481,34 @@ def dense_crf(
         q = mean_field(unary, kernels, params.iterations)
         return q.argmax(axis=1).astype(np.int32).reshape(lab.shape)
     hs, ws = -(-h // step), -(-w // step)
-
-    def blocks(a: np.ndarray) -> np.ndarray:
-        pad = [(0, hs * step - h), (0, ws * step - w)] + [(0, 0)] * (a.ndim - 2)
-        return np.pad(a, pad, mode="edge").reshape(hs, step, ws, step, *a.shape[2:])
-
-    def centres(a: np.ndarray | None) -> np.ndarray | None:
-        return None if a is None else blocks(np.asarray(a))[:, step // 2, :, step // 2]
-
-    prob = blocks(np.exp(-unary).reshape(h, w, num_labels)).mean(axis=(1, 3))
-    coarse_unary = -np.log(prob.reshape(-1, num_labels))
-    kernels = crf_features((hs, ws), params, rgb=centres(rgb), depth=centres(depth),
-                           normals=centres(normals))
-    q = mean_field(coarse_unary, kernels, params.iterations)
-    pairwise = np.zeros_like(q)
-    for kernel in kernels:
-        pairwise += kernel.message(q)
-    fine = cv2.resize(pairwise.reshape(hs, ws, num_labels), (ws * step, hs * step),
+    # Block centres: the pixel at (step//2, step//2) of each block, clipped to the image.
+    cv, cu = np.mgrid[0:hs, 0:ws]
+    centre = (np.minimum(cv * step + step // 2, h - 1) * w
+              + np.minimum(cu * step + step // 2, w - 1)).ravel()
+    prob = np.exp(-unary)
+    block = (np.minimum(np.arange(h) // step, hs - 1)[:, None] * ws
+             + np.minimum(np.arange(w) // step, ws - 1)[None, :]).ravel()
+    mean = np.stack([np.bincount(block, prob[:, k], hs * ws) for k in range(num_labels)], 1)
+    mean /= np.bincount(block, minlength=hs * ws)[:, None]
+    cues = _Cues.of(params, rgb, depth, normals)
+    kernels = _kernels(cues.features(params, cu.ravel(), cv.ravel(), hs * ws, centre))
+    q = mean_field(-np.log(mean), kernels, params.iterations)
+    coarse_pairwise = pairwise(kernels, q)
+    # cv2 maps fine pixel u to coarse position (u + 0.5) / step - 0.5.
+    fine = cv2.resize(coarse_pairwise.reshape(hs, ws, num_labels), (ws * step, hs * step),
                       interpolation=cv2.INTER_LINEAR).reshape(hs * step, ws * step, -1)[:h, :w]
     energy = fine.reshape(-1, num_labels) - unary
+    # Near a label change of the coarse result the interpolated messages blur the edge: there
+    # each pixel gets its messages from the coarse lattices sliced at its own features, so
+    # the boundary follows the full-resolution colour, depth and normal edges.
+    coarse = q.argmax(axis=1).reshape(hs, ws)
+    edge = ndimage.maximum_filter(coarse, 3) != ndimage.minimum_filter(coarse, 3)
+    band = np.flatnonzero(edge.ravel()[block])
+    if band.size:
+        fu = (band % w + 0.5) / step - 0.5
+        fv = (band // w + 0.5) / step - 0.5
+        specs = cues.features(params, fu, fv, hs * ws, band)
+        exact = sum((k.message_at(f, q) for k, (f, _) in zip(kernels, specs, strict=True)),
+                    np.zeros((band.size, num_labels), np.float32))
+        energy[band] = exact - unary[band]
     return energy.argmax(axis=1).astype(np.int32).reshape(lab.shape)

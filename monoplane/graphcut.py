@@ -27,6 +27,7 @@ import maxflow
 import numpy as np
 
 from monoplane.errors import InvalidInput
+from monoplane.jit import kernel
 
 
 def msac_costs(dist: np.ndarray, epsilon: float) -> tuple[np.ndarray, np.ndarray]:
@@ -120,15 +121,41 @@ def proximity_weights(points: np.ndarray, edges: np.ndarray, normals: np.ndarray
     numpy.ndarray
         (E,) float64 cut costs, all >= 0.5.
     """
-    i, j = edges[:, 0], edges[:, 1]
-    pos = -((points[i] - points[j]) ** 2).sum(axis=1) / (2.0 * alpha_p2)
-    w = 0.5 + w_p * np.exp(pos)
-    if colors is not None:
-        w += w_c * np.exp(pos - ((colors[i] - colors[j]) ** 2).sum(axis=1) / (2.0 * alpha_c2))
-    if normals is not None:
-        ang = np.arccos(np.clip((normals[i] * normals[j]).sum(axis=1), -1.0, 1.0))
-        w += w_n * np.exp(pos - ang / (2.0 * alpha_n2))
-    return w
+    none = np.zeros((0, 3))
+    return _proximity_weights(
+        np.ascontiguousarray(points, dtype=np.float64),
+        np.ascontiguousarray(np.asarray(edges, dtype=np.int64).reshape(-1, 2)),
+        none if normals is None else np.ascontiguousarray(normals, dtype=np.float64),
+        none if colors is None else np.ascontiguousarray(colors, dtype=np.float64),
+        float(alpha_p2), float(alpha_c2), float(alpha_n2), float(w_p), float(w_c), float(w_n))
+
+
+@kernel
+def _proximity_weights(points: np.ndarray, edges: np.ndarray, normals: np.ndarray,
+                       colors: np.ndarray, alpha_p2: float, alpha_c2: float, alpha_n2: float,
+                       w_p: float, w_c: float, w_n: float) -> np.ndarray:
+    """:func:`proximity_weights` in one pass; empty (0, 3) ``normals``/``colors`` drop a term."""
+    use_n, use_c = normals.shape[0] > 0, colors.shape[0] > 0
+    out = np.empty(edges.shape[0])
+    for e in range(edges.shape[0]):
+        i, j = edges[e, 0], edges[e, 1]
+        d2 = 0.0
+        for c in range(3):
+            d2 += (points[i, c] - points[j, c]) ** 2
+        pos = -d2 / (2.0 * alpha_p2)
+        w = 0.5 + w_p * np.exp(pos)
+        if use_c:
+            c2 = 0.0
+            for c in range(3):
+                c2 += (colors[i, c] - colors[j, c]) ** 2
+            w += w_c * np.exp(pos - c2 / (2.0 * alpha_c2))
+        if use_n:
+            dot = 0.0
+            for c in range(3):
+                dot += normals[i, c] * normals[j, c]
+            w += w_n * np.exp(pos - np.arccos(min(max(dot, -1.0), 1.0)) / (2.0 * alpha_n2))
+        out[e] = w
+    return out
 
 
 @dataclass
@@ -342,3 +369,198 @@ def minimize(unary: np.ndarray, edges: np.ndarray, tables: np.ndarray) -> np.nda
     g.add_grid_tedges(nodes, np.maximum(slope, 0.0), np.maximum(-slope, 0.0))
     g.maxflow()
     return np.asarray(g.get_grid_segments(nodes), dtype=bool)
+
+
+def minimize_gc_ransac(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray,
+                       cut_cost: np.ndarray | float, lambda_: float,
+                       pairwise_scale: float = 1.0) -> tuple[np.ndarray, float]:
+    """Exact minimiser and minimum of the (proximity) GC-RANSAC energy, without edge tables.
+
+    The same energy as ``gc_ransac_energy(f0, f1, edges, cut_cost, lambda_, g1,
+    pairwise_scale)`` with ``data1 = f1 + g1``, minimised as :func:`minimize` does, but built
+    straight from its structure (e(1,1) = 0, e(0,1) = e(1,0)) instead of (E, 2, 2) tables, and
+    on a smaller graph: a point whose extra data cost of the inlier label,
+    ``(1-λ)(data1 - f0)``, exceeds everything its edges can ever pay back, ``λ s Σ_q w_pq``,
+    is an outlier in *every* minimiser (turning it into an outlier always lowers the energy).
+    Such points are fixed to 0 before the max-flow and their edges become unaries of their
+    neighbours, which leaves the minimisers of the rest unchanged. With the normal term most
+    points of other planes are fixed this way, which halves the max-flow graph.
+
+    Parameters
+    ----------
+    f0 : numpy.ndarray
+        (M,) outlier costs f(0, p) in [0, 1] (:func:`msac_costs`).
+    data1 : numpy.ndarray
+        (M,) inlier costs f(1, p) + g(1, p) (:func:`msac_costs`, :func:`normal_costs`).
+    edges : numpy.ndarray
+        (E, 2) int node pairs among the M points.
+    cut_cost : numpy.ndarray or float
+        (E,) cost w_pq of labelling an edge's ends differently (or one for all edges).
+    lambda_ : float
+        Smoothness weight λ in [0, 1].
+    pairwise_scale : float
+        Positive factor s on the pairwise term.
+
+    Returns
+    -------
+    labels : numpy.ndarray
+        (M,) bool minimiser (True = inlier).
+    energy : float
+        Its energy.
+
+    Raises
+    ------
+    InvalidInput
+        If λ or s is out of range, or an edge's cut cost is below ¼(f(0,p) + f(0,q)), half
+        its both-outlier cost (the energy is then not submodular).
+    """
+    if not 0.0 <= lambda_ <= 1.0:
+        raise InvalidInput(f"lambda must lie in [0, 1], got {lambda_}")
+    if not pairwise_scale > 0:
+        raise InvalidInput(f"pairwise_scale must be positive, got {pairwise_scale}")
+    f0 = np.ascontiguousarray(f0, dtype=np.float64)
+    data1 = np.ascontiguousarray(data1, dtype=np.float64)
+    edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    ei, ej = np.ascontiguousarray(edges[:, 0]), np.ascontiguousarray(edges[:, 1])
+    cut = np.ascontiguousarray(np.broadcast_to(np.asarray(cut_cost, dtype=np.float64),
+                                               ei.shape))
+    lam, ls = float(lambda_), float(lambda_ * pairwise_scale)
+    bad, nodes, src, dst, cap, slope = _gc_ransac_graph(f0, data1, ei, ej, cut, lam, ls)
+    if bad:
+        raise InvalidInput(f"{bad} edge tables are not submodular; graph cuts cannot "
+                           "minimise this energy")
+    labels = np.zeros(f0.shape[0], dtype=bool)
+    if nodes.size:
+        g = maxflow.Graph[float](nodes.size, max(src.size, 1))
+        ids = g.add_nodes(nodes.size)
+        if src.size:
+            g.add_edges(src, dst, cap, np.zeros_like(cap))
+        # A positive slope makes label 1 (sink side) dearer: capacity on the source edge.
+        g.add_grid_tedges(ids, np.maximum(slope, 0.0), np.maximum(-slope, 0.0))
+        g.maxflow()
+        labels[nodes] = g.get_grid_segments(ids)
+    return labels, float(_gc_ransac_energy(f0, data1, ei, ej, cut, lam, ls, labels))
+
+
+@kernel
+def _gc_ransac_graph(f0: np.ndarray, data1: np.ndarray, ei: np.ndarray, ej: np.ndarray,
+                     cut: np.ndarray, lam: float, ls: float
+                     ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Max-flow graph of :func:`minimize_gc_ransac` on its undecided points.
+
+    Inputs are float64 (M,) ``f0``, ``data1``, int64 (E,) ``ei``, ``ej``, float64 (E,) cut
+    costs, λ and λs. Returns the number of non-submodular edges (nothing else is meaningful
+    when it is not 0), the (F,) pool positions of the undecided points, the (E',) local ends
+    and capacities of the edges among them and their (F,) cost slopes ``U(1) - U(0)``.
+    """
+    m, n_edges = f0.shape[0], ei.shape[0]
+    keep = 1.0 - lam
+    both_out = np.empty(n_edges)  # e(0, 0)
+    differ = np.empty(n_edges)  # e(0, 1) = e(1, 0)
+    payback = np.zeros(m)
+    degree = np.zeros(m + 1, dtype=np.int64)
+    bad = 0
+    for e in range(n_edges):
+        i, j = ei[e], ej[e]
+        a = 0.5 * ls * (f0[i] + f0[j])
+        b = ls * cut[e]
+        if 2.0 * b - a < -1e-9 * max(1.0, a):
+            bad += 1
+        both_out[e] = a
+        differ[e] = b
+        payback[i] += b
+        payback[j] += b
+        degree[i + 1] += 1
+        degree[j + 1] += 1
+    if bad:
+        empty = np.empty(0, dtype=np.int64)
+        return bad, empty, empty, empty, np.empty(0), np.empty(0)
+    # Incident edges of every point (CSR), to update the bounds of its neighbours.
+    for p in range(m):
+        degree[p + 1] += degree[p]
+    incident = np.empty(2 * n_edges, dtype=np.int64)
+    fill = degree[:m].copy()
+    for e in range(n_edges):
+        incident[fill[ei[e]]] = e
+        fill[ei[e]] += 1
+        incident[fill[ej[e]]] = e
+        fill[ej[e]] += 1
+    # A point whose extra inlier cost exceeds the most its edges can give back when it turns
+    # inlier is an outlier in every minimiser. The give-back of an edge is e(0,1) while the
+    # other end may be an inlier, and e(0,0) - e(1,0) once that end is known to be an outlier:
+    # fixing a point tightens its neighbours' bounds, so fixing spreads inwards from the far
+    # points until only the points around the plane's band remain.
+    excess = np.empty(m)
+    slack = np.empty(m)
+    fixed = np.zeros(m, dtype=np.bool_)
+    stack = np.empty(m, dtype=np.int64)
+    top = 0
+    for p in range(m):
+        excess[p] = keep * (data1[p] - f0[p])
+        slack[p] = 1e-9 * (payback[p] + abs(excess[p])) + 1e-12  # rounding of the sums
+        if excess[p] > payback[p] + slack[p]:
+            fixed[p] = True
+            stack[top] = p
+            top += 1
+    while top:
+        top -= 1
+        p = stack[top]
+        for x in range(degree[p], degree[p + 1]):
+            e = incident[x]
+            q = ej[e] if ei[e] == p else ei[e]
+            if fixed[q]:
+                continue
+            payback[q] += both_out[e] - 2.0 * differ[e]
+            if excess[q] > payback[q] + slack[q]:
+                fixed[q] = True
+                stack[top] = q
+                top += 1
+    local = np.full(m, -1, dtype=np.int64)
+    nodes = np.empty(m, dtype=np.int64)
+    count = 0
+    for p in range(m):
+        if not fixed[p]:
+            local[p] = count
+            nodes[count] = p
+            count += 1
+    slope = np.empty(count)
+    for q in range(count):
+        slope[q] = excess[nodes[q]]
+    src = np.empty(n_edges, dtype=np.int64)
+    dst = np.empty(n_edges, dtype=np.int64)
+    cap = np.empty(n_edges)
+    inner = 0
+    for e in range(n_edges):
+        li, lj = local[ei[e]], local[ej[e]]
+        if li < 0 and lj < 0:
+            continue
+        a, b = both_out[e], differ[e]
+        if li >= 0 and lj >= 0:
+            # e = A + (C - A) x_i + (D - C) x_j + (B + C - A - D)(1 - x_i) x_j, D = 0, B = C.
+            src[inner] = li
+            dst[inner] = lj
+            cap[inner] = max(2.0 * b - a, 0.0)
+            inner += 1
+            slope[li] += b - a
+            slope[lj] -= b
+        else:
+            # An edge to a fixed outlier costs e(0,0) = a or e(1,0) = b: a unary of its free end.
+            slope[max(li, lj)] += b - a
+    return (bad, nodes[:count].copy(), src[:inner].copy(), dst[:inner].copy(),
+            cap[:inner].copy(), slope)
+
+
+@kernel
+def _gc_ransac_energy(f0: np.ndarray, data1: np.ndarray, ei: np.ndarray, ej: np.ndarray,
+                      cut: np.ndarray, lam: float, ls: float, labels: np.ndarray) -> float:
+    """Energy of a (M,) bool labelling for the inputs of :func:`_gc_ransac_graph`."""
+    total = 0.0
+    for p in range(f0.shape[0]):
+        total += (1.0 - lam) * (data1[p] if labels[p] else f0[p])
+    for e in range(ei.shape[0]):
+        li, lj = labels[ei[e]], labels[ej[e]]
+        if not li and not lj:
+            total += 0.5 * ls * (f0[ei[e]] + f0[ej[e]])
+        elif li != lj:
+            total += ls * cut[e]
+    return total

@@ -20,7 +20,10 @@ from typing import TYPE_CHECKING
 import pluggy
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
     from monoplane.stages.base import Stage
+    from monoplane.types import Reconstruction
 
 PROJECT_NAME = "monoplane"
 
@@ -89,6 +92,18 @@ def monoplane_register_adjusters() -> list[type[Stage]]:
     """Joint refiners of a fused scene's cameras, per-view depth scales and global planes.
 
     Config table ``[adjuster]``. Contract: :class:`monoplane.stages.base.Adjuster`.
+    """
+
+
+@hookspec
+def monoplane_register_baselines() -> dict[str, Callable[..., Reconstruction]]:
+    """External plane detectors to compare against, by method name (``--baseline NAME``).
+
+    Each value is a callable ``baseline(frame, *, seed=0) -> Reconstruction`` that takes a
+    cue-filled frame and returns planes in its camera frame and depth units. It may record
+    ``timings["baseline.call"]``: the seconds of its core call alone (data conversion
+    excluded), which ``monoplane bench`` and ``monoplane eval`` compare against. Used by
+    :mod:`monoplane.evaluation.baselines`; names must be unique across plugins.
     """
 
 

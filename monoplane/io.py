@@ -1,4 +1,4 @@
-"""Reading inputs and writing outputs (the on-disk contract of DESIGN §6).
+"""Reading inputs and writing outputs (the on-disk contract of the command line and API).
 
 Inputs
 ------
@@ -11,9 +11,9 @@ Inputs
 
 Outputs (one folder, written atomically: a temporary sibling folder renamed into place)
 -------------------------------------------------------------------------------------------
-``labels.png`` (uint16, 0 = non-planar), ``planes.json``, ``planes.ply`` (one coloured polygon
-per plane region, triangulated so
-that any PLY reader loads it), ``depth_planar.npy`` and ``config.toml``.
+``labels.png`` (uint16, 0 = non-planar), ``planes.json``, ``planes.ply`` (every plane region
+triangulated on its plane with its holes left open, each face carrying its ``plane_id``; see
+:func:`write_plane_mesh_ply`), ``depth_planar.npy`` and ``config.toml``.
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ import numpy as np
 
 from monoplane.cues.intrinsics import assume_intrinsics
 from monoplane.errors import InvalidInput
-from monoplane.geometry.polygons import plane_polygons, triangulate_on_plane
+from monoplane.geometry.polygons import PlaneMesh, reconstruction_mesh
 from monoplane.types import Frame, Reconstruction, intrinsics_matrix
 
 
@@ -72,10 +72,13 @@ def read_image(path: str | Path) -> np.ndarray:
 def _load_npy(p: Path, what: str) -> np.ndarray:
     try:
         arr = np.load(p, allow_pickle=False)
-    except (ValueError, OSError, EOFError) as exc:
-        raise InvalidInput(f"cannot read {what} {p}: {exc}") from None
-    if not isinstance(arr, np.ndarray) or not np.issubdtype(arr.dtype, np.number):
-        raise InvalidInput(f"{what} {p} must hold a numeric array")
+    except Exception as exc:  # a damaged header surfaces as ValueError, SyntaxError, TokenError…
+        first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+        raise InvalidInput(f"cannot read {what} {p} as .npy: {first}") from None
+    if not isinstance(arr, np.ndarray) or not (np.issubdtype(arr.dtype, np.integer)
+                                               or np.issubdtype(arr.dtype, np.floating)):
+        kind = arr.dtype if isinstance(arr, np.ndarray) else type(arr).__name__
+        raise InvalidInput(f"{what} {p} must hold a real-valued numeric array, got {kind}")
     return arr
 
 
@@ -127,9 +130,13 @@ def read_depth(path: str | Path, depth_scale: float | None = None,
         depth[bad] = 0.0
     if np.any(depth < 0):
         raise InvalidInput(f"depth {p} has negative values")
-    if not np.any(depth > 0):
-        raise InvalidInput(f"depth {p} has no valid pixel (all zero, NaN or inf)")
-    return depth.astype(np.float32)
+    if depth.max(initial=0.0) > np.finfo(np.float32).max:
+        raise InvalidInput(f"depth {p} has values beyond {np.finfo(np.float32).max:.3g}; "
+                           "store it in a larger unit (e.g. metres)")
+    depth = depth.astype(np.float32)  # values below float32's range become 0 (invalid)
+    if np.any(depth > 0):
+        return depth
+    raise InvalidInput(f"depth {p} has no valid pixel (all zero, NaN or inf)")
 
 
 def read_normals(path: str | Path) -> np.ndarray:
@@ -183,7 +190,7 @@ def read_intrinsics(spec: str | Path) -> np.ndarray:
         where = str(p)
     else:
         parts = text.split(",")
-        where = f"--intrinsics '{text}'"
+        where = f"--intrinsics {text!r}"
         if len(parts) != 4:
             raise InvalidInput(f"{where} must be fx,fy,cx,cy or a JSON file")
         values = parts
@@ -278,6 +285,11 @@ def atomic_output_dir(out_dir: str | Path, overwrite: bool = False) -> Iterator[
     parent = out.parent
     parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".partial", dir=parent))
+    # mkdtemp creates the folder 0700; the result is an ordinary output folder, so give it the
+    # permissions the user's umask gives any new folder.
+    umask = os.umask(0)
+    os.umask(umask)
+    tmp.chmod(0o777 & ~umask)
     try:
         yield tmp
         if out.exists():
@@ -292,31 +304,47 @@ def atomic_output_dir(out_dir: str | Path, overwrite: bool = False) -> Iterator[
         raise
 
 
-def write_polygon_ply(path: Path, polygons: list[tuple[np.ndarray, np.ndarray]]) -> None:
-    """Write coloured polygons as an ASCII PLY (one face per polygon).
+def write_plane_mesh_ply(path: Path, mesh: PlaneMesh, colors: np.ndarray,
+                         first_id: int = 1) -> None:
+    """Write plane regions as an ASCII PLY triangle mesh, each face tagged with its plane id.
 
     Parameters
     ----------
     path : Path
         Output file.
-    polygons : list of (vertices, color)
-        ``(V, 3)`` float vertices and a (3,) uint8 RGB colour per polygon.
+    mesh : PlaneMesh
+        Triangles with their ``plane_ids``.
+    colors : numpy.ndarray
+        (P, 3) uint8 RGB of plane id ``p`` at row ``p - first_id``.
+    first_id : int
+        Id of the first plane: 1 for label values, 0 for a scene's global planes.
+
+    Notes
+    -----
+    Elements: ``vertex`` (float x, y, z; uchar red, green, blue) and ``face`` (uchar-counted
+    int list ``vertex_indices`` of 3 entries; uchar red, green, blue; int ``plane_id``). No
+    vertex is shared between planes, so the vertex colour is the plane colour too (Open3D reads
+    vertex colours, not face colours).
     """
-    n_vertices = sum(len(v) for v, _ in polygons)
-    lines = ["ply", "format ascii 1.0", f"element vertex {n_vertices}",
-             "property float x", "property float y", "property float z",
-             "property uchar red", "property uchar green", "property uchar blue",
-             f"element face {len(polygons)}", "property list uchar int vertex_indices",
-             "property uchar red", "property uchar green", "property uchar blue", "end_header"]
-    faces = []
-    start = 0
-    for verts, color in polygons:
-        r, g, b = (int(c) for c in color)
-        lines += [f"{x:.6g} {y:.6g} {z:.6g} {r} {g} {b}" for x, y, z in verts]
-        faces.append(f"{len(verts)} " + " ".join(str(start + i) for i in range(len(verts)))
-                     + f" {r} {g} {b}")
-        start += len(verts)
-    path.write_text("\n".join(lines + faces) + "\n")
+    colors = np.asarray(colors, dtype=np.uint8).reshape(-1, 3)
+    face_rgb = colors[mesh.plane_ids - first_id].reshape(-1, 3)
+    vertex_rgb = np.zeros((len(mesh.vertices), 3), np.uint8)
+    vertex_rgb[mesh.triangles.reshape(-1)] = np.repeat(face_rgb, 3, axis=0)
+    header = ["ply", "format ascii 1.0", "comment monoplane plane regions; "
+              "face plane_id = plane id in the accompanying JSON",
+              f"element vertex {len(mesh.vertices)}",
+              "property float x", "property float y", "property float z",
+              "property uchar red", "property uchar green", "property uchar blue",
+              f"element face {len(mesh.triangles)}", "property list uchar int vertex_indices",
+              "property uchar red", "property uchar green", "property uchar blue",
+              "property int plane_id", "end_header"]
+    vertices = [f"{x:.7g} {y:.7g} {z:.7g} {r} {g} {b}"
+                for (x, y, z), (r, g, b) in zip(mesh.vertices.tolist(), vertex_rgb.tolist(),
+                                                strict=True)]
+    faces = [f"3 {a} {b} {c} {r} {g} {bl} {pid}"
+             for (a, b, c), (r, g, bl), pid in zip(mesh.triangles.tolist(), face_rgb.tolist(),
+                                                   mesh.plane_ids.tolist(), strict=True)]
+    path.write_text("\n".join(header + vertices + faces) + "\n")
 
 
 def planes_document(rec: Reconstruction) -> dict:
@@ -351,7 +379,7 @@ def planes_document(rec: Reconstruction) -> dict:
 def write_reconstruction_files(rec: Reconstruction, folder: Path) -> None:
     """Write the single-view outputs into an existing folder (not atomic by itself)."""
     from monoplane import __version__
-    from monoplane.config import dumps_toml
+    from monoplane.config import dumps_toml  # config imports the plugin registry
 
     if rec.num_planes > np.iinfo(np.uint16).max:
         raise InvalidInput(f"{rec.num_planes} planes do not fit in a uint16 labels.png")
@@ -359,10 +387,7 @@ def write_reconstruction_files(rec: Reconstruction, folder: Path) -> None:
     doc = planes_document(rec)
     doc["monoplane_version"] = __version__
     (folder / "planes.json").write_text(json.dumps(doc, indent=2) + "\n")
-    colors = rec.colors
-    write_polygon_ply(folder / "planes.ply",
-                      [(tri, colors[pid - 1]) for pid, verts in plane_polygons(rec)
-                       for tri in triangulate_on_plane(verts, rec.params[pid - 1, :3])])
+    write_plane_mesh_ply(folder / "planes.ply", reconstruction_mesh(rec), rec.colors)
     np.save(folder / "depth_planar.npy", rec.planar_depth())
     (folder / "config.toml").write_text(
         "# Resolved monoplane config; rerun with: monoplane run ... --config config.toml\n"

@@ -39,9 +39,17 @@ import numpy as np
 
 from monoplane.errors import InvalidInput, StageError
 from monoplane.geometry.alignment import ScaleAlignment, align_scale
-from monoplane.geometry.polygons import plane_basis, triangulate_on_plane
+from monoplane.geometry.polygons import PlaneMesh, points_plane_mesh
 from monoplane.stages.base import Fuser, Matcher
-from monoplane.types import Camera, Frame, Reconstruction, Scene, SfmResult, plane_to_camera
+from monoplane.types import (
+    Camera,
+    Frame,
+    Reconstruction,
+    Scene,
+    SfmResult,
+    plane_to_camera,
+    ray_plane_depth,
+)
 
 if TYPE_CHECKING:
     from monoplane.pipeline import Pipeline
@@ -498,15 +506,14 @@ def save_sfm(sfm: SfmResult, out_dir: str | Path, overwrite: bool = False) -> Pa
     return Path(out_dir)
 
 
-def scene_plane_polygons(scene: Scene, step: int = 2, max_cells: int = 512
-                         ) -> list[tuple[int, np.ndarray]]:
-    """Outline polygons of every global plane: the union of its views' masks on the fused plane.
+def scene_mesh(scene: Scene, step: int = 2, max_cells: int = 512) -> PlaneMesh:
+    """Every global plane's surface: the union of its views' masks on the fused plane.
 
     Every ``step``-th mask pixel of each linked view plane is lifted along its ray onto the
     fused plane (pixels whose lifted depth disagrees with the view's own plane by more than a
-    factor 2 are dropped, which removes grazing-angle slivers). The union is rasterised in
-    plane coordinates at about the pixel footprint, closed morphologically, and its outer
-    contours are simplified.
+    factor 2 are dropped, which removes grazing-angle slivers). The union is triangulated by
+    :func:`~monoplane.geometry.polygons.points_plane_mesh` at about the pixel footprint, holes
+    left open.
 
     Parameters
     ----------
@@ -519,8 +526,8 @@ def scene_plane_polygons(scene: Scene, step: int = 2, max_cells: int = 512
 
     Returns
     -------
-    list of (int, numpy.ndarray)
-        ``(global_id, (V, 3) world vertices)``, possibly several polygons per plane.
+    PlaneMesh
+        World-frame triangles; ``plane_ids`` are global plane ids (0-based, as in scene.json).
     """
     from monoplane.types import pixel_rays
 
@@ -529,60 +536,28 @@ def scene_plane_polygons(scene: Scene, step: int = 2, max_cells: int = 512
         for local, glob in table.items():
             members.setdefault(glob, []).append((v, local))
     rays_cache: dict[int, np.ndarray] = {}
-    out = []
+    parts = []
     for g, plane in enumerate(scene.planes):
-        n = plane[:3] / np.linalg.norm(plane[:3])
-        e1, e2 = plane_basis(n)
-        origin = -plane[3] * n
-        coords, footprints = [], []
+        points, footprints = [], []
         for v, local in members.get(g, []):
             rec, cam = scene.views[v], scene.cameras[v]
             if v not in rays_cache:
                 rays_cache[v] = pixel_rays(cam.K, cam.height, cam.width)[::step, ::step]
             mask = rec.labels[::step, ::step] == local
             rays = rays_cache[v][mask]
-            pc = plane_to_camera(plane, cam.R, cam.t)[0]
-            own = rec.params[local - 1]
-            with np.errstate(divide="ignore", invalid="ignore"):
-                z = -pc[3] / (rays @ pc[:3])
-                z_own = -own[3] / (rays @ own[:3])
-            ok = np.isfinite(z) & (z > 0) & np.isfinite(z_own) & (z_own > 0)
-            ok &= (z < 2 * z_own) & (z_own < 2 * z)
+            z = ray_plane_depth(rays, plane_to_camera(plane, cam.R, cam.t)[0])
+            z_own = ray_plane_depth(rays, rec.params[local - 1])
+            ok = (z > 0) & (z_own > 0) & (z < 2 * z_own) & (z_own < 2 * z)
             if not np.any(ok):
                 continue
             x_cam = rays[ok] * z[ok, None]
-            x_world = (x_cam - cam.t) @ cam.R
-            rel = x_world - origin
-            coords.append(np.stack([rel @ e1, rel @ e2], axis=1))
+            points.append((x_cam - cam.t) @ cam.R)
             footprints.append(np.median(z[ok]) * step / cam.K[0, 0])
-        if not coords:
-            continue
-        uv = np.concatenate(coords)
-        lo, hi = uv.min(axis=0), uv.max(axis=0)
-        cell = max(float(np.median(footprints)), float((hi - lo).max()) / max_cells, 1e-12)
-        ij = np.floor((uv - lo) / cell).astype(np.int64) + 2
-        shape = (int(ij[:, 1].max()) + 3, int(ij[:, 0].max()) + 3)
-        grid = np.zeros(shape, np.uint8)
-        grid[ij[:, 1], ij[:, 0]] = 1
-        grid = cv2.morphologyEx(grid, cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8))
-        contours, _ = cv2.findContours(grid, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
-        for contour in contours:
-            poly = cv2.approxPolyDP(contour, 1.0, True).reshape(-1, 2).astype(np.float64)
-            if len(poly) < 3:
-                continue
-            a, b = (poly[:, 0] - 2 + 0.5) * cell + lo[0], (poly[:, 1] - 2 + 0.5) * cell + lo[1]
-            out.append((g, origin + a[:, None] * e1 + b[:, None] * e2))
-    return out
-
-
-def scene_triangles(scene: Scene, colors: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Every global plane's outline polygons, triangulated, as ``(vertices (3, 3), colour)``.
-
-    Concave outlines are split into triangles so that any PLY reader (Open3D included) can load
-    the mesh; triangles wind counter-clockwise around the fused plane's normal.
-    """
-    return [(tri, colors[g]) for g, verts in scene_plane_polygons(scene)
-            for tri in triangulate_on_plane(verts, scene.planes[g, :3])]
+        if points:
+            verts, tris = points_plane_mesh(np.concatenate(points), plane,
+                                            float(np.median(footprints)), max_cells=max_cells)
+            parts.append((g, verts, tris))
+    return PlaneMesh.concatenate(parts)
 
 
 def scene_plane_colors(scene: Scene) -> np.ndarray:
@@ -663,10 +638,11 @@ def save_scene(result: MultiviewResult, out_dir: str | Path, overwrite: bool = F
 
     Layout: ``view_000/`` ... (the single-view outputs of each registered view, plus
     ``labels_global.png``: global plane id + 1 per pixel, 16-bit), ``scene.json``,
-    ``scene.ply`` (each global plane's coloured outline, triangulated), ``cameras.json`` and
-    ``points.ply`` (sparse SfM points); with ``report``, ``report.html`` and its figures.
+    ``scene.ply`` (each global plane's coloured surface, triangulated with holes open),
+    ``cameras.json`` and ``points.ply`` (sparse SfM points); with ``report``, ``report.html``
+    and its figures.
     """
-    from monoplane.io import atomic_output_dir, write_polygon_ply, write_reconstruction_files
+    from monoplane.io import atomic_output_dir, write_plane_mesh_ply, write_reconstruction_files
 
     scene = result.scene
     with atomic_output_dir(out_dir, overwrite) as tmp:
@@ -677,7 +653,7 @@ def save_scene(result: MultiviewResult, out_dir: str | Path, overwrite: bool = F
             write_global_labels(folder / "labels_global.png", rec.labels, scene.links[v])
         (tmp / "scene.json").write_text(json.dumps(scene_document(result), indent=2) + "\n")
         colors = scene_plane_colors(scene)
-        write_polygon_ply(tmp / "scene.ply", scene_triangles(scene, colors))
+        write_plane_mesh_ply(tmp / "scene.ply", scene_mesh(scene), colors, first_id=0)
         cams = cameras_document(scene.cameras, result.registration, result.unregistered)
         (tmp / "cameras.json").write_text(json.dumps(cams, indent=2) + "\n")
         write_points_ply(tmp / "points.ply", result.sfm.points, result.sfm.colors)

@@ -5,7 +5,7 @@ Python API first::
     import monoplane
     pipe = monoplane.Pipeline.from_preset("monoplane", overrides={"labeler.lambda": 0.9})
     rec = pipe.run(monoplane.load_frame("rgb.png", depth="depth.npy", intrinsics="K.json"))
-    rec.save("out/")
+    monoplane.save_reconstruction(rec, "out/")
 
 A stage that raises is reported as a :class:`~monoplane.errors.StageError` naming its kind and
 plugin. Per-stage wall times land in ``rec.timings`` and are announced through the
@@ -22,6 +22,7 @@ from typing import Any, TypeVar
 import pluggy
 
 from monoplane import config as config_mod
+from monoplane.cues.given import use_given_cues
 from monoplane.errors import StageError
 from monoplane.plugin_manager import get_plugin_manager, get_registry
 from monoplane.stages.base import CueProvider, Labeler, Refiner, Sampler, Scorer, Stage
@@ -102,10 +103,20 @@ class Pipeline:
                                               frame_name=frame_name)
         return result
 
-    def prepare(self, frame: Frame) -> Frame:
-        """Run the cue provider: the returned frame has depth and normals."""
+    def prepare(self, frame: Frame, timings: dict[str, float] | None = None) -> Frame:
+        """Give the frame its cues: the returned frame has depth and normals.
+
+        The configured cue provider runs only when it :meth:`~CueProvider.needs_cues`; a frame
+        that already carries depth and normals is accepted as given (normals oriented towards
+        the camera), so the provider and its model files are never touched for it.
+        """
         cues = self.stage("cues", CueProvider)
-        return self.call("cues", cues.name, lambda: cues.provide(frame), frame.name, {})
+        timings = {} if timings is None else timings
+        if cues.needs_cues(frame):
+            return self.call("cues", cues.name, lambda: cues.provide(frame), frame.name,
+                             timings)
+        return self.call("cues", "given with the input", lambda: use_given_cues(frame),
+                         frame.name, timings)
 
     def segment(self, frame: Frame, timings: dict[str, float] | None = None) -> Reconstruction:
         """Sequential RANSAC then the refiner, on a frame that already has its cues."""
@@ -140,8 +151,7 @@ class Pipeline:
         """
         timings: dict[str, float] = {}
         start = time.perf_counter()
-        cues = self.stage("cues", CueProvider)
-        prepared = self.call("cues", cues.name, lambda: cues.provide(frame), frame.name, timings)
+        prepared = self.prepare(frame, timings)
         rec = self.segment(prepared, timings)
         rec.timings["total"] = time.perf_counter() - start
         return rec

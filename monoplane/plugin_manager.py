@@ -30,9 +30,11 @@ DEFAULT_PLUGINS: tuple[str, ...] = (
     "monoplane.stages.scorers",
     "monoplane.stages.labelers",
     "monoplane.stages.refiners",
+    "monoplane.stages.graph_refiner",
     "monoplane.stages.matchers",
     "monoplane.stages.fusers",
     "monoplane.stages.adjusters",
+    "monoplane.evaluation.baselines",
 )
 
 #: Set this environment variable to disable entry-point autoloading of third-party plugins.
@@ -167,7 +169,7 @@ class Registry:
             return self._stages[kind][name]
         except KeyError:
             choices = ", ".join(self.names(kind)) or "(none registered)"
-            raise ConfigError(f"unknown {kind} plugin '{name}'; valid choices: {choices}") from None
+            raise ConfigError(f"unknown {kind} plugin {name!r}; valid choices: {choices}") from None
 
     def all(self) -> list[StageInfo]:
         """Every registered stage, in pipeline order of kinds then by name."""

@@ -15,7 +15,9 @@ One plane at a time, on the points not yet assigned (the *pool*):
 5. the plane is accepted if its support reaches ``min_support``, otherwise the search stops;
    its inliers leave the pool.
 
-The cloud and its neighbour graph are built once per frame. Afterwards labels are carried to
+Steps 1-5 form the cloud-level core, :meth:`SequentialRansac.run_cloud`, which needs no pixel
+grid (a cloud and its kNN graph). :meth:`SequentialRansac.run` wraps it for a frame: the cloud
+and its neighbour graph are built once per frame, and afterwards labels are carried to
 every valid pixel (:meth:`PlaneCloud.propagate`), each plane is refit by least squares on all
 its pixels in the camera frame and the depth's units, and normals are turned towards the
 camera. All randomness comes from one generator seeded with ``seed``.
@@ -27,11 +29,11 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, TypeVar
+from typing import Any, NamedTuple, TypeVar
 
 import numpy as np
 
-from monoplane.errors import ConfigError, StageError
+from monoplane.errors import ConfigError, InvalidInput, StageError
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.geometry.planes import fit_plane, fit_planes_per_label, planes_from_triplets
@@ -47,6 +49,17 @@ from monoplane.stages.base import (
 from monoplane.types import Frame, Reconstruction, orient_towards_camera
 
 T = TypeVar("T")
+
+
+class CloudPlanes(NamedTuple):
+    """Result of :meth:`SequentialRansac.run_cloud` (unpacks as ``labels, planes, timings``)."""
+
+    labels: np.ndarray
+    """(N,) int32 plane of each point, 0 = non-planar, ``i`` = ``planes[i - 1]``."""
+    planes: np.ndarray
+    """(P, 4) float64 unit-normal planes in the cloud's normalised frame, detection order."""
+    timings: dict[str, float]
+    """Seconds per sub-step: ``ransac.search`` and ``ransac.label``."""
 
 
 @dataclass
@@ -179,18 +192,61 @@ class SequentialRansac:
             ``timings`` in seconds per sub-step (keys ``ransac.*``).
         """
         cfg = self.config
-        params = cfg.params
         rng = np.random.default_rng(cfg.seed)
-        timings = {"ransac.cloud": 0.0, "ransac.graph": 0.0, "ransac.search": 0.0,
-                   "ransac.label": 0.0, "ransac.finalize": 0.0}
-
         t = time.perf_counter()
         cloud = PlaneCloud.from_frame(frame, cfg.max_points, rng)
-        timings["ransac.cloud"] = time.perf_counter() - t
+        t_cloud = time.perf_counter() - t
         t = time.perf_counter()
         graph = NeighbourGraph.build(cloud.points, cfg.knn, tree=cloud.tree)
-        timings["ransac.graph"] = time.perf_counter() - t
+        t_graph = time.perf_counter() - t
 
+        result = self.run_cloud(cloud, graph, rng)
+
+        t = time.perf_counter()
+        # Pixels within ε/4 of their nearest sample's plane keep its label outright.
+        labels = cloud.propagate(result.labels, result.planes, tolerance=0.25 * cfg.epsilon,
+                                 graph=graph)
+        rec = self._finalize(frame, cloud, labels)
+        t_final = time.perf_counter() - t
+        rec.timings.update({"ransac.cloud": t_cloud, "ransac.graph": t_graph,
+                            **result.timings, "ransac.finalize": t_final})
+        return rec
+
+    def run_cloud(self, cloud: PlaneCloud, graph: NeighbourGraph,
+                  rng: np.random.Generator | None = None) -> CloudPlanes:
+        """Detect planes in a normalised oriented cloud; needs no pixel grid.
+
+        This is the sequential search itself (steps 1-5 of the module docstring); :meth:`run`
+        wraps it with the cloud and graph construction of a frame and the per-pixel finaliser.
+
+        Parameters
+        ----------
+        cloud : PlaneCloud
+            The normalised cloud (unit sphere); only ``points``, ``normals``, ``colors`` and
+            ``size`` are used here.
+        graph : NeighbourGraph
+            The kNN graph over ``cloud.points`` (e.g. ``NeighbourGraph.build(cloud.points,
+            config.knn)``).
+        rng : numpy.random.Generator, optional
+            Source of all randomness; a fresh generator seeded with ``config.seed`` when
+            omitted. Equal generators give equal results.
+
+        Returns
+        -------
+        CloudPlanes
+            ``labels`` (N,) int32 per point (0 = non-planar, ``i`` = ``planes[i - 1]``),
+            ``planes`` (P, 4) float64 unit-normal planes ``n · x + d = 0`` in the normalised
+            frame in detection order, and ``timings`` in seconds (``ransac.search``,
+            ``ransac.label``).
+        """
+        cfg = self.config
+        params = cfg.params
+        if rng is None:
+            rng = np.random.default_rng(cfg.seed)
+        if graph.num_nodes != cloud.size:
+            raise InvalidInput(f"graph has {graph.num_nodes} nodes for a cloud of "
+                               f"{cloud.size} points")
+        timings = {"ransac.search": 0.0, "ransac.label": 0.0}
         min_support = max(cfg.min_support_points, math.ceil(cfg.min_support * cloud.size))
         point_labels = np.zeros(cloud.size, dtype=np.int32)
         pool = np.arange(cloud.size, dtype=np.int64)
@@ -205,22 +261,15 @@ class SequentialRansac:
             plane, inliers = self._label(cloud, graph, pool, best[0], best[1], params)
             if cfg.split_components and inliers.any():
                 members = np.flatnonzero(inliers)
-                inliers[members[~graph.largest_component(pool[members])]] = False
+                inliers[members[~graph.largest_component_within(pool, inliers)]] = False
             timings["ransac.label"] += time.perf_counter() - t
             if inliers.sum() < min_support:
                 break
             found.append(plane)
             point_labels[pool[inliers]] = len(found)
             pool = pool[~inliers]
-
-        t = time.perf_counter()
-        # Pixels within ε/4 of their nearest sample's plane keep its label outright.
-        labels = cloud.propagate(point_labels, np.array(found).reshape(-1, 4),
-                                 spacing=graph.spacing, tolerance=0.25 * cfg.epsilon)
-        rec = self._finalize(frame, labels)
-        timings["ransac.finalize"] = time.perf_counter() - t
-        rec.timings.update(timings)
-        return rec
+        planes = np.array(found, dtype=np.float64).reshape(-1, 4)
+        return CloudPlanes(labels=point_labels, planes=planes, timings=timings)
 
     def _search(self, cloud: PlaneCloud, pool: np.ndarray, rng: np.random.Generator,
                 params: RansacParams) -> tuple[np.ndarray, np.ndarray] | None:
@@ -282,10 +331,17 @@ class SequentialRansac:
         return plane, np.asarray(lab.inliers, dtype=bool)
 
     @staticmethod
-    def _finalize(frame: Frame, labels: np.ndarray) -> Reconstruction:
-        """Least-squares plane per label on all its pixels, camera frame and depth units."""
-        params, rmse, support = fit_planes_per_label(frame.points(), labels,
-                                                     int(labels.max(initial=0)))
+    def _finalize(frame: Frame, cloud: PlaneCloud, labels: np.ndarray) -> Reconstruction:
+        """Least-squares plane per label on all its pixels, camera frame and depth units.
+
+        The fit runs on the normalised points of all valid pixels, which the cloud holds
+        already; a total-least-squares fit commutes with the similarity that maps them back
+        to the camera frame, where planes and RMSE are then expressed.
+        """
+        params, rmse, support = fit_planes_per_label(
+            cloud.all_points, labels.ravel()[cloud.all_pixels], int(labels.max(initial=0)))
+        params = cloud.plane_to_camera(params)
+        rmse = rmse * cloud.scale
         kept = ~np.isnan(rmse)
         # Labels too small to fit a plane become non-planar; the others are renumbered 1..P.
         renumber = np.zeros(len(kept) + 1, dtype=np.int32)

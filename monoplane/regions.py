@@ -22,13 +22,15 @@ available for stricter splitting.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import scipy.sparse as sp
+from scipy import ndimage
 from scipy.sparse.csgraph import connected_components
 
 from monoplane.densecrf import REFERENCE_AREA
 from monoplane.errors import InvalidInput
-from monoplane.geometry.planes import fit_planes_per_label, point_plane_distances
 from monoplane.types import Reconstruction
 
 #: The paper's minimum region size, in pixels at 256 x 192 (appendix).
@@ -80,32 +82,22 @@ def split_components(labels: np.ndarray, connectivity: int = 8) -> tuple[np.ndar
         raise InvalidInput(f"labels must be (H, W), got {lab.shape}")
     if connectivity not in (4, 8):
         raise InvalidInput(f"connectivity must be 4 or 8, got {connectivity}")
-    h, w = lab.shape
-    index = np.arange(h * w).reshape(h, w)
-    offsets = [(0, 1), (1, 0)] + ([(1, 1), (1, -1)] if connectivity == 8 else [])
-    src, dst = [], []
-    for dy, dx in offsets:
-        # Pair each pixel (y, x) with (y + dy, x + dx) where both exist.
-        ys, yd = slice(0, h - dy), slice(dy, h)
-        xs, xd = (slice(0, w - dx), slice(dx, w)) if dx >= 0 else (slice(-dx, w), slice(0, w + dx))
-        a, b = lab[ys, xs], lab[yd, xd]
-        same = (a == b) & (a > 0)
-        src.append(index[ys, xs][same])
-        dst.append(index[yd, xd][same])
-    s, d = np.concatenate(src), np.concatenate(dst)
-    graph = sp.coo_matrix((np.ones(s.size, dtype=np.int8), (s, d)), shape=(h * w, h * w))
-    _, comp = connected_components(graph, directed=False)
-    flat = lab.ravel()
-    planar = np.flatnonzero(flat > 0)
-    comps, first = np.unique(comp[planar], return_index=True)
-    first_pixel = planar[first]
-    orig = flat[first_pixel].astype(np.int64)
-    order = np.lexsort((first_pixel, orig))
-    new_id = np.zeros(comp.max() + 1, dtype=np.int32)
-    new_id[comps[order]] = np.arange(1, order.size + 1, dtype=np.int32)
-    out = np.zeros(h * w, dtype=np.int32)
-    out[planar] = new_id[comp[planar]]
-    return out.reshape(h, w), orig[order]
+    if lab.size and lab.min() < 0:
+        raise InvalidInput("labels must be >= 0")
+    structure = ndimage.generate_binary_structure(2, 1 if connectivity == 4 else 2)
+    out = np.zeros(lab.shape, dtype=np.int32)
+    origin: list[int] = []
+    # Each label is labelled inside its bounding box only. ndimage numbers components by the
+    # raster position of their first pixel, and raster order inside a box is raster order in
+    # the image, so the numbering is by label, then by first pixel.
+    for index, box in enumerate(ndimage.find_objects(lab)):
+        if box is None:
+            continue
+        mask = lab[box] == index + 1
+        comp, count = ndimage.label(mask, structure=structure)
+        out[box][mask] = comp[mask] + len(origin)
+        origin += [index + 1] * count
+    return out, np.asarray(origin, dtype=np.int64)
 
 
 def remove_small_regions(labels: np.ndarray, min_area: int) -> tuple[np.ndarray, np.ndarray]:
@@ -134,6 +126,106 @@ def remove_small_regions(labels: np.ndarray, min_area: int) -> tuple[np.ndarray,
     return remap[lab], kept.astype(np.int64)
 
 
+@dataclass(frozen=True)
+class RegionMoments:
+    """Zeroth, first and second moments of each region's valid 3D points.
+
+    Everything the clean-up asks of a region's points (its least-squares plane, the RMS
+    distance of its points to any plane) follows from these moments, and the moments of a
+    union of regions are sums. So the pixels are read once, for the connected components, and
+    merging, absorbing and the final refit work on R small matrices instead of the image.
+
+    Attributes
+    ----------
+    count : numpy.ndarray
+        (R,) int64 number of valid points of region 1..R.
+    total : numpy.ndarray
+        (R, 3) float64 sum of ``X - centre`` over the region's points.
+    outer : numpy.ndarray
+        (R, 3, 3) float64 sum of ``(X - centre)(X - centre)ᵀ``.
+    centre : numpy.ndarray
+        (3,) float64 common origin of the sums (the mean valid point), which keeps them well
+        conditioned; camera frame, depth units.
+    """
+
+    count: np.ndarray
+    total: np.ndarray
+    outer: np.ndarray
+    centre: np.ndarray
+
+    @classmethod
+    def of(cls, points: np.ndarray, valid: np.ndarray, labels: np.ndarray,
+           num: int) -> RegionMoments:
+        """Moments of labels 1..num of an (H, W) label map over (H, W, 3) points where valid."""
+        mask = np.asarray(valid) & (np.asarray(labels) > 0)
+        lab = np.asarray(labels)[mask]
+        pts = np.asarray(points, dtype=np.float64)[mask]
+        centre = pts.mean(axis=0) if len(pts) else np.zeros(3)
+        pts = pts - centre
+        size = num + 1
+        count = np.bincount(lab, minlength=size)[1:size].astype(np.int64)
+        total = np.stack([np.bincount(lab, pts[:, k], size)[1:size] for k in range(3)], axis=1)
+        outer = np.empty((num, 3, 3))
+        for i in range(3):
+            for j in range(i, 3):
+                outer[:, i, j] = outer[:, j, i] = np.bincount(lab, pts[:, i] * pts[:, j],
+                                                              size)[1:size]
+        return cls(count, total, outer, centre)
+
+    def combine(self, group_of: np.ndarray, num_groups: int) -> RegionMoments:
+        """Moments of groups of regions: ``group_of`` (R,) gives each region's group 1..G or 0
+        (dropped)."""
+        size = num_groups + 1
+        group = np.asarray(group_of, dtype=np.int64)
+
+        def add(x: np.ndarray) -> np.ndarray:
+            out = np.zeros((size, *x.shape[1:]), dtype=x.dtype)
+            np.add.at(out, group, x)
+            return out[1:]
+
+        return RegionMoments(add(self.count), add(self.total), add(self.outer), self.centre)
+
+    def planes(self, fallback: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Total-least-squares plane of each region (as :func:`~monoplane.geometry.planes.
+        fit_plane`: smallest eigenvector of the scatter, through the centroid, facing the
+        camera); regions with fewer than 3 points keep their (R, 4) ``fallback`` plane.
+
+        Returns ``params`` (R, 4), ``rmse`` (R,) (0 without points) and ``support`` (R,).
+        """
+        n = self.count.astype(np.float64)
+        fit = self.count >= 3
+        safe = np.maximum(n, 1.0)
+        mean = self.total / safe[:, None]
+        scatter = self.outer - safe[:, None, None] * mean[:, :, None] * mean[:, None, :]
+        params = np.array(fallback, dtype=np.float64).reshape(-1, 4)
+        rmse = np.zeros(n.size)
+        if fit.any():
+            values, vectors = np.linalg.eigh(scatter[fit])
+            normal = vectors[:, :, 0]
+            d = -np.einsum("rk,rk->r", normal, mean[fit] + self.centre)
+            flip = np.where(d < 0, -1.0, 1.0)
+            params[fit] = np.column_stack([normal * flip[:, None], d * flip])
+            rmse[fit] = np.sqrt(np.maximum(values[:, 0], 0.0) / n[fit])
+        # A region with 1-2 points keeps its previous plane; its RMSE is measured against it.
+        few = ~fit & (self.count > 0)
+        for k in np.flatnonzero(few):
+            rmse[k] = self.rms(params[k][None])[k, 0]
+        return params, rmse, self.count.copy()
+
+    def rms(self, planes: np.ndarray) -> np.ndarray:
+        """(R, H) RMS distance of each region's points to each of (H, 4) planes ``n·X + d = 0``
+        (unit n, camera frame); inf for a region without points."""
+        p = np.atleast_2d(planes)
+        normal = p[:, :3]
+        d = p[:, 3] + normal @ self.centre
+        square = (np.einsum("hi,rij,hj->rh", normal, self.outer, normal)
+                  + 2.0 * d[None, :] * (self.total @ normal.T)
+                  + self.count[:, None] * d[None, :] ** 2)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            out = np.sqrt(np.maximum(square, 0.0) / self.count[:, None])
+        return np.where(self.count[:, None] > 0, out, np.inf)
+
+
 def refit_planes(points: np.ndarray, valid: np.ndarray, labels: np.ndarray,
                  fallback: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Least-squares plane of each label on its valid pixels' 3D points.
@@ -160,18 +252,8 @@ def refit_planes(points: np.ndarray, valid: np.ndarray, labels: np.ndarray,
     support : numpy.ndarray
         (P,) int64 number of valid points of each label.
     """
-    fallback = np.asarray(fallback, dtype=np.float64).reshape(-1, 4)
-    num = fallback.shape[0]
-    lab = np.where(valid, labels, 0)
-    params, rmse, support = fit_planes_per_label(points, lab, num)
-    unfit = np.isnan(rmse)
-    params[unfit] = fallback[unfit]
-    rmse[unfit] = 0.0
-    # A label with 1-2 valid points keeps its previous plane; its RMSE is measured against it.
-    for k in np.flatnonzero(unfit & (support > 0)):
-        group = points[lab == k + 1].astype(np.float64)
-        rmse[k] = float(np.sqrt(np.mean((group @ params[k, :3] + params[k, 3]) ** 2)))
-    return params, rmse, support
+    num = np.asarray(fallback).reshape(-1, 4).shape[0]
+    return RegionMoments.of(points, valid, labels, num).planes(fallback)
 
 
 def scene_radius(points: np.ndarray, valid: np.ndarray) -> float:
@@ -192,27 +274,11 @@ def scene_radius(points: np.ndarray, valid: np.ndarray) -> float:
     float
         Radius in depth units; 0 when there are no valid points.
     """
-    pts = points[valid].astype(np.float64)
+    pts = np.asarray(points, dtype=np.float64)[valid]
     if not len(pts):
         return 0.0
-    return float(np.sqrt(((pts - pts.mean(axis=0)) ** 2).sum(axis=1).max()))
-
-
-def _rms_to_planes(points: np.ndarray, planes: np.ndarray) -> np.ndarray:
-    """(H,) RMS distance of (N, 3) points to each of (H, 4) planes; inf when N = 0."""
-    if not len(points):
-        return np.full(len(planes), np.inf)
-    return np.sqrt(np.mean(point_plane_distances(points, planes) ** 2, axis=1))
-
-
-def _groups(points: np.ndarray, valid: np.ndarray, labels: np.ndarray, num: int
-            ) -> list[np.ndarray]:
-    """Valid (n_k, 3) float64 points of each label 1..num, in label order."""
-    mask = valid & (labels > 0)
-    lab = labels[mask]
-    order = np.argsort(lab, kind="stable")
-    counts = np.bincount(lab, minlength=num + 1)[1:num + 1]
-    return np.split(points[mask].astype(np.float64)[order], np.cumsum(counts)[:-1])
+    pts -= pts.mean(axis=0)
+    return float(np.sqrt(np.einsum("ij,ij->i", pts, pts).max()))
 
 
 def merge_coplanar(points: np.ndarray, valid: np.ndarray, labels: np.ndarray,
@@ -224,8 +290,8 @@ def merge_coplanar(points: np.ndarray, valid: np.ndarray, labels: np.ndarray,
     Two regions ``a`` and ``b`` with ``origin[a] == origin[b]`` are joined when the angle
     between their refit normals is at most ``max_angle_deg`` and the RMS distance of each
     region's valid points to the other's plane is at most ``max_distance``. Joins are
-    transitive (union-find); regions need not touch in the image, since an occluder can cut a
-    plane into parts that only meet behind it.
+    transitive (connected components of the graph of agreeing pairs); regions need not touch in
+    the image, since an occluder can cut a plane into parts that only meet behind it.
 
     Parameters
     ----------
@@ -244,7 +310,6 @@ def merge_coplanar(points: np.ndarray, valid: np.ndarray, labels: np.ndarray,
         Largest normal angle between merged regions, degrees.
     max_distance : float
         Largest RMS point-to-plane distance, depth units.
-
     extra_pairs : numpy.ndarray, optional
         (E, 2) further region pairs (labels 1..R, e.g. :func:`region_adjacency`) to test the
         same way whatever their origin: touching regions of two RANSAC planes that turn out to
@@ -259,49 +324,39 @@ def merge_coplanar(points: np.ndarray, valid: np.ndarray, labels: np.ndarray,
         (G,) int64 original plane label of each group's representative.
     """
     origin = np.asarray(origin, dtype=np.int64)
+    moments = RegionMoments.of(points, valid, labels, origin.size)
+    area = np.bincount(np.asarray(labels).ravel(), minlength=origin.size + 1)[1:origin.size + 1]
+    remap, new_origin = _merge_groups(moments, area, origin, params, max_angle_deg,
+                                      max_distance, extra_pairs)
+    return remap[labels], new_origin
+
+
+def _merge_groups(moments: RegionMoments, area: np.ndarray, origin: np.ndarray,
+                  params: np.ndarray, max_angle_deg: float, max_distance: float,
+                  extra_pairs: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`merge_coplanar` on region moments: ``(remap (R+1,) int32, origin (G,))``."""
     num = origin.size
-    parent = np.arange(num)
-
-    def root(i: int) -> int:
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = int(parent[i])
-        return i
-
-    groups = _groups(points, valid, labels, num)
-    area = np.bincount(np.asarray(labels).ravel(), minlength=num + 1)[1:num + 1]
-
-    def union(a: int, b: int) -> None:
-        # The larger region (then the lower label) represents the group: it names the group's
-        # position in the numbering and its original plane.
-        ra, rb = root(a), root(b)
-        if ra != rb:
-            keep, drop = sorted((ra, rb), key=lambda r: (-area[r], r))
-            parent[drop] = keep
-
+    rms = moments.rms(params)  # rms[a, b]: region a's points to region b's plane
     cos_min = np.cos(np.deg2rad(max_angle_deg))
-    for o in np.unique(origin):
-        members = np.flatnonzero(origin == o)
-        if members.size < 2:
-            continue
-        normals = params[members, :3]
-        cos = np.abs(normals @ normals.T)
-        # rms[i, j]: RMS distance of region members[i]'s points to members[j]'s plane.
-        rms = np.stack([_rms_to_planes(groups[m], params[members]) for m in members])
-        ok = (cos >= cos_min) & (rms <= max_distance) & (rms.T <= max_distance)
-        for i, j in zip(*np.nonzero(np.triu(ok, 1)), strict=True):
-            union(int(members[i]), int(members[j]))
+    pairs = np.argwhere(np.triu(origin[:, None] == origin[None, :], 1))
     if extra_pairs is not None:
-        for a, b in np.asarray(extra_pairs, dtype=np.int64).reshape(-1, 2) - 1:
-            pa, pb = params[[a, b]]
-            if (abs(pa[:3] @ pb[:3]) >= cos_min
-                    and _rms_to_planes(groups[a], pb[None])[0] <= max_distance
-                    and _rms_to_planes(groups[b], pa[None])[0] <= max_distance):
-                union(int(a), int(b))
-    roots = np.array([root(i) for i in range(num)], dtype=np.int64)
-    kept, group_of = np.unique(roots, return_inverse=True)
-    remap = np.concatenate([[0], group_of + 1]).astype(np.int32)
-    return remap[labels], origin[kept]
+        pairs = np.concatenate([pairs, np.asarray(extra_pairs, np.int64).reshape(-1, 2) - 1])
+    a, b = pairs[:, 0], pairs[:, 1]
+    ok = ((np.abs(np.einsum("ek,ek->e", params[a, :3], params[b, :3])) >= cos_min)
+          & (rms[a, b] <= max_distance) & (rms[b, a] <= max_distance))
+    graph = sp.coo_matrix((np.ones(int(ok.sum()), np.int8), (a[ok], b[ok])), shape=(num, num))
+    _, group = connected_components(graph, directed=False)
+    # The largest region (then the lower label) of a group represents it: it names the group's
+    # position in the numbering and its original plane.
+    order = np.lexsort((np.arange(num), -area, group))
+    first = np.ones(num, bool)
+    first[1:] = group[order][1:] != group[order][:-1]
+    rep = order[first]  # one representative per group, groups in component-id order
+    rep_of_group = np.empty(rep.size, np.int64)
+    rep_of_group[group[rep]] = rep
+    rank = np.argsort(np.argsort(rep_of_group))  # groups numbered by representative label
+    remap = np.concatenate([[0], rank[group] + 1]).astype(np.int32)
+    return remap, origin[np.sort(rep_of_group)]
 
 
 def region_adjacency(labels: np.ndarray, connectivity: int = 8) -> np.ndarray:
@@ -368,23 +423,31 @@ def absorb_small_regions(points: np.ndarray, valid: np.ndarray, labels: np.ndarr
     lab = np.asarray(labels)
     num = params.shape[0]
     area = np.bincount(lab.ravel(), minlength=num + 1)[1:num + 1]
+    moments = RegionMoments.of(points, valid, lab, num)
+    edges = region_adjacency(lab, connectivity)
+    return _absorb_remap(moments, area, edges, params, min_area, max_distance)[lab]
+
+
+def _absorb_remap(moments: RegionMoments, area: np.ndarray, edges: np.ndarray,
+                  params: np.ndarray, min_area: int, max_distance: float) -> np.ndarray:
+    """:func:`absorb_small_regions` on region moments and (E, 2) adjacency: (R+1,) remap."""
+    num = area.size
     small = (area > 0) & (area < min_area)
     remap = np.arange(num + 1, dtype=np.int32)
     remap[1:][small] = 0
     if not small.any():
-        return remap[lab]
-    edges = region_adjacency(lab, connectivity)
-    groups = _groups(points, valid, lab, num)
+        return remap
+    rms = moments.rms(params)
     for s in np.flatnonzero(small) + 1:
         other = np.concatenate([edges[edges[:, 0] == s, 1], edges[edges[:, 1] == s, 0]])
         cand = other[~small[other - 1]]
         if not cand.size:
             continue
-        rms = _rms_to_planes(groups[s - 1], params[cand - 1])
-        best = int(np.argmin(rms))
-        if rms[best] <= max_distance:
+        fit = rms[s - 1, cand - 1]
+        best = int(np.argmin(fit))
+        if fit[best] <= max_distance:
             remap[s] = cand[best]
-    return remap[lab]
+    return remap
 
 
 def gate_filled_pixels(points: np.ndarray, valid: np.ndarray, before: np.ndarray,
@@ -426,7 +489,8 @@ def clean_regions(rec: Reconstruction, labels: np.ndarray, min_area: int,
                   connectivity: int = 8, split: bool = True, merge: bool = False,
                   absorb: bool = False, max_angle_deg: float = 10.0,
                   max_distance: float = 0.02, inliers_only: bool = False,
-                  merge_adjacent: bool = False) -> Reconstruction:
+                  merge_adjacent: bool = False, points: np.ndarray | None = None
+                  ) -> Reconstruction:
     """Split, filter and refit the planes of a refined label map.
 
     Parameters
@@ -458,6 +522,8 @@ def clean_regions(rec: Reconstruction, labels: np.ndarray, min_area: int,
         Fit planes, and run the residual tests, only on pixels that ``rec`` labelled planar
         (its RANSAC inliers). Pixels the refinement moved from non-planar to a plane keep their
         new label but do not bend its plane; support and RMSE count the fitted pixels only.
+    points : numpy.ndarray, optional
+        (H, W, 3) ``rec.frame.points()``, when the caller has them already.
 
     Returns
     -------
@@ -470,28 +536,43 @@ def clean_regions(rec: Reconstruction, labels: np.ndarray, min_area: int,
     if frame.depth is None:
         raise InvalidInput(f"{frame.name}: refitting planes needs a depth map")
     pieces, origin = split_components(labels, connectivity)
-    points, valid = frame.points(), frame.depth > 0
+    points = frame.points() if points is None else points
+    valid = frame.depth > 0
     if inliers_only:
         # RANSAC outliers carry no evidence about any plane: they may be labelled, not fitted.
         valid = valid & (np.asarray(rec.labels) > 0)
+    # Every later step works on the pieces' point moments; regions only ever grow by union.
+    moments = RegionMoments.of(points, valid, pieces, origin.size)
+    area = np.bincount(pieces.ravel(), minlength=origin.size + 1)[1:]
     if split and (merge or absorb):
         tolerance = max_distance * scene_radius(points, valid)
         if merge:
-            fitted, _, _ = refit_planes(points, valid, pieces, rec.params[origin - 1])
+            fitted, _, _ = moments.planes(rec.params[origin - 1])
             extra = region_adjacency(pieces, connectivity) if merge_adjacent else None
-            pieces, origin = merge_coplanar(points, valid, pieces, origin, fitted,
-                                            max_angle_deg, tolerance, extra)
+            remap, origin = _merge_groups(moments, area, origin, fitted, max_angle_deg,
+                                          tolerance, extra)
+            pieces = remap[pieces]
+            moments = moments.combine(remap[1:], origin.size)
+            area = np.bincount(remap[1:], area, origin.size + 1)[1:].astype(np.int64)
         if absorb:
-            fitted, _, _ = refit_planes(points, valid, pieces, rec.params[origin - 1])
-            pieces = absorb_small_regions(points, valid, pieces, fitted, min_area, tolerance,
-                                          connectivity)
-    final, kept = remove_small_regions(pieces, min_area)
+            fitted, _, _ = moments.planes(rec.params[origin - 1])
+            remap = _absorb_remap(moments, area, region_adjacency(pieces, connectivity),
+                                  fitted, min_area, tolerance)
+            pieces = remap[pieces]
+            moments = moments.combine(remap[1:], origin.size)
+            area = np.bincount(remap[1:], area, origin.size + 1)[1:].astype(np.int64)
+    kept = np.flatnonzero(area >= min_area) + 1
+    remap = np.zeros(area.size + 1, dtype=np.int32)
+    remap[kept] = np.arange(1, kept.size + 1, dtype=np.int32)
+    final = remap[pieces]
+    moments = moments.combine(remap[1:], kept.size)
     source = origin[kept - 1]
     if not split:
         # Merge the surviving regions of each original label back into one plane.
         source, merged = np.unique(source, return_inverse=True)
         final = np.concatenate([[0], merged + 1]).astype(np.int32)[final]
+        moments = moments.combine(merged + 1, source.size)
     inherited = rec.params[source - 1] if source.size else np.zeros((0, 4))
-    params, rmse, support = refit_planes(points, valid, final, inherited)
+    params, rmse, support = moments.planes(inherited)
     return Reconstruction(frame=frame, labels=final, params=params, rmse=rmse, support=support,
                           config=rec.config, timings=dict(rec.timings))

@@ -8,8 +8,10 @@ test suite once monoplane is installed:
 * ``plugin_manager``: a fresh plugin manager with built-ins only (no entry-point autoload),
   plus whatever the test registers on it.
 
-:func:`box_frame`, a frame of exact planes with its true labels, and
-:func:`check_stage_contract`, which a plugin's own tests call on each of its stage classes::
+:func:`plane_scene` (its shorthands :func:`box_frame`, :func:`room_cues`) and
+:func:`two_view_room` build exactly known views of planes; :func:`check_stage_contract`, which
+a plugin's own tests call on each of its stage classes, and :func:`check_baseline_contract`
+for ``monoplane eval`` baselines::
 
     from monoplane.testing import check_stage_contract
 
@@ -20,6 +22,8 @@ test suite once monoplane is installed:
 from __future__ import annotations
 
 import dataclasses
+import functools
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -28,28 +32,134 @@ import pytest
 if TYPE_CHECKING:
     import pluggy
 
+    from monoplane.geometry.cloud import PlaneCloud
     from monoplane.stages.base import Stage
     from monoplane.synth import SynthView
-    from monoplane.types import Frame
+    from monoplane.types import Frame, Reconstruction, SfmResult
 
 
 #: Inside a box, camera frame (OpenCV axes), metres: back wall 4 m ahead, floor 1 m below,
 #: left wall 1.5 m to the left; ``n · X + d = 0`` with n facing the camera.
 BOX_PLANES = np.array([[0.0, 0.0, -1.0, 4.0], [0.0, -1.0, 0.0, 1.0], [1.0, 0.0, 0.0, 1.5]])
 
+#: A room corner: floor 1 m below the camera and two walls meeting 3.75 m ahead.
+CORNER_PLANES = np.array([[0.0, -1.0, 0.0, 1.0], [0.6, 0.0, -0.8, 3.0],
+                          [-0.6, 0.0, -0.8, 3.0]])
 
-def box_frame(width: int = 128, height: int = 96, planes: np.ndarray = BOX_PLANES,
-              focal: float = 80.0) -> tuple[Frame, np.ndarray]:
-    """A depth-only frame of exact planes (the nearest plane along each ray), for tests.
+#: A closed box room seen from inside: floor, ceiling, back wall, left and right walls.
+ROOM = np.array([[0.0, -1.0, 0.0, 1.5], [0.0, 1.0, 0.0, 1.5], [0.0, 0.0, -1.0, 5.0],
+                 [1.0, 0.0, 0.0, 2.0], [-1.0, 0.0, 0.0, 2.5]])
+#: One flat RGB colour per :data:`ROOM` surface.
+ROOM_COLORS = np.array([[150, 100, 60], [230, 230, 230], [90, 140, 200], [200, 180, 120],
+                        [120, 200, 120]])
+
+
+@dataclasses.dataclass
+class PlaneScene:
+    """An exactly known view of planes.
+
+    Attributes
+    ----------
+    frame : Frame
+        Depth (0 where no plane is hit), normals (zero there) and, with colours, RGB.
+    labels : numpy.ndarray
+        (H, W) int32 true labels: ``i`` where plane row ``i - 1`` is the nearest hit, else 0.
+    planes : numpy.ndarray
+        (P, 4) the planes in the camera frame.
+    """
+
+    frame: Frame
+    labels: np.ndarray
+    planes: np.ndarray
+
+
+def plane_scene(planes: np.ndarray, K: np.ndarray, width: int, height: int, *,
+                R: np.ndarray | None = None, t: np.ndarray | None = None,
+                bounds: np.ndarray | None = None, colors: np.ndarray | None = None,
+                color_noise: float = 0.0, texture: bool = False, seed: int = 0,
+                name: str = "frame") -> PlaneScene:
+    """Ray-cast planes (optionally bounded rectangles) seen by a pinhole camera.
+
+    The one exact scene builder of the test suites: each pixel sees the nearest plane its ray
+    meets in front of the camera (within that plane's bounds, if any).
 
     Parameters
     ----------
+    planes : numpy.ndarray
+        (P, 4) ``(n, d)`` in the world frame, facing the camera.
+    K : numpy.ndarray
+        (3, 3) intrinsics.
     width, height : int
         Image size in pixels.
-    planes : numpy.ndarray
-        (P, 4) camera-frame planes facing the camera.
-    focal : float
-        Focal length in pixels (principal point at the image centre).
+    R, t : numpy.ndarray, optional
+        (3, 3) rotation and (3,) translation of the world-to-camera pose
+        ``x_cam = R x_world + t``; identity and zero by default.
+    bounds : numpy.ndarray, optional
+        (P, 2, 3) lower and upper world corners of each plane's rectangle; unbounded if omitted.
+    colors : numpy.ndarray, optional
+        (P, 3) RGB per plane; the frame has no RGB without it.
+    color_noise : float
+        Standard deviation of Gaussian noise added to the colours (seeded by ``seed``).
+    texture : bool
+        Modulate the colours by a blurred random texture fixed to each plane in the world (2 cm
+        texels, seeded by ``seed``), so that views from different poses share features.
+    name : str
+        Frame name.
+    """
+    from monoplane.types import Frame, pixel_rays, plane_to_camera, ray_plane_depth
+
+    planes = np.asarray(planes, dtype=np.float64)
+    R = np.eye(3) if R is None else np.asarray(R, dtype=np.float64)
+    t = np.zeros(3) if t is None else np.asarray(t, dtype=np.float64)
+    cam_planes = plane_to_camera(planes, R, t)
+    rays = pixel_rays(K, height, width)
+    z = ray_plane_depth(rays[..., None, :], cam_planes)  # (H, W, P)
+    if bounds is not None:
+        world = (rays[..., None, :] * z[..., None] - t) @ R
+        lo, hi = np.asarray(bounds)[:, 0] - 1e-9, np.asarray(bounds)[:, 1] + 1e-9
+        z[~np.all((world >= lo) & (world <= hi), axis=-1)] = 0.0
+    z[z <= 0] = np.inf
+    nearest = np.argmin(z, axis=-1)
+    depth = np.min(z, axis=-1)
+    hit = np.isfinite(depth)
+    labels = np.where(hit, nearest + 1, 0).astype(np.int32)
+    normals = np.where(hit[..., None], cam_planes[nearest, :3], 0.0)
+    rgb = None
+    if colors is not None:
+        rng = np.random.default_rng(seed)
+        base = np.where(hit[..., None], np.asarray(colors, np.float64)[nearest], 0.0)
+        if texture:
+            base *= _world_texture(planes, nearest, (rays * np.where(hit, depth, 0.0)[..., None]
+                                                     - t) @ R, rng)[..., None]
+        rgb = np.clip(base + rng.normal(0.0, color_noise, (height, width, 3)), 0, 255)
+        rgb = rgb.astype(np.uint8)
+    frame = Frame(rgb=rgb, K=K, depth=np.where(hit, depth, 0.0).astype(np.float32),
+                  normals=normals.astype(np.float32), name=name)
+    return PlaneScene(frame=frame, labels=labels, planes=cam_planes)
+
+
+def _world_texture(planes: np.ndarray, nearest: np.ndarray, world: np.ndarray,
+                   rng: np.random.Generator, texel: float = 0.02, size: int = 128) -> np.ndarray:
+    """(H, W) brightness factors in [0.4, 1.6] from a texture fixed on each world plane."""
+    import cv2
+
+    from monoplane.geometry.polygons import plane_basis
+
+    out = np.ones(nearest.shape)
+    for p, plane in enumerate(planes):
+        tex = cv2.GaussianBlur(rng.uniform(0.0, 1.0, (size, size)), (0, 0), 1.5)
+        tex = 0.4 + 1.2 * (tex - tex.min()) / max(float(np.ptp(tex)), 1e-12)
+        e1, e2 = plane_basis(plane[:3] / np.linalg.norm(plane[:3]))
+        mine = nearest == p
+        a = np.floor(world[mine] @ e1 / texel).astype(np.int64) % size
+        b = np.floor(world[mine] @ e2 / texel).astype(np.int64) % size
+        out[mine] = tex[b, a]
+    return out
+
+
+def box_frame(width: int = 128, height: int = 96, planes: np.ndarray = BOX_PLANES,
+              focal: float = 80.0) -> tuple[Frame, np.ndarray]:
+    """A depth-only frame of exact planes (:func:`plane_scene`), principal point centred.
 
     Returns
     -------
@@ -58,17 +168,107 @@ def box_frame(width: int = 128, height: int = 96, planes: np.ndarray = BOX_PLANE
     labels : numpy.ndarray
         (H, W) int32 true labels, ``i`` = row ``i - 1`` of ``planes``.
     """
-    from monoplane.types import Frame, intrinsics_matrix, pixel_rays
+    from monoplane.types import intrinsics_matrix
 
     K = intrinsics_matrix(focal, focal, (width - 1) / 2, (height - 1) / 2)
-    rays = pixel_rays(K, height, width)
-    with np.errstate(divide="ignore"):
-        z = np.stack([-p[3] / (rays @ p[:3]) for p in planes])
-    z[z <= 0] = np.inf
-    labels = np.argmin(z, axis=0) + 1
-    frame = Frame(rgb=None, K=K, depth=np.min(z, axis=0).astype(np.float32),
-                  normals=planes[labels - 1, :3].astype(np.float32))
-    return frame, labels.astype(np.int32)
+    scene = plane_scene(planes, K, width, height)
+    return scene.frame, scene.labels
+
+
+def room_cues(height: int = 192, width: int = 256, noise: float = 6.0, seed: int = 0
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Exact cues of the :data:`ROOM` (70° horizontal field of view), as arrays.
+
+    Returns
+    -------
+    rgb, depth, normals, labels, K
+        (H, W, 3) uint8 :data:`ROOM_COLORS` with Gaussian noise of std ``noise``; (H, W) float32
+        depth; (H, W, 3) float32 normals; (H, W) int32 labels in 1..5 (row ``i - 1`` of
+        :data:`ROOM`); (3, 3) intrinsics.
+    """
+    from monoplane.types import default_intrinsics
+
+    K = default_intrinsics(width, height, 70.0)
+    s = plane_scene(ROOM, K, width, height, colors=ROOM_COLORS, color_noise=noise, seed=seed)
+    return s.frame.rgb, s.frame.depth, s.frame.normals, s.labels, K  # type: ignore[return-value]
+
+
+@dataclasses.dataclass
+class PosedView:
+    """One view of :func:`two_view_room`: a cue-filled frame, its true pose and ground truth.
+
+    Attributes
+    ----------
+    frame : Frame
+        Textured RGB, exact depth and normals.
+    R, t : numpy.ndarray
+        World-to-camera pose ``x_cam = R x_world + t`` (OpenCV axes, metres).
+    gt_depth, gt_labels : numpy.ndarray
+        (H, W) exact depth and labels (row ``i - 1`` of ``planes``).
+    planes : numpy.ndarray
+        (P, 4) the room's planes in this camera's frame.
+    """
+
+    frame: Frame
+    R: np.ndarray
+    t: np.ndarray
+    gt_depth: np.ndarray
+    gt_labels: np.ndarray
+    planes: np.ndarray
+
+
+@dataclasses.dataclass
+class TwoViewRoom:
+    """Two posed views of the textured :data:`ROOM` (world frame = view 0's camera frame)."""
+
+    views: list[PosedView]
+
+    def reconstructions(self) -> list[Reconstruction]:
+        """Each view's exact planes and labels, as a refiner would hand them to a fuser."""
+        from monoplane.types import Reconstruction
+
+        return [Reconstruction(frame=v.frame, labels=v.gt_labels, params=v.planes)
+                for v in self.views]
+
+    def sfm(self, num_points: int = 300) -> SfmResult:
+        """An exact SfM result: true cameras, points on view 0 seen by view 1, their matches."""
+        from monoplane.evaluation.twoview import ground_truth_sfm
+
+        return ground_truth_sfm(self, num_points=num_points)  # type: ignore[arg-type]
+
+
+def two_view_room(width: int = 160, height: int = 120, seed: int = 0) -> TwoViewRoom:
+    """The :data:`ROOM` from two poses 0.4 m apart, turned 8° towards each other.
+
+    Colours are :data:`ROOM_COLORS` times a world-fixed texture, so a feature matcher finds
+    correspondences; everything else is exact.
+    """
+    from monoplane.types import default_intrinsics
+
+    K = default_intrinsics(width, height, 70.0)
+    yaw = np.deg2rad(-8.0)
+    R1 = np.array([[np.cos(yaw), 0.0, -np.sin(yaw)], [0.0, 1.0, 0.0],
+                   [np.sin(yaw), 0.0, np.cos(yaw)]])
+    poses = [(np.eye(3), np.zeros(3)), (R1, -R1 @ np.array([0.4, 0.0, 0.0]))]
+    views = []
+    for i, (R, t) in enumerate(poses):
+        s = plane_scene(ROOM, K, width, height, R=R, t=t, colors=ROOM_COLORS, color_noise=2.0,
+                        texture=True, seed=seed, name=f"view{i}")
+        # The texture must be the same in both views: it is drawn from ``seed`` alone.
+        views.append(PosedView(frame=s.frame, R=R, t=t, gt_depth=s.frame.depth,  # type: ignore[arg-type]
+                               gt_labels=s.labels, planes=s.planes))
+    return TwoViewRoom(views=views)
+
+
+def cloud_from_arrays(points: np.ndarray, normals: np.ndarray) -> PlaneCloud:
+    """A PlaneCloud over given (N, 3) points and normals, taken as already normalised."""
+    from monoplane.geometry.cloud import PlaneCloud
+
+    n = len(points)
+    pixels = np.arange(n, dtype=np.int64)
+    return PlaneCloud(points=points, normals=normals, colors=None, pixels=pixels,
+                      center=np.zeros(3), scale=1.0, shape=(1, n), all_points=points,
+                      all_pixels=pixels)
 
 
 @pytest.fixture
@@ -99,13 +299,19 @@ def _check_config(cls: type[Stage]) -> Any:
     return cls(cls.Config())
 
 
-def check_stage_contract(cls: type[Stage], frame: Frame | None = None, seed: int = 0) -> None:
+def check_stage_contract(cls: type[Stage], frame: Frame | None = None, seed: int = 0,
+                         run: bool | None = None) -> None:
     """Assert that a stage class honours its kind's contract.
 
     Static checks (all kinds): subclass of the right base, a name, a dataclass ``Config`` whose
-    every field has a doc, and instantiation with defaults. With ``frame`` (a frame that has
-    depth and normals), the stage is also run once and its output checked: shapes, dtypes and
-    value ranges stated in :mod:`monoplane.stages.base`.
+    every field has a doc, and instantiation with defaults. With ``run`` (default: whether a
+    ``frame`` is given) the stage is also run once and its output checked against the shapes,
+    dtypes and value ranges stated in :mod:`monoplane.stages.base`:
+
+    * cues, sampler, scorer, labeler, refiner: on ``frame`` (a frame with depth and normals);
+    * matcher: on the two textured views of :func:`two_view_room` (``frame`` is not used);
+    * fuser: on the exact planes of those two views with their exact SfM result, and every
+      link it makes must join planes that agree in the world frame.
     """
     from monoplane.geometry.cloud import PlaneCloud
     from monoplane.geometry.graph import NeighbourGraph
@@ -113,8 +319,13 @@ def check_stage_contract(cls: type[Stage], frame: Frame | None = None, seed: int
     from monoplane.types import Frame, Reconstruction
 
     stage = _check_config(cls)
-    if frame is None:
+    if not (frame is not None if run is None else run):
         return
+    if cls.kind in ("matcher", "fuser"):
+        _check_multiview_stage(stage, _two_view_room_cached())
+        return
+    if frame is None:
+        raise ValueError(f"check_stage_contract: running a {cls.kind} needs a frame")
     rng = np.random.default_rng(seed)
     params = RansacParams()
     if cls.kind == "cues":
@@ -154,3 +365,67 @@ def check_stage_contract(cls: type[Stage], frame: Frame | None = None, seed: int
             lab = stage.label(cloud, graph, pool, planes[0], normal, params)
             assert isinstance(lab, Labeling) and lab.inliers.shape == pool.shape
             assert lab.inliers.dtype == bool and np.isfinite(lab.energy)
+
+
+@functools.lru_cache(maxsize=1)
+def _two_view_room_cached() -> TwoViewRoom:
+    return two_view_room()
+
+
+def _check_multiview_stage(stage: Stage, room: TwoViewRoom) -> None:
+    from monoplane.types import Scene, SfmResult, plane_to_world
+
+    frames = [v.frame for v in room.views]
+    if stage.kind == "matcher":
+        sfm = stage.match(frames)  # type: ignore[attr-defined]
+        assert isinstance(sfm, SfmResult), f"{stage.name}.match must return an SfmResult"
+        assert len(sfm.cameras) == len(frames), "one camera per input frame, in input order"
+        for cam, f in zip(sfm.cameras, frames, strict=True):
+            assert (cam.width, cam.height) == (f.width, f.height), "camera size != frame size"
+            np.testing.assert_allclose(cam.R @ cam.R.T, np.eye(3), atol=1e-6)
+            assert np.isfinite(cam.t).all() and np.isfinite(cam.K).all()
+        for kp, f in zip(sfm.keypoints, frames, strict=True):
+            assert np.all((kp >= -0.5) & (kp <= [f.width - 0.5, f.height - 0.5])), \
+                "keypoints must be pixel coordinates inside their image"
+        for (i, j), m in sfm.matches.items():
+            assert 0 <= i < j < len(frames), f"match key {(i, j)} must have i < j"
+            assert m.ndim == 2 and m.shape[1] == 2 and m.dtype == np.int64
+            assert np.all((m >= 0) & (m < [len(sfm.keypoints[i]), len(sfm.keypoints[j])]))
+        return
+    views = room.reconstructions()
+    scene = stage.fuse(views, room.sfm())  # type: ignore[attr-defined]
+    assert isinstance(scene, Scene), f"{stage.name}.fuse must return a Scene"
+    assert len(scene.views) == len(views) and len(scene.cameras) == len(views)
+    assert np.isfinite(scene.planes).all()
+    np.testing.assert_allclose(np.linalg.norm(scene.planes[:, :3], axis=1), 1.0, atol=1e-6)
+    linked = 0
+    for v, table in enumerate(scene.links):
+        world = plane_to_world(views[v].params, room.views[v].R, room.views[v].t)
+        for local, glob in table.items():
+            cos = abs(float(world[local - 1, :3] @ scene.planes[glob, :3]))
+            assert cos > np.cos(np.deg2rad(10.0)), \
+                f"view {v} plane {local} is linked to a global plane {glob} it does not match"
+            linked += 1
+    assert linked >= len(views), "exact views of one room must link some planes"
+
+
+def check_baseline_contract(baseline: Callable[..., Reconstruction], seed: int = 0) -> None:
+    """Assert that a ``monoplane eval`` baseline honours the baseline contract.
+
+    A baseline is ``baseline(frame, *, seed=0) -> Reconstruction``. It is run on the exact
+    :func:`box_frame` (depth and normals, no RGB): the result must cover the frame, label with
+    ``0..P``, give ``P`` finite planes with unit normals, and find the back wall, which covers
+    most of the image.
+    """
+    from monoplane.types import Reconstruction
+
+    frame, _ = box_frame(64, 48)
+    rec = baseline(frame, seed=seed)
+    name = getattr(baseline, "__name__", repr(baseline))
+    assert isinstance(rec, Reconstruction), f"{name} must return a Reconstruction"
+    assert rec.labels.shape == frame.shape and rec.frame.shape == frame.shape
+    assert rec.labels.min() >= 0 and rec.labels.max() <= rec.num_planes
+    assert np.isfinite(rec.params).all()
+    np.testing.assert_allclose(np.linalg.norm(rec.params[:, :3], axis=1), 1.0, atol=1e-6)
+    assert rec.num_planes and np.abs(rec.params - BOX_PLANES[0]).max(axis=1).min() < 0.02, \
+        f"{name} misses the back wall of an exact box"

@@ -10,7 +10,9 @@ Conventions used everywhere in monoplane
 * Depth is z-depth (distance along the optical axis), not ray length. ``0`` marks an invalid
   pixel. Plane offsets are in the depth's units.
 
-This module imports nothing else of the project, so every other module can depend on it.
+This module imports nothing of the project but :mod:`monoplane.errors`, so every other module
+can depend on it. Writing outputs lives in :mod:`monoplane.io` (``monoplane.save_reconstruction``)
+and meshes in :mod:`monoplane.geometry.mesh` (``reconstruction_to_open3d``).
 """
 
 from __future__ import annotations
@@ -97,6 +99,31 @@ def pixel_rays(K: np.ndarray, height: int, width: int) -> np.ndarray:
     u, v = np.meshgrid(np.arange(width, dtype=np.float64), np.arange(height, dtype=np.float64))
     pix = np.stack([u, v, np.ones_like(u)], axis=-1)
     return pix @ np.linalg.inv(K).T
+
+
+def ray_plane_depth(rays: np.ndarray, planes: np.ndarray) -> np.ndarray:
+    """Where rays from the camera centre meet planes: the scale ``z = -d / (n·r)``.
+
+    Parameters
+    ----------
+    rays : numpy.ndarray
+        (..., 3) ray directions ``r`` (e.g. :func:`pixel_rays`, whose z component is 1, so the
+        result is a z-depth).
+    planes : numpy.ndarray
+        (4,) one plane ``(n, d)`` with ``n·X + d = 0`` for every ray, or (..., 4) one per ray,
+        in the rays' frame.
+
+    Returns
+    -------
+    numpy.ndarray
+        (...) float64 ``z`` such that ``z * r`` lies on the plane; 0 where the ray is parallel
+        to the plane or meets it behind the camera (the depth convention for "invalid").
+    """
+    rays = np.asarray(rays, dtype=np.float64)
+    planes = np.asarray(planes, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = -planes[..., 3] / np.einsum("...i,...i->...", rays, planes[..., :3])
+    return np.where(np.isfinite(z) & (z > 0), z, 0.0)
 
 
 @dataclass
@@ -369,32 +396,6 @@ class Reconstruction:
             out[:, c] = np.where(counts > 0, sums / np.maximum(counts, 1), 128).astype(np.uint8)
         return out
 
-    def save(self, out_dir: str, overwrite: bool = False, report: bool = False) -> None:
-        """Write the on-disk outputs atomically (see :func:`monoplane.io.save_reconstruction`)."""
-        # Imported here so that the data model itself depends on nothing else of the project.
-        from monoplane.io import save_reconstruction
-
-        save_reconstruction(self, out_dir, overwrite=overwrite, report=report)
-
-    def to_open3d(self, step: int = 2):  # -> open3d.geometry.TriangleMesh
-        """Planar mesh (camera frame, depth units) coloured by the image, as an Open3D mesh.
-
-        Parameters
-        ----------
-        step : int
-            Pixel stride of the triangulated grid.
-        """
-        import open3d as o3d
-
-        from monoplane.geometry.mesh import planar_mesh
-
-        vertices, triangles, colors, _ = planar_mesh(self, step=step)
-        mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(vertices),
-                                         o3d.utility.Vector3iVector(triangles))
-        mesh.vertex_colors = o3d.utility.Vector3dVector(colors)
-        mesh.compute_vertex_normals()
-        return mesh
-
     def planar_depth(self) -> np.ndarray:
         """Depth implied by each pixel's plane along that pixel's ray.
 
@@ -409,12 +410,7 @@ class Reconstruction:
         mask = self.labels > 0
         if not np.any(mask):
             return out
-        p = self.params[self.labels[mask] - 1]
-        denom = np.einsum("ij,ij->i", rays[mask], p[:, :3])
-        with np.errstate(divide="ignore", invalid="ignore"):
-            z = -p[:, 3] / denom
-        z = np.where(np.isfinite(z) & (z > 0), z, 0.0)
-        out[mask] = z
+        out[mask] = ray_plane_depth(rays[mask], self.params[self.labels[mask] - 1])
         return out
 
 

@@ -67,3 +67,9 @@ def test_config_file_with_preset_and_invalid_toml(tmp_path):
         config.load(config=bad)
     with pytest.raises(ConfigError, match="config file not found"):
         config.load(config=tmp_path / "missing.toml")
+
+
+@pytest.mark.parametrize("value", ["[1]", "3", "true", "{a = 1}"])
+def test_plugin_must_be_a_name(value):
+    with pytest.raises(ConfigError, match=r"\[sampler\] plugin must be a plugin name; valid"):
+        config.load(overrides=[f"sampler.plugin={value}"])

@@ -13,6 +13,7 @@ from monoplane.graphcut import (
     energy,
     gc_ransac_energy,
     minimize,
+    minimize_gc_ransac,
     msac_costs,
     normal_costs,
     proximity_weights,
@@ -137,3 +138,85 @@ def test_pairwise_scale_multiplies_only_the_pairwise_term():
 def test_degree_normalisation():
     assert degree_normalisation(10.0) == pytest.approx(0.1)
     assert degree_normalisation(0.0) == 1.0
+
+
+def random_gc_problem(seed):
+    """A random GC-RANSAC problem: MSAC costs, sparse normal costs, random proximity cuts."""
+    rng = np.random.default_rng(seed)
+    m = int(rng.integers(2, 400))
+    f0, f1 = msac_costs(rng.exponential(0.03, m), 0.02)
+    g1 = np.where(rng.random(m) < 0.5, normal_costs(rng.uniform(0, np.pi, m), 0.17), 0.0)
+    edges = rng.integers(0, m, size=(int(rng.integers(0, 6 * m)), 2))
+    edges = edges[edges[:, 0] != edges[:, 1]]
+    cut = 0.5 + 3.0 * rng.random(len(edges))
+    return f0, f1, g1, edges, cut, float(rng.uniform(0.3, 1.0)), float(rng.choice([1.0, 0.1]))
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_fast_gc_ransac_minimiser_equals_the_table_based_one(seed):
+    # Reference: the general (E, 2, 2)-table energy and its max-flow. Random real costs have no
+    # ties, so the labelling must be identical, and the energies equal up to summation order.
+    f0, f1, g1, edges, cut, lam, scale = random_gc_problem(seed)
+    ref = gc_ransac_energy(f0, f1, edges, cut, lam, g1, pairwise_scale=scale)
+    expected = ref.minimize()
+    labels, value = minimize_gc_ransac(f0, f1 + g1, edges, cut, lam, scale)
+    np.testing.assert_array_equal(labels, expected)
+    assert value == pytest.approx(ref.energy(expected), rel=1e-12, abs=1e-12)
+
+
+def test_fast_gc_ransac_minimiser_on_small_problems_is_the_brute_force_optimum():
+    for seed in range(30):
+        rng = np.random.default_rng(100 + seed)
+        f0, f1, g1, _, _, lam, scale = random_gc_problem(seed)
+        m = min(len(f0), 8)
+        f0, f1, g1 = f0[:m], f1[:m], g1[:m]
+        edges = np.array([(i, j) for i in range(m) for j in range(i + 1, m)
+                          if rng.random() < 0.5], dtype=np.int64).reshape(-1, 2)
+        cut = 0.5 + rng.random(len(edges))
+        ref = gc_ransac_energy(f0, f1, edges, cut, lam, g1, pairwise_scale=scale)
+        _, best = brute_force(ref)
+        labels, value = minimize_gc_ransac(f0, f1 + g1, edges, cut, lam, scale)
+        assert value == pytest.approx(best, abs=1e-12)
+        assert ref.energy(labels) == pytest.approx(best, abs=1e-12)
+
+
+def test_fast_gc_ransac_minimiser_rejects_bad_input():
+    f0, f1 = msac_costs(np.array([0.0, 0.0]), 0.02)
+    with pytest.raises(InvalidInput, match="not submodular"):
+        minimize_gc_ransac(f0, f1, np.array([[0, 1]]), 0.1, 0.9)
+    with pytest.raises(InvalidInput, match="lambda"):
+        minimize_gc_ransac(f0, f1, np.array([[0, 1]]), 1.0, 1.5)
+    labels, value = minimize_gc_ransac(np.zeros(0), np.zeros(0), np.zeros((0, 2)), 1.0, 0.9)
+    assert labels.shape == (0,) and value == 0.0
+
+
+def reference_proximity_weights(points, edges, normals, colors, ap2, ac2, an2, wp, wc, wn):
+    """Eqs. kp, kc, kn written out over all edges at once."""
+    i, j = edges[:, 0], edges[:, 1]
+    pos = -((points[i] - points[j]) ** 2).sum(axis=1) / (2.0 * ap2)
+    w = 0.5 + wp * np.exp(pos)
+    if colors is not None:
+        w += wc * np.exp(pos - ((colors[i] - colors[j]) ** 2).sum(axis=1) / (2.0 * ac2))
+    if normals is not None:
+        ang = np.arccos(np.clip((normals[i] * normals[j]).sum(axis=1), -1.0, 1.0))
+        w += wn * np.exp(pos - ang / (2.0 * an2))
+    return w
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_proximity_weight_kernel_matches_the_vectorised_formula(seed):
+    rng = np.random.default_rng(seed)
+    n = 200
+    pts = rng.normal(0, 0.05, (n, 3))
+    nrm = rng.normal(size=(n, 3))
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    nrm[:5] = nrm[5]  # dot products at exactly 1 (clipping)
+    col = rng.random((n, 3))
+    edges = rng.integers(0, n, size=(600, 2))
+    params = (0.005, 0.1, 5.0, *rng.uniform(0.5, 2.0, 3))
+    for normals in (nrm, None):
+        for colors in (col, None):
+            np.testing.assert_allclose(
+                proximity_weights(pts, edges, normals, colors, *params),
+                reference_proximity_weights(pts, edges, normals, colors, *params),
+                rtol=1e-12)

@@ -1,11 +1,12 @@
 import json
+import os
+import stat
 
 import cv2
 import numpy as np
 import pytest
 
 from monoplane.errors import InvalidInput
-from monoplane.geometry.polygons import plane_polygons
 from monoplane.io import (
     atomic_output_dir,
     load_frame,
@@ -13,8 +14,6 @@ from monoplane.io import (
     read_intrinsics,
     read_normals,
 )
-from monoplane.types import Frame, Reconstruction
-from tests.conftest import box_corner_depth
 
 
 def test_depth_png_uses_scale(tmp_path):
@@ -81,35 +80,20 @@ def test_atomic_dir_leaves_nothing_on_failure(tmp_path):
             pass
 
 
-def test_polygons_lie_on_their_planes():
-    K, depth, planes = box_corner_depth()
-    labels = np.zeros(depth.shape, np.int32)
-    labels[30:, :] = 1
-    f = Frame(rgb=None, K=K, depth=depth)
-    rec = Reconstruction(frame=f, labels=labels, params=np.array([planes[0]]))
-    polys = plane_polygons(rec)
-    assert len(polys) == 1
-    pid, verts = polys[0]
-    assert pid == 1 and len(verts) >= 4
-    assert np.allclose(verts @ planes[0][:3] + planes[0][3], 0, atol=1e-9)
+def test_atomic_dir_gets_umask_permissions(tmp_path):
+    old = os.umask(0o022)
+    try:
+        with atomic_output_dir(tmp_path / "out") as tmp:
+            (tmp / "labels.png").write_text("x")
+    finally:
+        os.umask(old)
+    assert stat.S_IMODE((tmp_path / "out").stat().st_mode) == 0o755
 
 
-def test_planes_ply_loads_in_open3d(tmp_path):
-    import open3d as o3d
-
-    from monoplane.io import write_reconstruction_files
-
-    K, depth, planes = box_corner_depth()
-    labels = np.zeros(depth.shape, np.int32)
-    labels[30:, :] = 1
-    labels[30:40, 20:40] = 0  # a notch makes the outline concave
-    labels[:20, :10] = 2
-    rec = Reconstruction(frame=Frame(rgb=None, K=K, depth=depth), labels=labels,
-                         params=np.array([planes[0], planes[1]]))
-    write_reconstruction_files(rec, tmp_path)
-    mesh = o3d.io.read_triangle_mesh(str(tmp_path / "planes.ply"))
-    assert len(mesh.triangles) >= 4
-    v = np.asarray(mesh.vertices)
-    on_floor = np.abs(v @ planes[0][:3] + planes[0][3]) < 1e-4
-    on_wall = np.abs(v @ planes[1][:3] + planes[1][3]) < 1e-4
-    assert np.all(on_floor | on_wall)
+def test_depth_outside_float32_range(tmp_path):
+    np.save(tmp_path / "big.npy", np.array([[1e300, 1.0]]))
+    with pytest.raises(InvalidInput, match=r"big.npy has values beyond 3.4e\+38"):
+        read_depth(tmp_path / "big.npy")
+    np.save(tmp_path / "tiny.npy", np.array([[1e-320, 0.0]]))
+    with pytest.raises(InvalidInput, match="no valid pixel"):
+        read_depth(tmp_path / "tiny.npy")

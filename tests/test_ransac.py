@@ -3,7 +3,9 @@
 import numpy as np
 import pytest
 
-from monoplane.errors import StageError
+from monoplane.errors import InvalidInput, StageError
+from monoplane.geometry.cloud import PlaneCloud
+from monoplane.geometry.graph import NeighbourGraph
 from monoplane.ransac import RansacConfig, SequentialRansac, required_iterations
 from monoplane.stages.labelers import GraphCutLabeler, ProximityGraphCutLabeler, ThresholdLabeler
 from monoplane.stages.samplers import NormalConsistentSampler, UniformSampler
@@ -182,3 +184,28 @@ def test_split_components_separates_two_coplanar_patches(split):
     assert rec.num_planes == (2 if split else 1)
     assert (left[0, 0] != right[0, 0]) == split
     np.testing.assert_allclose(rec.params[:, 3], 3.0, rtol=1e-6)
+
+
+def test_run_cloud_is_the_core_of_run():
+    # The cloud-level core needs no pixels: on the frame's own cloud and graph it gives the
+    # labels that run() carries to the pixels and planes that are the normalised-frame ones.
+    frame, labels, planes = room()
+    ransac = make("monoplane-nocrf")
+    cloud = PlaneCloud.from_frame(frame)
+    graph = NeighbourGraph.build(cloud.points, ransac.config.knn)
+    point_labels, found, timings = ransac.run_cloud(cloud, graph)
+    assert point_labels.dtype == np.int32 and point_labels.shape == (cloud.size,)
+    assert found.shape == (len(planes), 4)
+    assert set(timings) == {"ransac.search", "ransac.label"}
+    rec = ransac.run(frame)
+    np.testing.assert_array_equal(rec.labels.ravel()[cloud.pixels], point_labels)
+    cam = orient_towards_camera(cloud.plane_to_camera(found))
+    np.testing.assert_allclose(cam, rec.params, atol=1e-6)
+
+
+def test_run_cloud_rejects_a_graph_of_another_cloud():
+    frame, _, _ = room(h=24, w=32)
+    cloud = PlaneCloud.from_frame(frame)
+    graph = NeighbourGraph.build(cloud.points[:-1], 8)
+    with pytest.raises(InvalidInput, match="graph has"):
+        make("gc-ransac").run_cloud(cloud, graph)

@@ -115,7 +115,9 @@ def test_refit_recovers_exact_planes():
     wrong = np.array([[0.0, 0.0, -1.0, 1.0], [0.0, 0.0, -1.0, 1.0]])
     params, rmse, support = refit_planes(points, np.ones(frame.shape, bool), labels, wrong)
     np.testing.assert_allclose(params, planes, atol=1e-9)
-    np.testing.assert_allclose(rmse, 0.0, atol=1e-9)
+    # The RMSE is the root of the scatter's smallest eigenvalue: exact zero comes out as
+    # sqrt(round-off), about 1e-7 of the scene's extent.
+    np.testing.assert_allclose(rmse, 0.0, atol=1e-6)
     np.testing.assert_array_equal(support, [1200, 1200])
 
 

@@ -2,6 +2,7 @@ import numpy as np
 import pytest
 
 from monoplane.errors import InvalidInput
+from monoplane.testing import CORNER_PLANES, box_frame
 from monoplane.types import (
     Camera,
     Frame,
@@ -13,12 +14,12 @@ from monoplane.types import (
     plane_to_camera,
     plane_to_world,
 )
-from tests.conftest import box_corner_depth
 
 
 def frame(**kw):
-    K, depth, _ = box_corner_depth()
-    args = dict(rgb=np.zeros((*depth.shape, 3), np.uint8), K=K, depth=depth)
+    corner, _ = box_frame(64, 48, CORNER_PLANES, focal=50.0)
+    depth = corner.depth
+    args = dict(rgb=np.zeros((*depth.shape, 3), np.uint8), K=corner.K, depth=depth)
     args.update(kw)
     return Frame(**args)
 
@@ -71,11 +72,9 @@ def test_orientation_makes_offset_positive():
 
 
 def test_planar_depth_reproduces_exact_depth():
-    K, depth, planes = box_corner_depth()
-    rays = pixel_rays(K, *depth.shape)
-    labels = np.argmin([np.where(-p[3] / (rays @ p[:3]) > 0, -p[3] / (rays @ p[:3]), np.inf)
-                        for p in planes], axis=0) + 1
-    rec = Reconstruction(frame=frame(), labels=labels, params=np.array(planes))
+    corner, labels = box_frame(64, 48, CORNER_PLANES, focal=50.0)
+    depth = corner.depth
+    rec = Reconstruction(frame=frame(), labels=labels, params=CORNER_PLANES)
     assert np.allclose(rec.planar_depth(), depth, rtol=1e-5)
     assert rec.area_px.sum() == depth.size
     assert rec.support.tolist() == rec.area_px.tolist()
@@ -99,3 +98,25 @@ def test_plane_world_round_trip():
     assert np.isclose(plane_w[:3] @ x_w + plane_w[3], 0)
     assert np.allclose(plane_to_camera(plane_w, R, t)[0], plane_c)
     assert np.allclose(cam.center, R.T @ -t)
+
+
+def test_data_model_imports_nothing_of_the_project_but_errors() -> None:
+    import subprocess
+    import sys
+
+    code = ("import sys, monoplane.types; "
+            "print(sorted(m for m in sys.modules if m.startswith('monoplane'))); "
+            "print('cv2' in sys.modules, 'pluggy' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split("\n")[:2] == ["['monoplane', 'monoplane.errors', 'monoplane.types']",
+                                          "False False"]
+
+
+def test_package_names_load_on_first_use() -> None:
+    import monoplane
+    from monoplane.pipeline import Pipeline
+
+    assert monoplane.Pipeline is Pipeline and "Pipeline" in dir(monoplane)
+    assert set(monoplane.__all__) <= set(dir(monoplane))
+    with pytest.raises(AttributeError, match="no attribute 'nope'"):
+        _ = monoplane.nope

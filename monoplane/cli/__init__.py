@@ -18,13 +18,15 @@ from monoplane.errors import MonoplaneError
 
 #: Subcommand modules, in the order ``monoplane --help`` lists them.
 SUBCOMMANDS: tuple[str, ...] = (
-    "run", "batch", "multiview", "match", "eval", "bench", "plugins", "presets",
+    "run", "batch", "cloud", "multiview", "match", "eval", "bench", "plugins", "presets",
+    "models",
 )
 
 EXIT_USER_ERROR = 2
 EXIT_INTERNAL_ERROR = 70
 
 EPILOG = """examples:
+  monoplane run photo.jpg --cues depth-anything-v2-small --fetch --out out/photo
   monoplane run data_samples/room_000/rgb.png --depth data_samples/room_000/depth.npy \\
       --normals data_samples/room_000/normals.npy \\
       --intrinsics data_samples/room_000/intrinsics.json --out out/room_000 --report

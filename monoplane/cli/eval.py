@@ -23,11 +23,14 @@ EPILOG = """examples:
   monoplane eval --preset monoplane --set labeler.lambda=0.9 --level strong --json out.json
   monoplane eval --all --n 50 --report eval_report/
   monoplane eval --multiview --n 10
+  monoplane eval --data abw-dev/ --preset range --baseline cgal
+  monoplane eval --data abw-dev/ --as-cloud --preset cloud
   monoplane eval --multiview --views 5 --path walk --n 10
 
 Scene i uses seed SEED+i, so equal arguments give equal tables (timings aside). Baselines come
-from the built-in table (open3d-ransac) and the 'monoplane.baselines' entry-point group (e.g.
-the optional monoplane-cgal-baseline package adds 'cgal'). See docs/evaluation.md."""
+registered through the 'monoplane_register_baselines' plugin hook: open3d-ransac is built in,
+installed plugins add more (--all scores every one). 's/frame' is the whole call, 'core s' a
+baseline's own call without data conversion when it reports one. See docs/evaluation.md."""
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -55,6 +58,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     data.add_argument("--multiview", action="store_true",
                       help="two-view evaluation: relative pose error and plane AP; with "
                            "--views N > 2, N-view synthetic sequences")
+    data.add_argument("--data", metavar="DIR",
+                      help="score real frames instead: a folder of frame folders with "
+                           "gt_labels.png and depth (VOI, RI, SC and SegComp counts)")
+    data.add_argument("--as-cloud", action="store_true",
+                      help="with --data: run presets through detect_planes on the frames' "
+                           "shuffled 3D points")
+    data.add_argument("--tolerance", type=float, default=0.8,
+                      help="with --data: SegComp overlap tolerance T (default: 0.8)")
     data.add_argument("--views", type=int, default=2, metavar="N",
                       help="with --multiview: views per sequence (default: 2, the pair "
                            "protocol)")
@@ -135,8 +146,28 @@ def _write_report(results: Any, methods: list[Any], out_dir: str, progress: bool
     print(f"report written to {path}", file=sys.stderr)
 
 
+def _run_dataset(args: argparse.Namespace) -> int:
+    from monoplane.evaluation.dataset import evaluate_dataset, format_dataset_table
+
+    if args.multiview or args.all_methods or args.report:
+        raise InvalidInput("--data scores --preset/--baseline methods; drop --multiview, --all "
+                           "and --report")
+    results = evaluate_dataset(args.data, args.presets, args.baselines, args.overrides or None,
+                               as_cloud=args.as_cloud, tolerance=args.tolerance,
+                               seed=args.seed, progress=not args.no_progress)
+    print(format_dataset_table(results))
+    if args.json:
+        _write_json(args.json, results.to_dict())
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     from monoplane.evaluation.runner import evaluate, format_table, parse_size, resolve_methods
+
+    if args.data:
+        return _run_dataset(args)
+    if args.as_cloud:
+        raise InvalidInput("--as-cloud needs --data DIR")
 
     size = parse_size(args.size)
     if args.n < 1:

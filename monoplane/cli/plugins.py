@@ -33,7 +33,6 @@ def run(args: argparse.Namespace) -> int:
         print(f"(third-party autoload disabled by {AUTOLOAD_ENV})")
     for i in infos:
         print(f"{i.kind:8s} {i.name:22s} {i.provider} {i.version}")
-        for name, type_name, default, doc in i.cls.parameters():
-            key = name[:-1] if name.endswith("_") else name
+        for key, type_name, default, doc in i.cls.parameters():
             print(f"{'':9s}{key} ({type_name}, default {default!r}): {doc}")
     return 0

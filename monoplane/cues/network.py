@@ -8,7 +8,13 @@ from pathlib import Path
 
 import numpy as np
 
-from monoplane.cues.intrinsics import reassume_intrinsics
+from monoplane.cues.intrinsics import (
+    ASSUMED_INTRINSICS_NOTE,
+    assume_intrinsics,
+    intrinsics_assumed,
+    reassume_intrinsics,
+)
+from monoplane.cues.pointmap import depth_from_point_map, focal_from_intrinsics, focal_to_pixels
 from monoplane.cues.profiles import OnnxProfile
 from monoplane.cues.session import OnnxModel
 from monoplane.cues.transforms import (
@@ -95,8 +101,35 @@ class CueNetwork:
             self._depth_model()
         self._normal_model()
 
+    def _depth_from_raw(self, raw: np.ndarray, model: OnnxModel,
+                        K: np.ndarray, shape: tuple[int, int]) -> tuple[np.ndarray, str, str, str]:
+        kind = model.spec.output
+        src = f"{self.profile.name} network {model.path.name}"
+        if kind == "metric_depth":
+            depth = raw * np.float32(model.spec.depth_scale)
+            extra = ""
+            if model.spec.canonical_focal:
+                # Depth for a canonical camera: rescale by the focal length the network saw.
+                fx_net = float(K[0, 0]) * model.letterbox(*shape).scale[0]
+                depth = depth * np.float32(fx_net / model.spec.canonical_focal)
+                extra = (f", scaled by fx / {model.spec.canonical_focal:g} px at the network's "
+                         f"input resolution (fx there = {fx_net:.1f} px)")
+            depth = np.where(np.isfinite(depth) & (depth > 0), depth, 0).astype(np.float32)
+            if not np.any(depth > 0):
+                raise InvalidInput(f"{model.path}: the metric depth network returned no "
+                                   f"positive depth")
+            return depth, "metric", "m", f"depth: metric, from {src}{extra}"
+        if kind == "relative_depth":
+            depth = relative_depth_from_depth(raw)
+            return depth, "relative", "relative", (
+                f"depth: relative (median 1, shift assumed zero), from {src}")
+        depth = depth_from_disparity(raw, self.disparity_floor)
+        return depth, "relative", "relative", (
+            f"depth: relative, 1 / (disparity / median disparity) with shift assumed zero and "
+            f"disparities below {self.disparity_floor:g} x median invalid, from {src}")
+
     def predict_depth(self, rgb: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, str, str, str]:
-        """Depth of one image.
+        """Depth of one image (depth networks; point-map networks go through :meth:`provide`).
 
         Parameters
         ----------
@@ -117,37 +150,51 @@ class CueNetwork:
             Provenance for ``Frame.notes``.
         """
         model = self._depth_model()
-        raw = model.predict(rgb, K)
-        kind = model.spec.output
+        if model.spec.output == "point_map":
+            raise InvalidInput(f"profile {self.profile.name!r} predicts a point map; use "
+                               f"CueNetwork.provide")
+        return self._depth_from_raw(model.predict(rgb, K), model, K, rgb.shape[:2])
+
+    def _point_map_cues(self, frame: Frame, outputs: dict[str, np.ndarray],
+                        model: OnnxModel) -> tuple[Frame, np.ndarray, str]:
+        """Metric depth (and, for guessed intrinsics, the network's own) from a point map."""
+        spec = model.spec
+        h, w = frame.height, frame.width
+        mask = outputs.get(spec.mask_output) if spec.mask_output else None
+        scale = float(outputs[spec.scale_output][0]) if spec.scale_output else 1.0
+        if not np.isfinite(scale) or scale <= 0:
+            raise InvalidInput(f"{model.path}: the network returned metric scale {scale}")
         src = f"{self.profile.name} network {model.path.name}"
-        if kind == "metric_depth":
-            depth = raw * np.float32(model.spec.depth_scale)
-            depth = np.where(np.isfinite(depth) & (depth > 0), depth, 0).astype(np.float32)
-            if not np.any(depth > 0):
-                raise InvalidInput(f"{model.path}: the metric depth network returned no "
-                                   f"positive depth")
-            return depth, "metric", "m", f"depth: metric, from {src}"
-        if kind == "relative_depth":
-            depth = relative_depth_from_depth(raw)
-            return depth, "relative", "relative", (
-                f"depth: relative (median 1, shift assumed zero), from {src}")
-        depth = depth_from_disparity(raw, self.disparity_floor)
-        return depth, "relative", "relative", (
-            f"depth: relative, 1 / (disparity / median disparity) with shift assumed zero and "
-            f"disparities below {self.disparity_floor:g} x median invalid, from {src}")
+        known = None if intrinsics_assumed(frame) else focal_from_intrinsics(frame.K, h, w)
+        depth, focal = depth_from_point_map(outputs[model.output_name], mask, scale, known)
+        if known is None:
+            fx = focal_to_pixels(focal, h, w)
+            hfov = float(np.degrees(2 * np.arctan(0.5 * w / fx)))
+            K, _ = assume_intrinsics(w, h, hfov)
+            note = (f"{ASSUMED_INTRINSICS_NOTE}: estimated from the {src} point map: a "
+                    f"{hfov:.1f}° horizontal field of view, fx = fy = {fx:.1f} px, principal "
+                    f"point at the image centre")
+            notes = [n for n in frame.notes if not n.startswith(ASSUMED_INTRINSICS_NOTE)]
+            frame = frame.with_(K=K, notes=[*notes, note])
+        how = "focal length and shift recovered" if known is None else (
+            "shift recovered for the given focal length")
+        return frame, depth, (f"depth: metric, from the {src} point map ({how}, metric scale "
+                              f"{scale:.3g})")
 
     def provide(self, frame: Frame) -> Frame:
         """Fill the frame's missing cues: depth from the depth network, normals from the
-        normals network or, without one, estimated from depth.
+        depth network (joint networks), a normals network or, without either, from depth.
 
         Cues already on the frame (given by the user) are kept. When the frame's intrinsics
-        were assumed and the profile knows its field of view, the guess is replaced.
+        were assumed, a profile's field of view, or a point-map network's own estimate,
+        replaces the guess.
 
         Returns
         -------
         Frame
             A new frame with ``depth``, ``normals``, ``depth_kind``, ``depth_units`` and
-            ``notes`` set. Normals are zero wherever depth is invalid.
+            ``notes`` set (and ``K`` when the network estimated it). Normals are zero wherever
+            depth is invalid.
         """
         rgb = frame.rgb
         if rgb is None and frame.depth is None:
@@ -158,22 +205,44 @@ class CueNetwork:
         elif self.profile.hfov_deg is not None:
             frame = reassume_intrinsics(frame, self.profile.hfov_deg,
                                         f"profile {self.profile.name}")
-        notes = list(frame.notes)
+        spec = self.profile.depth
+        joint = spec.joint_normals and rgb is not None and frame.normals is None
+        outputs: dict[str, np.ndarray] = {}
+        model = None
+        if frame.depth is None or joint:
+            model = self._depth_model()
+            outputs = model.run(rgb, frame.K)  # type: ignore[arg-type]
         changes: dict = {}
         depth = frame.depth
+        notes_before: list[str] = []
         if depth is None:
-            depth, kind, units, note = self.predict_depth(rgb, frame.K)  # type: ignore[arg-type]
+            assert model is not None
+            if spec.output == "point_map":
+                frame, depth, note = self._point_map_cues(frame, outputs, model)
+                kind, units = "metric", "m"
+            else:
+                depth, kind, units, note = self._depth_from_raw(
+                    outputs[model.output_name], model, frame.K, (frame.height, frame.width))
             changes.update(depth=depth, depth_kind=kind, depth_units=units)
-            notes.append(note)
+            notes_before.append(note)
+        notes = [*frame.notes, *notes_before]
         if frame.normals is None:
-            # Depth-only input (range images) has no image for a normals network.
-            model = self._normal_model() if rgb is not None else None
-            if model is not None:
-                normals = decode_normals(model.predict(rgb, frame.K), model.spec, frame.K)
+            if joint:
+                assert model is not None and spec.normals_output is not None
+                normals = decode_normals(outputs[spec.normals_output], spec, frame.K)
                 notes.append(f"normals: from {self.profile.name} network {model.path.name}")
             else:
-                normals = normals_from_depth(depth, frame.K, **self.normals_options)
-                notes.append("normals: estimated from depth (edge-aware inverse-depth fits)")
+                # Depth-only input (range images) has no image for a normals network.
+                normal_model = self._normal_model() if rgb is not None else None
+                if normal_model is not None:
+                    assert rgb is not None
+                    normals = decode_normals(normal_model.predict(rgb, frame.K),
+                                             normal_model.spec, frame.K)
+                    notes.append(f"normals: from {self.profile.name} network "
+                                 f"{normal_model.path.name}")
+                else:
+                    normals = normals_from_depth(depth, frame.K, **self.normals_options)
+                    notes.append("normals: estimated from depth (edge-aware inverse-depth fits)")
             changes["normals"] = np.where((depth > 0)[..., None], normals, 0).astype(np.float32)
         else:
             changes["normals"] = orient_normals(frame.normals, frame.K)

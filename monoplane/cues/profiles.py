@@ -13,15 +13,19 @@ from typing import Any, Literal
 
 from monoplane.errors import ConfigError
 
-OutputKind = Literal["metric_depth", "relative_depth", "inverse_depth", "normals"]
+OutputKind = Literal["metric_depth", "relative_depth", "inverse_depth", "point_map", "normals"]
 #: What a network's output means.
 #:
 #: * ``metric_depth``: z-depth in metres (times ``ModelSpec.depth_scale``).
 #: * ``relative_depth``: z-depth up to an unknown scale (affine-invariant networks are treated
 #:   as shift-free).
 #: * ``inverse_depth``: relative disparity ``∝ 1/z`` (MiDaS, Depth Anything).
+#: * ``point_map``: an affine-invariant camera-frame point map (N, H, W, 3) whose z is known up
+#:   to a shift, with the principal point at the image centre (MoGe); focal length and shift are
+#:   recovered by :mod:`monoplane.cues.pointmap`, the metric scale read from ``scale_output``.
 #: * ``normals``: a 3-channel normal map, see ``normal_encoding`` and ``normal_axes``.
-OUTPUT_KINDS: tuple[str, ...] = ("metric_depth", "relative_depth", "inverse_depth", "normals")
+OUTPUT_KINDS: tuple[str, ...] = ("metric_depth", "relative_depth", "inverse_depth", "point_map",
+                                 "normals")
 RESIZE_POLICIES: tuple[str, ...] = ("keep_aspect", "stretch")
 NORMAL_ENCODINGS: tuple[str, ...] = ("signed", "unsigned")
 
@@ -90,6 +94,18 @@ class ModelSpec:
         the intrinsics are rescaled to the network's input resolution.
     output_name : str or None
         Output to read; ``None`` reads the first.
+    normals_output : str or None
+        A normals output of this same network (joint depth-and-normals networks such as
+        Metric3D v2 and MoGe-2), decoded with ``normal_encoding`` and ``normal_axes``; one
+        inference gives both cues.
+    canonical_focal : float or None
+        Metric networks trained on a canonical camera (Metric3D): the output is depth for a
+        focal length of ``canonical_focal`` pixels and is multiplied by ``fx / canonical_focal``,
+        ``fx`` being the focal length at the network's input resolution.
+    mask_output, scale_output : str or None
+        ``point_map`` networks: a (N, H, W) validity probability and a (N,) metric scale.
+    constant_inputs : tuple of (str, int)
+        Extra scalar int64 inputs fed with a fixed value (MoGe's ``num_tokens``).
     """
 
     output: str
@@ -104,6 +120,11 @@ class ModelSpec:
     image_input: str | None = None
     intrinsics_input: str | None = None
     output_name: str | None = None
+    normals_output: str | None = None
+    canonical_focal: float | None = None
+    mask_output: str | None = None
+    scale_output: str | None = None
+    constant_inputs: tuple[tuple[str, int], ...] = ()
 
     def __post_init__(self) -> None:
         if self.output not in OUTPUT_KINDS:
@@ -123,7 +144,18 @@ class ModelSpec:
             raise ConfigError(f"mean and std need 3 values, std > 0; got {self.mean}, {self.std}")
         if self.depth_scale <= 0:
             raise ConfigError(f"depth_scale must be positive, got {self.depth_scale}")
+        if self.canonical_focal is not None and (self.canonical_focal <= 0
+                                                 or self.output != "metric_depth"):
+            raise ConfigError("canonical_focal needs a metric_depth output and a positive value, "
+                              f"got {self.canonical_focal} for {self.output}")
+        if (self.mask_output or self.scale_output) and self.output != "point_map":
+            raise ConfigError("mask_output and scale_output belong to point_map networks")
         parse_axes(self.normal_axes)
+
+    @property
+    def joint_normals(self) -> bool:
+        """True when this network also predicts normals (one inference, both cues)."""
+        return self.normals_output is not None
 
     @property
     def is_depth(self) -> bool:
@@ -135,10 +167,21 @@ class ModelSpec:
         inputs = f"image input (1, 3, H, W) float32 named {self.image_input or '<any>'}"
         if self.intrinsics_input:
             inputs += f" and intrinsics input (1, 3, 3) float32 named {self.intrinsics_input}"
-        if self.is_depth:
+        for name, _ in self.constant_inputs:
+            inputs += f" and int64 scalar input {name}"
+        if self.output == "point_map":
+            out = f"a point map output (1, H, W, 3) named {self.output_name or '<first>'}"
+            extra = [n for n in (self.mask_output, self.scale_output) if n]
+            if extra:
+                out += f" and outputs {', '.join(extra)}"
+        elif self.is_depth:
             out = f"one {self.output.replace('_', ' ')} output (1, 1, H, W) or (1, H, W)"
+            if self.output_name:
+                out += f" named {self.output_name}"
         else:
             out = "one normals output (1, 3, H, W) or (1, H, W, 3)"
+        if self.normals_output:
+            out += f" and a normals output (1, 3, H, W) or (1, H, W, 3) named {self.normals_output}"
         return f"{inputs}; {out}"
 
 
@@ -173,6 +216,14 @@ class OnnxProfile:
             raise ConfigError(f"profile {self.name!r}: the depth model must output depth")
         if self.normals is not None and self.normals.is_depth:
             raise ConfigError(f"profile {self.name!r}: the normals model must output normals")
+        if self.normals is not None and self.depth.joint_normals:
+            raise ConfigError(f"profile {self.name!r}: normals come from the depth network "
+                              f"({self.depth.normals_output}) or from a second network, not both")
+
+    @property
+    def task(self) -> str:
+        """``"both"`` when the networks predict normals too, else ``"depth"``."""
+        return "both" if self.normals is not None or self.depth.joint_normals else "depth"
 
     def with_overrides(self, *, size: tuple[int, int] | None = None,
                        mean: tuple[float, float, float] | None = None,
@@ -182,6 +233,8 @@ class OnnxProfile:
         changes: dict[str, Any] = {
             k: v for k, v in (("size", size), ("mean", mean), ("std", std)) if v}
         depth = replace(self.depth, **changes)
+        if normal_axes and depth.joint_normals:
+            depth = replace(depth, normal_axes=normal_axes)
         normals = self.normals
         if normals is not None:
             normals = replace(normals, **changes)
@@ -216,8 +269,53 @@ MIDAS = OnnxProfile(
     summary="MiDaS v3 DPT: relative inverse depth; normals from depth",
 )
 
+# The three profiles below describe published ONNX exports that ``monoplane models fetch`` can
+# download (see monoplane.models.catalogue and docs/cues.md, "From a photo").
+
+DEPTH_ANYTHING_V2 = OnnxProfile(
+    name="depth-anything-v2",
+    # Transformers-style export: input pixel_values (ImageNet-normalised RGB, sides multiples of
+    # 14 for the DINOv2 ViT-14 backbone, 518 in training), output predicted_depth (N, H, W),
+    # affine-invariant inverse depth.
+    depth=ModelSpec(output="inverse_depth", size=(518, 518), multiple_of=14,
+                    mean=IMAGENET_MEAN, std=IMAGENET_STD, image_input="pixel_values",
+                    output_name="predicted_depth"),
+    summary="Depth Anything V2 (Transformers ONNX export): relative inverse depth; normals "
+            "from depth",
+)
+
+METRIC3D_V2 = OnnxProfile(
+    name="metric3d-v2",
+    # onnx-community export: input pixel_values holds raw 0-255 RGB (the ImageNet normalisation
+    # is inside the graph; its preprocessor_config.json turns rescaling and normalisation off),
+    # outputs predicted_depth (depth for a canonical 1000 px focal length) and predicted_normal
+    # (unit normals, OpenCV camera axes). 616x1064 is the upstream canonical input size.
+    depth=ModelSpec(output="metric_depth", size=(616, 1064), multiple_of=14,
+                    mean=(0.0, 0.0, 0.0), std=(1 / 255, 1 / 255, 1 / 255),
+                    image_input="pixel_values", output_name="predicted_depth",
+                    normals_output="predicted_normal", canonical_focal=1000.0),
+    summary="Metric3D v2 (ViT): metric depth (scaled by the focal length) and surface normals "
+            "from one network",
+)
+
+MOGE_2 = OnnxProfile(
+    name="moge-2",
+    # MoGe-2 export (its docs/onnx.md): inputs image (RGB in [0, 1], normalised inside) and
+    # num_tokens (int64 scalar, 1200-3600; more is finer and slower); outputs points (affine
+    # point map, OpenCV axes), normal, mask (probability) and metric_scale. The network resizes
+    # internally, so the image is fed unpadded (multiple_of 1): its point map assumes the
+    # principal point at the centre of what it sees.
+    depth=ModelSpec(output="point_map", size=(768, 768), multiple_of=1, mean=(0.0, 0.0, 0.0),
+                    std=(1.0, 1.0, 1.0), image_input="image", output_name="points",
+                    normals_output="normal", mask_output="mask", scale_output="metric_scale",
+                    constant_inputs=(("num_tokens", 1800),)),
+    summary="MoGe-2 with normals: metric point map, normals and the field of view from one "
+            "network",
+)
+
 #: Profiles shipped with monoplane, by name.
-BUILTIN_PROFILES: dict[str, OnnxProfile] = {p.name: p for p in (OMNIDATA, ZERODEPTH, MIDAS)}
+BUILTIN_PROFILES: dict[str, OnnxProfile] = {
+    p.name: p for p in (OMNIDATA, ZERODEPTH, MIDAS, DEPTH_ANYTHING_V2, METRIC3D_V2, MOGE_2)}
 
 
 def get_profile(name: str) -> OnnxProfile:

@@ -93,7 +93,13 @@ class OnnxModel:
                 raise self._mismatch(f"no input named {spec.intrinsics_input!r}")
             if len(intr.shape) != 3 or any(_static(d) not in (None, 3) for d in intr.shape[1:]):
                 raise self._mismatch(f"input {intr.name!r} is not (N, 3, 3)")
-        others = [n for n in inputs if n != spec.intrinsics_input]
+        constants = {name for name, _ in spec.constant_inputs}
+        for name in constants:
+            if name not in inputs:
+                raise self._mismatch(f"no input named {name!r}")
+            if "int" not in inputs[name].type or len(inputs[name].shape) > 1:
+                raise self._mismatch(f"input {name!r} is not an integer scalar")
+        others = [n for n in inputs if n != spec.intrinsics_input and n not in constants]
         if spec.image_input is not None:
             if spec.image_input not in inputs:
                 raise self._mismatch(f"no input named {spec.image_input!r}")
@@ -119,14 +125,28 @@ class OnnxModel:
             raise self._mismatch(f"no output named {name!r}")
         self.output_name = name
         shape = outputs[name].shape
-        if spec.is_depth:
-            ok = 2 <= len(shape) <= 4 and (len(shape) < 4 or _static(shape[1]) in (None, 1))
+        if spec.output == "point_map" or not spec.is_depth:
+            ok = _three_channels(shape)
         else:
-            # Channels first or last: (N, 3, H, W), (N, H, W, 3), (3, H, W) or (H, W, 3).
-            ends = (shape[-3], shape[-1]) if len(shape) in (3, 4) else ()
-            ok = any(_static(d) in (None, 3) for d in ends)
+            ok = 2 <= len(shape) <= 4 and (len(shape) < 4 or _static(shape[1]) in (None, 1))
         if not ok:
             raise self._mismatch(f"output {name!r} has shape {_shape_text(shape)}")
+        # Further outputs of joint networks: name -> channels of the restored map (0: scalar).
+        self.extra_outputs: dict[str, int] = {}
+        for out_name, channels in ((spec.normals_output, 3), (spec.mask_output, 1),
+                                   (spec.scale_output, 0)):
+            if out_name is None:
+                continue
+            if out_name not in outputs:
+                raise self._mismatch(f"no output named {out_name!r}")
+            if channels == 3 and not _three_channels(outputs[out_name].shape):
+                raise self._mismatch(f"output {out_name!r} has shape "
+                                     f"{_shape_text(outputs[out_name].shape)}")
+            self.extra_outputs[out_name] = channels
+
+    def letterbox(self, height: int, width: int) -> Letterbox:
+        """Where an image of this size sits inside the network input."""
+        return plan_letterbox(height, width, self.spec, self.fixed_size)
 
     def predict(self, rgb: np.ndarray, K: np.ndarray) -> np.ndarray:
         """Run the network on one image and bring the output back to the image's size.
@@ -144,17 +164,67 @@ class OnnxModel:
             (H, W) float32 raw depth-like values, or (H, W, 3) float32 raw normal channels,
             not yet decoded (see :mod:`monoplane.cues.transforms`).
         """
-        box: Letterbox = plan_letterbox(rgb.shape[0], rgb.shape[1], self.spec, self.fixed_size)
+        return self.run(rgb, K)[self.output_name]
+
+    def run(self, rgb: np.ndarray, K: np.ndarray) -> dict[str, np.ndarray]:
+        """Run the network once and return every output the spec names.
+
+        Parameters
+        ----------
+        rgb : numpy.ndarray
+            (H, W, 3) uint8 RGB image.
+        K : numpy.ndarray
+            (3, 3) intrinsics of the image.
+
+        Returns
+        -------
+        dict
+            Output name to array: maps come back at the image's size, (H, W) or (H, W, 3)
+            float32 raw values; scalar outputs (``scale_output``) as a float32 array of shape
+            (1,).
+        """
+        box = self.letterbox(rgb.shape[0], rgb.shape[1])
         feeds = {self.image_input: prepare_image(rgb, self.spec, box)}
         if self.spec.intrinsics_input is not None:
             feeds[self.spec.intrinsics_input] = scaled_intrinsics(K, box)
+        for name, value in self.spec.constant_inputs:
+            feeds[name] = np.array(value, dtype=np.int64)
+        wanted = {self.output_name: 1 if self.spec.output not in ("normals", "point_map") else 3,
+                  **self.extra_outputs}
+        names = list(wanted)
         try:
-            out = self.session.run([self.output_name], feeds)[0]
+            raw = self.session.run(names, feeds)
         except Exception as exc:  # shape errors inside the graph surface here
             first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
             raise InvalidInput(f"{self.path}: {self.label} failed on a "
                                f"{box.padded[1]}x{box.padded[0]} input ({first})") from None
-        try:
-            return restore_map(out, box, 1 if self.spec.is_depth else 3)
-        except InvalidInput as exc:
-            raise self._mismatch(str(exc)) from None
+        result: dict[str, np.ndarray] = {}
+        for name, out in zip(names, raw, strict=True):
+            try:
+                if wanted[name] == 0:
+                    result[name] = np.asarray(out, dtype=np.float32).reshape(-1)[:1]
+                else:
+                    result[name] = restore_map(_first_three(out, wanted[name]), box,
+                                               wanted[name])
+            except InvalidInput as exc:
+                raise self._mismatch(f"output {name!r}: {exc}") from None
+        return result
+
+
+def _three_channels(shape: list) -> bool:
+    """Whether a declared output shape can hold a 3-vector map, channels first or last.
+
+    Channels-first maps may carry a fourth channel (Metric3D appends a confidence to its
+    normals); :func:`_first_three` drops it.
+    """
+    if len(shape) not in (3, 4):
+        return False
+    return _static(shape[-1]) in (None, 3) or _static(shape[-3]) in (None, 3, 4)
+
+
+def _first_three(out: np.ndarray, channels: int) -> np.ndarray:
+    """The first three channels of a channels-first (N, 4, H, W) map; other arrays unchanged."""
+    a = np.asarray(out)
+    if channels == 3 and a.ndim == 4 and a.shape[1] == 4 and a.shape[-1] != 3:
+        return a[:, :3]
+    return a

@@ -18,7 +18,8 @@ import numpy as np
 def _save(nodes: list, inputs: list, output, initializers: list, path: str | Path) -> Path:
     from onnx import helper, save_model
 
-    graph = helper.make_graph(nodes, "monoplane_tiny", inputs, [output], initializer=initializers)
+    outputs = output if isinstance(output, list) else [output]
+    graph = helper.make_graph(nodes, "monoplane_tiny", inputs, outputs, initializer=initializers)
     model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)],
                               producer_name="monoplane-tests")
     model.ir_version = 8
@@ -112,3 +113,92 @@ def tiny_normals_model(path: str | Path, value: tuple[float, float, float], *,
     output = helper.make_tensor_value_info(output_name, TensorProto.FLOAT,
                                            ["batch", 3, "h_out", "w_out"])
     return _save(nodes, [_image_input(image_input, size)], output, inits, path)
+
+
+def tiny_joint_model(path: str | Path, normal_value: tuple[float, float, float], *,
+                     image_input: str = "pixel_values", depth_output: str = "predicted_depth",
+                     normals_output: str = "predicted_normal", scale: float = 1.0,
+                     offset: float = 0.0, reciprocal: bool = False) -> Path:
+    """Save a joint depth-and-normals network (Metric3D v2 signature).
+
+    Outputs ``depth_output`` (N, H, W) = ``scale * mean_c(x) + offset``, or its reciprocal, and
+    ``normals_output`` (N, 3, H, W) = ``normal_value`` at every pixel.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        Where to write the ``.onnx`` file.
+    normal_value : tuple of float
+        The raw normal output (network encoding and axes).
+    reciprocal : bool
+        Output ``1 / (scale * mean + offset)``: a depth whose inverse is affine in the input, so
+        an input whose value is affine in pixel coordinates gives an exact plane.
+    """
+    from onnx import TensorProto, helper, numpy_helper
+
+    inits = [numpy_helper.from_array(np.array(scale, np.float32), "scale"),
+             numpy_helper.from_array(np.array(offset, np.float32), "offset"),
+             numpy_helper.from_array(np.array([1], np.int64), "axis1"),
+             numpy_helper.from_array(np.zeros((), np.float32), "zero"),
+             numpy_helper.from_array(np.asarray(normal_value, np.float32).reshape(1, 3, 1, 1),
+                                     "value")]
+    nodes = [helper.make_node("ReduceMean", [image_input], ["mean"], axes=[1], keepdims=1),
+             helper.make_node("Mul", ["mean", "scale"], ["scaled"]),
+             helper.make_node("Add", ["scaled", "offset"], ["affine"])]
+    last = "affine"
+    if reciprocal:
+        nodes.append(helper.make_node("Reciprocal", ["affine"], ["inverse"]))
+        last = "inverse"
+    nodes += [helper.make_node("Squeeze", [last, "axis1"], [depth_output]),
+              helper.make_node("Mul", [image_input, "zero"], ["zeros"]),
+              helper.make_node("Add", ["zeros", "value"], [normals_output])]
+    outputs = [helper.make_tensor_value_info(depth_output, TensorProto.FLOAT,
+                                             ["batch", "h_out", "w_out"]),
+               helper.make_tensor_value_info(normals_output, TensorProto.FLOAT,
+                                             ["batch", 3, "h_out", "w_out"])]
+    return _save(nodes, [_image_input(image_input, None)], outputs, inits, path)
+
+
+def tiny_point_map_model(path: str | Path, low: tuple[float, float, float],
+                         high: tuple[float, float, float],
+                         normal_value: tuple[float, float, float], *,
+                         metric_scale: float = 1.0, mask_value: float = 0.9) -> Path:
+    """Save a point-map network with MoGe-2's ONNX signature.
+
+    Inputs ``image`` (N, 3, H, W) in [0, 1] and ``num_tokens`` (int64 scalar); outputs
+    ``points`` (N, H, W, 3) = ``low + image * (high - low)`` per channel (so a test encodes a
+    known point map in an RGB image), ``normal`` (N, H, W, 3) = ``normal_value``, ``mask``
+    (N, H, W) = ``mask_value`` and ``metric_scale`` (N,) = ``metric_scale``.
+    """
+    from onnx import TensorProto, helper, numpy_helper
+
+    lo = np.asarray(low, np.float32).reshape(1, 3, 1, 1)
+    span = (np.asarray(high, np.float32) - np.asarray(low, np.float32)).reshape(1, 3, 1, 1)
+    inits = [numpy_helper.from_array(lo, "low"), numpy_helper.from_array(span, "span"),
+             numpy_helper.from_array(np.zeros((), np.float32), "zero"),
+             numpy_helper.from_array(np.asarray(normal_value, np.float32), "normal_value"),
+             numpy_helper.from_array(np.array(mask_value, np.float32), "mask_value"),
+             numpy_helper.from_array(np.array(metric_scale, np.float32), "scale_value")]
+    nodes = [helper.make_node("Mul", ["image", "span"], ["spanned"]),
+             helper.make_node("Add", ["spanned", "low"], ["points_nchw"]),
+             helper.make_node("Transpose", ["points_nchw"], ["points"], perm=[0, 2, 3, 1]),
+             helper.make_node("Mul", ["points", "zero"], ["zeros_nhwc"]),
+             helper.make_node("Add", ["zeros_nhwc", "normal_value"], ["normal"]),
+             helper.make_node("ReduceMean", ["zeros_nhwc"], ["zeros_nhw"], axes=[3],
+                              keepdims=0),
+             helper.make_node("Add", ["zeros_nhw", "mask_value"], ["mask"]),
+             # num_tokens only steers the real network's resolution; use it so it stays an input
+             helper.make_node("Cast", ["num_tokens"], ["tokens_f"], to=TensorProto.FLOAT),
+             helper.make_node("Mul", ["tokens_f", "zero"], ["tokens_zero"]),
+             helper.make_node("ReduceMean", ["zeros_nhw"], ["zeros_n"], axes=[1, 2],
+                              keepdims=0),
+             helper.make_node("Add", ["zeros_n", "tokens_zero"], ["zeros_n_t"]),
+             helper.make_node("Add", ["zeros_n_t", "scale_value"], ["metric_scale"])]
+    inputs = [_image_input("image", None),
+              helper.make_tensor_value_info("num_tokens", TensorProto.INT64, [])]
+    outputs = [
+        helper.make_tensor_value_info("points", TensorProto.FLOAT, ["batch", "h", "w", 3]),
+        helper.make_tensor_value_info("normal", TensorProto.FLOAT, ["batch", "h", "w", 3]),
+        helper.make_tensor_value_info("mask", TensorProto.FLOAT, ["batch", "h", "w"]),
+        helper.make_tensor_value_info("metric_scale", TensorProto.FLOAT, ["batch"])]
+    return _save(nodes, inputs, outputs, inits, path)

@@ -13,7 +13,6 @@ import numpy as np
 
 from monoplane.cues.profiles import ModelSpec, parse_axes
 from monoplane.errors import InvalidInput
-from monoplane.types import pixel_rays
 
 
 @dataclass(frozen=True)
@@ -239,6 +238,13 @@ def orient_normals(normals: np.ndarray, K: np.ndarray) -> np.ndarray:
     numpy.ndarray
         (H, W, 3) float32 with ``n · K^-1 [u, v, 1] <= 0`` at every pixel.
     """
-    rays = pixel_rays(K, normals.shape[0], normals.shape[1]).astype(np.float32)
-    away = np.sum(normals * rays, axis=-1, keepdims=True) > 0
-    return np.where(away, -normals, normals).astype(np.float32)
+    normals = np.asarray(normals, dtype=np.float32)
+    h, w = normals.shape[:2]
+    # n · K^-1 [u, v, 1] per axis on broadcast rows and columns: no (H, W, 3) ray image.
+    k_inv = np.linalg.inv(K).astype(np.float32)
+    u = np.arange(w, dtype=np.float32)
+    v = np.arange(h, dtype=np.float32)[:, None]
+    dot = normals[..., 0] * (k_inv[0, 0] * u + k_inv[0, 1] * v + k_inv[0, 2])
+    dot += normals[..., 1] * (k_inv[1, 0] * u + k_inv[1, 1] * v + k_inv[1, 2])
+    dot += normals[..., 2] * (k_inv[2, 0] * u + k_inv[2, 1] * v + k_inv[2, 2])
+    return np.where((dot > 0)[..., None], -normals, normals)

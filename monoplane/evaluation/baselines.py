@@ -1,19 +1,18 @@
-"""External plane-detection baselines for ``monoplane eval`` and how they are found.
+"""External plane-detection baselines for ``monoplane eval`` and ``monoplane bench``.
 
 A *baseline* is a callable ``baseline(frame, *, seed=0) -> Reconstruction``: it receives the
 same cue-filled :class:`~monoplane.types.Frame` (depth, normals, intrinsics; OpenCV camera axes)
-the pipeline presets get and returns planes in the frame's camera frame and depth units.
+the pipeline presets get and returns planes in the frame's camera frame and depth units. It may
+record in ``Reconstruction.timings["baseline.call"]`` the seconds of the method's own call
+alone, without converting data in and out; ``eval`` and ``bench`` compare against that.
 
-Baselines are discovered the way stage plugins are, but through their own entry-point group
-:data:`ENTRY_POINT_GROUP` (``monoplane.baselines``), where the entry-point name is the method
-name users pass to ``--baseline``::
+Baselines register through the pluggy hook ``monoplane_register_baselines`` (see
+:mod:`monoplane.hookspecs`), like every other extension point: a plugin returns a dict from
+method name (what users pass to ``--baseline``) to callable. This module is itself the
+plugin of the built-in one. Use :func:`run_baseline` to run one by name::
 
-    [project.entry-points."monoplane.baselines"]
-    cgal = "monoplane_cgal_baseline:cgal_efficient_ransac"
-
-Built-in baselines sit in the host-side table :data:`BUILTIN_BASELINES` in the same
-``"module:attribute"`` form, so both kinds load through one path. Entry points are not read
-when ``MONOPLANE_DISABLE_PLUGIN_AUTOLOAD`` is set.
+    from monoplane.evaluation.baselines import run_baseline
+    rec = run_baseline("open3d-ransac", frame, seed=0)
 
 Built-in baseline
 -----------------
@@ -24,36 +23,36 @@ for both. Each round takes the best plane of the remaining points and removes it
 until the best plane has fewer inliers than the pipeline's minimum plane size (0.6 % of the
 valid pixels, the paper's 300 px at 256×192) or 20 planes were found (the pipeline's limit).
 Each round runs at most 1000 iterations (the pipeline's limit too) with Open3D's own early
-termination at its default confidence; every valid pixel is used (no subsampling). Normals
-are not used (``segment_plane`` has no normal test) and there is no spatial coherence: that is
-what the baseline stands for, plain sequential RANSAC from a widely used library.
+termination at its default confidence; every valid pixel is used (no subsampling). These
+shared values are read from :class:`~monoplane.ransac.RansacConfig`'s defaults. Normals are not
+used (``segment_plane`` has no normal test) and there is no spatial coherence: that is what the
+baseline stands for, plain sequential RANSAC from a widely used library.
 """
 
 from __future__ import annotations
 
-import importlib
+import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
-from importlib import metadata
 
 import numpy as np
+import pluggy
 
 from monoplane.errors import ConfigError, PluginError
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.planes import fit_plane
-from monoplane.plugin_manager import autoload_enabled
+from monoplane.hookspecs import hookimpl
+from monoplane.ransac import RansacConfig
 from monoplane.types import Frame, Reconstruction
-
-#: Entry-point group third-party baselines register in.
-ENTRY_POINT_GROUP = "monoplane.baselines"
-
-#: Baselines shipped with monoplane, as ``"module:attribute"`` references.
-BUILTIN_BASELINES: dict[str, str] = {
-    "open3d-ransac": "monoplane.evaluation.baselines:open3d_ransac",
-}
 
 #: Type of a baseline: a frame with cues in, planes out.
 Baseline = Callable[..., Reconstruction]
+
+#: Timing key a baseline records for its core call alone (data conversion excluded).
+CALL_TIMING = "baseline.call"
+
+_RANSAC = RansacConfig()
+
 
 @dataclass(frozen=True)
 class Open3DRansacConfig:
@@ -76,12 +75,12 @@ class Open3DRansacConfig:
         ... and never accept a plane with fewer inliers than this.
     """
 
-    epsilon: float = 0.02
-    num_iterations: int = 1000
+    epsilon: float = _RANSAC.epsilon
+    num_iterations: int = _RANSAC.max_iterations
     probability: float = 0.99999999
-    max_planes: int = 20
-    min_support: float = 0.006
-    min_support_points: int = 30
+    max_planes: int = _RANSAC.max_planes
+    min_support: float = _RANSAC.min_support
+    min_support_points: int = _RANSAC.min_support_points
 
 
 def open3d_ransac(frame: Frame, *, seed: int = 0,
@@ -117,11 +116,14 @@ def open3d_ransac(frame: Frame, *, seed: int = 0,
     planes: list[np.ndarray] = []
     rmses: list[float] = []
     supports: list[int] = []
+    call = 0.0
     while len(planes) < cfg.max_planes and remaining.size >= min_support:
         pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(cloud.all_points[remaining]))
+        start = time.perf_counter()
         _, inliers = pcd.segment_plane(distance_threshold=cfg.epsilon, ransac_n=3,
                                        num_iterations=cfg.num_iterations,
                                        probability=cfg.probability)
+        call += time.perf_counter() - start
         if len(inliers) < min_support:
             break
         chosen = remaining[np.asarray(inliers, dtype=np.int64)]
@@ -137,47 +139,83 @@ def open3d_ransac(frame: Frame, *, seed: int = 0,
                           params=np.asarray(planes, dtype=np.float64).reshape(-1, 4),
                           rmse=np.asarray(rmses, dtype=np.float64),
                           support=np.asarray(supports, dtype=np.int64),
-                          config={"baseline": "open3d-ransac", **asdict(cfg)})
+                          config={"baseline": "open3d-ransac", **asdict(cfg)},
+                          timings={CALL_TIMING: call})
 
 
-def _load_reference(name: str, ref: str) -> Baseline:
-    module, _, attr = ref.partition(":")
-    try:
-        obj = importlib.import_module(module)
-        for part in attr.split("."):
-            obj = getattr(obj, part)
-    except (ImportError, AttributeError) as exc:
-        raise PluginError(f"baseline '{name}' ({ref}) cannot be loaded: {exc}") from exc
-    if not callable(obj):
-        raise PluginError(f"baseline '{name}' ({ref}) is not callable")
-    return obj
+@hookimpl
+def monoplane_register_baselines() -> dict[str, Baseline]:
+    """Register the built-in baseline."""
+    return {"open3d-ransac": open3d_ransac}
 
 
-def _entry_points() -> dict[str, metadata.EntryPoint]:
-    if not autoload_enabled():
-        return {}
-    return {ep.name: ep for ep in metadata.entry_points(group=ENTRY_POINT_GROUP)}
+def registered_baselines(pm: pluggy.PluginManager | None = None) -> dict[str, Baseline]:
+    """Every baseline the plugin manager knows, by name.
+
+    Parameters
+    ----------
+    pm : pluggy.PluginManager, optional
+        Defaults to :func:`monoplane.plugin_manager.get_plugin_manager` (built-ins, plus
+        installed plugins unless autoloading is disabled).
+
+    Raises
+    ------
+    PluginError
+        When a plugin returns something else than a name -> callable dict, or two plugins
+        register the same name.
+    """
+    from monoplane.plugin_manager import get_plugin_manager
+
+    pm = pm or get_plugin_manager()
+    found: dict[str, Baseline] = {}
+    for impl in pm.hook.monoplane_register_baselines.get_hookimpls():
+        table = impl.function() or {}
+        if not isinstance(table, dict):
+            raise PluginError(f"plugin '{impl.plugin_name}': monoplane_register_baselines must "
+                              f"return a dict of name -> callable, got {type(table).__name__}")
+        for name, fn in table.items():
+            if not callable(fn):
+                raise PluginError(f"plugin '{impl.plugin_name}': baseline '{name}' is not "
+                                  "callable")
+            if name in found:
+                raise PluginError(f"plugin '{impl.plugin_name}' registers baseline '{name}', "
+                                  "which another plugin registered already")
+            found[name] = fn
+    return found
 
 
-def baseline_names() -> list[str]:
-    """Names of every available baseline: built-ins, then installed plugins, sorted."""
-    return sorted(set(BUILTIN_BASELINES) | set(_entry_points()))
+def baseline_names(pm: pluggy.PluginManager | None = None) -> list[str]:
+    """Names of every available baseline, sorted."""
+    return sorted(registered_baselines(pm))
 
 
-def get_baseline(name: str) -> Baseline:
-    """Load a baseline by name.
+def get_baseline(name: str, pm: pluggy.PluginManager | None = None) -> Baseline:
+    """The baseline registered as ``name``.
 
     Raises
     ------
     ConfigError
         When no baseline has that name (the message lists the valid ones).
-    PluginError
-        When a registered baseline fails to import.
     """
-    if name in BUILTIN_BASELINES:
-        return _load_reference(name, BUILTIN_BASELINES[name])
-    eps = _entry_points()
-    if name not in eps:
+    table = registered_baselines(pm)
+    if name not in table:
         raise ConfigError(f"unknown baseline '{name}'; valid choices: "
-                          f"{', '.join(baseline_names())}")
-    return _load_reference(name, eps[name].value)
+                          f"{', '.join(sorted(table)) or '(none)'}")
+    return table[name]
+
+
+def run_baseline(name: str, frame: Frame, seed: int = 0,
+                 pm: pluggy.PluginManager | None = None) -> Reconstruction:
+    """Run the baseline ``name`` on a cue-filled frame.
+
+    Returns
+    -------
+    Reconstruction
+        The baseline's planes; ``timings["total"]`` holds the wall time of the whole call and
+        ``timings["baseline.call"]`` (when the baseline reports it) its core call alone.
+    """
+    fn = get_baseline(name, pm)
+    start = time.perf_counter()
+    rec = fn(frame, seed=seed)
+    rec.timings.setdefault("total", time.perf_counter() - start)
+    return rec

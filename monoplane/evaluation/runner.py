@@ -8,9 +8,13 @@ The protocol of ``monoplane eval``:
 2. Segmentation (VOI, RI, SC) is averaged over frames; plane recall is pooled over frames
    (``Σ recalled / Σ ground-truth planes``); see :mod:`~monoplane.evaluation.segmentation` and
    :mod:`~monoplane.evaluation.recall`.
-3. Time per frame is the wall time of the method's call on a frame that already carries its
-   cues (for presets: the whole :meth:`Pipeline.run`, whose ``given`` cue step is a
-   pass-through; for baselines: the baseline call).
+3. Time per frame (``s/frame``) is the wall time of the method's call on a frame that already
+   carries its cues (for presets: the whole :meth:`Pipeline.run`, whose ``given`` cue step is
+   a pass-through; for baselines: the whole baseline call, data conversion included). The
+   *core* time (``core s``) is what compares methods' algorithms: for presets the same
+   pipeline time, for a baseline the time of its own call alone when it reports one
+   (``timings["baseline.call"]``, e.g. a library's detection call without converting the
+   cloud into its data structure), else its whole call.
 4. A method that raises a :class:`~monoplane.errors.MonoplaneError` on a frame is scored as if
    it had found no plane there (all pixels non-planar), and counted in ``n_failed``.
 """
@@ -26,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from monoplane.errors import InvalidInput, MonoplaneError
-from monoplane.evaluation.baselines import baseline_names, get_baseline
+from monoplane.evaluation.baselines import CALL_TIMING, baseline_names, get_baseline
 from monoplane.evaluation.recall import DEPTH_THRESHOLDS, plane_recall
 from monoplane.evaluation.segmentation import segmentation_scores
 from monoplane.types import Frame, Reconstruction
@@ -35,8 +39,6 @@ from monoplane.types import Frame, Reconstruction
 PAPER_PRESETS: tuple[str, ...] = (
     "seq-ransac", "seq-ransac+crf", "gc-ransac", "gc-ransac+crf", "monoplane-nocrf", "monoplane",
 )
-#: Baselines ``--all`` adds when they are available.
-ALL_BASELINES: tuple[str, ...] = ("open3d-ransac", "cgal")
 #: Corruption levels of :func:`monoplane.synth.generate`.
 LEVELS: tuple[str, ...] = ("clean", "mild", "strong")
 
@@ -90,8 +92,8 @@ def resolve_methods(presets: Sequence[str] = (), baselines: Sequence[str] = (),
     baselines : sequence of str
         Baseline names, in order.
     all_methods : bool
-        Prepend the paper's six ablation presets and append every available baseline of
-        :data:`ALL_BASELINES`.
+        Prepend the paper's six ablation presets and append every registered baseline
+        (:func:`~monoplane.evaluation.baselines.baseline_names`).
     overrides : list of str, optional
         ``table.key=value`` overrides applied to every preset.
 
@@ -104,8 +106,7 @@ def resolve_methods(presets: Sequence[str] = (), baselines: Sequence[str] = (),
     preset_names += [p for p in presets if p not in preset_names]
     baseline_list = list(baselines)
     if all_methods:
-        available = set(baseline_names())
-        baseline_list += [b for b in ALL_BASELINES if b in available and b not in baseline_list]
+        baseline_list += [b for b in baseline_names() if b not in baseline_list]
     if not preset_names and not baseline_list:
         raise InvalidInput("nothing to evaluate: give --preset, --baseline or --all")
     methods = [preset_method(p, overrides) for p in preset_names]
@@ -125,6 +126,7 @@ class FrameResult:
     n_gt: int
     n_planes: int
     seconds: float
+    core_seconds: float = float("nan")
     failed: bool = False
     error: str = ""
 
@@ -182,6 +184,11 @@ class MethodResult:
         return self._mean("seconds")
 
     @property
+    def core_seconds_per_frame(self) -> float:
+        """Mean core time per frame, seconds (see the module docstring)."""
+        return self._mean("core_seconds")
+
+    @property
     def planes_per_frame(self) -> float:
         """Mean number of predicted planes."""
         return self._mean("n_planes")
@@ -197,6 +204,7 @@ class MethodResult:
             "name": self.name, "kind": self.kind, "voi": self.voi, "ri": self.ri, "sc": self.sc,
             "recall": {f"{t:g}": r for t, r in zip(self.thresholds, self.recall, strict=True)},
             "seconds_per_frame": self.seconds_per_frame,
+            "core_seconds_per_frame": self.core_seconds_per_frame,
             "planes_per_frame": self.planes_per_frame,
             "n_frames": len(self.frames), "n_failed": self.n_failed,
         }
@@ -330,10 +338,12 @@ def evaluate(methods: Sequence[Method], n: int = 50, level: str = "mild", seed: 
                                   stacklevel=2)
                     rec = _empty_reconstruction(view.frame)
                 seconds = time.perf_counter() - start
+                core = rec.timings.get(CALL_TIMING, seconds) if not failed else seconds
                 voi, ri, sc, recalled, n_gt = score_reconstruction(rec, gt_labels, gt_depth, thr)
                 result.frames.append(FrameResult(
                     scene_seed=scene_seed, voi=voi, ri=ri, sc=sc, recalled=recalled, n_gt=n_gt,
-                    n_planes=rec.num_planes, seconds=seconds, failed=failed, error=error))
+                    n_planes=rec.num_planes, seconds=seconds, core_seconds=core, failed=failed,
+                    error=error))
                 bar.update(1)
     finally:
         bar.close()
@@ -346,17 +356,18 @@ def format_table(results: EvalResults) -> str:
     """The paper's table columns as aligned plain text.
 
     Columns: method, VOI↓, RI↑, SC↑, recall at each threshold, mean planes and seconds per
-    frame; a failure count is appended to the name when a method failed on some frames.
+    frame (whole call) and core seconds per frame (see the module docstring); a failure count
+    is appended to the name when a method failed on some frames.
     """
     thr = results.settings.get("thresholds", list(DEPTH_THRESHOLDS))
     header = ["method", "VOI↓", "RI↑", "SC↑", *[f"R@{t:g}m↑" for t in thr], "planes",
-              "s/frame"]
+              "s/frame", "core s"]
     rows = []
     for m in results.methods:
         name = m.name if not m.n_failed else f"{m.name} ({m.n_failed} failed)"
         rows.append([name, f"{m.voi:.3f}", f"{m.ri:.3f}", f"{m.sc:.3f}",
                      *[f"{r:.3f}" for r in m.recall], f"{m.planes_per_frame:.1f}",
-                     f"{m.seconds_per_frame:.3f}"])
+                     f"{m.seconds_per_frame:.3f}", f"{m.core_seconds_per_frame:.3f}"])
     widths = [max(len(r[c]) for r in [header, *rows]) for c in range(len(header))]
 
     def line(cells: list[str]) -> str:

@@ -53,7 +53,8 @@ class SegmentationScores:
         return asdict(self)
 
 
-def _check_pair(pred: np.ndarray, gt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def check_label_pair(pred: np.ndarray, gt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Both label maps as arrays; InvalidInput unless same shape, integer and >= 0."""
     pred = np.asarray(pred)
     gt = np.asarray(gt)
     if pred.shape != gt.shape:
@@ -84,7 +85,7 @@ def contingency(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
         columns when it is non-empty). Empty rows and columns are dropped; shape ``(0, 0)``
         when the ground truth has no planar pixel.
     """
-    pred, gt = _check_pair(pred, gt)
+    pred, gt = check_label_pair(pred, gt)
     scored = gt > 0
     g = gt[scored].astype(np.int64)
     p = pred[scored].astype(np.int64)

@@ -15,9 +15,12 @@ At high resolution RANSAC runs on a random subset of at most ``max_points`` vali
 from the caller's generator, so it is deterministic for a seed). :meth:`PlaneCloud.propagate`
 then carries the labels of the subset to every valid pixel. A pixel first takes the label of
 its nearest sampled pixel in the image (a distance transform). Where that is doubtful (the
-sample is farther in 3D than a radius tied to the sampling density, or the pixel is not close
-to the sample's plane) it is decided in 3D instead: non-planar if its nearest 3D sample is
-non-planar or out of the radius, else the closest plane among its few nearest samples' planes.
+pixel is not close to the sample's plane) it is decided in 3D instead: non-planar if its
+nearest 3D sample is non-planar, else the closest plane among its few nearest samples'
+planes. The 3D candidates are the sample and its neighbours in the kNN graph (the pixel is
+next to the sample, so its nearest samples are the sample's); only pixels farther in 3D from
+their image-nearest sample than a radius tied to the sampling density (across a depth jump)
+query the KD-tree, and are non-planar when no sample lies within the radius.
 Neighbour transfer keeps region extents where the graph cut put them (a plain per-plane
 distance test would re-open holes that the proximity terms had closed), choosing by plane
 distance keeps creases sharp, and the 3D radius stops labels leaking across depth jumps.
@@ -30,9 +33,11 @@ from functools import cached_property
 
 import numpy as np
 from scipy.ndimage import distance_transform_edt
-from scipy.spatial import cKDTree
 
 from monoplane.errors import InvalidInput
+from monoplane.geometry.graph import NeighbourGraph
+from monoplane.geometry.neighbours import PointIndex
+from monoplane.jit import kernel
 from monoplane.types import Frame
 
 #: A non-sampled pixel inherits its nearest sample's label only within this many times the
@@ -40,6 +45,8 @@ from monoplane.types import Frame
 PROPAGATION_RADIUS_FACTOR = 4.0
 #: Nearest samples whose planes compete for a non-sampled pixel (see :meth:`propagate`).
 PROPAGATION_NEIGHBOURS = 4
+#: Neighbours per sample of the graph :meth:`PlaneCloud.propagate` builds when given none.
+PROPAGATION_GRAPH_K = 8
 
 
 @dataclass
@@ -98,9 +105,9 @@ class PlaneCloud:
         return int(self.points.shape[0])
 
     @cached_property
-    def tree(self) -> cKDTree:
-        """KD-tree over ``points`` (built on first use)."""
-        return cKDTree(self.points)
+    def tree(self) -> PointIndex:
+        """Nearest-neighbour index over ``points`` (built on first use)."""
+        return PointIndex(self.points)
 
     @property
     def subsampled(self) -> bool:
@@ -141,12 +148,11 @@ class PlaneCloud:
         all_pixels = np.flatnonzero(valid).astype(np.int64)
         if all_pixels.size < 3:
             raise InvalidInput(f"{frame.name}: fewer than 3 valid pixels")
-        cam = frame.points().reshape(-1, 3)[all_pixels]
-        center = cam.mean(axis=0)
-        scale = float(np.sqrt(((cam - center) ** 2).sum(axis=1).max()))
+        all_points, center, scale = _normalised_points(
+            np.ascontiguousarray(frame.depth, dtype=np.float32),
+            np.linalg.inv(np.asarray(frame.K, dtype=np.float64)), all_pixels)
         if scale <= 0:
             raise InvalidInput(f"{frame.name}: all valid pixels unproject to the same point")
-        all_points = (cam - center) / scale
 
         keep = all_pixels
         points = all_points
@@ -208,7 +214,8 @@ class PlaneCloud:
         return out
 
     def propagate(self, labels: np.ndarray, planes: np.ndarray | None = None,
-                  spacing: float | None = None, tolerance: float = 0.0) -> np.ndarray:
+                  spacing: float | None = None, tolerance: float = 0.0,
+                  graph: NeighbourGraph | None = None) -> np.ndarray:
         """Carry per-point labels of the (possibly subsampled) cloud to the full image.
 
         Parameters
@@ -222,10 +229,14 @@ class PlaneCloud:
             :data:`PROPAGATION_NEIGHBOURS` nearest samples, the plane it is closest to; this
             keeps creases between planes sharp instead of following the sampling pattern.
         spacing : float, optional
-            Median distance from a point to its nearest other point, if known already.
+            Median distance from a point to its nearest other point, if known already
+            (default: ``graph.spacing``).
         tolerance : float
             Distance to its nearest sample's plane (normalised units) below which a pixel
             keeps that label without comparing planes.
+        graph : NeighbourGraph, optional
+            The kNN graph over ``points`` (built here with :data:`PROPAGATION_GRAPH_K`
+            neighbours when omitted and needed).
 
         Returns
         -------
@@ -233,48 +244,150 @@ class PlaneCloud:
             (H, W) int32 label image; invalid pixels are 0. See the module docstring for the
             nearest-sample rule used on pixels that were not sampled.
         """
-        labels = np.asarray(labels)
+        labels = np.ascontiguousarray(labels, dtype=np.int32)
         h, w = self.shape
         out = np.zeros(h * w, dtype=np.int32)
         if not self.subsampled:
             out[self.pixels] = labels
             return out.reshape(h, w)
-        if spacing is None:
-            nn, _ = self.tree.query(self.points, k=2)
-            spacing = float(np.median(nn[:, 1]))
-        radius = PROPAGATION_RADIUS_FACTOR * spacing
+        if graph is None:
+            graph = NeighbourGraph.build(self.points, PROPAGATION_GRAPH_K, tree=self.tree)
+        radius = PROPAGATION_RADIUS_FACTOR * (graph.spacing if spacing is None else spacing)
         # Nearest sample in the image first (a distance transform, far cheaper than a 3D query
-        # for every pixel); pixels where that choice is doubtful are resolved in 3D below.
-        sampled = np.zeros(h * w, dtype=bool)
-        sampled[self.pixels] = True
-        _, (rows, cols) = distance_transform_edt(~sampled.reshape(h, w), return_indices=True)
+        # for every pixel); pixels where that choice is doubtful are resolved in 3D.
+        sampled = np.ones(h * w, dtype=bool)
+        sampled[self.pixels] = False
+        _, (rows, cols) = distance_transform_edt(sampled.reshape(h, w), return_indices=True)
         sample_of = np.full(h * w, -1, dtype=np.int64)
         sample_of[self.pixels] = np.arange(self.size)
-        near = sample_of[(rows * w + cols).ravel()[self.all_pixels]]
-        full = labels[near].astype(np.int32)
-        gap = ((self.all_points - self.points[near]) ** 2).sum(axis=1) > radius**2
-        unsure = gap
-        p = None
-        if planes is not None and len(planes):
-            p = np.asarray(planes, dtype=np.float64)
-            lab = np.maximum(full - 1, 0)
-            resid = np.abs(np.einsum("vc,vc->v", p[lab, :3], self.all_points) + p[lab, 3])
-            unsure = gap | ((full > 0) & (resid > tolerance))
-        unsure = np.flatnonzero(unsure)
-        k = 1 if p is None else min(PROPAGATION_NEIGHBOURS, self.size)
-        d_k, n_k = self.tree.query(self.all_points[unsure], k=k, distance_upper_bound=radius)
-        d_k, n_k = d_k.reshape(unsure.size, k), n_k.reshape(unsure.size, k)
-        cand = np.where(np.isfinite(d_k), labels[np.minimum(n_k, self.size - 1)], 0)
-        pick = cand[:, 0]
-        if p is not None:
-            lab = np.maximum(cand - 1, 0)
-            res_k = np.abs(np.einsum("vkc,vc->vk", p[lab, :3], self.all_points[unsure])
-                           + p[lab, 3])
-            res_k[cand == 0] = np.inf
-            best = cand[np.arange(unsure.size), np.argmin(res_k, axis=1)]
-            pick = np.where(pick > 0, best, 0)
-        full[unsure] = pick
+        near = sample_of[(rows.ravel() * w + cols.ravel())[self.all_pixels]]
+        p = np.zeros((0, 4)) if planes is None else np.asarray(planes, dtype=np.float64)
+        k = min(PROPAGATION_NEIGHBOURS, self.size) if len(p) else 1
+        full, gap = _propagate(self.all_points, near, self.points, labels, p, graph.indptr,
+                               graph.indices, radius**2, float(tolerance), k)
+        # Pixels farther than the radius from their image-nearest sample lie across a depth
+        # jump from it: their nearest samples in 3D come from the KD-tree.
+        gap = np.flatnonzero(gap)
+        if gap.size:
+            d_k, n_k = self.tree.query(self.all_points[gap], k=k, distance_upper_bound=radius)
+            full[gap] = _closest_plane(self.all_points[gap], d_k.reshape(gap.size, k),
+                                       n_k.reshape(gap.size, k), labels, p)
         out[self.all_pixels] = full
         # Sampled pixels keep their own label even if a closer duplicate point exists.
         out[self.pixels] = labels
         return out.reshape(h, w)
+
+
+@kernel
+def _normalised_points(depth: np.ndarray, k_inv: np.ndarray, pixels: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray, float]:
+    """Unproject pixels and normalise them into the unit ball, in three passes.
+
+    ``depth`` (H, W) float32 z-depth, ``k_inv`` (3, 3) inverse intrinsics, ``pixels`` (V,)
+    int64 flat indices. Returns the (V, 3) normalised points ``(X - center) / scale``, the
+    (3,) centroid ``center`` of the camera-frame points ``X = z K^-1 [u, v, 1]`` and
+    ``scale``, the largest distance of a point from it.
+    """
+    w = depth.shape[1]
+    n = pixels.shape[0]
+    out = np.empty((n, 3))
+    center = np.zeros(3)
+    for i in range(n):
+        v, u = divmod(pixels[i], w)
+        z = np.float64(depth[v, u])
+        for c in range(3):
+            x = z * (k_inv[c, 0] * u + k_inv[c, 1] * v + k_inv[c, 2])
+            out[i, c] = x
+            center[c] += x
+    center /= max(n, 1)
+    far = 0.0
+    for i in range(n):
+        d2 = 0.0
+        for c in range(3):
+            out[i, c] -= center[c]
+            d2 += out[i, c] ** 2
+        far = max(far, d2)
+    scale = np.sqrt(far)
+    if scale > 0:
+        out /= scale
+    return out, center, scale
+
+
+def _closest_plane(x: np.ndarray, d_k: np.ndarray, n_k: np.ndarray, labels: np.ndarray,
+                   planes: np.ndarray) -> np.ndarray:
+    """Labels of pixels from their k nearest samples (KD-tree query with an upper bound).
+
+    ``x`` (U, 3) pixel points, ``d_k``/``n_k`` (U, k) distances (inf beyond the bound) and
+    sample indices, ``labels`` (N,), ``planes`` (P, 4). Non-planar if the nearest sample is
+    non-planar or out of range, else the planar candidate label whose plane is closest.
+    """
+    found = np.isfinite(d_k)
+    cand = np.where(found, labels[np.minimum(n_k, labels.size - 1)], 0)
+    if not len(planes):
+        return cand[:, 0]
+    lab = np.maximum(cand - 1, 0)
+    res_k = np.abs(np.einsum("vkc,vc->vk", planes[lab, :3], x) + planes[lab, 3])
+    res_k[cand == 0] = np.inf
+    best = cand[np.arange(len(x)), np.argmin(res_k, axis=1)]
+    return np.where(cand[:, 0] > 0, best, 0).astype(np.int32)
+
+
+@kernel
+def _propagate(all_points: np.ndarray, near: np.ndarray, points: np.ndarray,
+               labels: np.ndarray, planes: np.ndarray, indptr: np.ndarray, indices: np.ndarray,
+               radius2: float, tolerance: float, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Label every valid pixel from its image-nearest sample ``near`` (see :meth:`propagate`).
+
+    A pixel takes its sample's label when the sample is within the radius and non-planar or
+    within ``tolerance`` of its plane. Otherwise its candidates are the sample and the
+    sample's graph neighbours within the radius: non-planar if the nearest of them is, else
+    the closest plane among the planar labels of the ``k`` nearest. Returns the (V,) int32
+    labels and a (V,) bool mask of pixels whose sample is beyond the radius (left at 0).
+    """
+    n_pix = all_points.shape[0]
+    full = np.zeros(n_pix, dtype=np.int32)
+    gap = np.zeros(n_pix, dtype=np.bool_)
+    best_d = np.empty(k)
+    best_i = np.empty(k, dtype=np.int64)
+    for v in range(n_pix):
+        s = near[v]
+        x0, x1, x2 = all_points[v, 0], all_points[v, 1], all_points[v, 2]
+        d2 = (x0 - points[s, 0]) ** 2 + (x1 - points[s, 1]) ** 2 + (x2 - points[s, 2]) ** 2
+        if d2 > radius2:
+            gap[v] = True
+            continue
+        lab = labels[s]
+        if lab == 0 or planes.shape[0] == 0:
+            full[v] = lab
+            continue
+        q = planes[lab - 1]
+        if abs(q[0] * x0 + q[1] * x1 + q[2] * x2 + q[3]) <= tolerance:
+            full[v] = lab
+            continue
+        # The k nearest candidates within the radius, by insertion into a sorted list.
+        found = 0
+        for c in range(indptr[s] - 1, indptr[s + 1]):
+            t = s if c < indptr[s] else indices[c]
+            dt = (x0 - points[t, 0]) ** 2 + (x1 - points[t, 1]) ** 2 + (x2 - points[t, 2]) ** 2
+            if dt > radius2 or (found == k and dt >= best_d[k - 1]):
+                continue
+            y = min(found, k - 1)
+            while y > 0 and best_d[y - 1] > dt:
+                best_d[y] = best_d[y - 1]
+                best_i[y] = best_i[y - 1]
+                y -= 1
+            best_d[y] = dt
+            best_i[y] = t
+            found = min(found + 1, k)
+        if labels[best_i[0]] == 0:
+            continue
+        best_r = np.inf
+        for y in range(found):
+            lab = labels[best_i[y]]
+            if lab > 0:
+                q = planes[lab - 1]
+                r = abs(q[0] * x0 + q[1] * x1 + q[2] * x2 + q[3])
+                if r < best_r:
+                    best_r = r
+                    full[v] = lab
+    return full, gap

@@ -11,11 +11,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
-from scipy.spatial import cKDTree
 
 from monoplane.errors import InvalidInput
+from monoplane.geometry.neighbours import PointIndex
+from monoplane.jit import kernel
 
 
 @dataclass
@@ -30,9 +29,9 @@ class NeighbourGraph:
         (E, 2) int64 unique undirected edges ``(i, j)`` with ``i < j``, sorted by ``(i, j)``.
     indptr, indices : numpy.ndarray
         Symmetric CSR adjacency: the neighbours of node ``i`` are
-        ``indices[indptr[i]:indptr[i + 1]]`` (int64).
-    tree : scipy.spatial.cKDTree
-        KD-tree over the points the graph was built on.
+        ``indices[indptr[i]:indptr[i + 1]]`` (int64, ascending).
+    tree : PointIndex
+        Nearest-neighbour index over the points the graph was built on.
     spacing : float
         Median distance from a point to its nearest other point, in the points' unit.
     cache : dict
@@ -44,12 +43,15 @@ class NeighbourGraph:
     edges: np.ndarray
     indptr: np.ndarray
     indices: np.ndarray
-    tree: cKDTree
+    tree: PointIndex
     spacing: float
     cache: dict = field(default_factory=dict, repr=False)
+    _last_subgraph: tuple[np.ndarray, np.ndarray, np.ndarray] | None = field(
+        default=None, init=False, repr=False, compare=False)
 
     @classmethod
-    def build(cls, points: np.ndarray, k: int, tree: cKDTree | None = None) -> NeighbourGraph:
+    def build(cls, points: np.ndarray, k: int, tree: PointIndex | None = None
+              ) -> NeighbourGraph:
         """Connect every point to its ``k`` nearest neighbours (symmetrised, deduplicated).
 
         Parameters
@@ -58,8 +60,8 @@ class NeighbourGraph:
             (N, 3) float points (normalised RANSAC frame).
         k : int
             Neighbours per point, >= 1; capped at N - 1.
-        tree : scipy.spatial.cKDTree, optional
-            An existing KD-tree over exactly these points, to avoid building another.
+        tree : PointIndex, optional
+            An existing index over exactly these points, to avoid building another.
 
         Returns
         -------
@@ -72,28 +74,16 @@ class NeighbourGraph:
             raise InvalidInput(f"k must be at least 1, got {k}")
         n = pts.shape[0]
         if tree is None:
-            tree = cKDTree(pts)
+            tree = PointIndex(pts)
         kk = min(k, n - 1)
         if kk < 1:
             empty = np.zeros((0, 2), dtype=np.int64)
             return cls(n, empty, np.zeros(n + 1, dtype=np.int64), np.zeros(0, dtype=np.int64),
                        tree, 0.0)
         dist, nbr = tree.query(pts, k=kk + 1)
-        # Column 0 is the point itself except among exact duplicates; drop self-loops anywhere.
-        src = np.repeat(np.arange(n, dtype=np.int64), kk + 1)
-        dst = nbr.ravel().astype(np.int64)
-        keep = src != dst
-        src, dst = src[keep], dst[keep]
-        lo, hi = np.minimum(src, dst), np.maximum(src, dst)
-        key = np.sort(lo * n + hi)
-        key = key[np.r_[True, key[1:] != key[:-1]]]
-        edges = np.stack([key // n, key % n], axis=1)
-        both = np.concatenate([edges, edges[:, ::-1]])
-        both = both[np.argsort(both[:, 0], kind="stable")]
-        indptr = np.zeros(n + 1, dtype=np.int64)
-        np.cumsum(np.bincount(both[:, 0], minlength=n), out=indptr[1:])
+        edges, indptr, indices = _knn_edges(np.ascontiguousarray(nbr, dtype=np.int64))
         spacing = float(np.median(dist[:, 1]))
-        return cls(n, edges, indptr, both[:, 1].copy(), tree, spacing)
+        return cls(n, edges, indptr, indices, tree, spacing)
 
     @property
     def num_edges(self) -> int:
@@ -120,13 +110,27 @@ class NeighbourGraph:
             ``nodes`` (the lowest-numbered one among equally large components).
         """
         nodes = np.asarray(nodes, dtype=np.int64)
-        if nodes.size == 0:
-            return np.zeros(0, dtype=bool)
-        edges, _ = self.subgraph(nodes)
-        adj = coo_matrix((np.ones(edges.shape[0]), (edges[:, 0], edges[:, 1])),
-                         shape=(nodes.size, nodes.size))
-        _, comp = connected_components(adj, directed=False)
-        return comp == np.argmax(np.bincount(comp))
+        return self.largest_component_within(nodes, np.ones(nodes.size, dtype=bool))
+
+    def largest_component_within(self, pool: np.ndarray, members: np.ndarray) -> np.ndarray:
+        """:meth:`largest_component` of ``pool[members]``, from the pool's (cached) subgraph.
+
+        Parameters
+        ----------
+        pool : numpy.ndarray
+            (M,) int64 distinct node indices.
+        members : numpy.ndarray
+            (M,) bool selection of the pool.
+
+        Returns
+        -------
+        numpy.ndarray
+            (K,) bool over ``pool[members]`` (K = ``members.sum()``), True on the largest
+            connected component of the subgraph they induce (lowest-numbered on ties).
+        """
+        members = np.ascontiguousarray(members, dtype=bool)
+        edges, _ = self.subgraph(pool)
+        return _largest_component(members, edges)
 
     def neighbours(self, i: int) -> np.ndarray:
         """(deg,) int64 neighbours of node ``i``."""
@@ -134,6 +138,9 @@ class NeighbourGraph:
 
     def subgraph(self, pool: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Edges among a subset of nodes, renumbered to positions in ``pool``.
+
+        The result for the last pool asked for is kept: the RANSAC driver labels one pool
+        several times (local optimisation, component split) before it shrinks.
 
         Parameters
         ----------
@@ -143,13 +150,130 @@ class NeighbourGraph:
         Returns
         -------
         edges : numpy.ndarray
-            (E', 2) int64 edges ``(a, b)`` with ``pool[a]``–``pool[b]`` an edge of the graph.
+            (E', 2) int64 edges ``(a, b)`` with ``pool[a]``–``pool[b]`` an edge of the graph,
+            in the order of :attr:`edges` (read-only).
         edge_ids : numpy.ndarray
-            (E',) int64 rows of :attr:`edges` they come from (to index per-edge caches).
+            (E',) int64 rows of :attr:`edges` they come from (to index per-edge caches;
+            read-only).
         """
         pool = np.asarray(pool, dtype=np.int64)
+        last = self._last_subgraph
+        if last is not None and np.array_equal(last[0], pool):
+            return last[1], last[2]
         local = np.full(self.num_nodes, -1, dtype=np.int64)
         local[pool] = np.arange(pool.size, dtype=np.int64)
         mapped = local[self.edges]
         edge_ids = np.flatnonzero((mapped[:, 0] >= 0) & (mapped[:, 1] >= 0))
-        return mapped[edge_ids], edge_ids
+        edges = mapped[edge_ids]
+        for a in (edges, edge_ids):
+            a.flags.writeable = False
+        self._last_subgraph = (pool.copy(), edges, edge_ids)
+        return edges, edge_ids
+
+
+@kernel
+def _knn_edges(nbr: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Unique undirected edges and symmetric CSR adjacency of kNN lists.
+
+    ``nbr`` is the (N, K) int64 neighbour table of a KD-tree query (a row may contain the point
+    itself, anywhere among exact duplicates). Returns the (E, 2) edges ``i < j`` sorted by
+    ``(i, j)`` without self-loops or repeats, and ``indptr`` (N + 1,), ``indices`` (2E,) with
+    every node's neighbours in ascending order. A bucket per smaller end, sorted in place,
+    replaces a global sort of all pairs.
+    """
+    n, k = nbr.shape
+    start = np.zeros(n + 1, dtype=np.int64)
+    for i in range(n):
+        for c in range(k):
+            j = nbr[i, c]
+            if j != i:
+                start[min(i, j) + 1] += 1
+    for i in range(n):
+        start[i + 1] += start[i]
+    bucket = np.empty(start[n], dtype=np.int64)
+    fill = start[:n].copy()
+    for i in range(n):
+        for c in range(k):
+            j = nbr[i, c]
+            if j != i:
+                lo = min(i, j)
+                bucket[fill[lo]] = max(i, j)
+                fill[lo] += 1
+    edges = np.empty((start[n], 2), dtype=np.int64)
+    degree = np.zeros(n, dtype=np.int64)
+    count = 0
+    for lo in range(n):
+        a, b = start[lo], start[lo + 1]
+        for x in range(a + 1, b):  # insertion sort: buckets hold about K entries
+            v = bucket[x]
+            y = x - 1
+            while y >= a and bucket[y] > v:
+                bucket[y + 1] = bucket[y]
+                y -= 1
+            bucket[y + 1] = v
+        for x in range(a, b):
+            if x == a or bucket[x] != bucket[x - 1]:
+                edges[count, 0] = lo
+                edges[count, 1] = bucket[x]
+                degree[lo] += 1
+                degree[bucket[x]] += 1
+                count += 1
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    for i in range(n):
+        indptr[i + 1] = indptr[i] + degree[i]
+    indices = np.empty(2 * count, dtype=np.int64)
+    pos = indptr[:n].copy()
+    # Edges come sorted by (lo, hi): each row receives its smaller neighbours (as hi) before
+    # its larger ones (as lo), both ascending, so rows come out sorted.
+    for e in range(count):
+        lo, hi = edges[e, 0], edges[e, 1]
+        indices[pos[lo]] = hi
+        pos[lo] += 1
+        indices[pos[hi]] = lo
+        pos[hi] += 1
+    return edges[:count].copy(), indptr, indices
+
+
+@kernel
+def _largest_component(members: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """Largest connected component among the ``members`` (M,) bool of a graph on M nodes.
+
+    ``edges`` (E, 2) int64 are the graph's edges; only those between two members count.
+    Returns (K,) bool over the K members in order, True on the largest component; among
+    equally large ones, the one holding the lowest-numbered member. Union-find with path
+    halving.
+    """
+    m = members.shape[0]
+    parent = np.arange(m)
+    for e in range(edges.shape[0]):
+        a, b = edges[e, 0], edges[e, 1]
+        if not (members[a] and members[b]):
+            continue
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        while parent[b] != b:
+            parent[b] = parent[parent[b]]
+            b = parent[b]
+        if a != b:
+            parent[max(a, b)] = min(a, b)
+    size = np.zeros(m, dtype=np.int64)
+    root = np.empty(m, dtype=np.int64)
+    for p in range(m):
+        if members[p]:
+            r = p
+            while parent[r] != r:
+                r = parent[r]
+            root[p] = r
+            size[r] += 1
+    best = -1
+    for p in range(m):  # ascending, so ties go to the component of the lowest member
+        if members[p] and (best < 0 or size[root[p]] > size[best]):
+            best = root[p]
+    out = np.zeros(members.sum(), dtype=np.bool_)
+    k = 0
+    for p in range(m):
+        if members[p]:
+            out[k] = root[p] == best
+            k += 1
+    return out

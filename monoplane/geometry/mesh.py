@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from monoplane.types import Reconstruction, pixel_rays
+from monoplane.types import Reconstruction, pixel_rays, ray_plane_depth
 
 
 def planar_mesh(
@@ -57,11 +57,7 @@ def planar_mesh(
     z = np.zeros(labels.shape)
     planar = labels > 0
     if np.any(planar):
-        p = rec.params[labels[planar] - 1]
-        denom = np.einsum("ij,ij->i", rays[planar], p[:, :3])
-        with np.errstate(divide="ignore", invalid="ignore"):
-            zp = -p[:, 3] / denom
-        z[planar] = np.where(np.isfinite(zp) & (zp > 0), zp, 0.0)
+        z[planar] = ray_plane_depth(rays[planar], rec.params[labels[planar] - 1])
     if max_depth is None and frame.depth is not None:
         max_depth = 2.0 * float(frame.depth.max())
     if max_depth is not None:
@@ -94,3 +90,28 @@ def planar_mesh(
         ]
     )
     return vertices, tris.astype(np.int32).reshape(-1, 3), vertex_colors, plane_ids
+
+
+def reconstruction_to_open3d(rec: Reconstruction, step: int = 2):  # -> o3d.geometry.TriangleMesh
+    """The planar mesh of :func:`planar_mesh` as an Open3D triangle mesh.
+
+    Parameters
+    ----------
+    rec : Reconstruction
+        Labels and planes in the camera frame.
+    step : int
+        Pixel stride of the triangulated grid.
+
+    Returns
+    -------
+    open3d.geometry.TriangleMesh
+        Camera frame, depth units, vertex colours from the image, vertex normals computed.
+    """
+    import open3d as o3d
+
+    vertices, triangles, colors, _ = planar_mesh(rec, step=step)
+    mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(vertices),
+                                     o3d.utility.Vector3iVector(triangles))
+    mesh.vertex_colors = o3d.utility.Vector3dVector(colors)
+    mesh.compute_vertex_normals()
+    return mesh

@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from monoplane.errors import InvalidInput
+from monoplane.jit import kernel
 
 
 def fit_plane(points: np.ndarray, weights: np.ndarray | None = None) -> tuple[np.ndarray, float]:
@@ -127,15 +128,79 @@ def fit_planes_per_label(points: np.ndarray, labels: np.ndarray, num_labels: int
     count : numpy.ndarray
         (P,) int64 number of points of each label.
     """
-    labels = np.asarray(labels).ravel()
-    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    keep = labels > 0
-    lab, pts = labels[keep], pts[keep]
-    order = np.argsort(lab, kind="stable")
-    count = np.bincount(lab, minlength=num_labels + 1)[1:num_labels + 1].astype(np.int64)
+    labels = np.ascontiguousarray(np.asarray(labels).ravel(), dtype=np.int64)
+    pts = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
+    if labels.shape[0] != pts.shape[0]:
+        raise InvalidInput(f"{pts.shape[0]} points but {labels.shape[0]} labels")
+    count, centroid, scatter = _label_moments(pts, labels, int(num_labels))
     params = np.full((num_labels, 4), np.nan)
     rmse = np.full(num_labels, np.nan)
-    for k, group in enumerate(np.split(pts[order], np.cumsum(count)[:-1])):
-        if len(group) >= 3:
-            params[k], rmse[k] = fit_plane(group)
+    fit = np.flatnonzero(count >= 3)
+    if fit.size:
+        _, vecs = np.linalg.eigh(scatter[fit])
+        normal = vecs[:, :, 0]
+        d = -np.einsum("pc,pc->p", normal, centroid[fit])
+        flip = d < 0
+        normal[flip] *= -1.0
+        d[flip] *= -1.0
+        params[fit, :3] = normal
+        params[fit, 3] = d
+        rmse[fit] = np.sqrt(_label_sq_distances(pts, labels, params, centroid)[fit] / count[fit])
     return params, rmse, count
+
+
+@kernel
+def _label_moments(points: np.ndarray, labels: np.ndarray, num_labels: int
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(P,) int64 counts, (P, 3) centroids and (P, 3, 3) centred scatter matrices per label.
+
+    ``points`` (N, 3) float64, ``labels`` (N,) int64; labels outside 1..P are ignored. Two
+    passes (centroid, then centred products) keep the scatter as accurate as a direct fit.
+    """
+    count = np.zeros(num_labels, dtype=np.int64)
+    centroid = np.zeros((num_labels, 3))
+    for v in range(points.shape[0]):
+        k = labels[v] - 1
+        if 0 <= k < num_labels:
+            count[k] += 1
+            for c in range(3):
+                centroid[k, c] += points[v, c]
+    for k in range(num_labels):
+        if count[k]:
+            for c in range(3):
+                centroid[k, c] /= count[k]
+    scatter = np.zeros((num_labels, 3, 3))
+    for v in range(points.shape[0]):
+        k = labels[v] - 1
+        if 0 <= k < num_labels:
+            x0 = points[v, 0] - centroid[k, 0]
+            x1 = points[v, 1] - centroid[k, 1]
+            x2 = points[v, 2] - centroid[k, 2]
+            scatter[k, 0, 0] += x0 * x0
+            scatter[k, 0, 1] += x0 * x1
+            scatter[k, 0, 2] += x0 * x2
+            scatter[k, 1, 1] += x1 * x1
+            scatter[k, 1, 2] += x1 * x2
+            scatter[k, 2, 2] += x2 * x2
+    for k in range(num_labels):
+        scatter[k, 1, 0] = scatter[k, 0, 1]
+        scatter[k, 2, 0] = scatter[k, 0, 2]
+        scatter[k, 2, 1] = scatter[k, 1, 2]
+    return count, centroid, scatter
+
+
+@kernel
+def _label_sq_distances(points: np.ndarray, labels: np.ndarray, planes: np.ndarray,
+                        centroid: np.ndarray) -> np.ndarray:
+    """(P,) sums of squared distances of each label's points to its (P, 4) plane."""
+    num_labels = planes.shape[0]
+    out = np.zeros(num_labels)
+    for v in range(points.shape[0]):
+        k = labels[v] - 1
+        if 0 <= k < num_labels:
+            # Through the centroid, as the fit does: the offset d is rounded, the centroid not.
+            r = 0.0
+            for c in range(3):
+                r += planes[k, c] * (points[v, c] - centroid[k, c])
+            out[k] += r * r
+    return out

@@ -41,7 +41,6 @@ RENDER_ENV = {"EGL_PLATFORM": "surfaceless"}
 DEFAULT_TIMEOUT = 120.0
 
 
-
 @dataclass
 class Mesh:
     """A triangle mesh to render.
@@ -124,37 +123,6 @@ class RenderResult:
     paths: dict[str, Path]
     reason: str | None
     seconds: float
-
-
-def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray) -> np.ndarray:
-    """World-to-camera matrix of a camera at ``eye`` looking at ``target``.
-
-    Parameters
-    ----------
-    eye, target : numpy.ndarray
-        (3,) world points.
-    up : numpy.ndarray
-        (3,) world direction that should point up in the picture.
-
-    Returns
-    -------
-    numpy.ndarray
-        (4, 4) float64 extrinsics with OpenCV axes (x right, y down, z forward).
-    """
-    eye = np.asarray(eye, dtype=np.float64)
-    z = np.asarray(target, dtype=np.float64) - eye
-    z /= np.linalg.norm(z)
-    up = np.asarray(up, dtype=np.float64)
-    y = -(up - (up @ z) * z)
-    norm = np.linalg.norm(y)
-    if norm < 1e-9:
-        raise ValueError("look_at: the up vector is parallel to the viewing direction")
-    y /= norm
-    x = np.cross(y, z)
-    T = np.eye(4)
-    T[:3, :3] = np.stack([x, y, z])
-    T[:3, 3] = -T[:3, :3] @ eye
-    return T
 
 
 def render(

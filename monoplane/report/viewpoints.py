@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from monoplane.report.render3d import look_at
+from monoplane.geometry.camera import look_at
 
 #: Horizontal field of view of the virtual cameras, degrees.
 VIRTUAL_HFOV = 60.0
@@ -108,7 +108,10 @@ def orbit_viewpoints(
         eye = center + dist * (np.cos(el) * horiz + np.sin(el) * up)
         # Looking steeply down, "up" in the picture is the forward direction.
         img_up = fwd if elev_deg > 60 else up
-        return Viewpoint(name, title, K, look_at(eye, center, img_up), eye)
+        R, t = look_at(eye, center, img_up)
+        extrinsics = np.eye(4)
+        extrinsics[:3, :3], extrinsics[:3, 3] = R, t
+        return Viewpoint(name, title, K, extrinsics, eye)
 
     return [
         at("birdseye", "bird's eye view", 65.0, 0.0),

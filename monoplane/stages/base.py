@@ -44,6 +44,12 @@ def param(default: Any, doc: str, **kwargs: Any) -> Any:
     return field(default=default, metadata={"doc": doc}, **kwargs)
 
 
+def config_key(f: dataclasses.Field) -> str:
+    """User-facing key of a config field: a Python keyword is spelled with a trailing
+    underscore in the dataclass (``lambda_``) and without it in configs (``lambda``)."""
+    return f.name[:-1] if f.name.endswith("_") else f.name
+
+
 @dataclass
 class NoConfig:
     """A stage without parameters."""
@@ -99,7 +105,10 @@ class Stage:
 
     @classmethod
     def parameters(cls) -> list[tuple[str, str, Any, str]]:
-        """``(name, type, default, doc)`` for each config field, for listings and docs."""
+        """``(key, type, default, doc)`` for each config field, for listings and docs.
+
+        ``key`` is what a config or ``--set`` names (see :func:`config_key`).
+        """
         rows = []
         for f in dataclasses.fields(cls.Config):
             if f.default is not dataclasses.MISSING:
@@ -109,14 +118,25 @@ class Stage:
             else:
                 default = None
             type_name = f.type if isinstance(f.type, str) else getattr(f.type, "__name__", "")
-            rows.append((f.name, type_name, default, f.metadata.get("doc", "")))
+            rows.append((config_key(f), type_name, default, f.metadata.get("doc", "")))
         return rows
 
 
 class CueProvider(Stage):
-    """Fills depth, normals (and possibly intrinsics) of a frame."""
+    """Fills depth, normals (and possibly intrinsics) of a frame.
+
+    The pipeline calls :meth:`provide` only for frames that :meth:`needs_cues`; a frame that
+    already has depth and normals (RGB-D with normals, precomputed cues, synthetic scenes) goes
+    through :func:`monoplane.cues.given.use_given_cues` instead, whatever provider the config
+    names, so host code never has to switch providers for such frames.
+    """
 
     kind = "cues"
+
+    def needs_cues(self, frame: Frame) -> bool:
+        """Whether this provider has work to do on the frame (default: depth or normals
+        missing). Override to also process complete frames (e.g. to recompute normals)."""
+        return frame.depth is None or frame.normals is None
 
     def provide(self, frame: Frame) -> Frame:
         """Return a frame with ``depth`` and ``normals`` set.
@@ -219,13 +239,43 @@ class Labeler(Stage):
 
 
 class Refiner(Stage):
-    """Refines the multi-plane label map at image level."""
+    """Refines the multi-plane labelling.
+
+    A refiner that works on the pixel grid (``needs_pixels = True``, the default) only has
+    :meth:`refine`; a refiner that needs no image sets ``needs_pixels = False`` and also
+    implements :meth:`refine_cloud`, which is what :func:`monoplane.detect_planes` calls on
+    point clouds. The host rejects a pixel refiner on a cloud with a clear error.
+    """
 
     kind = "refiner"
+    #: True when the refiner works on the image grid and so cannot refine a bare point cloud.
+    needs_pixels: ClassVar[bool] = True
 
     def refine(self, rec: Reconstruction) -> Reconstruction:
         """Return a refined reconstruction (labels, and params refit on the final masks)."""
         raise NotImplementedError
+
+    def refine_cloud(self, cloud: PlaneCloud, graph: NeighbourGraph, labels: np.ndarray,
+                     planes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Refine per-point labels of a normalised cloud (refiners with ``needs_pixels=False``).
+
+        Parameters
+        ----------
+        cloud : PlaneCloud
+            Normalised oriented cloud (N points, unit sphere).
+        graph : NeighbourGraph
+            kNN graph over ``cloud.points``.
+        labels : numpy.ndarray
+            (N,) int32 RANSAC labels, 0 = non-planar, ``i`` = ``planes[i - 1]``.
+        planes : numpy.ndarray
+            (P, 4) unit-normal planes in the normalised frame.
+
+        Returns
+        -------
+        labels, planes : numpy.ndarray
+            Refined (N,) int32 labels 0..P' and (P', 4) planes, same frame.
+        """
+        raise NotImplementedError(f"refiner '{self.name}' works on images only")
 
 
 class Matcher(Stage):

@@ -4,8 +4,14 @@
   normals are estimated from depth with edge-aware fits
   (:func:`monoplane.geometry.normals.normals_from_depth`).
 * ``onnx``: monocular networks run with onnxruntime on the CPU, described by a profile
-  (``omnidata``, ``zerodepth``, ``midas``; see :mod:`monoplane.cues.profiles`). The profile is
-  chosen purely by config::
+  (see :mod:`monoplane.cues.profiles`). Either name a catalogue model, fetched once with
+  ``monoplane models fetch NAME`` (see :mod:`monoplane.models`)::
+
+      [cues]
+      plugin = "onnx"
+      model = "depth-anything-v2-small"
+
+  or bring your own export and choose its profile::
 
       [cues]
       plugin = "onnx"
@@ -23,12 +29,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from monoplane.cues.given import use_given_cues
 from monoplane.cues.network import CueNetwork
 from monoplane.cues.profiles import BUILTIN_PROFILES, OnnxProfile, get_profile
-from monoplane.cues.transforms import orient_normals
 from monoplane.errors import ConfigError, InvalidInput
 from monoplane.geometry.normals import normals_from_depth
 from monoplane.hookspecs import hookimpl
+from monoplane.models import get_model, require_model
 from monoplane.stages.base import CueProvider, Stage, param
 from monoplane.types import Frame
 
@@ -93,26 +100,28 @@ class GivenCues(CueProvider):
             raise InvalidInput(
                 f"{frame.name}: cue provider 'given' needs a depth map (--depth FILE); to "
                 f"predict depth from the image use cues.plugin=onnx")
-        notes = list(frame.notes)
-        if frame.normals is None or cfg.recompute_normals:
-            normals = normals_from_depth(frame.depth, frame.K, **cfg.normals_options())
-            notes.append("normals: estimated from depth (edge-aware inverse-depth fits)")
-        else:
-            normals = orient_normals(frame.normals, frame.K)
-            flipped = np.sum(np.any(normals != frame.normals, axis=-1))
-            if flipped:
-                notes.append(f"normals: {int(flipped)} given normals pointed away from the "
-                             f"camera and were flipped")
+        if frame.normals is not None and not cfg.recompute_normals:
+            return use_given_cues(frame)
+        normals = normals_from_depth(frame.depth, frame.K, **cfg.normals_options())
         normals = np.where((frame.depth > 0)[..., None], normals, 0).astype(np.float32)
-        return frame.with_(normals=normals, notes=notes)
+        return frame.with_(normals=normals, notes=[
+            *frame.notes, "normals: estimated from depth (edge-aware inverse-depth fits)"])
+
+    def needs_cues(self, frame: Frame) -> bool:
+        """Also run on complete frames when told to recompute the given normals."""
+        return self.config.recompute_normals or super().needs_cues(frame)
 
 
 @dataclass
 class OnnxCuesConfig(NormalsFromDepthOptions):
     """Parameters of the ``onnx`` cue provider."""
 
+    model: str = param(
+        "", "catalogue model name (see 'monoplane models list'); sets the profile and the "
+            "depth model file, downloaded once with 'monoplane models fetch NAME'")
     profile: str = param(
-        "omnidata", f"network profile: {', '.join(sorted(BUILTIN_PROFILES))}")
+        "omnidata", f"network profile: {', '.join(sorted(BUILTIN_PROFILES))} (ignored when "
+                    f"'model' is set)")
     depth_model: str = param("", "path to the depth network's .onnx file")
     normal_model: str = param(
         "", "path to the normals network's .onnx file (empty: normals estimated from depth)")
@@ -131,6 +140,11 @@ class OnnxCuesConfig(NormalsFromDepthOptions):
 
     def __post_init__(self) -> None:
         get_profile(self.profile)
+        if self.model:
+            get_model(self.model)
+            if self.depth_model:
+                raise ConfigError("set either cues.model (a catalogue name) or "
+                                  "cues.depth_model (a file), not both")
         if self.threads < 1:
             raise ConfigError(f"threads must be >= 1, got {self.threads}")
         if self.input_size and (len(self.input_size) != 2 or min(self.input_size) < 1):
@@ -152,7 +166,8 @@ class OnnxCuesConfig(NormalsFromDepthOptions):
             return (v[0], v[1], v[2]) if v else None
 
         size = (self.input_size[0], self.input_size[1]) if self.input_size else None
-        return get_profile(self.profile).with_overrides(
+        name = get_model(self.model).profile if self.model else self.profile
+        return get_profile(name).with_overrides(
             size=size, mean=triple(self.mean), std=triple(self.std),
             normal_axes=self.normal_axes or None)
 
@@ -173,8 +188,18 @@ class OnnxCues(CueProvider):
             normals_options=cfg.normals_options())
 
     def provide(self, frame: Frame) -> Frame:
-        """Predict the frame's missing depth and normals (see :meth:`CueNetwork.provide`)."""
-        return self.network.provide(frame)
+        """Predict the frame's missing depth and normals (see :meth:`CueNetwork.provide`).
+
+        A catalogue model (``cues.model``) is looked up in the cache only when a frame needs
+        the network, so frames that carry their own cues run without it.
+        """
+        cfg = self.config
+        net = self.network
+        needs_net = frame.depth is None or (
+            net.profile.depth.joint_normals and frame.normals is None and frame.rgb is not None)
+        if cfg.model and net.depth_path is None and needs_net:
+            net.depth_path = require_model(cfg.model)
+        return net.provide(frame)
 
 
 @hookimpl

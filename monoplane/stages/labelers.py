@@ -24,7 +24,7 @@ from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.graphcut import (
     degree_normalisation,
-    gc_ransac_energy,
+    minimize_gc_ransac,
     msac_costs,
     normal_angles,
     normal_costs,
@@ -72,9 +72,8 @@ class GraphCutLabeler(Labeler):
         f0, f1 = msac_costs(_pool_distances(cloud, pool, plane), params.epsilon)
         edges, _ = graph.subgraph(pool)
         scale = degree_normalisation(graph.mean_degree) if self.config.normalise else 1.0
-        e = gc_ransac_energy(f0, f1, edges, 1.0, self.config.lambda_, pairwise_scale=scale)
-        inliers = e.minimize()
-        return Labeling(inliers=inliers, energy=e.energy(inliers))
+        inliers, energy = minimize_gc_ransac(f0, f1, edges, 1.0, self.config.lambda_, scale)
+        return Labeling(inliers=inliers, energy=energy)
 
 
 @dataclass
@@ -115,15 +114,13 @@ class ProximityGraphCutLabeler(Labeler):
               plane: np.ndarray, model_normal: np.ndarray, params: RansacParams) -> Labeling:
         """See :meth:`monoplane.stages.base.Labeler.label`."""
         f0, f1 = msac_costs(_pool_distances(cloud, pool, plane), params.epsilon)
-        g1 = None
         if self.config.normal_term:
-            g1 = normal_costs(normal_angles(cloud.normals[pool], model_normal), params.epsilon_n)
+            f1 += normal_costs(normal_angles(cloud.normals[pool], model_normal), params.epsilon_n)
         edges, edge_ids = graph.subgraph(pool)
         cut = self._edge_weights(cloud, graph)[edge_ids]
         scale = degree_normalisation(graph.mean_degree) if self.config.normalise else 1.0
-        e = gc_ransac_energy(f0, f1, edges, cut, self.config.lambda_, g1, pairwise_scale=scale)
-        inliers = e.minimize()
-        return Labeling(inliers=inliers, energy=e.energy(inliers))
+        inliers, energy = minimize_gc_ransac(f0, f1, edges, cut, self.config.lambda_, scale)
+        return Labeling(inliers=inliers, energy=energy)
 
 
 @hookimpl

@@ -23,9 +23,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from monoplane.errors import InvalidInput
+from monoplane.geometry.camera import look_at
 from monoplane.synth.corrupt import corrupt
 from monoplane.synth.render import make_raycaster, render_view, world_planes
-from monoplane.synth.scene import Layout, build_layout, extra_camera, look_at
+from monoplane.synth.scene import WORLD_UP, Layout, build_layout, extra_camera
 from monoplane.types import Frame, intrinsics_matrix
 
 LEVELS: tuple[str, ...] = ("clean", "mild", "strong")
@@ -127,7 +128,7 @@ def generate(seed: int, level: str = "mild", width: int = 256, height: int = 192
     seed = int(seed)
 
     layout = build_layout(np.random.default_rng([seed, _STREAM_LAYOUT]))
-    poses = [look_at(layout.camera_center, layout.camera_target)]
+    poses = [look_at(layout.camera_center, layout.camera_target, WORLD_UP)]
     cam_rng = np.random.default_rng([seed, _STREAM_CAMERAS])
     poses += [extra_camera(layout, cam_rng) for _ in range(n_views - 1)]
     return render_scene(layout, poses, seed, level, width, height)

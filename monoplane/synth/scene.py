@@ -23,8 +23,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from monoplane.geometry.camera import look_at
 from monoplane.synth.texture import Material, random_material
 
+#: The synthetic world's up direction (z up); up in every rendered picture.
+WORLD_UP = np.array([0.0, 0.0, 1.0])
 #: Free radius (m, in the floor plane) kept around the first camera centre.
 CAMERA_CLEARANCE = 1.3
 #: Extra views stay this close (m) to the first camera, inside its free disk.
@@ -461,28 +464,6 @@ def build_layout(rng: np.random.Generator) -> Layout:
                    hfov_deg=hfov, footprints=np.array(footprints).reshape(-1, 3))
 
 
-def look_at(center: np.ndarray, target: np.ndarray, roll_deg: float = 0.0
-            ) -> tuple[np.ndarray, np.ndarray]:
-    """World-to-camera pose of a camera at ``center`` looking at ``target`` (world z up).
-
-    Returns
-    -------
-    R, t : numpy.ndarray
-        (3, 3) rotation and (3,) translation with ``x_cam = R x_world + t``; the camera frame is
-        OpenCV's (x right, y down, z forward).
-    """
-    fwd = target - center
-    fwd = fwd / np.linalg.norm(fwd)
-    right = np.cross(fwd, np.array([0.0, 0.0, 1.0]))
-    right /= np.linalg.norm(right)
-    down = np.cross(fwd, right)
-    ang = np.deg2rad(roll_deg)
-    right, down = (np.cos(ang) * right + np.sin(ang) * down,
-                   -np.sin(ang) * right + np.cos(ang) * down)
-    R = np.stack([right, down, fwd])
-    return R, -R @ center
-
-
 def extra_camera(layout: Layout, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """A further view of the same room with a moderate baseline and rotation to view 0.
 
@@ -496,7 +477,7 @@ def extra_camera(layout: Layout, rng: np.random.Generator) -> tuple[np.ndarray, 
         World-to-camera pose.
     """
     c0, tgt0 = layout.camera_center, layout.camera_target
-    R0, _ = look_at(c0, tgt0)
+    R0, _ = look_at(c0, tgt0, WORLD_UP)
     fwd = (tgt0 - c0)[:2] / np.linalg.norm((tgt0 - c0)[:2])
     side = np.array([-fwd[1], fwd[0]])
     for _ in range(200):
@@ -508,7 +489,7 @@ def extra_camera(layout: Layout, rng: np.random.Generator) -> tuple[np.ndarray, 
         if not _free(c1[:2], 0.3, list(layout.footprints), layout.size, margin=0.3):
             continue
         tgt1 = tgt0 + rng.uniform(-0.5, 0.5, size=3) * np.array([1.0, 1.0, 0.4])
-        R1, t1 = look_at(c1, tgt1, roll_deg=rng.uniform(-5.0, 5.0))
+        R1, t1 = look_at(c1, tgt1, WORLD_UP, roll_deg=rng.uniform(-5.0, 5.0))
         cos_rel = (np.trace(R1 @ R0.T) - 1) / 2
         rel = np.rad2deg(np.arccos(np.clip(cos_rel, -1, 1)))
         if 10.0 <= rel <= 30.0:

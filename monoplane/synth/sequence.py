@@ -19,13 +19,14 @@ from __future__ import annotations
 import numpy as np
 
 from monoplane.errors import InvalidInput
+from monoplane.geometry.camera import look_at
 from monoplane.synth.generator import (
     _STREAM_LAYOUT,
     SynthScene,
     check_arguments,
     render_scene,
 )
-from monoplane.synth.scene import MAX_BASELINE, Layout, _free, build_layout, look_at
+from monoplane.synth.scene import MAX_BASELINE, WORLD_UP, Layout, _free, build_layout
 
 #: Camera paths of :func:`generate_sequence`.
 PATHS: tuple[str, ...] = ("walk", "star")
@@ -55,7 +56,7 @@ def _view_zero(layout: Layout) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarra
     """View 0's pose and its horizontal forward and sideways unit directions (world xy)."""
     c0, tgt0 = layout.camera_center, layout.camera_target
     fwd = (tgt0 - c0)[:2] / np.linalg.norm((tgt0 - c0)[:2])
-    return look_at(c0, tgt0), fwd, np.array([-fwd[1], fwd[0]])
+    return look_at(c0, tgt0, WORLD_UP), fwd, np.array([-fwd[1], fwd[0]])
 
 
 def walk_poses(layout: Layout, n_views: int, rng: np.random.Generator
@@ -65,7 +66,7 @@ def walk_poses(layout: Layout, n_views: int, rng: np.random.Generator
     Parameters
     ----------
     layout : Layout
-        The room (view 0 is ``look_at(layout.camera_center, layout.camera_target)``).
+        The room (view 0 is ``look_at(layout.camera_center, layout.camera_target, WORLD_UP)``).
     n_views : int
         Number of views, >= 1.
     rng : numpy.random.Generator
@@ -92,7 +93,7 @@ def walk_poses(layout: Layout, n_views: int, rng: np.random.Generator
                 # The gaze drifts along with the walk but keeps view 0's region in sight.
                 tgt = targets[-1] + 0.4 * np.array([dxy[0], dxy[1], 0.0]) \
                     + rng.uniform(-0.25, 0.25, size=3) * np.array([1.0, 1.0, 0.3])
-                pose = look_at(c, tgt, roll_deg=rng.uniform(-3.0, 3.0))
+                pose = look_at(c, tgt, WORLD_UP, roll_deg=rng.uniform(-3.0, 3.0))
                 turn = rotation_angle_deg(poses[-1][0], pose[0])
                 if WALK_TURN_DEG[0] <= turn <= WALK_TURN_DEG[1]:
                     poses.append(pose)
@@ -135,7 +136,7 @@ def star_poses(layout: Layout, n_views: int, rng: np.random.Generator
             if not _camera_ok(layout, c):
                 continue
             tgt = tgt0 + rng.uniform(-0.6, 0.6, size=3) * np.array([1.0, 1.0, 0.4])
-            pose = look_at(c, tgt, roll_deg=rng.uniform(-5.0, 5.0))
+            pose = look_at(c, tgt, WORLD_UP, roll_deg=rng.uniform(-5.0, 5.0))
             if STAR_TURN_DEG[0] <= rotation_angle_deg(first[0], pose[0]) <= STAR_TURN_DEG[1]:
                 poses.append(pose)
                 break

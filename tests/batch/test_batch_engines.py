@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import BROKEN, GOOD, read_labels
+from batch_helpers import BROKEN, GOOD, read_labels
 
 from monoplane.batch import run_batch
 from monoplane.batch.frame import OUTPUT_FILES

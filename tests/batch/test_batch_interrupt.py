@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from conftest import BROKEN, GOOD, read_labels
+from batch_helpers import BROKEN, GOOD, read_labels
 
 from monoplane.batch import run_batch
 from monoplane.batch.frame import is_complete
@@ -46,9 +46,19 @@ def wait_for_first_frame(proc: subprocess.Popen, out: Path) -> None:
     raise AssertionError("no frame finished in time")
 
 
-def children(pid: int) -> list[int]:
+def worker_pids(pid: int) -> list[int]:
+    """Pool workers among a process's children (not multiprocessing's resource tracker)."""
     path = Path(f"/proc/{pid}/task/{pid}/children")
-    return [int(c) for c in path.read_text().split()] if path.exists() else []
+    kids = [int(c) for c in path.read_text().split()] if path.exists() else []
+    out = []
+    for kid in kids:
+        try:
+            cmdline = Path(f"/proc/{kid}/cmdline").read_bytes()
+        except FileNotFoundError:
+            continue
+        if b"spawn_main" in cmdline:
+            out.append(kid)
+    return out
 
 
 def alive(pid: int) -> bool:
@@ -87,7 +97,7 @@ def test_ctrl_c_stops_workers_cleanly(frames_dir, tmp_path):
     out = tmp_path / "out"
     proc = start_batch(frames_dir, out)
     wait_for_first_frame(proc, out)
-    workers = children(proc.pid)
+    workers = worker_pids(proc.pid)
     assert workers, "the local engine runs frames in worker processes"
     os.killpg(proc.pid, signal.SIGINT)  # what a terminal sends on Ctrl-C
     _, err = proc.communicate(timeout=TIMEOUT)

@@ -9,7 +9,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from conftest import GOOD, read_labels, run_cli_labels
+from batch_helpers import GOOD, read_labels, run_cli_labels
 
 from monoplane.batch import read_frames, run_batch
 from monoplane.cli import main

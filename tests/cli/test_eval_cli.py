@@ -60,14 +60,18 @@ def test_help_has_examples(command: str, capsys: pytest.CaptureFixture[str]) -> 
 def test_bench_prints_stage_rows(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "bench.json"
     assert main(["bench", "--preset", "seq-ransac", "--sizes", "96x72", "--repeat", "1",
-                 "--no-progress", "--json", str(out)]) == 0
+                 "--frames", "1", "--no-baselines", "--no-progress", "--json", str(out)]) == 0
     text = capsys.readouterr().out
-    for row in ("cues", "ransac", "refiner", "total", "96x72 ms"):
+    for row in ("cues", "ransac", "refiner", "total", "96x72 ms", "throughput", "peak RSS"):
         assert row in text
     data = json.loads(out.read_text())
-    names = [s["name"] for s in data[0]["stages"]]
+    names = [s["name"] for s in data["results"][0]["stages"]]
     assert names[0] == "cues" and names[-1] == "total"
-    assert data[0]["stages"][-1]["peak_mib"] > 0
+    assert data["results"][0]["stages"][-1]["peak_mib"] > 0
+    assert data["results"][0]["max_rss_mib"] > 0 and data["settings"]["frames"] == 1
+    # The saved run re-renders to the same table (how docs/evaluation.md is regenerated).
+    assert main(["bench", "--from-json", str(out)]) == 0
+    assert capsys.readouterr().out == text
 
 
 def test_eval_report_writes_html(tmp_path: Path) -> None:

@@ -9,7 +9,8 @@ from monoplane.errors import ConfigError
 
 
 def test_builtin_profiles_and_their_outputs() -> None:
-    assert set(BUILTIN_PROFILES) == {"omnidata", "zerodepth", "midas"}
+    assert set(BUILTIN_PROFILES) == {"omnidata", "zerodepth", "midas", "depth-anything-v2",
+                                     "metric3d-v2", "moge-2"}
     omni = get_profile("omnidata")
     assert omni.depth.output == "relative_depth"
     assert omni.normals is not None and omni.normals.normal_encoding == "unsigned"
@@ -17,10 +18,24 @@ def test_builtin_profiles_and_their_outputs() -> None:
     assert zero.depth.output == "metric_depth" and zero.depth.intrinsics_input == "intrinsics"
     assert get_profile("midas").depth.output == "inverse_depth"
     assert get_profile("midas").normals is None
+    assert get_profile("depth-anything-v2").task == "depth"
+    m3d = get_profile("metric3d-v2").depth
+    assert m3d.canonical_focal == 1000.0 and m3d.normals_output == "predicted_normal"
+    moge = get_profile("moge-2").depth
+    assert moge.output == "point_map" and moge.constant_inputs == (("num_tokens", 1800),)
+    assert get_profile("moge-2").task == get_profile("metric3d-v2").task == "both"
+
+
+def test_joint_normals_and_a_normals_network_exclude_each_other() -> None:
+    joint = ModelSpec(output="metric_depth", normals_output="normals")
+    with pytest.raises(ConfigError, match="not both"):
+        OnnxProfile(name="x", depth=joint, normals=ModelSpec(output="normals"))
+    with pytest.raises(ConfigError, match="canonical_focal"):
+        ModelSpec(output="inverse_depth", canonical_focal=1000.0)
 
 
 def test_unknown_profile_lists_valid_ones() -> None:
-    with pytest.raises(ConfigError, match="midas, omnidata, zerodepth"):
+    with pytest.raises(ConfigError, match="midas, moge-2, omnidata, zerodepth"):
         get_profile("dpt")
 
 

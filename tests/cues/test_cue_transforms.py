@@ -133,6 +133,20 @@ def test_decode_flips_normals_that_face_away() -> None:
     assert np.all(np.sum(tilted * rays, axis=-1) <= 0)
 
 
+def test_orient_normals_matches_the_ray_image_reference() -> None:
+    # Reference: dot products with the full (H, W, 3) float32 ray image; random normals and
+    # intrinsics with skew.
+    rng = np.random.default_rng(0)
+    K = default_intrinsics(40, 30)
+    K[0, 1] = 3.0
+    normals = rng.normal(size=(30, 40, 3)).astype(np.float32)
+    rays = pixel_rays(K, 30, 40).astype(np.float32)
+    away = np.sum(normals * rays, axis=-1, keepdims=True) > 0
+    out = orient_normals(normals, K)
+    assert out.dtype == np.float32
+    np.testing.assert_array_equal(out, np.where(away, -normals, normals))
+
+
 @pytest.mark.parametrize("axes", ["x,y", "x,x,z", "a,b,c", "x;y;z"])
 def test_bad_axes_are_config_errors(axes: str) -> None:
     with pytest.raises(ConfigError):

@@ -1,23 +1,26 @@
-"""Built-in baseline on an exact scene, and how baselines are discovered."""
+"""Built-in baseline on an exact scene, and how baselines are discovered (pluggy hook)."""
 
 from __future__ import annotations
 
-from importlib import metadata
+import re
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from monoplane.errors import ConfigError
-from monoplane.evaluation import baselines
+from monoplane import hookimpl, hookspecs
+from monoplane.errors import ConfigError, PluginError
 from monoplane.evaluation.baselines import (
-    BUILTIN_BASELINES,
+    CALL_TIMING,
     Open3DRansacConfig,
     baseline_names,
     get_baseline,
     open3d_ransac,
+    run_baseline,
 )
 from monoplane.evaluation.segmentation import segmentation_scores
-from monoplane.plugin_manager import AUTOLOAD_ENV
+from monoplane.plugin_manager import get_plugin_manager
+from monoplane.ransac import RansacConfig
 from monoplane.testing import BOX_PLANES, box_frame
 
 
@@ -43,10 +46,43 @@ def test_open3d_ransac_respects_plane_limits() -> None:
     np.testing.assert_allclose(big_only.params[0], BOX_PLANES[0], atol=1e-4)
 
 
-def test_builtin_baselines_resolve_by_name() -> None:
+def test_builtin_baseline_registers_through_the_hook_and_times_its_call() -> None:
     assert "open3d-ransac" in baseline_names()
     assert get_baseline("open3d-ransac") is open3d_ransac
-    assert set(BUILTIN_BASELINES) <= set(baseline_names())
+    frame, _ = box_frame(64, 48)
+    rec = run_baseline("open3d-ransac", frame, seed=0)
+    assert rec.num_planes == 3
+    assert 0 < rec.timings[CALL_TIMING] <= rec.timings["total"]
+
+
+def test_baseline_config_follows_the_ransac_defaults() -> None:
+    cfg, ransac = Open3DRansacConfig(), RansacConfig()
+    assert (cfg.epsilon, cfg.num_iterations, cfg.max_planes, cfg.min_support,
+            cfg.min_support_points) == (ransac.epsilon, ransac.max_iterations,
+                                        ransac.max_planes, ransac.min_support,
+                                        ransac.min_support_points)
+
+
+class _Plugin:
+    def __init__(self, table: object) -> None:
+        self.table = table
+
+    @hookimpl
+    def monoplane_register_baselines(self) -> object:
+        return self.table
+
+
+def test_plugin_baselines_are_discovered_and_checked() -> None:
+    pm = get_plugin_manager(autoload=False, extra_plugins=(_Plugin({"mine": open3d_ransac}),))
+    assert baseline_names(pm) == ["mine", "open3d-ransac"]
+    assert get_baseline("mine", pm) is open3d_ransac
+    clash = get_plugin_manager(autoload=False,
+                               extra_plugins=(_Plugin({"open3d-ransac": open3d_ransac}),))
+    with pytest.raises(PluginError, match="open3d-ransac"):
+        baseline_names(clash)
+    for bad in ([open3d_ransac], {"x": 3}):
+        with pytest.raises(PluginError):
+            baseline_names(get_plugin_manager(autoload=False, extra_plugins=(_Plugin(bad),)))
 
 
 def test_unknown_baseline_lists_the_choices() -> None:
@@ -54,15 +90,9 @@ def test_unknown_baseline_lists_the_choices() -> None:
         get_baseline("no-such-baseline")
 
 
-def test_entry_points_are_read_only_when_autoload_is_on(monkeypatch: pytest.MonkeyPatch) -> None:
-    ep = metadata.EntryPoint(name="fake", value="monoplane.evaluation.baselines:open3d_ransac",
-                             group=baselines.ENTRY_POINT_GROUP)
-
-    def fake_entry_points(group: str) -> list[metadata.EntryPoint]:
-        return [ep] if group == baselines.ENTRY_POINT_GROUP else []
-
-    monkeypatch.setattr(baselines.metadata, "entry_points", fake_entry_points)
-    assert "fake" not in baseline_names()  # the test session disables autoload
-    monkeypatch.delenv(AUTOLOAD_ENV)
-    assert "fake" in baseline_names()
-    assert get_baseline("fake") is open3d_ransac
+def test_every_hook_is_documented_in_the_plugin_guide() -> None:
+    guide = (Path(__file__).parents[2] / "docs" / "plugins.md").read_text()
+    hooks = [name for name in dir(hookspecs) if name.startswith("monoplane_")]
+    assert "monoplane_register_baselines" in hooks
+    missing = [h for h in hooks if not re.search(rf"`{h}\(", guide)]
+    assert not missing, f"hooks missing from docs/plugins.md: {missing}"

@@ -4,7 +4,13 @@ import numpy as np
 import pytest
 
 from monoplane.errors import InvalidInput
-from monoplane.geometry.cloud import PlaneCloud
+from monoplane.geometry.cloud import (
+    PROPAGATION_NEIGHBOURS,
+    PROPAGATION_RADIUS_FACTOR,
+    PlaneCloud,
+)
+from monoplane.geometry.graph import NeighbourGraph
+from monoplane.testing import ROOM, room_cues
 from monoplane.types import Frame, intrinsics_matrix, pixel_rays
 
 K = intrinsics_matrix(40.0, 40.0, 15.5, 11.5)
@@ -102,3 +108,95 @@ def test_propagation_does_not_jump_far_gaps():
     full = sub.propagate(np.ones(sub.size, dtype=np.int32))
     assert np.all(full[:, :28] == 1)
     assert np.all(full[:, 28:] == 0)
+
+
+def noisy_room_cloud(seed=0, max_points=3000):
+    """A subsampled cloud of the box room with 1 % depth noise, its true sample labels and
+    planes (normalised frame): many pixels lie off their sample's plane and across creases."""
+    rgb, depth, normals, labels, K = room_cues(96, 128, seed=seed)
+    rng = np.random.default_rng(seed)
+    depth = (depth * (1 + 0.01 * rng.normal(size=depth.shape))).astype(np.float32)
+    depth[40:50, 60:80] = 0.0  # a hole, so some pixels' nearest sample is far in the image
+    frame = Frame(rgb=rgb, K=K, depth=depth, normals=normals)
+    cloud = PlaneCloud.from_frame(frame, max_points=max_points, rng=rng)
+    planes = cloud.plane_to_normalised(ROOM)
+    sample_labels = labels.ravel()[cloud.pixels].astype(np.int32)
+    sample_labels[rng.random(cloud.size) < 0.05] = 0  # some non-planar samples
+    return cloud, sample_labels, planes
+
+
+def reference_propagation(cloud, labels, planes, graph, tolerance, tree_k=None):
+    """Pixel by pixel, in Python: the rule of PlaneCloud.propagate. With ``tree_k``, every
+    doubtful pixel's candidates are its exact ``tree_k`` nearest samples in 3D instead of its
+    image-nearest sample and that sample's graph neighbours."""
+    from scipy.ndimage import distance_transform_edt
+
+    h, w = cloud.shape
+    radius = PROPAGATION_RADIUS_FACTOR * graph.spacing
+    missing = np.ones(h * w, bool)
+    missing[cloud.pixels] = False
+    _, (rows, cols) = distance_transform_edt(missing.reshape(h, w), return_indices=True)
+    sample_of = np.full(h * w, -1)
+    sample_of[cloud.pixels] = np.arange(cloud.size)
+    k = PROPAGATION_NEIGHBOURS
+    out = np.zeros(h * w, np.int32)
+    for v, pix in enumerate(cloud.all_pixels):
+        x = cloud.all_points[v]
+        s = sample_of[rows.ravel()[pix] * w + cols.ravel()[pix]]
+        gap = np.linalg.norm(x - cloud.points[s]) > radius
+        lab = labels[s]
+        if not gap and (lab == 0 or abs(planes[lab - 1, :3] @ x + planes[lab - 1, 3])
+                        <= tolerance):
+            out[pix] = lab
+            continue
+        if gap or tree_k:
+            dist, cand = cloud.tree.query(x, k=k, distance_upper_bound=radius)
+            cand = cand[np.isfinite(dist)]
+        else:
+            cand = np.r_[s, graph.neighbours(s)]
+            dist = np.linalg.norm(cloud.points[cand] - x, axis=1)
+            keep = dist <= radius
+            cand = cand[keep][np.argsort(dist[keep], kind="stable")][:k]
+        if cand.size == 0 or labels[cand[0]] == 0:
+            continue
+        planar = cand[labels[cand] > 0]
+        res = [abs(planes[labels[c] - 1, :3] @ x + planes[labels[c] - 1, 3]) for c in planar]
+        out[pix] = labels[planar[int(np.argmin(res))]]
+    out[cloud.pixels] = labels
+    return out.reshape(h, w)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_propagation_kernel_follows_its_rule_and_nearly_matches_exact_3d_neighbours(seed):
+    cloud, labels, planes = noisy_room_cloud(seed)
+    graph = NeighbourGraph.build(cloud.points, 8)
+    got = cloud.propagate(labels, planes, tolerance=0.005, graph=graph)
+    np.testing.assert_array_equal(got, reference_propagation(cloud, labels, planes, graph,
+                                                             0.005))
+    # Candidates from the graph stand in for the exact 3D nearest samples: same labels but
+    # on a handful of pixels.
+    exact = reference_propagation(cloud, labels, planes, graph, 0.005, tree_k=True)
+    valid = np.zeros(cloud.shape, bool).ravel()
+    valid[cloud.all_pixels] = True
+    assert np.mean(got.ravel()[valid] != exact.ravel()[valid]) < 0.005
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_unprojection_kernel_matches_frame_points(seed):
+    # Reference: Frame.points() (pixel rays times depth), centred and scaled with numpy; random
+    # intrinsics with skew, random depth with invalid pixels.
+    rng = np.random.default_rng(seed)
+    h, w = rng.integers(2, 40, size=2)
+    K = intrinsics_matrix(*rng.uniform(20, 80, 2), *rng.uniform(0, 30, 2))
+    K[0, 1] = rng.uniform(-2, 2)
+    depth = rng.uniform(0.5, 9.0, (h, w)).astype(np.float32)
+    depth[rng.random((h, w)) < 0.3] = 0.0
+    depth.flat[:3] = 1.0
+    frame = Frame(rgb=None, K=K, depth=depth, normals=np.tile(np.float32([0, 0, -1]), (h, w, 1)))
+    cloud = PlaneCloud.from_frame(frame)
+    cam = frame.points().reshape(-1, 3)[cloud.all_pixels]
+    center = cam.mean(axis=0)
+    scale = np.sqrt(((cam - center) ** 2).sum(axis=1).max())
+    np.testing.assert_allclose(cloud.center, center, rtol=1e-12, atol=1e-12)
+    assert cloud.scale == pytest.approx(scale, rel=1e-12)
+    np.testing.assert_allclose(cloud.all_points, (cam - center) / scale, atol=1e-12)

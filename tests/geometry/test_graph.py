@@ -1,9 +1,12 @@
 """NeighbourGraph: symmetric deduplicated kNN edges, CSR adjacency and pool subgraphs."""
 
 import numpy as np
+import pytest
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from monoplane.geometry.graph import NeighbourGraph
+from monoplane.geometry.graph import NeighbourGraph, _knn_edges, _largest_component
 
 
 def grid_points(n=6):
@@ -94,3 +97,88 @@ def test_largest_component_of_a_node_subset():
     np.testing.assert_array_equal(g.largest_component(np.array([0, 2, 3, 4])),
                                   [False, False, True, True])
     assert g.largest_component(np.zeros(0, dtype=np.int64)).shape == (0,)
+
+
+def test_subgraph_of_the_same_pool_is_reused_and_read_only():
+    rng = np.random.default_rng(4)
+    g = NeighbourGraph.build(rng.uniform(size=(200, 3)), k=6)
+    pool = np.sort(rng.choice(200, size=120, replace=False))
+    a, ids = g.subgraph(pool)
+    b, _ = g.subgraph(pool.copy())
+    assert a is b and not a.flags.writeable and not ids.flags.writeable
+    other = pool[::2]
+    c, _ = g.subgraph(other)
+    np.testing.assert_array_equal(other[c], g.edges[np.isin(g.edges, other).all(axis=1)])
+
+
+def test_largest_component_within_a_pool_matches_the_subset_one():
+    # Two clusters along x, far apart; the larger one wins, computed from the pool's subgraph.
+    rng = np.random.default_rng(5)
+    pts = np.concatenate([rng.uniform(0, 1, (80, 3)), rng.uniform(0, 1, (50, 3)) + [10, 0, 0]])
+    g = NeighbourGraph.build(pts, k=5)
+    pool = np.sort(rng.choice(130, size=100, replace=False))
+    members = rng.random(100) < 0.7
+    within = g.largest_component_within(pool, members)
+    np.testing.assert_array_equal(within, g.largest_component(pool[members]))
+    assert np.all(pool[members][within] < 80)
+    assert g.largest_component_within(pool, np.zeros(100, bool)).shape == (0,)
+
+
+def reference_knn_edges(nbr):
+    """The straightforward construction: all (min, max) pairs, one global sort, unique."""
+    n = nbr.shape[0]
+    src = np.repeat(np.arange(n), nbr.shape[1])
+    dst = nbr.ravel()
+    keep = src != dst
+    lo, hi = np.minimum(src, dst)[keep], np.maximum(src, dst)[keep]
+    key = np.unique(lo * n + hi)
+    edges = np.stack([key // n, key % n], axis=1)
+    neighbours = [[] for _ in range(n)]
+    for i, j in edges:
+        neighbours[i].append(j)
+        neighbours[j].append(i)
+    return edges, [sorted(x) for x in neighbours]
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_knn_edge_kernel_matches_the_sorting_reference(seed):
+    # Random neighbour tables, with self-references anywhere and repeated pairs (as among
+    # duplicate points), and real kNN tables of random clouds with exact duplicates.
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 300))
+    if seed % 2:
+        pts = rng.uniform(size=(n, 3))
+        pts[rng.random(n) < 0.2] = pts[0]
+        _, nbr = cKDTree(pts).query(pts, k=min(n, 6))
+        nbr = nbr.reshape(n, -1)
+    else:
+        nbr = rng.integers(0, n, size=(n, int(rng.integers(1, 12))))
+    nbr = np.ascontiguousarray(nbr, dtype=np.int64)
+    edges, indptr, indices = _knn_edges(nbr)
+    ref_edges, ref_rows = reference_knn_edges(nbr)
+    np.testing.assert_array_equal(edges.reshape(-1, 2), ref_edges.reshape(-1, 2))
+    assert [indices[indptr[i]:indptr[i + 1]].tolist() for i in range(n)] == ref_rows
+
+
+def reference_largest_component(members, edges):
+    """scipy's connected components of the members' induced subgraph, largest (first) one."""
+    idx = np.flatnonzero(members)
+    rank = np.cumsum(members) - 1
+    inside = members[edges[:, 0]] & members[edges[:, 1]]
+    ends = rank[edges[inside]]
+    adj = coo_matrix((np.ones(len(ends)), (ends[:, 0], ends[:, 1])), shape=(idx.size,) * 2)
+    _, comp = connected_components(adj, directed=False)
+    return comp == np.argmax(np.bincount(comp))
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_largest_component_kernel_matches_scipy(seed):
+    # Sparse random graphs have many components of equal size: the tie rule is exercised.
+    rng = np.random.default_rng(seed)
+    m = int(rng.integers(1, 200))
+    edges = rng.integers(0, m, size=(int(rng.integers(0, m)), 2)).astype(np.int64)
+    members = rng.random(m) < rng.uniform(0.2, 1.0)
+    if not members.any():
+        members[0] = True
+    np.testing.assert_array_equal(_largest_component(members, edges),
+                                  reference_largest_component(members, edges))

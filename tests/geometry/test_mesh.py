@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from monoplane.geometry.mesh import planar_mesh
+from monoplane.geometry.mesh import planar_mesh, reconstruction_to_open3d
 from monoplane.types import Frame, Reconstruction, intrinsics_matrix
 
 H, W = 12, 16
@@ -68,3 +68,13 @@ def test_empty_and_bad_step() -> None:
     assert v.shape == (0, 3) and t.shape == (0, 3) and c.shape == (0, 3) and ids.shape == (0,)
     with pytest.raises(ValueError, match="step"):
         planar_mesh(rec, step=0)
+
+
+def test_open3d_mesh_matches_planar_mesh() -> None:
+    rec = _rec(np.ones((H, W), np.int32), np.array([[0.0, 0.0, -1.0, 2.0]]))
+    v, t, c, _ = planar_mesh(rec, step=2)
+    mesh = reconstruction_to_open3d(rec, step=2)
+    np.testing.assert_allclose(np.asarray(mesh.vertices), v)
+    np.testing.assert_array_equal(np.asarray(mesh.triangles), t)
+    np.testing.assert_allclose(np.asarray(mesh.vertex_colors), c)
+    assert mesh.has_vertex_normals()

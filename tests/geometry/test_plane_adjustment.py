@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from monoplane.geometry.camera import look_at
 from monoplane.geometry.plane_adjustment import AdjustmentProblem, adjust
-from monoplane.synth.scene import look_at
+from monoplane.synth.scene import WORLD_UP
 from monoplane.types import intrinsics_matrix
 
 
@@ -14,7 +15,8 @@ def _problem(rng: np.random.Generator, n_views: int = 4):
     """Three orthogonal planes (floor, two walls) seen by a few cameras; exact data."""
     K = intrinsics_matrix(200.0, 200.0, 127.5, 95.5)
     planes = np.array([[0, 0, 1, 0.0], [1, 0, 0, 0.0], [0, 1, 0, 0.0]])
-    poses = [look_at(np.array([3.0 + 0.3 * k, 2.5 - 0.2 * k, 1.5]), np.array([0.5, 0.5, 0.5]))
+    poses = [look_at(np.array([3.0 + 0.3 * k, 2.5 - 0.2 * k, 1.5]), np.array([0.5, 0.5, 0.5]),
+                     WORLD_UP)
              for k in range(n_views)]
     R = np.stack([p[0] for p in poses])
     t = np.stack([p[1] for p in poses])

@@ -1,6 +1,7 @@
 """Plane primitives against closed-form answers."""
 
 import numpy as np
+import pytest
 
 from monoplane.geometry.planes import (
     fit_plane,
@@ -48,3 +49,29 @@ def test_fit_planes_per_label():
     assert count.tolist() == [20, 2, 30]
     assert np.allclose(params[0], [*na, 1.0]) and np.allclose(params[2], [*nb, 2.0])
     assert np.isnan(params[1]).all() and np.isnan(rmse[1])
+
+
+def test_per_label_fits_match_one_fit_per_label():
+    # Reference: fit_plane on each label's points. Labels 0, out of range or with < 3 points
+    # are left out; offsets far from the origin check the centring.
+    rng = np.random.default_rng(7)
+    groups, labels = [], []
+    for k in range(1, 9):
+        count = [0, 1, 2, 3, 50, 400, 1000, 7][k - 1]
+        n = rng.normal(size=3)
+        x, _ = on_plane(n, rng.uniform(0, 50), count, seed=k)
+        groups.append(x + rng.normal(0, 0.01, x.shape))
+        labels.append(np.full(count, k))
+    noise = rng.normal(size=(100, 3))
+    pts = np.vstack([*groups, noise, noise])
+    labels = np.concatenate([*labels, np.zeros(100, int), np.full(100, 12)])
+    order = rng.permutation(len(pts))
+    params, rmse, count = fit_planes_per_label(pts[order], labels[order], 8)
+    assert count.tolist() == [0, 1, 2, 3, 50, 400, 1000, 7]
+    for k, group in enumerate(groups):
+        if len(group) < 3:
+            assert np.isnan(params[k]).all() and np.isnan(rmse[k])
+            continue
+        ref, ref_rmse = fit_plane(group)
+        np.testing.assert_allclose(params[k], ref, rtol=1e-9, atol=1e-9)
+        assert rmse[k] == pytest.approx(ref_rmse, rel=1e-9, abs=1e-12)

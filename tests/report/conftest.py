@@ -10,7 +10,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from monoplane.types import Frame, Reconstruction, default_intrinsics, pixel_rays, plane_to_camera
+from monoplane.testing import plane_scene
+from monoplane.types import Reconstruction, default_intrinsics
 
 # (normal, d, lower bound, upper bound) in the room frame (x right, y down, z forward).
 _RECTS = [
@@ -37,24 +38,10 @@ def make_room(width: int = 160, height: int = 120, pitch_deg: float = 6.0) -> Re
     a = np.deg2rad(pitch_deg)
     R = np.array([[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])
     K = default_intrinsics(width, height, 70.0)
-    rays = pixel_rays(K, height, width).reshape(-1, 3)
-    rays_room = rays @ R  # R^T applied to each row
-    depth = np.full(len(rays), np.inf)
-    labels = np.zeros(len(rays), dtype=np.int32)
-    for i, (n, d, lo, hi) in enumerate(_RECTS):
-        n = np.asarray(n, dtype=np.float64)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = -d / (rays_room @ n)
-        pts = rays_room * t[:, None]
-        inside = np.all((pts >= np.asarray(lo) - 1e-9) & (pts <= np.asarray(hi) + 1e-9), axis=1)
-        hit = inside & (t > 0) & (t < depth)
-        depth[hit] = t[hit]
-        labels[hit] = i + 1
-    params_room = np.array([[*n, d] for n, d, _, _ in _RECTS], dtype=np.float64)
-    params = plane_to_camera(params_room, R, np.zeros(3))
-    depth = depth.reshape(height, width)
-    labels = labels.reshape(height, width)
-    normals = params[labels - 1, :3].astype(np.float32)
+    planes = np.array([[*n, d] for n, d, _, _ in _RECTS], dtype=np.float64)
+    bounds = np.array([[lo, hi] for _, _, lo, hi in _RECTS], dtype=np.float64)
+    scene = plane_scene(planes, K, width, height, R=R, bounds=bounds)
+    labels = scene.labels.copy()
 
     v, u = np.mgrid[0:height, 0:width]
     rng = np.random.default_rng(0)
@@ -64,10 +51,9 @@ def make_room(width: int = 160, height: int = 120, pitch_deg: float = 6.0) -> Re
     rgb[blob] = (40, 140, 60)
     labels[blob] = 0
     rgb = np.clip(rgb, 0, 255).astype(np.uint8)
-    frame = Frame(rgb=rgb, K=K, depth=depth.astype(np.float32), normals=normals, name="room",
-                  notes=["synthetic test room"])
-    return Reconstruction(frame=frame, labels=labels, params=params,
-                          rmse=np.full(len(params), 0.004), timings={"total": 1.25})
+    frame = scene.frame.with_(rgb=rgb, name="room", notes=["synthetic test room"])
+    return Reconstruction(frame=frame, labels=labels, params=scene.planes,
+                          rmse=np.full(len(planes), 0.004), timings={"total": 1.25})
 
 
 @pytest.fixture

@@ -5,13 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from monoplane.report.render3d import look_at
+from monoplane.geometry.camera import look_at
 from monoplane.report.viewpoints import facing_triangles, orbit_viewpoints, zoom_to_fit
 
 
 def test_look_at_opencv_axes() -> None:
-    T = look_at(np.array([0.0, -5.0, 0.0]), np.zeros(3), up=np.array([0.0, 0.0, 1.0]))
-    R, t = T[:3, :3], T[:3, 3]
+    R, t = look_at(np.array([0.0, -5.0, 0.0]), np.zeros(3), up=np.array([0.0, 0.0, 1.0]))
     np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-12)
     assert np.linalg.det(R) == pytest.approx(1.0)
     np.testing.assert_allclose(R @ np.zeros(3) + t, [0.0, 0.0, 5.0])  # target on the axis
@@ -19,6 +18,17 @@ def test_look_at_opencv_axes() -> None:
     np.testing.assert_allclose(R @ np.array([0.0, 0.0, 1.0]), [0.0, -1.0, 0.0], atol=1e-12)
     with pytest.raises(ValueError):
         look_at(np.zeros(3), np.array([0.0, 1.0, 0.0]), up=np.array([0.0, 1.0, 0.0]))
+
+
+def test_look_at_roll_turns_the_picture() -> None:
+    eye, target, up = np.zeros(3), np.array([0.0, 0.0, 4.0]), np.array([0.0, -1.0, 0.0])
+    R0, _ = look_at(eye, target, up)
+    np.testing.assert_allclose(R0, np.eye(3), atol=1e-12)  # OpenCV axes already
+    R, t = look_at(eye, target, up, roll_deg=90.0)
+    # Camera x now points along the old camera y (world down), camera y along world -x.
+    np.testing.assert_allclose(R @ [0.0, 1.0, 0.0], [1.0, 0.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(R @ [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(t, 0.0)
 
 
 def test_orbit_views_look_at_the_model_and_zoom_fits() -> None:

@@ -106,7 +106,7 @@ from monoplane.cues.tiny_models import tiny_depth_model, tiny_normals_model  # n
 
 
 def test_unknown_profile_is_config_error() -> None:
-    with pytest.raises(ConfigError, match="valid profiles: midas, omnidata, zerodepth"):
+    with pytest.raises(ConfigError, match="valid profiles: depth-anything-v2, metric3d-v2, midas"):
         OnnxCuesConfig(profile="dpt-large")
 
 

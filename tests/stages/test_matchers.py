@@ -7,23 +7,17 @@ import numpy as np
 import pytest
 
 from monoplane.errors import InvalidInput
+from monoplane.geometry.camera import look_at
 from monoplane.stages.matchers import ColmapMatcher, SfmError, monoplane_register_matchers
 from monoplane.types import Frame, intrinsics_matrix
 
 W, H, F = 480, 360, 380.0
 K = intrinsics_matrix(F, F, (W - 1) / 2, (H - 1) / 2)
+#: World up: the room's world frame has y down, like the camera.
+UP = np.array([0.0, -1.0, 0.0])
 # Room (world frame, y down): floor y = 1.5, back wall z = 6, side walls x = ±2.5, ceiling.
 ROOM = np.array([[0, -1, 0, 1.5], [0, 0, -1, 6.0], [1, 0, 0, 2.5], [-1, 0, 0, 2.5],
                  [0, 1, 0, 1.5]], dtype=np.float64)
-
-
-def look_at(eye: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    z = target - eye
-    z /= np.linalg.norm(z)
-    x = np.cross(z, [0.0, -1.0, 0.0])
-    x /= np.linalg.norm(x)
-    R = np.stack([x, np.cross(z, x), z])
-    return R, -R @ eye
 
 
 def render(R: np.ndarray, t: np.ndarray, seed: int = 0) -> np.ndarray:
@@ -56,8 +50,8 @@ def render(R: np.ndarray, t: np.ndarray, seed: int = 0) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def pair() -> tuple[list[Frame], list[tuple[np.ndarray, np.ndarray]]]:
-    poses = [look_at(np.array([0.0, 0.0, 0.0]), np.array([0.0, 0.3, 5.0])),
-             look_at(np.array([0.6, -0.1, 0.2]), np.array([0.2, 0.3, 5.0]))]
+    poses = [look_at(np.array([0.0, 0.0, 0.0]), np.array([0.0, 0.3, 5.0]), UP),
+             look_at(np.array([0.6, -0.1, 0.2]), np.array([0.2, 0.3, 5.0]), UP)]
     frames = [Frame(rgb=render(R, t), K=K, name=f"view{i}") for i, (R, t) in enumerate(poses)]
     return frames, poses
 

@@ -8,9 +8,8 @@ from scipy import ndimage
 
 from monoplane.errors import ConfigError
 from monoplane.stages.refiners import DenseCrfRefiner, NoRefiner, monoplane_register_refiners
-from monoplane.testing import check_stage_contract
+from monoplane.testing import ROOM, check_stage_contract, room_cues
 from monoplane.types import Frame, Reconstruction
-from tests.conftest import ROOM, room_cues
 
 
 def room(height: int = 96, width: int = 128, grey: bool = False, seed: int = 0):

@@ -5,7 +5,7 @@ import pytest
 
 from monoplane.stages.base import RansacParams
 from monoplane.stages.samplers import NapsacSampler, NormalConsistentSampler, UniformSampler
-from tests.conftest import cloud_from_arrays
+from monoplane.testing import cloud_from_arrays
 
 
 @pytest.fixture

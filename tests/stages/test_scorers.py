@@ -6,7 +6,7 @@ import pytest
 from monoplane.stages import scorers
 from monoplane.stages.base import RansacParams
 from monoplane.stages.scorers import InlierCountScorer, MsacNormalScorer, MsacScorer
-from tests.conftest import cloud_from_arrays
+from monoplane.testing import cloud_from_arrays
 
 
 @pytest.fixture

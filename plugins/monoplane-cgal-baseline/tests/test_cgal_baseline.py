@@ -10,7 +10,7 @@ pytest.importorskip("CGAL.CGAL_Shape_detection", reason="the GPL 'cgal' package 
 from monoplane_cgal_baseline import CgalRansacConfig, cgal_efficient_ransac  # noqa: E402
 
 from monoplane.evaluation.segmentation import segmentation_scores  # noqa: E402
-from monoplane.testing import BOX_PLANES, box_frame  # noqa: E402
+from monoplane.testing import BOX_PLANES, box_frame, check_baseline_contract  # noqa: E402
 
 
 def test_finds_the_three_planes_of_an_exact_box() -> None:
@@ -24,6 +24,10 @@ def test_finds_the_three_planes_of_an_exact_box() -> None:
         assert np.abs(rec.params - plane).max(axis=1).min() < 5e-3
 
 
+def test_baseline_contract() -> None:
+    check_baseline_contract(cgal_efficient_ransac)
+
+
 def test_minimum_support_drops_small_planes() -> None:
     frame, _ = box_frame(64, 48)
     rec = cgal_efficient_ransac(frame, config=CgalRansacConfig(min_support=0.4))
@@ -31,9 +35,26 @@ def test_minimum_support_drops_small_planes() -> None:
     np.testing.assert_allclose(rec.params[0], BOX_PLANES[0], atol=1e-3)
 
 
-def test_registered_in_the_baselines_entry_point_group(monkeypatch: pytest.MonkeyPatch) -> None:
-    from monoplane.evaluation.baselines import get_baseline
-    from monoplane.plugin_manager import AUTOLOAD_ENV
+def test_reports_the_efficient_ransac_call_time() -> None:
+    frame, _ = box_frame(64, 48)
+    rec = cgal_efficient_ransac(frame)
+    assert rec.timings["baseline.call"] > 0
 
-    monkeypatch.delenv(AUTOLOAD_ENV, raising=False)
-    assert get_baseline("cgal") is cgal_efficient_ransac
+
+def test_registered_through_the_baseline_hook() -> None:
+    import monoplane_cgal_baseline
+
+    from monoplane.evaluation.baselines import baseline_names, get_baseline
+    from monoplane.plugin_manager import get_plugin_manager
+
+    pm = get_plugin_manager(autoload=False, extra_plugins=(monoplane_cgal_baseline,))
+    assert "cgal" in baseline_names(pm)
+    assert get_baseline("cgal", pm) is cgal_efficient_ransac
+
+
+def test_shares_the_pipeline_ransac_defaults() -> None:
+    from monoplane.ransac import RansacConfig
+
+    cfg, ransac = CgalRansacConfig(), RansacConfig()
+    assert (cfg.epsilon, cfg.normal_deg, cfg.min_support, cfg.min_support_points) == (
+        ransac.epsilon, ransac.epsilon_n_deg, ransac.min_support, ransac.min_support_points)

@@ -1,8 +1,10 @@
 """CGAL Efficient RANSAC (Schnabel et al. 2007) as a ``monoplane eval`` baseline.
 
-Registered in the ``monoplane.baselines`` entry-point group under the name ``cgal``. The
-callable follows monoplane's baseline contract: ``baseline(frame, *, seed=0) ->
-Reconstruction``, planes in the frame's camera frame (OpenCV axes) and depth units.
+Registered under the name ``cgal`` through monoplane's ``monoplane_register_baselines`` hook
+(this module is a plugin in the ``monoplane`` entry-point group). The callable follows
+monoplane's baseline contract: ``baseline(frame, *, seed=0) -> Reconstruction``, planes in the
+frame's camera frame (OpenCV axes) and depth units, and ``timings["baseline.call"]`` the
+seconds of the ``efficient_RANSAC`` call alone (building CGAL's point set excluded).
 
 License: GPL-3.0-or-later (CGAL's Shape_detection package is GPL).
 """
@@ -10,15 +12,21 @@ License: GPL-3.0-or-later (CGAL's Shape_detection package is GPL).
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from monoplane import hookimpl
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.planes import fit_plane
+from monoplane.ransac import RansacConfig
 from monoplane.types import Frame, Reconstruction
 
 __version__ = "0.1.0"
+
+#: Values shared with the pipeline's RANSAC are read from its defaults, not copied.
+_RANSAC = RansacConfig()
 
 
 @dataclass(frozen=True)
@@ -42,12 +50,12 @@ class CgalRansacConfig:
         Smallest shape in points, whatever the fraction.
     """
 
-    epsilon: float = 0.02
-    normal_deg: float = 10.0
+    epsilon: float = _RANSAC.epsilon
+    normal_deg: float = _RANSAC.epsilon_n_deg
     cluster_epsilon: float = 0.03
     probability: float = 0.01
-    min_support: float = 0.006
-    min_support_points: int = 30
+    min_support: float = _RANSAC.min_support
+    min_support_points: int = _RANSAC.min_support_points
 
 
 def _point_set(points: np.ndarray, normals: np.ndarray) -> object:
@@ -92,11 +100,13 @@ def cgal_efficient_ransac(frame: Frame, *, seed: int = 0,
     shape_map = ps.add_int_map("shape", -1)
     n_points = cloud.all_points.shape[0]
     min_points = max(3, cfg.min_support_points, int(math.ceil(cfg.min_support * n_points)))
+    start = time.perf_counter()
     CGAL_Shape_detection.efficient_RANSAC(
         ps, shape_map, min_points=min_points, epsilon=cfg.epsilon,
         cluster_epsilon=cfg.cluster_epsilon,
         normal_threshold=math.cos(math.radians(cfg.normal_deg)),
         probability=cfg.probability, planes=True)
+    call = time.perf_counter() - start
     shape = np.fromiter((shape_map.get(i) for i in range(n_points)), dtype=np.int64,
                         count=n_points)
     flat = np.zeros(frame.height * frame.width, dtype=np.int32)
@@ -116,4 +126,11 @@ def cgal_efficient_ransac(frame: Frame, *, seed: int = 0,
                           params=np.asarray(planes, dtype=np.float64).reshape(-1, 4),
                           rmse=np.asarray(rmses, dtype=np.float64),
                           support=np.asarray(supports, dtype=np.int64),
-                          config={"baseline": "cgal", **asdict(cfg)})
+                          config={"baseline": "cgal", **asdict(cfg)},
+                          timings={"baseline.call": call})
+
+
+@hookimpl
+def monoplane_register_baselines() -> dict:
+    """Register ``cgal`` with monoplane's evaluation and benchmark."""
+    return {"cgal": cgal_efficient_ransac}

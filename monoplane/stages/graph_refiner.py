@@ -1,0 +1,322 @@
+"""``graph-crf``: multi-plane refinement on the kNN graph of the cloud, no image needed.
+
+Sequential RANSAC labels greedily: a point on the crease between two faces goes to whichever
+plane was found first, and a point left over after the search stays non-planar. This refiner
+revisits every point with all planes at once. It minimises a multi-label CRF on the cloud's kNN
+graph
+
+    E(l) = Σ_i U_i(l_i) + β Σ_(i,j)∈E w_ij [l_i ≠ l_j] / k̄
+
+by mean-field inference, where
+
+* ``U_i(0) = 1`` (non-planar) and ``U_i(p) = (φ(i, p) / ε)² + g(ρ(i, p))`` for plane ``p``:
+  the GC-RANSAC truncated-L2 distance cost, untruncated so that a point beyond ε prefers
+  "non-planar", plus the labeler's normal cost (paper eq. E_n) with threshold ε_n;
+* ``w_ij = 0.5 + k_p + k_c + k_n`` are the proximity labeler's cut costs (the same position,
+  colour and normal affinities and bandwidths; colour is dropped when the cloud has none);
+* ``k̄`` is the graph's mean degree, so β does not depend on ``knn``.
+
+Afterwards each label is split into graph-connected components (coplanar but separate faces
+become separate planes), components smaller than ``min_support`` are dropped, every plane is
+refit by least squares on its points, and touching regions whose planes agree are merged.
+
+The same code refines an image reconstruction: the frame's valid pixels are the cloud (no
+subsampling), so it can serve ``monoplane run`` on range data as well.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.sparse import coo_matrix, csr_matrix
+from scipy.sparse.csgraph import connected_components
+
+from monoplane.errors import ConfigError
+from monoplane.geometry.cloud import PlaneCloud
+from monoplane.geometry.graph import NeighbourGraph
+from monoplane.geometry.planes import fit_planes_per_label
+from monoplane.graphcut import normal_costs, proximity_weights
+from monoplane.hookspecs import hookimpl
+from monoplane.stages.base import Refiner, Stage, param
+from monoplane.types import Reconstruction, orient_towards_camera
+
+
+@dataclass
+class GraphCrfConfig:
+    """Parameters of the ``graph-crf`` refiner (distances in unit-sphere units)."""
+
+    epsilon: float = param(0.02, "distance scale ε of the plane cost (like ransac.epsilon)")
+    noise_factor: float = param(
+        0.0, "if > 0, ε = noise_factor × σ within [epsilon / 10, epsilon], σ the sensor noise "
+        "estimated from the RANSAC planes' residuals (robust: 1.4826 × median |distance|)")
+    epsilon_n_deg: float = param(10.0, "normal threshold ε_n of the plane cost, degrees")
+    normal_weight: float = param(
+        1.0, "weight of the normal cost in the data term (0: distance only, for range data "
+        "whose normals are blurred at creases)")
+    beta: float = param(2.0, "weight β of the pairwise term against the data term")
+    temperature: float = param(0.2, "mean-field temperature (lower = closer to hard ICM)")
+    iterations: int = param(8, "mean-field iterations (0 keeps the labels, still splits/merges)")
+    max_jump: float = param(
+        0.05, "image input: relative depth jump that cuts the pixel-grid graph")
+    alpha_p2: float = param(0.005, "α_p², squared position bandwidth of the affinities")
+    alpha_c2: float = param(0.1, "α_c², squared colour bandwidth (RGB in [0, 1])")
+    alpha_n2: float = param(5.0, "α_n², normal-angle bandwidth (radians)")
+    w_p: float = param(1.0, "weight of the position affinity")
+    w_c: float = param(1.0, "weight of the colour affinity (dropped without colour)")
+    w_n: float = param(1.0, "weight of the normal affinity")
+    min_support: float = param(
+        0.001, "smallest region kept, fraction of the cloud's points")
+    min_support_points: int = param(20, "smallest region kept, points")
+    merge_angle_deg: float = param(5.0, "touching regions merge when normals agree this well")
+    merge_distance: float = param(
+        0.5, "... and each region's RMS distance to the other's plane is below this times ε")
+
+    def __post_init__(self) -> None:
+        checks = [
+            (self.epsilon > 0, "epsilon must be positive"),
+            (self.noise_factor >= 0, "noise_factor must be >= 0"),
+            (0 < self.epsilon_n_deg <= 180, "epsilon_n_deg must lie in (0, 180]"),
+            (self.beta >= 0, "beta must be >= 0"),
+            (self.normal_weight >= 0, "normal_weight must be >= 0"),
+            (self.temperature > 0, "temperature must be positive"),
+            (self.iterations >= 0, "iterations must be >= 0"),
+            (self.max_jump > 0, "max_jump must be positive"),
+            (min(self.alpha_p2, self.alpha_c2, self.alpha_n2) > 0, "bandwidths must be > 0"),
+            (0 <= self.min_support < 1, "min_support must lie in [0, 1)"),
+            (self.min_support_points >= 3, "min_support_points must be at least 3"),
+            (0 <= self.merge_angle_deg <= 90, "merge_angle_deg must lie in [0, 90]"),
+            (self.merge_distance >= 0, "merge_distance must be >= 0"),
+        ]
+        for ok, message in checks:
+            if not ok:
+                raise ConfigError(f"refiner (graph-crf): {message}")
+
+
+def _adjacency(graph: NeighbourGraph, weights: np.ndarray) -> csr_matrix:
+    """Symmetric (N, N) sparse matrix of edge weights."""
+    i, j = graph.edges[:, 0], graph.edges[:, 1]
+    n = graph.num_nodes
+    return coo_matrix((np.r_[weights, weights], (np.r_[i, j], np.r_[j, i])),
+                      shape=(n, n)).tocsr()
+
+
+def pixel_graph(cloud: PlaneCloud, max_jump: float) -> NeighbourGraph:
+    """8-connected graph of a frame's valid pixels, cut across depth jumps.
+
+    On an image the pixel grid is the natural neighbourhood: a 3D kNN graph over quantised
+    range data links points only within one quantisation step (terrace) and falls apart into
+    stripes. Two neighbouring pixels are linked unless their 3D distance exceeds ``max_jump``
+    times their distance from the cloud's centre (a relative depth jump, as in the normals
+    estimator).
+
+    Parameters
+    ----------
+    cloud : PlaneCloud
+        Cloud of the frame's valid pixels, not subsampled.
+    max_jump : float
+        Relative jump threshold.
+    """
+    h, w = cloud.shape
+    index = np.full(h * w, -1, dtype=np.int64)
+    index[cloud.pixels] = np.arange(cloud.size)
+    index = index.reshape(h, w)
+    pairs = []
+    for dv, du in ((0, 1), (1, 0), (1, 1), (1, -1)):
+        c0, c1 = max(0, -du), w - max(0, du)
+        a, b = index[:h - dv, c0:c1], index[dv:, c0 + du:c1 + du]
+        ok = (a >= 0) & (b >= 0)
+        pairs.append(np.stack([a[ok], b[ok]], axis=1))
+    edges = np.concatenate(pairs)
+    # The cloud is centred on the scene; points are compared at their own depth scale.
+    p = cloud.points
+    gap = np.linalg.norm(p[edges[:, 0]] - p[edges[:, 1]], axis=1)
+    reach = max_jump * np.maximum(np.linalg.norm(p[edges[:, 0]] + cloud.center / cloud.scale,
+                                                 axis=1), 1e-12)
+    edges = np.sort(edges[gap <= reach], axis=1)
+    edges = edges[np.lexsort((edges[:, 1], edges[:, 0]))]
+    both = np.concatenate([edges, edges[:, ::-1]])
+    both = both[np.argsort(both[:, 0], kind="stable")]
+    indptr = np.zeros(cloud.size + 1, dtype=np.int64)
+    np.cumsum(np.bincount(both[:, 0], minlength=cloud.size), out=indptr[1:])
+    spacing = float(np.median(gap)) if gap.size else 0.0
+    return NeighbourGraph(cloud.size, edges, indptr, both[:, 1].copy(), cloud.tree, spacing)
+
+
+class GraphCrfRefiner(Refiner):
+    """Mean-field multi-plane CRF on the kNN graph, component split, refit, coplanar merge."""
+
+    name = "graph-crf"
+    Config = GraphCrfConfig
+    needs_pixels = False
+
+    def distance_scale(self, cloud: PlaneCloud, labels: np.ndarray, planes: np.ndarray
+                       ) -> float:
+        """ε of the plane cost, normalised units: ``epsilon`` or the noise-based one."""
+        c = self.config
+        planar = labels > 0
+        if c.noise_factor == 0 or planar.sum() < 3:
+            return c.epsilon
+        p = planes[labels[planar] - 1]
+        resid = np.abs(np.einsum("ij,ij->i", cloud.points[planar], p[:, :3]) + p[:, 3])
+        sigma = 1.4826 * float(np.median(resid))
+        # Exact or synthetic data have σ ≈ 0: a tenth of ε keeps the cost finite and above
+        # the rounding of the plane fits.
+        return float(np.clip(c.noise_factor * sigma, 0.1 * c.epsilon, c.epsilon))
+
+    def unary(self, cloud: PlaneCloud, planes: np.ndarray, epsilon: float | None = None
+              ) -> np.ndarray:
+        """(N, P + 1) data costs: column 0 non-planar, column p plane p (see module doc)."""
+        c = self.config
+        epsilon = c.epsilon if epsilon is None else epsilon
+        dist = np.abs(cloud.points @ planes[:, :3].T + planes[:, 3])
+        cos = np.clip(cloud.normals @ planes[:, :3].T, -1.0, 1.0)
+        plane_cost = (dist / epsilon) ** 2
+        if c.normal_weight > 0:
+            plane_cost += c.normal_weight * normal_costs(np.arccos(cos),
+                                                         math.radians(c.epsilon_n_deg))
+        return np.c_[np.ones(cloud.size), plane_cost]
+
+    def _mean_field(self, unary: np.ndarray, adj: csr_matrix, labels: np.ndarray,
+                    mean_degree: float) -> np.ndarray:
+        c = self.config
+        if c.iterations == 0 or unary.shape[1] < 2:
+            return labels
+        beta = c.beta / max(mean_degree, 1e-12)
+        q = np.zeros(unary.shape, dtype=np.float64)
+        q[np.arange(labels.size), labels] = 1.0
+        # "Non-planar" after RANSAC means no plane claimed the point, not evidence against
+        # every plane: such points start from their data term alone, so a strip the greedy
+        # search left over does not hold itself in place through the pairwise term.
+        free = labels == 0
+        if free.any():
+            e = unary[free] - unary[free].min(axis=1, keepdims=True)
+            q[free] = np.exp(-e / c.temperature)
+            q[free] /= q[free].sum(axis=1, keepdims=True)
+        for _ in range(c.iterations):
+            # Expected Potts cost of label l at i: Σ_j w_ij (1 - Q_j(l)) = deg_i - (W Q)_i(l);
+            # deg_i is the same for every label and cancels in the softmax.
+            energy = unary - beta * (adj @ q)
+            energy -= energy.min(axis=1, keepdims=True)
+            q = np.exp(-energy / c.temperature)
+            q /= q.sum(axis=1, keepdims=True)
+        return np.argmax(q, axis=1).astype(np.int32)
+
+    def _components(self, graph: NeighbourGraph, labels: np.ndarray, min_size: int
+                    ) -> np.ndarray:
+        """Relabel every graph-connected region of one label as its own label 1..R."""
+        i, j = graph.edges[:, 0], graph.edges[:, 1]
+        same = (labels[i] == labels[j]) & (labels[i] > 0)
+        n = labels.size
+        adj = coo_matrix((np.ones(int(same.sum())), (i[same], j[same])), shape=(n, n))
+        _, comp = connected_components(adj, directed=False)
+        comp = np.where(labels > 0, comp + 1, 0)
+        sizes = np.bincount(comp)
+        sizes[0] = 0
+        keep = np.flatnonzero(sizes >= min_size)
+        # Larger regions first, so plane ids follow size.
+        keep = keep[np.argsort(-sizes[keep], kind="stable")]
+        renumber = np.zeros(sizes.size, dtype=np.int32)
+        renumber[keep] = np.arange(1, keep.size + 1)
+        return renumber[comp]
+
+    def _merge(self, cloud: PlaneCloud, graph: NeighbourGraph, labels: np.ndarray,
+               planes: np.ndarray) -> np.ndarray:
+        """Merge touching regions whose planes agree (union-find over region adjacency)."""
+        c = self.config
+        num = planes.shape[0]
+        if num < 2 or c.merge_distance == 0:
+            return labels
+        a, b = labels[graph.edges[:, 0]], labels[graph.edges[:, 1]]
+        touch = (a > 0) & (b > 0) & (a != b)
+        pairs = np.unique(np.sort(np.stack([a[touch], b[touch]], axis=1), axis=1), axis=0)
+        if pairs.size == 0:
+            return labels
+        cos_max = math.cos(math.radians(c.merge_angle_deg))
+        tol2 = (c.merge_distance * c.epsilon) ** 2
+        order = np.argsort(labels, kind="stable")
+        counts = np.bincount(labels, minlength=num + 1)
+        groups = np.split(order, np.cumsum(counts)[:-1])
+        parent = np.arange(num + 1)
+
+        def root(x: int) -> int:
+            while parent[x] != x:
+                parent[x] = parent[parent[x]]
+                x = parent[x]
+            return x
+
+        for p, q in pairs:
+            n_p, n_q = planes[p - 1], planes[q - 1]
+            if abs(float(n_p[:3] @ n_q[:3])) < cos_max:
+                continue
+            pts_p, pts_q = cloud.points[groups[p]], cloud.points[groups[q]]
+            if (np.mean((pts_p @ n_q[:3] + n_q[3]) ** 2) > tol2
+                    or np.mean((pts_q @ n_p[:3] + n_p[3]) ** 2) > tol2):
+                continue
+            rp, rq = root(int(p)), root(int(q))
+            if rp != rq:
+                parent[max(rp, rq)] = min(rp, rq)
+        roots = np.array([root(x) for x in range(num + 1)])
+        _, dense = np.unique(roots, return_inverse=True)
+        return dense.astype(np.int32)[labels]
+
+    def refine_cloud(self, cloud: PlaneCloud, graph: NeighbourGraph, labels: np.ndarray,
+                     planes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """See :meth:`monoplane.stages.base.Refiner.refine_cloud`."""
+        c = self.config
+        labels = np.asarray(labels, dtype=np.int32)
+        planes = np.asarray(planes, dtype=np.float64).reshape(-1, 4)
+        if planes.shape[0] == 0:
+            return labels, planes
+        weights = proximity_weights(cloud.points, graph.edges, cloud.normals, cloud.colors,
+                                    c.alpha_p2, c.alpha_c2, c.alpha_n2, c.w_p, c.w_c, c.w_n)
+        adj = _adjacency(graph, weights)
+        epsilon = self.distance_scale(cloud, labels, planes)
+        labels = self._mean_field(self.unary(cloud, planes, epsilon), adj, labels,
+                                  graph.mean_degree)
+        min_size = max(c.min_support_points, math.ceil(c.min_support * cloud.size))
+        for _ in range(2):
+            labels = self._components(graph, labels, min_size)
+            num = int(labels.max(initial=0))
+            planes, _, _ = fit_planes_per_label(cloud.points, labels, num)
+            merged = self._merge(cloud, graph, labels, planes)
+            if int(merged.max(initial=0)) == num:
+                break
+            labels = merged
+        return labels, planes
+
+    def refine(self, rec: Reconstruction) -> Reconstruction:
+        """Refine an image reconstruction on the kNN graph of all its valid pixels.
+
+        Parameters
+        ----------
+        rec : Reconstruction
+            RANSAC result; its frame needs depth and normals.
+
+        Returns
+        -------
+        Reconstruction
+            Labels 1..P' (graph-connected regions), planes refit on each region's pixels in
+            the camera frame and depth units, facing the camera.
+        """
+        frame = rec.frame
+        cloud = PlaneCloud.from_frame(frame)
+        graph = pixel_graph(cloud, self.config.max_jump)
+        start = rec.labels.ravel()[cloud.pixels]
+        planes = cloud.plane_to_normalised(rec.params) if rec.num_planes else np.zeros((0, 4))
+        labels, _ = self.refine_cloud(cloud, graph, start, planes)
+        image = np.zeros(frame.height * frame.width, dtype=np.int32)
+        image[cloud.pixels] = labels
+        params, rmse, support = fit_planes_per_label(frame.points().reshape(-1, 3), image,
+                                                     int(labels.max(initial=0)))
+        return Reconstruction(frame=frame, labels=image.reshape(frame.shape),
+                              params=orient_towards_camera(params) if len(params)
+                              else np.zeros((0, 4)),
+                              rmse=rmse, support=support, timings=dict(rec.timings))
+
+
+@hookimpl
+def monoplane_register_refiners() -> list[type[Stage]]:
+    """Register the graph refiner."""
+    return [GraphCrfRefiner]

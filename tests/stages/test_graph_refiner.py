@@ -1,0 +1,96 @@
+"""The graph-crf refiner: a crease relabelled, separate coplanar parts split, image use."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from monoplane import Pipeline
+from monoplane.errors import ConfigError
+from monoplane.evaluation.segcomp import segcomp
+from monoplane.geometry.cloud import PlaneCloud
+from monoplane.geometry.graph import NeighbourGraph
+from monoplane.stages.graph_refiner import GraphCrfConfig, GraphCrfRefiner
+from monoplane.testing import box_frame
+
+
+def crease_cloud() -> tuple[PlaneCloud, np.ndarray]:
+    """A floor (z = 0) meeting a wall (x = 0) at a right angle, normalised frame units."""
+    s = np.arange(0.0, 0.5, 0.01)
+    a, b = np.meshgrid(s, s)
+    floor = np.stack([a.ravel() + 0.005, b.ravel(), np.zeros(a.size)], axis=1)
+    wall = np.stack([np.zeros(a.size), b.ravel(), a.ravel() + 0.005], axis=1)
+    points = np.vstack([floor, wall])
+    normals = np.vstack([np.tile([0, 0, 1.0], (a.size, 1)), np.tile([1.0, 0, 0], (a.size, 1))])
+    truth = np.repeat([1, 2], a.size).astype(np.int32)
+    n = len(points)
+    cloud = PlaneCloud(points=points, normals=normals, colors=None, pixels=np.arange(n),
+                       center=np.zeros(3), scale=1.0, shape=(1, n), all_points=points,
+                       all_pixels=np.arange(n))
+    return cloud, truth
+
+
+def test_crease_points_go_back_to_their_plane():
+    cloud, truth = crease_cloud()
+    graph = NeighbourGraph.build(cloud.points, 8)
+    planes = np.array([[0, 0, 1.0, 0], [1.0, 0, 0, 0]])
+    start = truth.copy()
+    # RANSAC-like greedy errors: the floor took a strip of the wall near the crease, and a
+    # few floor points were left non-planar.
+    near_wall = (truth == 2) & (cloud.points[:, 2] < 0.03)
+    start[near_wall] = 1
+    start[(truth == 1) & (cloud.points[:, 0] > 0.4) & (cloud.points[:, 1] < 0.05)] = 0
+    labels, refit = GraphCrfRefiner().refine_cloud(cloud, graph, start, planes)
+    assert segcomp(labels, truth).correct == 2
+    # Refined labels are renumbered by region size: compare through each region's majority.
+    for g in (1, 2):
+        values, counts = np.unique(labels[truth == g], return_counts=True)
+        assert values[np.argmax(counts)] > 0 and counts.max() == counts.sum()
+    assert refit.shape == (2, 4)
+
+
+def test_separate_coplanar_parts_become_separate_planes():
+    cloud, truth = crease_cloud()
+    # Move half of the floor far away along its own plane: same plane, two parts.
+    pts = cloud.points.copy()
+    far = (truth == 1) & (pts[:, 1] > 0.25)
+    pts[far, 0] += 2.0
+    moved = PlaneCloud(points=pts, normals=cloud.normals, colors=None, pixels=cloud.pixels,
+                       center=cloud.center, scale=1.0, shape=cloud.shape, all_points=pts,
+                       all_pixels=cloud.all_pixels)
+    graph = NeighbourGraph.build(pts, 8)
+    labels, planes = GraphCrfRefiner().refine_cloud(moved, graph, truth,
+                                                    np.array([[0, 0, 1.0, 0], [1.0, 0, 0, 0]]))
+    assert labels.max() == 3 and len(planes) == 3
+    assert len(np.unique(labels[far])) == 1 and labels[far][0] not in labels[truth == 2]
+
+
+def test_image_refinement_recovers_the_box():
+    frame, true_labels = box_frame()
+    pipe = Pipeline.from_preset("range")
+    rec = pipe.run(frame)
+    assert segcomp(rec.labels, true_labels).correct == 3
+
+
+def test_bad_config():
+    with pytest.raises(ConfigError, match="temperature"):
+        GraphCrfConfig(temperature=0)
+
+
+def test_noise_based_distance_scale_is_three_sigma():
+    cloud, truth = crease_cloud()
+    rng = np.random.default_rng(0)
+    sigma = 0.001
+    pts = cloud.points.copy()
+    pts[truth == 1, 2] += rng.normal(0, sigma, (truth == 1).sum())
+    pts[truth == 2, 0] += rng.normal(0, sigma, (truth == 2).sum())
+    noisy = PlaneCloud(points=pts, normals=cloud.normals, colors=None, pixels=cloud.pixels,
+                       center=cloud.center, scale=1.0, shape=cloud.shape, all_points=pts,
+                       all_pixels=cloud.all_pixels)
+    planes = np.array([[0, 0, 1.0, 0], [1.0, 0, 0, 0]])
+    refiner = GraphCrfRefiner(GraphCrfConfig(noise_factor=3.0))
+    assert refiner.distance_scale(noisy, truth, planes) == pytest.approx(3 * sigma, rel=0.1)
+    # Never above the configured epsilon, and off by default.
+    assert GraphCrfRefiner(GraphCrfConfig(noise_factor=1e3)).distance_scale(
+        noisy, truth, planes) == 0.02
+    assert GraphCrfRefiner().distance_scale(noisy, truth, planes) == 0.02
