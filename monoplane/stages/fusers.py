@@ -51,7 +51,8 @@ class AverageConfig:
     geometry_max_distance: float = param(
         0.05, "each plane's 3D centroid lies within this share of its depth of the other plane")
     grid_width: int = param(
-        256, "reprojection check resolution: pixel columns sampled per view")
+        160, "reprojection check resolution: every (width // grid_width)-th pixel row and "
+        "column of a view is warped (all pixels below 320 px)")
 
 
 @dataclass
@@ -192,7 +193,7 @@ class AverageFuser(Fuser):
         return out
 
     def _step(self, rec: Reconstruction) -> int:
-        return max(1, int(round(rec.frame.width / max(self.config.grid_width, 1))))
+        return max(1, rec.frame.width // max(self.config.grid_width, 1))
 
 
 def _world_centroids(rec: Reconstruction, cam: object) -> np.ndarray:
