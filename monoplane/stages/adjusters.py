@@ -35,9 +35,9 @@ class PlaneBundleConfig:
         "planar", "depth that lifts the plane pixels: 'planar' (each view's own plane fit, "
         "which carries its normal cues) or 'cues' (the scale-aligned monocular depth)")
     sigma_normal_deg: float = param(
-        2.0, "expected angle between a view plane's normal and its global plane's (degrees)")
+        1.0, "expected angle between a view plane's normal and its global plane's (degrees)")
     sigma_point: float = param(
-        0.01, "expected distance of an SfM point seen inside a plane to that plane, relative "
+        0.03, "expected distance of an SfM point seen inside a plane to that plane, relative "
         "to its depth (0 drops the term)")
     prior_rot_deg: float = param(
         0.5, "pose prior: expected rotation change of a view (degrees)")
@@ -48,7 +48,7 @@ class PlaneBundleConfig:
         True, "refine only global planes seen in two or more views (others follow their view)")
     refine_points: bool = param(
         True, "refine the SfM points too (False: hold them as COLMAP adjusted them)")
-    max_evaluations: int = param(60, "cap on the solver's residual evaluations")
+    max_evaluations: int = param(20, "cap on the solver's residual evaluations")
     seed: int = param(0, "seed of the plane-pixel subsampling")
 
 
