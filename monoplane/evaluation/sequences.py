@@ -141,7 +141,8 @@ def evaluate_sequences(n: int = 10, views: int = 5, path: str = "walk", level: s
         ``global_planes`` / ``gt_planes`` (sums), ``plane_count_ratio``, ``consistency`` (and
         ``consistency_all``, counting planes of any area, with their counts),
         ``normal_error_deg`` / ``offset_error_m`` (medians, ``fused`` and ``refined``),
-        ``time_s`` (mean per sequence) and ``failures``.
+        ``time_s`` (mean per sequence), ``step_time_s`` (mean seconds per pipeline step) and
+        ``failures``.
     """
     from tqdm import tqdm
 
@@ -157,6 +158,7 @@ def evaluate_sequences(n: int = 10, views: int = 5, path: str = "walk", level: s
     hold_intrinsics_fixed(pipe)
     min_area = float(pipe.config.to_dict()["ransac"]["min_support"])
     rot, trans, times, failures = [], [], [], []
+    steps: dict[str, list[float]] = {}
     reg_views = all_reg = g_pred = g_true = good = multi = good_all = multi_all = 0
     errors: dict[str, dict[str, list[float]]] = {"fused": {"n": [], "d": []},
                                                  "refined": {"n": [], "d": []}}
@@ -170,6 +172,8 @@ def evaluate_sequences(n: int = 10, views: int = 5, path: str = "walk", level: s
             failures.append(f"seed {seed + k}: {exc}")
             continue
         times.append(time.perf_counter() - start)
+        for step, sec in out.timings.items():
+            steps.setdefault(step, []).append(sec)
         keep = out.frame_indices
         reg_views += len(keep)
         all_reg += len(keep) == views
@@ -216,6 +220,7 @@ def evaluate_sequences(n: int = 10, views: int = 5, path: str = "walk", level: s
         "normal_error_deg": {t: stats(e["n"]) for t, e in errors.items()},
         "offset_error_m": {t: stats(e["d"]) for t, e in errors.items()},
         "time_s": stats(times), "failures": failures,
+        "step_time_s": {k: float(np.mean(v)) for k, v in steps.items()},
     }
 
 
@@ -243,7 +248,9 @@ def format_sequences(r: dict[str, Any]) -> str:
         "plane error (mean): fused {:.2f}° / {:.3f} m, refined {:.2f}° / {:.3f} m".format(
             ne["fused"]["mean"], oe["fused"]["mean"], ne["refined"]["mean"],
             oe["refined"]["mean"]),
-        f"time per sequence: {r['time_s']['mean']:.2f} s (mean)",
+        f"time per sequence: {r['time_s']['mean']:.2f} s (mean; "
+        + ", ".join(f"{k} {v:.2f}" for k, v in r.get("step_time_s", {}).items()
+                    if k != "total") + ")",
     ]
     lines += [f"failed: {f}" for f in r["failures"]]
     return "\n".join(lines)
