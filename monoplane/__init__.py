@@ -1,6 +1,6 @@
 """monoplane: planar 3D reconstruction from one or a few images (MonoPlane, IROS 2024).
 
-The names below are loaded on first use, so that ``import monoplane.types`` (or any other
+The names below are loaded on first use, so that ``import monoplane.datamodel`` (or any other
 small module) does not pull in the pipeline, OpenCV and the plugin system.
 """
 
@@ -16,9 +16,9 @@ _MODULES: dict[str, tuple[str, ...]] = {
     "monoplane.detect": ("detect_planes",),
     "monoplane.errors": ("ConfigError", "InvalidInput", "MonoplaneError", "StageError"),
     "monoplane.hookspecs": ("hookimpl",),
-    "monoplane.io": ("load_frame", "save_reconstruction"),
+    "monoplane.fileio": ("load_frame", "save_reconstruction"),
     "monoplane.pipeline": ("Pipeline",),
-    "monoplane.types": ("Camera", "Frame", "Reconstruction", "Scene"),
+    "monoplane.datamodel": ("Camera", "Frame", "Reconstruction", "Scene"),
 }
 _LAZY = {name: module for module, names in _MODULES.items() for name in names}
 
@@ -29,12 +29,12 @@ __all__ = [
 ]
 
 if TYPE_CHECKING:
+    from monoplane.datamodel import Camera, Frame, Reconstruction, Scene
     from monoplane.detect import detect_planes
     from monoplane.errors import ConfigError, InvalidInput, MonoplaneError, StageError
+    from monoplane.fileio import load_frame, save_reconstruction
     from monoplane.hookspecs import hookimpl
-    from monoplane.io import load_frame, save_reconstruction
     from monoplane.pipeline import Pipeline
-    from monoplane.types import Camera, Frame, Reconstruction, Scene
 
 
 def __getattr__(name: str) -> Any:

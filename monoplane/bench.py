@@ -275,7 +275,7 @@ def _bench_size(preset: str, overrides: list[str], size: tuple[int, int], seed: 
 
     tracker = StagePeakTracker()
     pm = _plugin_manager(plugins, tracker)
-    pipe = Pipeline.from_preset(preset, overrides=["cues.plugin=given", *overrides], pm=pm)
+    pipe = Pipeline.from_preset(preset, overrides=overrides, pm=pm)
     width, height = size
     views = [generate(seed + i, level, width=width, height=height, n_views=1).views[0].frame
              for i in range(frames)]

@@ -277,7 +277,7 @@ def _softmax(x: np.ndarray) -> np.ndarray:
 class CrfParams:
     """Parameters of the image-level dense CRF (paper appendix).
 
-    There are no defaults here: they live once, in the ``dense-crf`` refiner's config
+    There are no defaults here: they live once, in the image refiner's config
     (:class:`monoplane.stages.refiners.DenseCrfRefiner.Config`), which builds this object.
 
     Feature scaling (what each θ divides)

@@ -15,8 +15,14 @@ The energy of a labelling L of M points with a neighbourhood graph (paper §III-
   0.5 + k_p + k_c + k_n (paper eqs. kp, kc, kn).
 
 Each edge table is reduced to unaries plus one directed edge (Kolmogorov & Zabih 2004) and the
-energy is minimised exactly with PyMaxflow. Everything here is vectorised over points and
-edges; nothing here knows about stages or frames.
+energy is minimised exactly with PyMaxflow. Nothing here knows about stages or frames.
+
+Two forms of the same minimisation live here. :class:`BinaryEnergy` (built by
+:func:`gc_ransac_energy`, solved by :func:`minimize`) holds explicit (E, 2, 2) edge tables: the
+general, readable form, for any submodular pairwise term a plugin labeler may want. The
+built-in labelers call the specialised :func:`data_costs` and :func:`minimize_gc_ransac`,
+compiled loops that exploit the structure of this energy and leave provable outliers out of
+the max-flow graph; the tests hold them to the general form on random problems.
 """
 
 from __future__ import annotations
@@ -88,6 +94,66 @@ def normal_costs(angles: np.ndarray, epsilon_n: float) -> np.ndarray:
     """
     a = np.asarray(angles, dtype=np.float64)
     return np.where(a >= epsilon_n, np.exp(a / epsilon_n - 1.0), 0.0)
+
+
+def data_costs(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, plane: np.ndarray,
+               model_normal: np.ndarray | None, epsilon: float, epsilon_n: float = np.pi
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """Data costs f(0, p) and f(1, p) + g(1, p) of a pool for one hypothesis, in one pass.
+
+    :func:`msac_costs` of the point-to-plane distances, plus :func:`normal_costs` of the
+    angles to the model normal when one is given.
+
+    Parameters
+    ----------
+    points, normals : numpy.ndarray
+        (N, 3) float64 cloud points and unit normals.
+    pool : numpy.ndarray
+        (M,) int64 indices of the points to label.
+    plane : numpy.ndarray
+        (4,) unit-normal plane in the points' frame.
+    model_normal : numpy.ndarray or None
+        (3,) unit model normal θ_n; ``None`` leaves out E_n.
+    epsilon, epsilon_n : float
+        Distance threshold ε (points' unit) and normal threshold ε_n (radians).
+
+    Returns
+    -------
+    f0, data1 : numpy.ndarray
+        (M,) float64 costs of the outlier and the inlier label.
+    """
+    use_normal = model_normal is not None
+    mn = np.zeros(3) if model_normal is None else np.asarray(model_normal, dtype=np.float64)
+    return _data_costs(points, normals, np.ascontiguousarray(pool, dtype=np.int64),
+                       np.asarray(plane, dtype=np.float64), mn, float(epsilon),
+                       float(epsilon_n), use_normal)
+
+
+@kernel
+def _data_costs(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, plane: np.ndarray,
+                model_normal: np.ndarray, epsilon: float, epsilon_n: float, use_normal: bool
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`data_costs` (``use_normal`` False ignores ``model_normal``)."""
+    m = pool.shape[0]
+    f0 = np.zeros(m)
+    data1 = np.empty(m)
+    for i in range(m):
+        p = pool[i]
+        phi = (plane[0] * points[p, 0] + plane[1] * points[p, 1] + plane[2] * points[p, 2]
+               + plane[3])
+        r = (phi / epsilon) ** 2
+        if r < 1.0:
+            f0[i] = 1.0 - r
+            data1[i] = 0.0
+        else:
+            data1[i] = r
+        if use_normal:
+            cos = (model_normal[0] * normals[p, 0] + model_normal[1] * normals[p, 1]
+                   + model_normal[2] * normals[p, 2])
+            rho = np.arccos(min(max(cos, -1.0), 1.0))
+            if rho >= epsilon_n:
+                data1[i] += np.exp(rho / epsilon_n - 1.0)
+    return f0, data1
 
 
 def proximity_weights(points: np.ndarray, edges: np.ndarray, normals: np.ndarray | None = None,
@@ -420,12 +486,11 @@ def minimize_gc_ransac(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray,
         raise InvalidInput(f"pairwise_scale must be positive, got {pairwise_scale}")
     f0 = np.ascontiguousarray(f0, dtype=np.float64)
     data1 = np.ascontiguousarray(data1, dtype=np.float64)
-    edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
-    ei, ej = np.ascontiguousarray(edges[:, 0]), np.ascontiguousarray(edges[:, 1])
+    edges = np.ascontiguousarray(np.asarray(edges, dtype=np.int64).reshape(-1, 2))
     cut = np.ascontiguousarray(np.broadcast_to(np.asarray(cut_cost, dtype=np.float64),
-                                               ei.shape))
+                                               edges.shape[:1]))
     lam, ls = float(lambda_), float(lambda_ * pairwise_scale)
-    bad, nodes, src, dst, cap, slope = _gc_ransac_graph(f0, data1, ei, ej, cut, lam, ls)
+    bad, nodes, src, dst, cap, slope = _gc_ransac_graph(f0, data1, edges, cut, lam, ls)
     if bad:
         raise InvalidInput(f"{bad} edge tables are not submodular; graph cuts cannot "
                            "minimise this energy")
@@ -439,93 +504,46 @@ def minimize_gc_ransac(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray,
         g.add_grid_tedges(ids, np.maximum(slope, 0.0), np.maximum(-slope, 0.0))
         g.maxflow()
         labels[nodes] = g.get_grid_segments(ids)
-    return labels, float(_gc_ransac_energy(f0, data1, ei, ej, cut, lam, ls, labels))
+    return labels, float(_gc_ransac_energy(f0, data1, edges, cut, lam, ls, labels))
 
 
 @kernel
-def _gc_ransac_graph(f0: np.ndarray, data1: np.ndarray, ei: np.ndarray, ej: np.ndarray,
-                     cut: np.ndarray, lam: float, ls: float
+def _gc_ransac_graph(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray, cut: np.ndarray,
+                     lam: float, ls: float
                      ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Max-flow graph of :func:`minimize_gc_ransac` on its undecided points.
 
-    Inputs are float64 (M,) ``f0``, ``data1``, int64 (E,) ``ei``, ``ej``, float64 (E,) cut
+    Inputs are float64 (M,) ``f0``, ``data1``, int64 (E, 2) ``edges``, float64 (E,) cut
     costs, λ and λs. Returns the number of non-submodular edges (nothing else is meaningful
     when it is not 0), the (F,) pool positions of the undecided points, the (E',) local ends
     and capacities of the edges among them and their (F,) cost slopes ``U(1) - U(0)``.
     """
-    m, n_edges = f0.shape[0], ei.shape[0]
+    m, n_edges = f0.shape[0], edges.shape[0]
+    ei, ej = edges[:, 0], edges[:, 1]
     keep = 1.0 - lam
-    both_out = np.empty(n_edges)  # e(0, 0)
-    differ = np.empty(n_edges)  # e(0, 1) = e(1, 0)
     payback = np.zeros(m)
-    degree = np.zeros(m + 1, dtype=np.int64)
     bad = 0
     for e in range(n_edges):
-        i, j = ei[e], ej[e]
-        a = 0.5 * ls * (f0[i] + f0[j])
+        a = 0.5 * ls * (f0[ei[e]] + f0[ej[e]])
         b = ls * cut[e]
         if 2.0 * b - a < -1e-9 * max(1.0, a):
             bad += 1
-        both_out[e] = a
-        differ[e] = b
-        payback[i] += b
-        payback[j] += b
-        degree[i + 1] += 1
-        degree[j + 1] += 1
-    if bad:
-        empty = np.empty(0, dtype=np.int64)
-        return bad, empty, empty, empty, np.empty(0), np.empty(0)
-    # Incident edges of every point (CSR), to update the bounds of its neighbours.
-    for p in range(m):
-        degree[p + 1] += degree[p]
-    incident = np.empty(2 * n_edges, dtype=np.int64)
-    fill = degree[:m].copy()
-    for e in range(n_edges):
-        incident[fill[ei[e]]] = e
-        fill[ei[e]] += 1
-        incident[fill[ej[e]]] = e
-        fill[ej[e]] += 1
-    # A point whose extra inlier cost exceeds the most its edges can give back when it turns
-    # inlier is an outlier in every minimiser. The give-back of an edge is e(0,1) while the
-    # other end may be an inlier, and e(0,0) - e(1,0) once that end is known to be an outlier:
-    # fixing a point tightens its neighbours' bounds, so fixing spreads inwards from the far
-    # points until only the points around the plane's band remain.
-    excess = np.empty(m)
-    slack = np.empty(m)
-    fixed = np.zeros(m, dtype=np.bool_)
-    stack = np.empty(m, dtype=np.int64)
-    top = 0
-    for p in range(m):
-        excess[p] = keep * (data1[p] - f0[p])
-        slack[p] = 1e-9 * (payback[p] + abs(excess[p])) + 1e-12  # rounding of the sums
-        if excess[p] > payback[p] + slack[p]:
-            fixed[p] = True
-            stack[top] = p
-            top += 1
-    while top:
-        top -= 1
-        p = stack[top]
-        for x in range(degree[p], degree[p + 1]):
-            e = incident[x]
-            q = ej[e] if ei[e] == p else ei[e]
-            if fixed[q]:
-                continue
-            payback[q] += both_out[e] - 2.0 * differ[e]
-            if excess[q] > payback[q] + slack[q]:
-                fixed[q] = True
-                stack[top] = q
-                top += 1
+        payback[ei[e]] += b
+        payback[ej[e]] += b
     local = np.full(m, -1, dtype=np.int64)
     nodes = np.empty(m, dtype=np.int64)
     count = 0
     for p in range(m):
-        if not fixed[p]:
+        # Submodularity makes e(0,1) the most an edge gives back when its end turns inlier,
+        # so u1 - u0 > Σ e(0,1) means outlier in every minimiser (kept with a margin).
+        if keep * (data1[p] - f0[p]) <= payback[p] * (1.0 + 1e-9) + 1e-12:
             local[p] = count
             nodes[count] = p
             count += 1
     slope = np.empty(count)
     for q in range(count):
-        slope[q] = excess[nodes[q]]
+        p = nodes[q]
+        slope[q] = keep * (data1[p] - f0[p])
     src = np.empty(n_edges, dtype=np.int64)
     dst = np.empty(n_edges, dtype=np.int64)
     cap = np.empty(n_edges)
@@ -534,7 +552,8 @@ def _gc_ransac_graph(f0: np.ndarray, data1: np.ndarray, ei: np.ndarray, ej: np.n
         li, lj = local[ei[e]], local[ej[e]]
         if li < 0 and lj < 0:
             continue
-        a, b = both_out[e], differ[e]
+        a = 0.5 * ls * (f0[ei[e]] + f0[ej[e]])
+        b = ls * cut[e]
         if li >= 0 and lj >= 0:
             # e = A + (C - A) x_i + (D - C) x_j + (B + C - A - D)(1 - x_i) x_j, D = 0, B = C.
             src[inner] = li
@@ -551,9 +570,10 @@ def _gc_ransac_graph(f0: np.ndarray, data1: np.ndarray, ei: np.ndarray, ej: np.n
 
 
 @kernel
-def _gc_ransac_energy(f0: np.ndarray, data1: np.ndarray, ei: np.ndarray, ej: np.ndarray,
-                      cut: np.ndarray, lam: float, ls: float, labels: np.ndarray) -> float:
+def _gc_ransac_energy(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray, cut: np.ndarray,
+                      lam: float, ls: float, labels: np.ndarray) -> float:
     """Energy of a (M,) bool labelling for the inputs of :func:`_gc_ransac_graph`."""
+    ei, ej = edges[:, 0], edges[:, 1]
     total = 0.0
     for p in range(f0.shape[0]):
         total += (1.0 - lam) * (data1[p] if labels[p] else f0[p])

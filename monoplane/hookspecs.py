@@ -22,8 +22,8 @@ import pluggy
 if TYPE_CHECKING:
     from collections.abc import Callable
 
+    from monoplane.datamodel import Reconstruction
     from monoplane.stages.base import Stage
-    from monoplane.types import Reconstruction
 
 PROJECT_NAME = "monoplane"
 
@@ -33,7 +33,7 @@ hookimpl = pluggy.HookimplMarker(PROJECT_NAME)
 
 @hookspec
 def monoplane_register_cue_providers() -> list[type[Stage]]:
-    """Cue providers: fill a :class:`~monoplane.types.Frame`'s depth, normals and intrinsics.
+    """Cue providers: fill a :class:`~monoplane.datamodel.Frame`'s depth, normals and intrinsics.
 
     Config table ``[cues]``. Contract: :class:`monoplane.stages.base.CueProvider`.
     """
@@ -81,7 +81,7 @@ def monoplane_register_matchers() -> list[type[Stage]]:
 
 @hookspec
 def monoplane_register_fusers() -> list[type[Stage]]:
-    """Fusers of per-view planes into a global planar :class:`~monoplane.types.Scene`.
+    """Fusers of per-view planes into a global planar :class:`~monoplane.datamodel.Scene`.
 
     Config table ``[fuser]``. Contract: :class:`monoplane.stages.base.Fuser`.
     """
@@ -99,11 +99,18 @@ def monoplane_register_adjusters() -> list[type[Stage]]:
 def monoplane_register_baselines() -> dict[str, Callable[..., Reconstruction]]:
     """External plane detectors to compare against, by method name (``--baseline NAME``).
 
-    Each value is a callable ``baseline(frame, *, seed=0) -> Reconstruction`` that takes a
-    cue-filled frame and returns planes in its camera frame and depth units. It may record
-    ``timings["baseline.call"]``: the seconds of its core call alone (data conversion
-    excluded), which ``monoplane bench`` and ``monoplane eval`` compare against. Used by
-    :mod:`monoplane.evaluation.baselines`; names must be unique across plugins.
+    Each value is a callable ``baseline(frame, *, seed=0, **options) -> Reconstruction`` that
+    takes a cue-filled frame and returns planes in its camera frame and depth units. It may
+    record ``timings["baseline.call"]``: the seconds of its core call alone (data conversion
+    excluded), which ``monoplane bench`` and ``monoplane eval`` compare against.
+
+    The keyword ``options`` override fields of the baseline's settings (``monoplane eval
+    --baseline-set NAME.FIELD=VALUE``); an unknown option or an ill-typed value raises a
+    one-line :class:`~monoplane.errors.ConfigError` listing the valid ones
+    (:func:`monoplane.evaluation.baselines.baseline_config` does this for a settings
+    dataclass). A callable that exposes that dataclass as ``config_class`` has its options
+    checked before the first frame. Used by :mod:`monoplane.evaluation.baselines`; names must be
+    unique across plugins.
     """
 
 

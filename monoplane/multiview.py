@@ -10,7 +10,7 @@ Python API::
 
 Steps:
 
-1. the configured matcher (``[matcher]``, default ``colmap``) gives cameras, sparse points and
+1. the configured matcher (``[matcher]``) gives cameras, sparse points and
    keypoint matches;
 2. the cue provider fills each view's depth and normals (at the view's native resolution, with
    the SfM intrinsics);
@@ -18,8 +18,8 @@ Steps:
    align_scale`); when every view's depth is metric the SfM world is then rescaled to the views'
    median metric scale, so outputs keep the depth's units;
 4. the single-view pipeline segments each view;
-5. the configured fuser (``[fuser]``, default ``average``) matches and fuses planes into a
-   :class:`~monoplane.types.Scene`.
+5. the configured fuser (``[fuser]``) matches and fuses planes into a
+   :class:`~monoplane.datamodel.Scene`.
 
 Frames: cameras are world-to-camera ``x_cam = R x_world + t`` with OpenCV axes (x right, y down,
 z forward).
@@ -38,11 +38,7 @@ from typing import TYPE_CHECKING, Any
 import cv2
 import numpy as np
 
-from monoplane.errors import InvalidInput, StageError
-from monoplane.geometry.alignment import ScaleAlignment, align_scale
-from monoplane.geometry.polygons import PlaneMesh, points_plane_mesh
-from monoplane.stages.base import Fuser, Matcher
-from monoplane.types import (
+from monoplane.datamodel import (
     Camera,
     Frame,
     Reconstruction,
@@ -51,6 +47,10 @@ from monoplane.types import (
     plane_to_camera,
     ray_plane_depth,
 )
+from monoplane.errors import InvalidInput, StageError
+from monoplane.geometry.alignment import ScaleAlignment, align_scale
+from monoplane.geometry.polygons import PlaneMesh, points_plane_mesh
+from monoplane.stages.base import Fuser, Matcher
 
 if TYPE_CHECKING:
     from monoplane.pipeline import Pipeline
@@ -259,7 +259,7 @@ def reconstruct_multiview(frames: list[Frame], pipe: Pipeline, progress: bool = 
     Parameters
     ----------
     frames : list of Frame
-        Two or more colour frames, optionally with depth/normals (then the ``given`` cue
+        Two or more colour frames, optionally with depth/normals (then the cue
         provider uses them). ``K`` is held fixed in SfM only after
         :func:`hold_intrinsics_fixed`; otherwise it is the initial guess.
     pipe : Pipeline
@@ -495,7 +495,7 @@ def write_points_ply(path: Path, points: np.ndarray, colors: np.ndarray | None =
 
 def save_sfm(sfm: SfmResult, out_dir: str | Path, overwrite: bool = False) -> Path:
     """Write ``cameras.json`` and ``points.ply`` of an SfM result atomically into ``out_dir``."""
-    from monoplane.io import atomic_output_dir
+    from monoplane.fileio import atomic_output_dir
 
     with atomic_output_dir(out_dir, overwrite) as tmp:
         keep = [v for v, ok in enumerate(sfm.registered) if ok]
@@ -536,7 +536,7 @@ def scene_mesh(scene: Scene, step: int = 2, max_cells: int = 512) -> PlaneMesh:
     PlaneMesh
         World-frame triangles; ``plane_ids`` are global plane ids (0-based, as in scene.json).
     """
-    from monoplane.types import pixel_rays
+    from monoplane.datamodel import pixel_rays
 
     members: dict[int, list[tuple[int, int]]] = {}
     for v, table in enumerate(scene.links):
@@ -649,7 +649,7 @@ def save_scene(result: MultiviewResult, out_dir: str | Path, overwrite: bool = F
     ``cameras.json`` and ``points.ply`` (sparse SfM points); with ``report``, ``report.html``
     and its figures.
     """
-    from monoplane.io import atomic_output_dir, write_plane_mesh_ply, write_reconstruction_files
+    from monoplane.fileio import atomic_output_dir, write_plane_mesh_ply, write_reconstruction_files
 
     scene = result.scene
     with atomic_output_dir(out_dir, overwrite) as tmp:

@@ -23,10 +23,10 @@ import pluggy
 
 from monoplane import config as config_mod
 from monoplane.cues.given import use_given_cues
+from monoplane.datamodel import Frame, Reconstruction
 from monoplane.errors import StageError
 from monoplane.plugin_manager import get_plugin_manager, get_registry
 from monoplane.stages.base import CueProvider, Labeler, Refiner, Sampler, Scorer, Stage
-from monoplane.types import Frame, Reconstruction
 
 T = TypeVar("T")
 S = TypeVar("S", bound=Stage)

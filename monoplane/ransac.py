@@ -33,6 +33,7 @@ from typing import Any, NamedTuple, TypeVar
 
 import numpy as np
 
+from monoplane.datamodel import Frame, Reconstruction, orient_towards_camera
 from monoplane.errors import ConfigError, InvalidInput, StageError
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
@@ -46,7 +47,6 @@ from monoplane.stages.base import (
     Stage,
     param,
 )
-from monoplane.types import Frame, Reconstruction, orient_towards_camera
 
 T = TypeVar("T")
 

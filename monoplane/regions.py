@@ -29,9 +29,9 @@ import scipy.sparse as sp
 from scipy import ndimage
 from scipy.sparse.csgraph import connected_components
 
+from monoplane.datamodel import Reconstruction
 from monoplane.densecrf import REFERENCE_AREA
 from monoplane.errors import InvalidInput
-from monoplane.types import Reconstruction
 
 #: The paper's minimum region size, in pixels at 256 x 192 (appendix).
 MIN_AREA_AT_REFERENCE = 300

@@ -32,10 +32,10 @@ import pytest
 if TYPE_CHECKING:
     import pluggy
 
+    from monoplane.datamodel import Frame, Reconstruction, SfmResult
     from monoplane.geometry.cloud import PlaneCloud
     from monoplane.stages.base import Stage
     from monoplane.synth import SynthView
-    from monoplane.types import Frame, Reconstruction, SfmResult
 
 
 #: Inside a box, camera frame (OpenCV axes), metres: back wall 4 m ahead, floor 1 m below,
@@ -106,7 +106,7 @@ def plane_scene(planes: np.ndarray, K: np.ndarray, width: int, height: int, *,
     name : str
         Frame name.
     """
-    from monoplane.types import Frame, pixel_rays, plane_to_camera, ray_plane_depth
+    from monoplane.datamodel import Frame, pixel_rays, plane_to_camera, ray_plane_depth
 
     planes = np.asarray(planes, dtype=np.float64)
     R = np.eye(3) if R is None else np.asarray(R, dtype=np.float64)
@@ -168,7 +168,7 @@ def box_frame(width: int = 128, height: int = 96, planes: np.ndarray = BOX_PLANE
     labels : numpy.ndarray
         (H, W) int32 true labels, ``i`` = row ``i - 1`` of ``planes``.
     """
-    from monoplane.types import intrinsics_matrix
+    from monoplane.datamodel import intrinsics_matrix
 
     K = intrinsics_matrix(focal, focal, (width - 1) / 2, (height - 1) / 2)
     scene = plane_scene(planes, K, width, height)
@@ -186,7 +186,7 @@ def room_cues(height: int = 192, width: int = 256, noise: float = 6.0, seed: int
         depth; (H, W, 3) float32 normals; (H, W) int32 labels in 1..5 (row ``i - 1`` of
         :data:`ROOM`); (3, 3) intrinsics.
     """
-    from monoplane.types import default_intrinsics
+    from monoplane.datamodel import default_intrinsics
 
     K = default_intrinsics(width, height, 70.0)
     s = plane_scene(ROOM, K, width, height, colors=ROOM_COLORS, color_noise=noise, seed=seed)
@@ -225,7 +225,7 @@ class TwoViewRoom:
 
     def reconstructions(self) -> list[Reconstruction]:
         """Each view's exact planes and labels, as a refiner would hand them to a fuser."""
-        from monoplane.types import Reconstruction
+        from monoplane.datamodel import Reconstruction
 
         return [Reconstruction(frame=v.frame, labels=v.gt_labels, params=v.planes)
                 for v in self.views]
@@ -243,7 +243,7 @@ def two_view_room(width: int = 160, height: int = 120, seed: int = 0) -> TwoView
     Colours are :data:`ROOM_COLORS` times a world-fixed texture, so a feature matcher finds
     correspondences; everything else is exact.
     """
-    from monoplane.types import default_intrinsics
+    from monoplane.datamodel import default_intrinsics
 
     K = default_intrinsics(width, height, 70.0)
     yaw = np.deg2rad(-8.0)
@@ -313,10 +313,10 @@ def check_stage_contract(cls: type[Stage], frame: Frame | None = None, seed: int
     * fuser: on the exact planes of those two views with their exact SfM result, and every
       link it makes must join planes that agree in the world frame.
     """
+    from monoplane.datamodel import Frame, Reconstruction
     from monoplane.geometry.cloud import PlaneCloud
     from monoplane.geometry.graph import NeighbourGraph
     from monoplane.stages.base import Labeling, RansacParams
-    from monoplane.types import Frame, Reconstruction
 
     stage = _check_config(cls)
     if not (frame is not None if run is None else run):
@@ -373,7 +373,7 @@ def _two_view_room_cached() -> TwoViewRoom:
 
 
 def _check_multiview_stage(stage: Stage, room: TwoViewRoom) -> None:
-    from monoplane.types import Scene, SfmResult, plane_to_world
+    from monoplane.datamodel import Scene, SfmResult, plane_to_world
 
     frames = [v.frame for v in room.views]
     if stage.kind == "matcher":
@@ -412,12 +412,16 @@ def _check_multiview_stage(stage: Stage, room: TwoViewRoom) -> None:
 def check_baseline_contract(baseline: Callable[..., Reconstruction], seed: int = 0) -> None:
     """Assert that a ``monoplane eval`` baseline honours the baseline contract.
 
-    A baseline is ``baseline(frame, *, seed=0) -> Reconstruction``. It is run on the exact
-    :func:`box_frame` (depth and normals, no RGB): the result must cover the frame, label with
-    ``0..P``, give ``P`` finite planes with unit normals, and find the back wall, which covers
-    most of the image.
+    A baseline is ``baseline(frame, *, seed=0, **options) -> Reconstruction``. It is run on the
+    exact :func:`box_frame` (depth and normals, no RGB): the result must cover the frame, label
+    with ``0..P``, give ``P`` finite planes with unit normals, and find the back wall, which
+    covers most of the image. An unknown keyword option must raise a one-line
+    :class:`~monoplane.errors.ConfigError` naming it; a ``config_class`` attribute, when
+    present, must be a dataclass whose defaults build.
     """
-    from monoplane.types import Reconstruction
+    from monoplane.datamodel import Reconstruction
+    from monoplane.errors import ConfigError
+    from monoplane.evaluation.baselines import baseline_config
 
     frame, _ = box_frame(64, 48)
     rec = baseline(frame, seed=seed)
@@ -429,3 +433,19 @@ def check_baseline_contract(baseline: Callable[..., Reconstruction], seed: int =
     np.testing.assert_allclose(np.linalg.norm(rec.params[:, :3], axis=1), 1.0, atol=1e-6)
     assert rec.num_planes and np.abs(rec.params - BOX_PLANES[0]).max(axis=1).min() < 0.02, \
         f"{name} misses the back wall of an exact box"
+    try:
+        baseline(frame, seed=seed, no_such_option=1)
+    except ConfigError as exc:
+        message = str(exc)
+        assert "no_such_option" in message and "\n" not in message, \
+            f"{name}: the error on an unknown option must be one line naming it: {message!r}"
+    except TypeError as exc:
+        raise AssertionError(f"{name} must take keyword options (baseline(frame, *, seed=0, "
+                             f"**options)) and reject unknown ones with a ConfigError: {exc}"
+                             ) from None
+    else:
+        raise AssertionError(f"{name} accepts an unknown option without a ConfigError")
+    config_class = getattr(baseline, "config_class", None)
+    if config_class is not None:
+        assert dataclasses.is_dataclass(config_class), f"{name}.config_class must be a dataclass"
+        baseline_config(config_class, {}, name)

@@ -9,12 +9,14 @@ from monoplane.errors import InvalidInput
 from monoplane.graphcut import (
     BinaryEnergy,
     check_submodular,
+    data_costs,
     degree_normalisation,
     energy,
     gc_ransac_energy,
     minimize,
     minimize_gc_ransac,
     msac_costs,
+    normal_angles,
     normal_costs,
     proximity_weights,
 )
@@ -220,3 +222,24 @@ def test_proximity_weight_kernel_matches_the_vectorised_formula(seed):
                 proximity_weights(pts, edges, normals, colors, *params),
                 reference_proximity_weights(pts, edges, normals, colors, *params),
                 rtol=1e-12)
+
+
+def test_fused_data_costs_match_msac_and_normal_costs():
+    # Reference: msac_costs of the distances plus normal_costs of the angles, vectorised.
+    rng = np.random.default_rng(8)
+    pts = rng.normal(0, 0.05, (400, 3))
+    nrm = rng.normal(size=(400, 3))
+    nrm[:200] = [0.0, 0.0, -1.0] + 0.05 * rng.normal(size=(200, 3))
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    pool = np.sort(rng.choice(400, 300, replace=False))
+    plane = np.array([0.0, 0.0, -1.0, 0.01])
+    mn = np.array([0.0, 0.0, -1.0])
+    eps, eps_n = 0.02, np.deg2rad(10.0)
+    f0_ref, f1_ref = msac_costs(np.abs(pts[pool] @ plane[:3] + plane[3]), eps)
+    g1_ref = normal_costs(normal_angles(nrm[pool], mn), eps_n)
+    f0, data1 = data_costs(pts, nrm, pool, plane, mn, eps, eps_n)
+    np.testing.assert_allclose(f0, f0_ref, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(data1, f1_ref + g1_ref, rtol=1e-12, atol=1e-15)
+    assert (f0 > 0).any() and (g1_ref > 0).any()
+    f0, data1 = data_costs(pts, nrm, pool, plane, None, eps)
+    np.testing.assert_allclose(data1, f1_ref, rtol=1e-12, atol=1e-15)

@@ -9,6 +9,7 @@ import cv2
 import numpy as np
 import pytest
 
+from monoplane.datamodel import Reconstruction
 from monoplane.evaluation.twoview import ground_truth_sfm, relative_pose_error
 from monoplane.geometry.alignment import ScaleAlignment
 from monoplane.multiview import (
@@ -19,7 +20,6 @@ from monoplane.multiview import (
 )
 from monoplane.stages.fusers import AverageFuser
 from monoplane.synth import generate
-from monoplane.types import Reconstruction
 
 
 @pytest.fixture(scope="module")
@@ -72,14 +72,14 @@ def test_scene_mesh_lies_on_its_fused_planes(synth_pair) -> None:
 
 
 def test_failed_save_leaves_nothing(synth_pair, tmp_path: Path, monkeypatch) -> None:
-    import monoplane.io
+    import monoplane.fileio
 
     result = _oracle_result(synth_pair)
 
     def boom(*args, **kwargs):
         raise RuntimeError("disk full")
 
-    monkeypatch.setattr(monoplane.io, "write_plane_mesh_ply", boom)
+    monkeypatch.setattr(monoplane.fileio, "write_plane_mesh_ply", boom)
     with pytest.raises(RuntimeError):
         save_scene(result, tmp_path / "scene")
     assert list(tmp_path.iterdir()) == []
@@ -133,7 +133,7 @@ def test_cli_match_writes_cameras(synth_pair, tmp_path: Path) -> None:
                  "--quiet"]) == 0
     cams = json.loads((tmp_path / "sfm" / "cameras.json").read_text())["cameras"]
     assert [c["image"] for c in cams] == ["img0", "img1"]
-    from monoplane.types import Camera
+    from monoplane.datamodel import Camera
 
     c0, c1 = (Camera(np.array(c["K"]), np.array(c["R"]), np.array(c["t"]), 256, 192)
               for c in cams)

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from monoplane.datamodel import Frame, default_intrinsics, orient_towards_camera, pixel_rays
 from monoplane.errors import InvalidInput, StageError
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
@@ -10,7 +11,6 @@ from monoplane.ransac import RansacConfig, SequentialRansac, required_iterations
 from monoplane.stages.labelers import GraphCutLabeler, ProximityGraphCutLabeler, ThresholdLabeler
 from monoplane.stages.samplers import NormalConsistentSampler, UniformSampler
 from monoplane.stages.scorers import InlierCountScorer, MsacNormalScorer, MsacScorer
-from monoplane.types import Frame, default_intrinsics, orient_towards_camera, pixel_rays
 
 
 def room(h=96, w=128, rgb=True):

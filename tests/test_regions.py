@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from monoplane.datamodel import Frame, Reconstruction, intrinsics_matrix, pixel_rays
 from monoplane.errors import InvalidInput
 from monoplane.regions import (
     absorb_small_regions,
@@ -18,7 +19,6 @@ from monoplane.regions import (
     scene_radius,
     split_components,
 )
-from monoplane.types import Frame, Reconstruction, intrinsics_matrix, pixel_rays
 
 # Label 1 has two regions touching only at a corner (joined by 8- but not by 4-connectivity)
 # plus a separate region on the right; label 2 has two regions; 0 is non-planar. New labels go
@@ -31,29 +31,21 @@ MAP = np.array([
 ], dtype=np.int32)
 
 
-def test_split_components_8_connectivity_exact():
-    labels, origin = split_components(MAP, connectivity=8)
-    expected = np.array([
-        [1, 1, 0, 0, 0, 2],
-        [1, 1, 0, 3, 0, 2],
-        [0, 0, 1, 3, 0, 0],
-        [4, 0, 1, 0, 0, 0],
-    ])
+@pytest.mark.parametrize("connectivity, expected, origin", [
+    (8, [[1, 1, 0, 0, 0, 2],
+         [1, 1, 0, 3, 0, 2],
+         [0, 0, 1, 3, 0, 0],
+         [4, 0, 1, 0, 0, 0]], [1, 1, 2, 2]),
+    (4, [[1, 1, 0, 0, 0, 2],
+         [1, 1, 0, 4, 0, 2],
+         [0, 0, 3, 4, 0, 0],
+         [5, 0, 3, 0, 0, 0]], [1, 1, 1, 2, 2]),
+])
+def test_split_components_exact(connectivity, expected, origin):
+    labels, origin_labels = split_components(MAP, connectivity=connectivity)
     np.testing.assert_array_equal(labels, expected)
-    np.testing.assert_array_equal(origin, [1, 1, 2, 2])
+    np.testing.assert_array_equal(origin_labels, origin)
     assert labels.dtype == np.int32
-
-
-def test_split_components_4_connectivity_exact():
-    labels, origin = split_components(MAP, connectivity=4)
-    expected = np.array([
-        [1, 1, 0, 0, 0, 2],
-        [1, 1, 0, 4, 0, 2],
-        [0, 0, 3, 4, 0, 0],
-        [5, 0, 3, 0, 0, 0],
-    ])
-    np.testing.assert_array_equal(labels, expected)
-    np.testing.assert_array_equal(origin, [1, 1, 1, 2, 2])
 
 
 def test_split_components_anti_diagonal_and_edges():

@@ -7,6 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
+from monoplane.datamodel import Scene, SfmResult, intrinsics_matrix, plane_to_world
 from monoplane.plugin_manager import get_plugin_manager, get_registry
 from monoplane.stages.base import Fuser, Matcher
 from monoplane.testing import (
@@ -15,7 +16,6 @@ from monoplane.testing import (
     plane_scene,
     two_view_room,
 )
-from monoplane.types import Scene, SfmResult, intrinsics_matrix, plane_to_world
 
 REGISTRY = get_registry(get_plugin_manager(autoload=False))
 
@@ -89,9 +89,9 @@ def test_running_a_frame_stage_needs_a_frame() -> None:
 
 
 def test_baseline_contract_accepts_the_builtin_and_rejects_a_broken_one() -> None:
+    from monoplane.datamodel import Reconstruction
     from monoplane.evaluation.baselines import open3d_ransac
     from monoplane.testing import check_baseline_contract
-    from monoplane.types import Reconstruction
 
     check_baseline_contract(open3d_ransac)
 
@@ -103,3 +103,14 @@ def test_baseline_contract_accepts_the_builtin_and_rejects_a_broken_one() -> Non
 
     with pytest.raises(AssertionError, match="misses the back wall"):
         check_baseline_contract(floor_only)
+
+    def no_options(frame, *, seed=0):
+        return open3d_ransac(frame, seed=seed)
+
+    def ignores_options(frame, *, seed=0, **options):
+        return open3d_ransac(frame, seed=seed)
+
+    with pytest.raises(AssertionError, match="must take keyword options"):
+        check_baseline_contract(no_options)
+    with pytest.raises(AssertionError, match="accepts an unknown option"):
+        check_baseline_contract(ignores_options)

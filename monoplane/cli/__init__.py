@@ -31,8 +31,7 @@ EPILOG = """examples:
       --normals data_samples/room_000/normals.npy \\
       --intrinsics data_samples/room_000/intrinsics.json --out out/room_000 --report
   monoplane batch data_samples --out out/batch --report
-  monoplane run photo.jpg --set cues.plugin=onnx --set cues.depth_model=omnidata_depth.onnx \\
-      --set cues.normal_model=omnidata_normal.onnx --out out/photo
+  monoplane run photo.jpg --set cues.depth_model=my_depth.onnx --out out/photo
   monoplane eval --all --level mild --n 50
   monoplane plugins
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from monoplane.cli.common import add_pipeline_args
+from monoplane.cli.common import add_depth_value_args, add_pipeline_args, depth_reading
 
 DESCRIPTION = """Recover the planes of every frame of INPUT into DIR/<name>/ (the files of
 'monoplane run'), then write DIR/summary.json (status, planes, seconds and error of every frame,
@@ -32,14 +32,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("input", metavar="INPUT", help="folder of frame folders, or .jsonl/.csv "
                                                   "manifest")
     add_pipeline_args(p)
-    group = p.add_argument_group("inputs")
-    group.add_argument("--depth-scale", type=float, metavar="S",
-                       help="divide PNG depth by S (1000 for millimetres, 5000 for TUM); a "
-                            "manifest's depth_scale column wins")
-    group.add_argument("--relative-depth", action="store_true",
-                       help="the depths are correct only up to scale (e.g. network outputs)")
-    group.add_argument("--nan-as-invalid", action="store_true",
-                       help="treat NaN/inf depth as invalid pixels instead of failing the frame")
+    add_depth_value_args(p.add_argument_group("inputs"),
+                         scale_note="; a manifest's depth_scale column wins")
     out = p.add_argument_group("outputs")
     out.add_argument("--out", required=True, metavar="DIR", help="batch output folder")
     out.add_argument("--overwrite", action="store_true",
@@ -66,9 +60,8 @@ def run_cmd(args: argparse.Namespace) -> int:
     summary = run_batch(
         args.input, args.out, config=args.config, preset=args.preset, overrides=args.overrides,
         workers=args.workers, engine=args.engine, ray_address=args.ray_address,
-        overwrite=args.overwrite, report=args.report, depth_scale=args.depth_scale,
-        depth_kind="relative" if args.relative_depth else "metric",
-        nan_as_invalid=args.nan_as_invalid, progress=not args.quiet)
+        overwrite=args.overwrite, report=args.report, progress=not args.quiet,
+        **depth_reading(args))
     if not args.quiet:
         for note in summary.notes:
             print(f"note: {note}")

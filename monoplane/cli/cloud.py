@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from monoplane.errors import InvalidInput
-from monoplane.io import atomic_output_dir, check_output_dir, write_plane_mesh_ply
+from monoplane.fileio import atomic_output_dir, check_output_dir, write_plane_mesh_ply
 
 DESCRIPTION = """Detect the planes of a point cloud (PLY, PCD, XYZ or PTS) with MonoPlane's
 graph-cut RANSAC and the graph-crf refiner, and write into --out:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
 from monoplane.pipeline import Pipeline
 
@@ -27,22 +28,43 @@ def pipeline_from_args(args: argparse.Namespace) -> Pipeline:
     return Pipeline.from_config(args.config, preset=args.preset, overrides=args.overrides)
 
 
-def add_input_args(parser: argparse.ArgumentParser) -> None:
-    """Cue files and intrinsics of one view."""
+def add_input_args(parser: argparse.ArgumentParser, per_image: bool = False) -> None:
+    """Cue files and intrinsics of one view, or with ``per_image`` one cue file per image."""
     group = parser.add_argument_group("inputs")
-    group.add_argument("--depth", metavar="FILE",
-                       help="depth map: .npy float (any unit) or 16-bit PNG with --depth-scale")
-    group.add_argument("--depth-scale", type=float, metavar="S",
-                       help="divide PNG depth by S (1000 for millimetres, 5000 for TUM)")
-    group.add_argument("--normals", metavar="FILE",
-                       help="normals: .npy (H, W, 3) in the camera frame (x right, y down, "
+    nargs, each = ("+", "one per image: ") if per_image else (None, "")
+    group.add_argument("--depth", nargs=nargs, metavar="FILE",
+                       help=f"{each}depth map: .npy float (any unit) or 16-bit PNG with "
+                            "--depth-scale")
+    group.add_argument("--normals", nargs=nargs, metavar="FILE",
+                       help=f"{each}normals: .npy (H, W, 3) in the camera frame (x right, y down, "
                             "z forward), or 8-bit PNG storing (n+1)/2*255")
     group.add_argument("--intrinsics", metavar="fx,fy,cx,cy|FILE.json",
-                       help="pinhole intrinsics in pixels; default: 60 degree horizontal FOV")
+                       help="pinhole intrinsics in pixels"
+                            + (" shared by all images, held fixed in SfM where the matcher can"
+                               if per_image else "")
+                            + "; default: 60 degree horizontal FOV")
+    add_depth_value_args(group)
+
+
+def add_depth_value_args(group: argparse._ArgumentGroup, scale_note: str = "") -> None:
+    """``--depth-scale``, ``--relative-depth`` and ``--nan-as-invalid``: how depth values read.
+
+    ``scale_note`` is appended to the ``--depth-scale`` help (e.g. what overrides it).
+    """
+    group.add_argument("--depth-scale", type=float, metavar="S",
+                       help="divide PNG depth by S (1000 for millimetres, 5000 for TUM)"
+                            + scale_note)
     group.add_argument("--relative-depth", action="store_true",
                        help="the given depth is correct only up to scale (e.g. a network output)")
     group.add_argument("--nan-as-invalid", action="store_true",
-                       help="treat NaN/inf depth as invalid pixels instead of rejecting the file")
+                       help="treat NaN/inf depth as invalid pixels instead of an error")
+
+
+def depth_reading(args: argparse.Namespace) -> dict[str, Any]:
+    """Keyword arguments ``depth_scale``, ``depth_kind`` and ``nan_as_invalid`` of the loaders,
+    from the options of :func:`add_depth_value_args`."""
+    return dict(depth_scale=args.depth_scale, nan_as_invalid=args.nan_as_invalid,
+                depth_kind="relative" if args.relative_depth else "metric")
 
 
 def add_output_args(parser: argparse.ArgumentParser) -> None:

@@ -23,14 +23,17 @@ EPILOG = """examples:
   monoplane eval --preset monoplane --set labeler.lambda=0.9 --level strong --json out.json
   monoplane eval --all --n 50 --report eval_report/
   monoplane eval --multiview --n 10
-  monoplane eval --data abw-dev/ --preset range --baseline cgal
+  monoplane eval --data abw-dev/ --preset range --baseline cgal \
+      --baseline-set cgal.min_support=0.001 --baseline-set cgal.normal_deg=35
   monoplane eval --data abw-dev/ --as-cloud --preset cloud
   monoplane eval --multiview --views 5 --path walk --n 10
 
 Scene i uses seed SEED+i, so equal arguments give equal tables (timings aside). Baselines come
 registered through the 'monoplane_register_baselines' plugin hook: open3d-ransac is built in,
-installed plugins add more (--all scores every one). 's/frame' is the whole call, 'core s' a
-baseline's own call without data conversion when it reports one. See docs/evaluation.md."""
+installed plugins add more (--all scores every one); --baseline-set NAME.FIELD=VALUE sets the
+fields of a baseline's settings, so peers are compared tuned. 's/frame' is the whole call,
+'core s' a baseline's own call without data conversion when it reports one. See
+docs/evaluation.md."""
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -43,6 +46,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     what.add_argument("--baseline", dest="baselines", action="append", default=[],
                       metavar="NAME",
                       help="external baseline to score (repeatable), e.g. open3d-ransac")
+    what.add_argument("--baseline-set", dest="baseline_sets", action="append", default=[],
+                      metavar="NAME.FIELD=VALUE",
+                      help="set one option of a baseline (repeatable), e.g. "
+                           "cgal.min_support=0.001; unknown fields list the valid ones")
     what.add_argument("--all", dest="all_methods", action="store_true",
                       help="the paper's six ablation presets plus every available baseline")
     what.add_argument("--set", dest="overrides", action="append", default=[],
@@ -100,9 +107,9 @@ def _run_multiview(args: argparse.Namespace, size: tuple[int, int]) -> int:
     except ImportError as exc:
         raise InvalidInput(f"two-view evaluation is not available in this installation: {exc}"
                            ) from exc
-    if args.baselines or args.all_methods or len(args.presets) > 1:
-        raise InvalidInput("--multiview scores one preset; drop --baseline/--all and give at "
-                           "most one --preset")
+    if args.baselines or args.baseline_sets or args.all_methods or len(args.presets) > 1:
+        raise InvalidInput("--multiview scores one preset; drop --baseline/--baseline-set/--all "
+                           "and give at most one --preset")
     kwargs: dict[str, Any] = {"width": size[0], "height": size[1],
                               "overrides": args.overrides or None}
     if args.presets:
@@ -146,6 +153,15 @@ def _write_report(results: Any, methods: list[Any], out_dir: str, progress: bool
     print(f"report written to {path}", file=sys.stderr)
 
 
+def _baseline_options(args: argparse.Namespace, names: list[str], all_methods: bool = False
+                      ) -> dict[str, dict[str, Any]]:
+    """``--baseline-set`` options per baseline; each must name a baseline of the run."""
+    from monoplane.evaluation.baselines import baseline_names, parse_baseline_options
+
+    run = [*names, *baseline_names()] if all_methods else names
+    return parse_baseline_options(args.baseline_sets, list(dict.fromkeys(run)))
+
+
 def _run_dataset(args: argparse.Namespace) -> int:
     from monoplane.evaluation.dataset import evaluate_dataset, format_dataset_table
 
@@ -154,7 +170,8 @@ def _run_dataset(args: argparse.Namespace) -> int:
                            "and --report")
     results = evaluate_dataset(args.data, args.presets, args.baselines, args.overrides or None,
                                as_cloud=args.as_cloud, tolerance=args.tolerance,
-                               seed=args.seed, progress=not args.no_progress)
+                               seed=args.seed, progress=not args.no_progress,
+                               baseline_options=_baseline_options(args, args.baselines))
     print(format_dataset_table(results))
     if args.json:
         _write_json(args.json, results.to_dict())
@@ -174,7 +191,8 @@ def run(args: argparse.Namespace) -> int:
         raise InvalidInput(f"--n must be at least 1, got {args.n}")
     if args.multiview:
         return _run_multiview(args, size)
-    methods = resolve_methods(args.presets, args.baselines, args.all_methods, args.overrides)
+    methods = resolve_methods(args.presets, args.baselines, args.all_methods, args.overrides,
+                              _baseline_options(args, args.baselines, args.all_methods))
     results = evaluate(methods, n=args.n, level=args.level, seed=args.seed, size=size,
                        progress=not args.no_progress)
     print(format_table(results))

@@ -17,6 +17,7 @@ from monoplane.models import (
 )
 from monoplane.models.catalogue import ModelRecord
 from monoplane.pipeline import Pipeline
+from monoplane.stages.base import CueProvider
 
 DESCRIPTION = """Monocular depth/normal networks monoplane can download on request (ONNX exports
 published on Hugging Face, pinned to a revision where one is known, checked by size and SHA-256).
@@ -97,13 +98,12 @@ def prepare_cue_model(pipe: Pipeline, *, fetch_missing: bool, has_depth: bool,
                       has_normals: bool, quiet: bool = False) -> None:
     """Make sure the pipeline's catalogue model (``cues.model``) is in the cache.
 
-    With ``fetch_missing`` a missing model is downloaded (the only download a run ever does);
-    otherwise, when the input needs the network (no given depth, or no given normals for a
-    network that predicts them), a missing model is a one-line error naming the fetch command,
-    raised before any image is read.
+    The cue provider says which catalogue model the input needs
+    (:meth:`~monoplane.stages.base.CueProvider.catalogue_model`). With ``fetch_missing`` a
+    missing model is downloaded (the only download a run ever does); otherwise a missing model
+    is a one-line error naming the fetch command, raised before any image is read.
     """
-    plugin, cfg = pipe.config.stages["cues"]
-    name = getattr(cfg, "model", "") if plugin == "onnx" else ""
+    name = pipe.stage("cues", CueProvider).catalogue_model(not has_depth, not has_normals)
     if not name or cached_model(name) is not None:
         return
     if fetch_missing:
@@ -111,6 +111,4 @@ def prepare_cue_model(pipe: Pipeline, *, fetch_missing: bool, has_depth: bool,
         if not quiet:
             print(f"fetched {name} -> {result.path} (sha256 {result.sha256})")
         return
-    joint = cfg.resolved_profile().depth.joint_normals
-    if not has_depth or (joint and not has_normals):
-        require_model(name)
+    require_model(name)

@@ -5,8 +5,14 @@ from __future__ import annotations
 import argparse
 import sys
 
-from monoplane.cli.common import add_output_args, add_pipeline_args, pipeline_from_args
-from monoplane.io import check_output_dir, load_frame
+from monoplane.cli.common import (
+    add_input_args,
+    add_output_args,
+    add_pipeline_args,
+    depth_reading,
+    pipeline_from_args,
+)
+from monoplane.fileio import check_output_dir, load_frame
 
 DESCRIPTION = """Sparse-view planar reconstruction (MonoPlane §III-C): structure from motion
 (pycolmap SIFT, CPU), monocular cues per image, scale alignment of each depth onto the SfM
@@ -31,18 +37,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        description=DESCRIPTION,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("images", nargs="+", metavar="IMG", help="two or more colour images")
-    g = p.add_argument_group("inputs")
-    g.add_argument("--depth", nargs="+", metavar="FILE",
-                   help="one depth map per image: .npy float or 16-bit PNG with --depth-scale")
-    g.add_argument("--depth-scale", type=float, metavar="S",
-                   help="divide PNG depth by S (1000 for millimetres)")
-    g.add_argument("--normals", nargs="+", metavar="FILE",
-                   help="one normal map per image: .npy (H, W, 3) camera frame or 8-bit PNG")
-    g.add_argument("--intrinsics", metavar="fx,fy,cx,cy|FILE.json",
-                   help="known intrinsics shared by all images, kept fixed in SfM; default: "
-                        "estimated from a 60 degree horizontal field of view")
-    g.add_argument("--relative-depth", action="store_true",
-                   help="the given depths are correct only up to scale")
+    add_input_args(p, per_image=True)
     add_pipeline_args(p)
     add_output_args(p)
     p.add_argument("--strict", action="store_true",
@@ -81,9 +76,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"monoplane: note: matcher '{pipe.config.stages['matcher'][0]}' cannot hold "
               "intrinsics fixed; --intrinsics is its starting guess", file=sys.stderr)
     frames = [
-        load_frame(img, depth=d, normals=nm, intrinsics=args.intrinsics,
-                   depth_scale=args.depth_scale,
-                   depth_kind="relative" if args.relative_depth else "metric")
+        load_frame(img, depth=d, normals=nm, intrinsics=args.intrinsics, **depth_reading(args))
         for img, d, nm in zip(args.images, depths, normals, strict=True)
     ]
     names = [f.name for f in frames]

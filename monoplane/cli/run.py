@@ -8,10 +8,11 @@ from monoplane.cli.common import (
     add_input_args,
     add_output_args,
     add_pipeline_args,
+    depth_reading,
     pipeline_from_args,
 )
 from monoplane.cli.models import prepare_cue_model
-from monoplane.io import check_output_dir, load_frame, save_reconstruction
+from monoplane.fileio import check_output_dir, load_frame, save_reconstruction
 
 DESCRIPTION = """Recover the planes of one image and write labels.png (uint16, 0 = non-planar),
 planes.json (normal . X + offset = 0 in the camera frame and the depth's units), planes.ply,
@@ -19,8 +20,8 @@ depth_planar.npy and config.toml into --out.
 
 Depth and normals come from --depth/--normals (RGB-D, precomputed network outputs), from a
 catalogue model (--cues NAME, see 'monoplane models list'; --fetch downloads it once) or from
-the configured cue provider (e.g. --set cues.plugin=onnx with model files). IMAGE may be
-omitted for depth-only range images."""
+the configured cue provider (see 'monoplane plugins'). IMAGE may be omitted for depth-only
+range images."""
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -32,7 +33,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     group = p.add_argument_group("monocular models")
     group.add_argument("--cues", metavar="NAME",
                        help="predict depth/normals with a catalogue model (same as --set "
-                            "cues.plugin=onnx --set cues.model=NAME)")
+                            "cues.model=NAME)")
     group.add_argument("--fetch", action="store_true",
                        help="download the configured catalogue model first if it is not "
                             "cached (nothing is downloaded without this flag)")
@@ -45,14 +46,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     check_output_dir(args.out, args.overwrite)  # fail before any work
     if args.cues:
-        args.overrides = ["cues.plugin=onnx", f"cues.model={args.cues}", *args.overrides]
+        args.overrides = [f"cues.model={args.cues}", *args.overrides]
     pipe = pipeline_from_args(args)
     prepare_cue_model(pipe, fetch_missing=args.fetch, has_depth=args.depth is not None,
                       has_normals=args.normals is not None, quiet=args.quiet)
     frame = load_frame(args.image, depth=args.depth, normals=args.normals,
-                       intrinsics=args.intrinsics, depth_scale=args.depth_scale,
-                       nan_as_invalid=args.nan_as_invalid,
-                       depth_kind="relative" if args.relative_depth else "metric")
+                       intrinsics=args.intrinsics, **depth_reading(args))
     rec = pipe.run(frame)
     out = save_reconstruction(rec, args.out, overwrite=args.overwrite, report=args.report,
                               progress=not args.quiet)

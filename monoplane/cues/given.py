@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 
 from monoplane.cues.transforms import orient_normals
+from monoplane.datamodel import Frame
 from monoplane.errors import InvalidInput
-from monoplane.types import Frame
 
 
 def use_given_cues(frame: Frame) -> Frame:

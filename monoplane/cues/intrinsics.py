@@ -1,6 +1,6 @@
 """Intrinsics for images that come without calibration, and the note that says so.
 
-Whoever builds a :class:`~monoplane.types.Frame` without known intrinsics (file readers, the
+Whoever builds a :class:`~monoplane.datamodel.Frame` without known intrinsics (file readers, the
 Python API) calls :func:`assume_intrinsics` and puts the returned note in ``frame.notes``. Cue
 providers recognise that note with :func:`intrinsics_assumed` and may replace the guess with a
 better one (a network profile's field of view) via :func:`reassume_intrinsics`. Notes end up in
@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from monoplane.types import Frame, default_intrinsics
+from monoplane.datamodel import Frame, default_intrinsics
 
-#: Every note about assumed intrinsics starts with this (``monoplane.io.load_frame`` too).
+#: Every note about assumed intrinsics starts with this (``monoplane.fileio.load_frame`` too).
 ASSUMED_INTRINSICS_NOTE = "intrinsics not given"
-#: Field of view used when nothing better is known (see ``monoplane.types.default_intrinsics``).
+#: Field of view used when nothing better is known (see ``monoplane.datamodel.default_intrinsics``).
 DEFAULT_HFOV_DEG = 60.0
 
 

@@ -23,9 +23,9 @@ from monoplane.cues.transforms import (
     orient_normals,
     relative_depth_from_depth,
 )
+from monoplane.datamodel import Frame
 from monoplane.errors import InvalidInput
 from monoplane.geometry.normals import normals_from_depth
-from monoplane.types import Frame
 
 
 class CueNetwork:

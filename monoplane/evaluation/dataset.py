@@ -7,8 +7,8 @@ A dataset is a folder of frame folders, each holding
 * ``intrinsics.json``: ``{"fx": ..., "fy": ..., "cx": ..., "cy": ...}`` (optional);
 * ``rgb.png`` / ``rgb.jpg`` / ``color.png`` / ``color.jpg`` (optional; depth-only otherwise).
 
-Every method sees the frame with its depth, and normals estimated from it by the ``given`` cue
-provider of the method's preset (baselines: that provider's defaults). Scores per frame:
+Every method sees the frame with its depth, and normals estimated from it by the cue
+provider of the method's preset (baselines: the default preset's provider). Scores per frame:
 VOI, RI and SC on ground-truth planar pixels (:mod:`~monoplane.evaluation.segmentation`) and
 Hoover et al.'s SegComp counts at tolerance T (:mod:`~monoplane.evaluation.segcomp`); tables
 report their means over frames.
@@ -29,10 +29,10 @@ from typing import Any
 
 import numpy as np
 
-from monoplane.errors import InvalidInput, MonoplaneError
+from monoplane.datamodel import Frame, Reconstruction
+from monoplane.errors import ConfigError, InvalidInput, MonoplaneError
 from monoplane.evaluation.segcomp import DEFAULT_TOLERANCE, segcomp
 from monoplane.evaluation.segmentation import segmentation_scores
-from monoplane.types import Frame, Reconstruction
 
 _RGB_NAMES = ("rgb.png", "rgb.jpg", "color.png", "color.jpg")
 
@@ -64,7 +64,7 @@ def load_dataset(folder: str | Path) -> list[LabelledFrame]:
         When the folder does not exist, holds no frame with ``gt_labels.png``, or a frame's
         files do not agree in size.
     """
-    from monoplane.io import load_frame
+    from monoplane.fileio import load_frame
 
     root = Path(folder)
     if not root.is_dir():
@@ -163,8 +163,9 @@ def cloud_reconstruction(frame: Frame, preset: str, overrides: list[str] | None,
 
 
 def _methods(presets: Sequence[str], baselines: Sequence[str], overrides: list[str] | None,
-             as_cloud: bool) -> list[tuple[str, str, Any]]:
-    from monoplane.evaluation.baselines import get_baseline
+             as_cloud: bool, baseline_options: dict[str, dict[str, Any]]
+             ) -> list[tuple[str, str, Any]]:
+    from monoplane.evaluation.baselines import bind_baseline
     from monoplane.pipeline import Pipeline
 
     out: list[tuple[str, str, Any]] = []
@@ -175,11 +176,10 @@ def _methods(presets: Sequence[str], baselines: Sequence[str], overrides: list[s
             out.append((f"{name} (cloud)", "cloud",
                         lambda f, s, n=name: cloud_reconstruction(f, n, overrides, s)))
         else:
-            pipe = Pipeline.from_preset(name, overrides=["cues.plugin=given",
-                                                         *(overrides or [])])
+            pipe = Pipeline.from_preset(name, overrides=overrides)
             out.append((name, "preset", lambda f, s, p=pipe: p.run(f)))
     for name in baselines:
-        fn = get_baseline(name)
+        fn = bind_baseline(name, baseline_options.get(name))
         out.append((name, "baseline", lambda f, s, fn=fn: fn(f, seed=s)))
     if not out:
         raise InvalidInput("nothing to evaluate: give --preset or --baseline")
@@ -189,7 +189,9 @@ def _methods(presets: Sequence[str], baselines: Sequence[str], overrides: list[s
 def evaluate_dataset(folder: str | Path, presets: Sequence[str] = (),
                      baselines: Sequence[str] = (), overrides: list[str] | None = None,
                      as_cloud: bool = False, tolerance: float = DEFAULT_TOLERANCE,
-                     seed: int = 0, progress: bool = True) -> DatasetResults:
+                     seed: int = 0, progress: bool = True,
+                     baseline_options: dict[str, dict[str, Any]] | None = None
+                     ) -> DatasetResults:
     """Score methods on every frame of a dataset folder.
 
     Parameters
@@ -208,6 +210,10 @@ def evaluate_dataset(folder: str | Path, presets: Sequence[str] = (),
         Seed of baselines and of the cloud shuffling.
     progress : bool
         Show a progress bar on stderr.
+    baseline_options : dict, optional
+        Baseline name -> keyword options (fields of its settings), e.g.
+        ``{"cgal": {"min_support": 0.001}}``; checked before the first frame when the baseline
+        exposes its settings class.
 
     Returns
     -------
@@ -215,20 +221,22 @@ def evaluate_dataset(folder: str | Path, presets: Sequence[str] = (),
     """
     from tqdm import tqdm
 
-    from monoplane.stages.cues import GivenCues
+    from monoplane.pipeline import Pipeline
 
     if not 0.5 < tolerance <= 1.0:
         raise InvalidInput(f"--tolerance must lie in (0.5, 1], got {tolerance}")
     frames = load_dataset(folder)
-    methods = _methods(presets, baselines, overrides, as_cloud)
+    baseline_options = baseline_options or {}
+    methods = _methods(presets, baselines, overrides, as_cloud, baseline_options)
     results = [DatasetMethodResult(name, kind) for name, kind, _ in methods]
-    cues = GivenCues()
+    # Baselines get their normals from the default preset's cue provider, as any user would.
+    cues = Pipeline.from_preset()
     bar = tqdm(total=len(frames) * len(methods), disable=not progress, unit="run",
                desc="eval")
     try:
         for item in frames:
             # Baselines need normals; presets estimate their own with their cue settings.
-            with_normals = cues.provide(item.frame)
+            with_normals = cues.prepare(item.frame)
             for (name, kind, run), result in zip(methods, results, strict=True):
                 bar.set_postfix_str(f"{item.name} {name}")
                 frame = with_normals if kind == "baseline" else item.frame
@@ -237,6 +245,8 @@ def evaluate_dataset(folder: str | Path, presets: Sequence[str] = (),
                 try:
                     rec = run(frame, seed)
                     labels = rec.labels
+                except ConfigError:
+                    raise  # a wrong option fails the run, not one frame
                 except MonoplaneError as exc:
                     failed, error = True, str(exc)
                     warnings.warn(f"{name} failed on {item.name}: {exc}", stacklevel=2)
@@ -253,7 +263,8 @@ def evaluate_dataset(folder: str | Path, presets: Sequence[str] = (),
     finally:
         bar.close()
     settings = {"data": str(folder), "n_frames": len(frames), "tolerance": tolerance,
-                "as_cloud": as_cloud, "seed": seed, "overrides": list(overrides or [])}
+                "as_cloud": as_cloud, "seed": seed, "overrides": list(overrides or []),
+                "baseline_options": baseline_options}
     return DatasetResults(results, settings)
 
 

@@ -9,8 +9,8 @@ The protocol of ``monoplane eval``:
    (``Σ recalled / Σ ground-truth planes``); see :mod:`~monoplane.evaluation.segmentation` and
    :mod:`~monoplane.evaluation.recall`.
 3. Time per frame (``s/frame``) is the wall time of the method's call on a frame that already
-   carries its cues (for presets: the whole :meth:`Pipeline.run`, whose ``given`` cue step is
-   a pass-through; for baselines: the whole baseline call, data conversion included). The
+   carries its cues (for presets: the whole :meth:`Pipeline.run`, whose cue step passes the
+   given cues through; for baselines: the whole baseline call, data conversion included). The
    *core* time (``core s``) is what compares methods' algorithms: for presets the same
    pipeline time, for a baseline the time of its own call alone when it reports one
    (``timings["baseline.call"]``, e.g. a library's detection call without converting the
@@ -29,11 +29,11 @@ from typing import Any
 
 import numpy as np
 
-from monoplane.errors import InvalidInput, MonoplaneError
-from monoplane.evaluation.baselines import CALL_TIMING, baseline_names, get_baseline
+from monoplane.datamodel import Frame, Reconstruction
+from monoplane.errors import ConfigError, InvalidInput, MonoplaneError
+from monoplane.evaluation.baselines import CALL_TIMING, baseline_names, bind_baseline
 from monoplane.evaluation.recall import DEPTH_THRESHOLDS, plane_recall
 from monoplane.evaluation.segmentation import segmentation_scores
-from monoplane.types import Frame, Reconstruction
 
 #: The paper's ablation rows (Tab. IV), in table order.
 PAPER_PRESETS: tuple[str, ...] = (
@@ -65,24 +65,27 @@ class Method:
 def preset_method(name: str, overrides: list[str] | None = None) -> Method:
     """A pipeline preset as a method (the config is validated now, not on the first frame).
 
-    The synthetic frames carry their (corrupted) cues already, so the cue provider is forced to
-    ``given`` before the caller's ``table.key=value`` overrides apply.
+    The synthetic frames carry their (corrupted) cues already, so the pipeline skips the cue
+    provider for them (:meth:`~monoplane.stages.base.CueProvider.needs_cues`).
     """
     from monoplane.pipeline import Pipeline
 
-    pipe = Pipeline.from_preset(name, overrides=["cues.plugin=given", *(overrides or [])])
+    pipe = Pipeline.from_preset(name, overrides=overrides)
     return Method(name=name, kind="preset", run=lambda frame, seed: pipe.run(frame))
 
 
-def baseline_method(name: str) -> Method:
-    """A registered baseline as a method (see :mod:`monoplane.evaluation.baselines`)."""
-    fn = get_baseline(name)
+def baseline_method(name: str, options: dict[str, Any] | None = None) -> Method:
+    """A registered baseline as a method (see :mod:`monoplane.evaluation.baselines`), with its
+    keyword ``options`` (checked now when the baseline exposes its settings class)."""
+    fn = bind_baseline(name, options)
     return Method(name=name, kind="baseline", run=lambda frame, seed: fn(frame, seed=seed))
 
 
 def resolve_methods(presets: Sequence[str] = (), baselines: Sequence[str] = (),
                     all_methods: bool = False,
-                    overrides: list[str] | None = None) -> list[Method]:
+                    overrides: list[str] | None = None,
+                    baseline_options: dict[str, dict[str, Any]] | None = None
+                    ) -> list[Method]:
     """Build the method list of an evaluation run.
 
     Parameters
@@ -96,6 +99,9 @@ def resolve_methods(presets: Sequence[str] = (), baselines: Sequence[str] = (),
         (:func:`~monoplane.evaluation.baselines.baseline_names`).
     overrides : list of str, optional
         ``table.key=value`` overrides applied to every preset.
+    baseline_options : dict, optional
+        Baseline name -> keyword options (see
+        :func:`~monoplane.evaluation.baselines.parse_baseline_options`).
 
     Returns
     -------
@@ -110,7 +116,8 @@ def resolve_methods(presets: Sequence[str] = (), baselines: Sequence[str] = (),
     if not preset_names and not baseline_list:
         raise InvalidInput("nothing to evaluate: give --preset, --baseline or --all")
     methods = [preset_method(p, overrides) for p in preset_names]
-    methods += [baseline_method(b) for b in dict.fromkeys(baseline_list)]
+    options = baseline_options or {}
+    methods += [baseline_method(b, options.get(b)) for b in dict.fromkeys(baseline_list)]
     return methods
 
 
@@ -129,6 +136,30 @@ class FrameResult:
     core_seconds: float = float("nan")
     failed: bool = False
     error: str = ""
+
+
+class FrameMean:
+    """Read-only attribute of a result holding ``frames``: one per-frame field's mean.
+
+    ``NaN`` when there are no frames.
+
+    Parameters
+    ----------
+    attr : str
+        The per-frame field averaged.
+    doc : str
+        The attribute's docstring.
+    """
+
+    def __init__(self, attr: str, doc: str) -> None:
+        self.attr = attr
+        self.__doc__ = doc
+
+    def __get__(self, obj: Any, owner: type | None = None) -> Any:
+        if obj is None:  # looked up on the class: the descriptor itself, for help()
+            return self
+        values = [getattr(f, self.attr) for f in obj.frames]
+        return float(np.mean(values)) if values else float("nan")
 
 
 @dataclass
@@ -150,24 +181,13 @@ class MethodResult:
     thresholds: list[float]
     frames: list[FrameResult] = field(default_factory=list)
 
-    def _mean(self, attr: str) -> float:
-        values = [getattr(f, attr) for f in self.frames]
-        return float(np.mean(values)) if values else float("nan")
-
-    @property
-    def voi(self) -> float:
-        """Mean VOI (nats)."""
-        return self._mean("voi")
-
-    @property
-    def ri(self) -> float:
-        """Mean Rand index."""
-        return self._mean("ri")
-
-    @property
-    def sc(self) -> float:
-        """Mean segmentation covering."""
-        return self._mean("sc")
+    voi = FrameMean("voi", "Mean VOI (nats).")
+    ri = FrameMean("ri", "Mean Rand index.")
+    sc = FrameMean("sc", "Mean segmentation covering.")
+    seconds_per_frame = FrameMean("seconds", "Mean wall time per frame, seconds.")
+    core_seconds_per_frame = FrameMean(
+        "core_seconds", "Mean core time per frame, seconds (see the module docstring).")
+    planes_per_frame = FrameMean("n_planes", "Mean number of predicted planes.")
 
     @property
     def recall(self) -> list[float]:
@@ -177,21 +197,6 @@ class MethodResult:
             return [float("nan")] * len(self.thresholds)
         return [sum(f.recalled[k] for f in self.frames) / total
                 for k in range(len(self.thresholds))]
-
-    @property
-    def seconds_per_frame(self) -> float:
-        """Mean wall time per frame, seconds."""
-        return self._mean("seconds")
-
-    @property
-    def core_seconds_per_frame(self) -> float:
-        """Mean core time per frame, seconds (see the module docstring)."""
-        return self._mean("core_seconds")
-
-    @property
-    def planes_per_frame(self) -> float:
-        """Mean number of predicted planes."""
-        return self._mean("n_planes")
 
     @property
     def n_failed(self) -> int:
@@ -332,6 +337,8 @@ def evaluate(methods: Sequence[Method], n: int = 50, level: str = "mild", seed: 
                 start = time.perf_counter()
                 try:
                     rec = method.run(view.frame, scene_seed)
+                except ConfigError:
+                    raise  # a wrong option fails the run, not one scene
                 except MonoplaneError as exc:
                     failed, error = True, str(exc)
                     warnings.warn(f"{method.name} failed on scene seed {scene_seed}: {exc}",

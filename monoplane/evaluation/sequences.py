@@ -30,9 +30,9 @@ from typing import Any
 
 import numpy as np
 
+from monoplane.datamodel import Scene
 from monoplane.errors import InvalidInput, MonoplaneError
 from monoplane.evaluation.twoview import relative_pose_error
-from monoplane.types import Scene
 
 
 def similarity_to_truth(R_pred: np.ndarray, c_pred: np.ndarray, R_gt: np.ndarray,
@@ -154,7 +154,7 @@ def evaluate_sequences(n: int = 10, views: int = 5, path: str = "walk", level: s
         raise InvalidInput(f"n must be at least 1, got {n}")
     if views < 2:
         raise InvalidInput(f"--views must be at least 2, got {views}")
-    pipe = Pipeline.from_preset(preset, overrides=["cues.plugin=given", *(overrides or [])])
+    pipe = Pipeline.from_preset(preset, overrides=overrides)
     hold_intrinsics_fixed(pipe)
     min_area = float(pipe.config.to_dict()["ransac"]["min_support"])
     rot, trans, times, failures = [], [], [], []

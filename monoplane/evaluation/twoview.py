@@ -27,13 +27,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from monoplane.datamodel import Camera, Scene, orient_towards_camera, plane_to_camera
 from monoplane.errors import InvalidInput, MonoplaneError
 from monoplane.evaluation.recall import median_scale
-from monoplane.types import Camera, Scene, orient_towards_camera, plane_to_camera
 
 if TYPE_CHECKING:
+    from monoplane.datamodel import SfmResult
     from monoplane.synth import SynthScene
-    from monoplane.types import SfmResult
 
 #: AP variants: name -> (use normal test, use offset test).
 AP_VARIANTS: dict[str, tuple[bool, bool]] = {
@@ -245,7 +245,7 @@ def ground_truth_sfm(synth: SynthScene, num_points: int = 400, seed: int = 0) ->
     seed : int
         Sampling seed.
     """
-    from monoplane.types import SfmResult, pixel_rays
+    from monoplane.datamodel import SfmResult, pixel_rays
 
     rng = np.random.default_rng(seed)
     v0 = synth.views[0]
@@ -363,7 +363,7 @@ def evaluate_pairs(n: int = 20, level: str = "mild", seed: int = 0, progress: bo
 
     if n < 1:
         raise InvalidInput(f"n must be at least 1, got {n}")
-    pipe = Pipeline.from_preset(preset, overrides=["cues.plugin=given", *(overrides or [])])
+    pipe = Pipeline.from_preset(preset, overrides=overrides)
     hold_intrinsics_fixed(pipe)
     res = TwoViewResults(n_pairs=n, registered=0)
     judged_all, judged_ok = [], []

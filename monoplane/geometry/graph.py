@@ -160,11 +160,7 @@ class NeighbourGraph:
         last = self._last_subgraph
         if last is not None and np.array_equal(last[0], pool):
             return last[1], last[2]
-        local = np.full(self.num_nodes, -1, dtype=np.int64)
-        local[pool] = np.arange(pool.size, dtype=np.int64)
-        mapped = local[self.edges]
-        edge_ids = np.flatnonzero((mapped[:, 0] >= 0) & (mapped[:, 1] >= 0))
-        edges = mapped[edge_ids]
+        edges, edge_ids = _pool_edges(self.num_nodes, self.edges, pool)
         for a in (edges, edge_ids):
             a.flags.writeable = False
         self._last_subgraph = (pool.copy(), edges, edge_ids)
@@ -277,3 +273,23 @@ def _largest_component(members: np.ndarray, edges: np.ndarray) -> np.ndarray:
             out[k] = root[p] == best
             k += 1
     return out
+
+
+@kernel
+def _pool_edges(num_nodes: int, edges: np.ndarray, pool: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """(E', 2) edges among the (M,) ``pool`` in pool positions and their (E',) rows."""
+    local = np.full(num_nodes, -1, dtype=np.int64)
+    for i in range(pool.shape[0]):
+        local[pool[i]] = i
+    out = np.empty((edges.shape[0], 2), dtype=np.int64)
+    ids = np.empty(edges.shape[0], dtype=np.int64)
+    count = 0
+    for e in range(edges.shape[0]):
+        a, b = local[edges[e, 0]], local[edges[e, 1]]
+        if a >= 0 and b >= 0:
+            out[count, 0] = a
+            out[count, 1] = b
+            ids[count] = e
+            count += 1
+    return out[:count].copy(), ids[:count].copy()

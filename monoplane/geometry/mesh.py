@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from monoplane.types import Reconstruction, pixel_rays, ray_plane_depth
+from monoplane.datamodel import Reconstruction, pixel_rays, ray_plane_depth
 
 
 def planar_mesh(

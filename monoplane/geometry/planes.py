@@ -69,21 +69,32 @@ def planes_from_triplets(triplets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     valid : numpy.ndarray
         (S,) bool, False where the three points are (nearly) collinear.
     """
-    t = np.asarray(triplets, dtype=np.float64)
-    a, b, c = t[:, 0], t[:, 1], t[:, 2]
-    normal = np.cross(b - a, c - a)
-    norm = np.linalg.norm(normal, axis=1)
-    # Scale-aware degeneracy test: |cross| is twice the triangle area, compare to edge lengths².
-    edge2 = np.maximum(((b - a) ** 2).sum(1), ((c - a) ** 2).sum(1))
-    valid = norm > 1e-9 * np.maximum(edge2, 1e-300)
-    planes = np.zeros((len(t), 4))
-    n = normal[valid] / norm[valid, None]
-    d = -np.einsum("ij,ij->i", n, a[valid])
-    flip = d < 0
-    n[flip] *= -1
-    d[flip] *= -1
-    planes[valid, :3] = n
-    planes[valid, 3] = d
+    t = np.ascontiguousarray(triplets, dtype=np.float64)
+    if t.ndim != 3 or t.shape[1:] != (3, 3):
+        raise InvalidInput(f"triplets must have shape (S, 3, 3), got {t.shape}")
+    return _triplet_planes(t)
+
+
+@kernel
+def _triplet_planes(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`planes_from_triplets` on a (S, 3, 3) float64 array, one sample at a time."""
+    planes = np.zeros((t.shape[0], 4))
+    valid = np.zeros(t.shape[0], dtype=np.bool_)
+    for s in range(t.shape[0]):
+        u0, u1, u2 = t[s, 1, 0] - t[s, 0, 0], t[s, 1, 1] - t[s, 0, 1], t[s, 1, 2] - t[s, 0, 2]
+        v0, v1, v2 = t[s, 2, 0] - t[s, 0, 0], t[s, 2, 1] - t[s, 0, 1], t[s, 2, 2] - t[s, 0, 2]
+        n0, n1, n2 = u1 * v2 - u2 * v1, u2 * v0 - u0 * v2, u0 * v1 - u1 * v0
+        norm = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+        # Scale-aware degeneracy test: |cross| is twice the triangle area, compare to edge².
+        edge2 = max(u0 * u0 + u1 * u1 + u2 * u2, v0 * v0 + v1 * v1 + v2 * v2)
+        if not norm > 1e-9 * max(edge2, 1e-300):
+            continue
+        n0, n1, n2 = n0 / norm, n1 / norm, n2 / norm
+        d = -(n0 * t[s, 0, 0] + n1 * t[s, 0, 1] + n2 * t[s, 0, 2])
+        if d < 0:
+            n0, n1, n2, d = -n0, -n1, -n2, -d
+        planes[s, 0], planes[s, 1], planes[s, 2], planes[s, 3] = n0, n1, n2, d
+        valid[s] = True
     return planes, valid
 
 

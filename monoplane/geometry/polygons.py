@@ -26,7 +26,7 @@ import cv2
 import mapbox_earcut
 import numpy as np
 
-from monoplane.types import Reconstruction, ray_plane_depth
+from monoplane.datamodel import Reconstruction, ray_plane_depth
 
 
 @dataclass

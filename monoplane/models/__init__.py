@@ -6,7 +6,7 @@
     fetch("depth-anything-v2-small")            # downloads once, verified
     path = require_model("depth-anything-v2-small")
 
-or in a config: ``[cues] plugin = "onnx"``, ``model = "depth-anything-v2-small"``.
+or in a config: ``[cues] model = "depth-anything-v2-small"``.
 """
 
 from monoplane.models.cache import (

@@ -179,7 +179,9 @@ def fetch(name: str, *, downloader: Downloader | None = None) -> FetchResult:
             got = (downloader or _hf_download)(record.repo, record.filename, record.revision,
                                                tmp)
         except Exception as exc:  # offline, DNS, HTTP errors: huggingface_hub raises many types
-            first = (str(exc).strip().splitlines() or [type(exc).__name__])[0][:160]
+            first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+            # Library messages run on; keep their first sentence so the line stays readable.
+            first = first.split(". ")[0].rstrip(".")[:160]
             raise InvalidInput(
                 f"cannot download {record.url} ({type(exc).__name__}: {first}); without a "
                 f"network, download that file elsewhere and place it at {final}") from None

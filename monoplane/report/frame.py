@@ -4,19 +4,20 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable
 from datetime import datetime
 from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
+from monoplane.datamodel import Reconstruction
 from monoplane.geometry.mesh import planar_mesh
 from monoplane.report import figures as fig
 from monoplane.report import html
 from monoplane.report.colors import colorize_normals, plane_palette, shade
 from monoplane.report.render3d import DEFAULT_TIMEOUT, Mesh, RenderResult, Shot, render
 from monoplane.report.viewpoints import facing_triangles, orbit_viewpoints, zoom_to_fit
-from monoplane.types import Reconstruction
 
 #: Width of the 3D renders in pixels (height follows the image's aspect ratio).
 RENDER_WIDTH = 640
@@ -122,6 +123,27 @@ def plane_rows(rec: Reconstruction) -> list[list[str]]:
     return rows
 
 
+def rendered_views(render_3d: bool, make: Callable[[], tuple[list[html.Figure], RenderResult]]
+                   ) -> tuple[list[html.Figure], RenderResult]:
+    """The 3D figures ``make()`` renders, or none (with the reason) when 3D was not asked for."""
+    if not render_3d:
+        return [], RenderResult({}, "3D views were not requested", 0.0)
+    return make()
+
+
+def views_3d_body(views: list[html.Figure], reason: str | None, complete: str) -> str:
+    """HTML of a report's 3D section: why views are missing, if any are, then the views.
+
+    ``complete`` names the 2D figures a reader can still rely on.
+    """
+    body = ""
+    if reason:
+        body += html.warning(f"3D views are missing or incomplete: {reason}. {complete}")
+    if views:
+        body += html.figure_grid(views, 2)
+    return body
+
+
 def write_frame_report(rec: Reconstruction, out_dir: Path, render_3d: bool = True,
                        progress: bool = False, timeout: float = DEFAULT_TIMEOUT) -> Path:
     """Write ``report.html`` and its PNG figures for one reconstruction.
@@ -186,14 +208,9 @@ def write_frame_report(rec: Reconstruction, out_dir: Path, render_3d: bool = Tru
 
     bar.set_postfix_str("3D views")
     notes = list(frame.notes)
-    if render_3d:
-        views, result = frame_views(rec, out, timeout)
-        if result.reason:
-            notes.append(f"3D views: {result.reason}")
-        render_msg = result.reason
-        render_seconds = result.seconds
-    else:
-        views, render_msg, render_seconds = [], "3D views were not requested", 0.0
+    views, rendered = rendered_views(render_3d, lambda: frame_views(rec, out, timeout))
+    if render_3d and rendered.reason:
+        notes.append(f"3D views: {rendered.reason}")
     bar.update()
 
     bar.set_postfix_str("html")
@@ -213,13 +230,8 @@ def write_frame_report(rec: Reconstruction, out_dir: Path, render_3d: bool = Tru
         html.section("Planes", html.figure_grid(planes_figs, 2)
                      + html.figure_grid(depth_figs, 1)),
     ]
-    body3d = ""
-    if render_msg:
-        body3d += html.warning(f"3D views are missing or incomplete: {render_msg}. "
-                               "The 2D figures above are complete.")
-    if views:
-        body3d += html.figure_grid(views, 2)
-    sections.append(html.section("3D planar model", body3d))
+    sections.append(html.section("3D planar model", views_3d_body(
+        views, rendered.reason, "The 2D figures above are complete.")))
     header = ["id", "normal (x, y, z)", "offset d", "area px (share)", "RMSE", "support"]
     sections.append(html.section(
         "Plane table",
@@ -230,7 +242,7 @@ def write_frame_report(rec: Reconstruction, out_dir: Path, render_3d: bool = Tru
     sections.append(html.section("Notes", html.bullet_list(notes) or html.paragraph("none")))
     timing_rows = [[k, f"{float(v):.3f}"] for k, v in rec.timings.items()]
     if render_3d:
-        timing_rows.append(["3D rendering (report)", f"{render_seconds:.3f}"])
+        timing_rows.append(["3D rendering (report)", f"{rendered.seconds:.3f}"])
     timing_rows.append(["report total", f"{time.perf_counter() - start:.3f}"])
     timing = html.table(["step", "seconds"], timing_rows)
     if rec.config:

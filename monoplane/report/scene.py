@@ -9,14 +9,20 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from monoplane.datamodel import Reconstruction, Scene, plane_to_camera, plane_to_world
 from monoplane.geometry.mesh import planar_mesh
 from monoplane.report import figures as fig
 from monoplane.report import html
 from monoplane.report.colors import LIGHT_DIRECTION, plane_palette, shade
-from monoplane.report.frame import estimate_up, mesh_step, render_size
+from monoplane.report.frame import (
+    estimate_up,
+    mesh_step,
+    render_size,
+    rendered_views,
+    views_3d_body,
+)
 from monoplane.report.render3d import DEFAULT_TIMEOUT, Lines, Mesh, RenderResult, Shot, render
 from monoplane.report.viewpoints import facing_triangles, orbit_viewpoints, zoom_to_fit
-from monoplane.types import Reconstruction, Scene, plane_to_camera, plane_to_world
 
 #: Colour of planes that no global plane claims, in 3D views and label maps.
 UNLINKED_GREY = np.array([170, 170, 170], dtype=np.uint8)
@@ -194,11 +200,7 @@ def write_scene_report(scene: Scene, out_dir: Path, render_3d: bool = True,
     bar = tqdm(total=n_views + 2, desc="scene report", unit="step", disable=not progress)
 
     bar.set_postfix_str("3D views")
-    if render_3d:
-        views3d, result = scene_views(scene, out, timeout)
-        render_msg, render_seconds = result.reason, result.seconds
-    else:
-        views3d, render_msg, render_seconds = [], "3D views were not requested", 0.0
+    views3d, rendered = rendered_views(render_3d, lambda: scene_views(scene, out, timeout))
     bar.update()
 
     per_view: list[html.Figure] = []
@@ -244,16 +246,11 @@ def write_scene_report(scene: Scene, out_dir: Path, render_3d: bool = True,
         cam_rows.append([f"{v + 1}", cam.name or rec.frame.name,
                          "(" + ", ".join(f"{x:+.3f}" for x in cam.center) + ")", scale,
                          f"{rec.num_planes}", f"{len(links)}"])
-    body3d = ""
-    if render_msg:
-        body3d += html.warning(f"3D views are missing or incomplete: {render_msg}. "
-                               "The per-view figures below are complete.")
-    if views3d:
-        body3d += html.figure_grid(views3d, 2)
+    body3d = views_3d_body(views3d, rendered.reason, "The per-view figures below are complete.")
     notes = list(dict.fromkeys(n for rec in scene.views for n in rec.frame.notes))
-    if render_3d and render_msg:
-        notes.append(f"3D views: {render_msg}")
-    timing = [["3D rendering (report)", f"{render_seconds:.3f}"],
+    if render_3d and rendered.reason:
+        notes.append(f"3D views: {rendered.reason}")
+    timing = [["3D rendering (report)", f"{rendered.seconds:.3f}"],
               ["report total", f"{time.perf_counter() - start:.3f}"]]
     sections = [
         html.section("Cameras and fused planes in 3D", body3d),

@@ -13,12 +13,12 @@ from typing import Any
 
 import numpy as np
 
+from monoplane.datamodel import Scene, SfmResult, pixel_rays, plane_to_camera, plane_to_world
 from monoplane.errors import InvalidInput
 from monoplane.geometry.plane_adjustment import AdjustmentProblem, adjust
 from monoplane.geometry.plane_matching import fuse_planes
 from monoplane.hookspecs import hookimpl
 from monoplane.stages.base import Adjuster, Stage, param
-from monoplane.types import Scene, SfmResult, pixel_rays, plane_to_camera, plane_to_world
 
 
 @dataclass

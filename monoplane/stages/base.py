@@ -23,9 +23,9 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import numpy as np
 
 if TYPE_CHECKING:
+    from monoplane.datamodel import Frame, Reconstruction, Scene, SfmResult
     from monoplane.geometry.cloud import PlaneCloud
     from monoplane.geometry.graph import NeighbourGraph
-    from monoplane.types import Frame, Reconstruction, Scene, SfmResult
 
 #: Stage kinds, in pipeline order; each is also the name of its config table.
 STAGE_KINDS: tuple[str, ...] = (
@@ -137,6 +137,12 @@ class CueProvider(Stage):
         """Whether this provider has work to do on the frame (default: depth or normals
         missing). Override to also process complete frames (e.g. to recompute normals)."""
         return frame.depth is None or frame.normals is None
+
+    def catalogue_model(self, missing_depth: bool, missing_normals: bool) -> str | None:
+        """Name of the model-catalogue entry this provider would load for a frame that lacks
+        the given cues, or None when it would load none (default). The CLI uses it to check
+        the cache, or fetch on request, before any image is read."""
+        return None
 
     def provide(self, frame: Frame) -> Frame:
         """Return a frame with ``depth`` and ``normals`` set.
@@ -309,7 +315,8 @@ class Fuser(Stage):
     kind = "fuser"
 
     def fuse(self, views: list[Reconstruction], sfm: SfmResult) -> Scene:
-        """Fuse scale-aligned per-view reconstructions into a :class:`~monoplane.types.Scene`."""
+        """Fuse scale-aligned per-view reconstructions into a
+        :class:`~monoplane.datamodel.Scene`."""
         raise NotImplementedError
 
     def fuse_with_matches(self, views: list[Reconstruction],

@@ -32,12 +32,12 @@ import numpy as np
 from monoplane.cues.given import use_given_cues
 from monoplane.cues.network import CueNetwork
 from monoplane.cues.profiles import BUILTIN_PROFILES, OnnxProfile, get_profile
+from monoplane.datamodel import Frame
 from monoplane.errors import ConfigError, InvalidInput
 from monoplane.geometry.normals import normals_from_depth
 from monoplane.hookspecs import hookimpl
 from monoplane.models import get_model, require_model
 from monoplane.stages.base import CueProvider, Stage, param
-from monoplane.types import Frame
 
 
 @dataclass
@@ -186,6 +186,14 @@ class OnnxCues(CueProvider):
             threads=cfg.threads, disparity_floor=cfg.disparity_floor,
             hfov_deg=cfg.hfov_deg or None,
             normals_options=cfg.normals_options())
+
+    def catalogue_model(self, missing_depth: bool, missing_normals: bool) -> str | None:
+        """``cues.model`` when a frame lacking these cues needs the network: always without
+        depth, and without normals when the network predicts them jointly."""
+        joint = self.config.resolved_profile().depth.joint_normals
+        if self.config.model and (missing_depth or (joint and missing_normals)):
+            return self.config.model
+        return None
 
     def provide(self, frame: Frame) -> Frame:
         """Predict the frame's missing depth and normals (see :meth:`CueNetwork.provide`).

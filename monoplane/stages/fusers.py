@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from monoplane.datamodel import Reconstruction, Scene, SfmResult, plane_to_world
 from monoplane.errors import InvalidInput
 from monoplane.geometry.plane_matching import (
     consistent_groups,
@@ -25,7 +26,6 @@ from monoplane.geometry.plane_matching import (
 )
 from monoplane.hookspecs import hookimpl
 from monoplane.stages.base import Fuser, Stage, param
-from monoplane.types import Reconstruction, Scene, SfmResult, plane_to_world
 
 
 @dataclass
@@ -198,7 +198,7 @@ class AverageFuser(Fuser):
 
 def _world_centroids(rec: Reconstruction, cam: object) -> np.ndarray:
     """(P, 4) world centroid of each plane's pixels (lifted on its plane) and its mean depth."""
-    from monoplane.types import pixel_rays
+    from monoplane.datamodel import pixel_rays
 
     out = np.full((rec.num_planes, 4), np.nan)
     if rec.num_planes == 0:

@@ -33,6 +33,7 @@ import numpy as np
 from scipy.sparse import coo_matrix, csr_matrix
 from scipy.sparse.csgraph import connected_components
 
+from monoplane.datamodel import Reconstruction, orient_towards_camera
 from monoplane.errors import ConfigError
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
@@ -40,7 +41,6 @@ from monoplane.geometry.planes import fit_planes_per_label
 from monoplane.graphcut import normal_costs, proximity_weights
 from monoplane.hookspecs import hookimpl
 from monoplane.stages.base import Refiner, Stage, param
-from monoplane.types import Reconstruction, orient_towards_camera
 
 
 @dataclass
@@ -167,16 +167,24 @@ class GraphCrfRefiner(Refiner):
 
     def unary(self, cloud: PlaneCloud, planes: np.ndarray, epsilon: float | None = None
               ) -> np.ndarray:
-        """(N, P + 1) data costs: column 0 non-planar, column p plane p (see module doc)."""
+        """(N, P + 1) float32 data costs: column 0 non-planar, column p plane p (module doc)."""
         c = self.config
         epsilon = c.epsilon if epsilon is None else epsilon
-        dist = np.abs(cloud.points @ planes[:, :3].T + planes[:, 3])
-        cos = np.clip(cloud.normals @ planes[:, :3].T, -1.0, 1.0)
-        plane_cost = (dist / epsilon) ** 2
-        if c.normal_weight > 0:
-            plane_cost += c.normal_weight * normal_costs(np.arccos(cos),
-                                                         math.radians(c.epsilon_n_deg))
-        return np.c_[np.ones(cloud.size), plane_cost]
+        # float32: the costs only rank labels, and the (N, P + 1) arrays of a 512x512 range
+        # image with 40 planes are the refiner's main memory traffic.
+        points = cloud.points.astype(np.float32)
+        normals_p = planes[:, :3].astype(np.float32)
+        out = np.empty((cloud.size, planes.shape[0] + 1), dtype=np.float32)
+        out[:, 0] = 1.0
+        cost = out[:, 1:]
+        np.matmul(points, normals_p.T, out=cost)
+        cost += planes[:, 3].astype(np.float32)
+        cost *= np.float32(1.0 / epsilon)
+        np.square(cost, out=cost)
+        if c.normal_weight > 0:  # the angles are only needed then
+            cos = np.clip(cloud.normals.astype(np.float32) @ normals_p.T, -1.0, 1.0)
+            cost += c.normal_weight * normal_costs(np.arccos(cos), math.radians(c.epsilon_n_deg))
+        return out
 
     def _mean_field(self, unary: np.ndarray, adj: csr_matrix, labels: np.ndarray,
                     mean_degree: float) -> np.ndarray:
@@ -184,7 +192,9 @@ class GraphCrfRefiner(Refiner):
         if c.iterations == 0 or unary.shape[1] < 2:
             return labels
         beta = c.beta / max(mean_degree, 1e-12)
-        q = np.zeros(unary.shape, dtype=np.float64)
+        adj = adj.astype(np.float32)
+        inv_t = np.float32(1.0 / c.temperature)
+        q = np.zeros(unary.shape, dtype=np.float32)
         q[np.arange(labels.size), labels] = 1.0
         # "Non-planar" after RANSAC means no plane claimed the point, not evidence against
         # every plane: such points start from their data term alone, so a strip the greedy
@@ -192,14 +202,18 @@ class GraphCrfRefiner(Refiner):
         free = labels == 0
         if free.any():
             e = unary[free] - unary[free].min(axis=1, keepdims=True)
-            q[free] = np.exp(-e / c.temperature)
+            q[free] = np.exp(-e * inv_t)
             q[free] /= q[free].sum(axis=1, keepdims=True)
         for _ in range(c.iterations):
             # Expected Potts cost of label l at i: Σ_j w_ij (1 - Q_j(l)) = deg_i - (W Q)_i(l);
-            # deg_i is the same for every label and cancels in the softmax.
-            energy = unary - beta * (adj @ q)
+            # deg_i is the same for every label and cancels in the softmax. In place: these
+            # (N, P + 1) arrays are the refiner's largest.
+            energy = adj @ q
+            energy *= np.float32(-beta)
+            energy += unary
             energy -= energy.min(axis=1, keepdims=True)
-            q = np.exp(-energy / c.temperature)
+            energy *= -inv_t
+            q = np.exp(energy, out=energy)
             q /= q.sum(axis=1, keepdims=True)
         return np.argmax(q, axis=1).astype(np.int32)
 

@@ -23,11 +23,9 @@ import numpy as np
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.graphcut import (
+    data_costs,
     degree_normalisation,
     minimize_gc_ransac,
-    msac_costs,
-    normal_angles,
-    normal_costs,
     proximity_weights,
 )
 from monoplane.hookspecs import hookimpl
@@ -69,7 +67,7 @@ class GraphCutLabeler(Labeler):
     def label(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray,
               plane: np.ndarray, model_normal: np.ndarray, params: RansacParams) -> Labeling:
         """See :meth:`monoplane.stages.base.Labeler.label`."""
-        f0, f1 = msac_costs(_pool_distances(cloud, pool, plane), params.epsilon)
+        f0, f1 = data_costs(cloud.points, cloud.normals, pool, plane, None, params.epsilon)
         edges, _ = graph.subgraph(pool)
         scale = degree_normalisation(graph.mean_degree) if self.config.normalise else 1.0
         inliers, energy = minimize_gc_ransac(f0, f1, edges, 1.0, self.config.lambda_, scale)
@@ -97,6 +95,7 @@ class ProximityGraphCutLabeler(Labeler):
 
     name = "proximity-graph-cut"
     Config = ProximityGraphCutConfig
+    _last_pool_weights: tuple[np.ndarray, np.ndarray] | None = None
 
     def _edge_weights(self, cloud: PlaneCloud, graph: NeighbourGraph) -> np.ndarray:
         """(E,) cut costs of every graph edge; they depend on the frame only, so cached."""
@@ -110,16 +109,25 @@ class ProximityGraphCutLabeler(Labeler):
             graph.cache[key] = w
         return w
 
+    def _pool_weights(self, cloud: PlaneCloud, graph: NeighbourGraph,
+                      edge_ids: np.ndarray) -> np.ndarray:
+        """Cut costs of a pool's subgraph edges; kept while the pool (its ``edge_ids``) is."""
+        last = self._last_pool_weights
+        if last is None or last[0] is not edge_ids:
+            last = self._last_pool_weights = (edge_ids,
+                                              self._edge_weights(cloud, graph)[edge_ids])
+        return last[1]
+
     def label(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray,
               plane: np.ndarray, model_normal: np.ndarray, params: RansacParams) -> Labeling:
         """See :meth:`monoplane.stages.base.Labeler.label`."""
-        f0, f1 = msac_costs(_pool_distances(cloud, pool, plane), params.epsilon)
-        if self.config.normal_term:
-            f1 += normal_costs(normal_angles(cloud.normals[pool], model_normal), params.epsilon_n)
+        f0, data1 = data_costs(cloud.points, cloud.normals, pool, plane,
+                               model_normal if self.config.normal_term else None,
+                               params.epsilon, params.epsilon_n)
         edges, edge_ids = graph.subgraph(pool)
-        cut = self._edge_weights(cloud, graph)[edge_ids]
+        cut = self._pool_weights(cloud, graph, edge_ids)
         scale = degree_normalisation(graph.mean_degree) if self.config.normalise else 1.0
-        inliers, energy = minimize_gc_ransac(f0, f1, edges, cut, self.config.lambda_, scale)
+        inliers, energy = minimize_gc_ransac(f0, data1, edges, cut, self.config.lambda_, scale)
         return Labeling(inliers=inliers, energy=energy)
 
 

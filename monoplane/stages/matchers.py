@@ -2,7 +2,7 @@
 
 ``colmap`` runs pycolmap on the CPU (no colmap binary): SIFT extraction, exhaustive matching
 with geometric verification, then incremental mapping. It returns an
-:class:`~monoplane.types.SfmResult` in the frames' native pixel coordinates (pixel centres at
+:class:`~monoplane.datamodel.SfmResult` in the frames' native pixel coordinates (pixel centres at
 integers, OpenCV camera axes), whatever resolution SIFT ran at internally.
 """
 
@@ -18,10 +18,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from monoplane.datamodel import Camera, Frame, SfmResult, intrinsics_matrix
 from monoplane.errors import InvalidInput, MonoplaneError
 from monoplane.hookspecs import hookimpl
 from monoplane.stages.base import Matcher, Stage, param
-from monoplane.types import Camera, Frame, SfmResult, intrinsics_matrix
 
 #: COLMAP puts pixel centres at +0.5; monoplane puts them at integers.
 _COLMAP_PIXEL_OFFSET = 0.5

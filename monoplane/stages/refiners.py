@@ -13,6 +13,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from monoplane.datamodel import Reconstruction
 from monoplane.densecrf import REFERENCE_AREA, CrfParams, dense_crf
 from monoplane.errors import ConfigError, InvalidInput
 from monoplane.geometry.cloud import PlaneCloud
@@ -26,7 +27,6 @@ from monoplane.regions import (
     scene_radius,
 )
 from monoplane.stages.base import Refiner, Stage, param
-from monoplane.types import Reconstruction
 
 
 class NoRefiner(Refiner):

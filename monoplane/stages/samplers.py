@@ -16,6 +16,7 @@ import numpy as np
 
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.hookspecs import hookimpl
+from monoplane.jit import kernel
 from monoplane.stages.base import RansacParams, Sampler, Stage, param
 
 
@@ -79,12 +80,7 @@ class NormalConsistentSampler(Sampler):
             batch = min(2 * count, budget) if drawn == 0 else budget - drawn
             idx = pool[_distinct_triplets(pool.size, batch, rng)]
             drawn += batch
-            n = cloud.normals[idx]  # (batch, 3, 3)
-            c01 = (n[:, 0] * n[:, 1]).sum(axis=1)
-            c02 = (n[:, 0] * n[:, 2]).sum(axis=1)
-            c12 = (n[:, 1] * n[:, 2]).sum(axis=1)
-            ok = (c01 >= cos_min) & (c02 >= cos_min) & (c12 >= cos_min)
-            good = idx[ok][: count - n_ok]
+            good = idx[_consistent(cloud.normals, idx, cos_min)][: count - n_ok]
             accepted.append(good)
             n_ok += good.shape[0]
         return np.concatenate(accepted) if accepted else np.zeros((0, 3), dtype=np.int64)
@@ -130,6 +126,21 @@ class NapsacSampler(Sampler):
         rows = np.flatnonzero(ok)
         picked = nbr[rows[:, None], top[ok]]
         return np.concatenate([seeds[ok, None], picked], axis=1).astype(np.int64)
+
+
+@kernel
+def _consistent(normals: np.ndarray, idx: np.ndarray, cos_min: float) -> np.ndarray:
+    """(S,) bool: the three (N, 3) ``normals`` of each (S, 3) sample are pairwise within ε_n."""
+    ok = np.empty(idx.shape[0], dtype=np.bool_)
+    for s in range(idx.shape[0]):
+        a, b, c = idx[s, 0], idx[s, 1], idx[s, 2]
+        ab = ac = bc = 0.0
+        for k in range(3):
+            ab += normals[a, k] * normals[b, k]
+            ac += normals[a, k] * normals[c, k]
+            bc += normals[b, k] * normals[c, k]
+        ok[s] = ab >= cos_min and ac >= cos_min and bc >= cos_min
+    return ok
 
 
 @hookimpl

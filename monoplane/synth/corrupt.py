@@ -45,7 +45,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from monoplane.types import pixel_rays
+from monoplane.datamodel import pixel_rays
 
 
 @dataclass(frozen=True)

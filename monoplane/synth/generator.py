@@ -22,12 +22,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from monoplane.datamodel import Frame, intrinsics_matrix
 from monoplane.errors import InvalidInput
 from monoplane.geometry.camera import look_at
 from monoplane.synth.corrupt import corrupt
 from monoplane.synth.render import make_raycaster, render_view, world_planes
 from monoplane.synth.scene import WORLD_UP, Layout, build_layout, extra_camera
-from monoplane.types import Frame, intrinsics_matrix
 
 LEVELS: tuple[str, ...] = ("clean", "mild", "strong")
 #: A planar face needs at least this fraction of the image's pixels to get a plane id.

@@ -18,8 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 import open3d as o3d
 
+from monoplane.datamodel import pixel_rays, plane_to_camera
 from monoplane.synth.scene import Layout
-from monoplane.types import pixel_rays, plane_to_camera
 
 _AMBIENT = 0.35
 _DIFFUSE = 0.8

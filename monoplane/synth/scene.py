@@ -9,7 +9,7 @@ Open3D's ``RaycastingScene``.
 
 World frame: metres, z up, floor at ``z = 0``, room spanning ``[0, Lx] x [0, Ly] x [0, Lz]``.
 World planes ``n · x + d = 0`` have their unit normal on the side the surface is seen from (into
-the room for the room's faces, outwards for objects), so :func:`monoplane.types.plane_to_camera`
+the room for the room's faces, outwards for objects), so :func:`monoplane.datamodel.plane_to_camera`
 turns them directly into camera-facing planes for any camera inside the room.
 
 The camera of view 0 is drawn first, then objects keep a free disk around it, so that extra
@@ -322,6 +322,17 @@ def build_layout(rng: np.random.Generator) -> Layout:
     def wall_coord(k: int, xy: np.ndarray) -> float:
         return float(xy[1] if k < 2 else xy[0])
 
+    def floor_spot(r: float) -> np.ndarray | None:
+        """A uniformly drawn floor point (x, y) whose disc of radius r is free, else None."""
+        xy = rng.uniform([r, r], [lx - r, ly - r])
+        return xy if _free(xy, r, discs, size) else None
+
+    def occupy(xy: np.ndarray, r: float) -> None:
+        """Reserve the disc for later placements and record it as a footprint."""
+        disc = np.array([xy[0], xy[1], r])
+        discs.append(disc)
+        footprints.append(disc)
+
     # Cabinets and shelves against walls.
     for _ in range(int(rng.integers(2, 5))):
         for _try in range(30):
@@ -338,9 +349,7 @@ def build_layout(rng: np.random.Generator) -> Layout:
             yaw = float(np.arctan2(a[1], a[0]))
             b.box(center, np.array([w / 2, dpt / 2, h / 2]), yaw, "box",
                   random_material(rng, "object"))
-            disc = np.array([center[0], center[1], r])
-            discs.append(disc)
-            footprints.append(disc)
+            occupy(center, r)
             wall_used[k].append((s - w / 2, s + w / 2))
             break
 
@@ -349,14 +358,12 @@ def build_layout(rng: np.random.Generator) -> Layout:
         for _try in range(30):
             w, dpt, h = rng.uniform(0.3, 0.8), rng.uniform(0.3, 0.8), rng.uniform(0.3, 1.0)
             r = float(np.hypot(w, dpt) / 2)
-            xy = rng.uniform([r, r], [lx - r, ly - r])
-            if not _free(xy, r, discs, size):
+            xy = floor_spot(r)
+            if xy is None:
                 continue
             b.box(np.array([xy[0], xy[1], h / 2]), np.array([w / 2, dpt / 2, h / 2]),
                   float(rng.uniform(0, np.pi)), "box", random_material(rng, "object"))
-            disc = np.array([xy[0], xy[1], r])
-            discs.append(disc)
-            footprints.append(disc)
+            occupy(xy, r)
             break
 
     # Tables: slab top, tube legs, and something on top.
@@ -364,8 +371,8 @@ def build_layout(rng: np.random.Generator) -> Layout:
         for _try in range(30):
             w, dpt, h = rng.uniform(0.8, 1.6), rng.uniform(0.6, 1.0), rng.uniform(0.68, 0.8)
             r = float(np.hypot(w, dpt) / 2)
-            xy = rng.uniform([r, r], [lx - r, ly - r])
-            if not _free(xy, r, discs, size):
+            xy = floor_spot(r)
+            if xy is None:
                 continue
             yaw = float(rng.uniform(0, np.pi))
             th = 0.04
@@ -395,9 +402,7 @@ def build_layout(rng: np.random.Generator) -> Layout:
                     rr = rng.uniform(0.03, 0.06)
                     _torus(b, np.array([oxy[0], oxy[1], h + rr]), rng.uniform(0.1, 0.18), rr,
                            mat)
-            disc = np.array([xy[0], xy[1], r])
-            discs.append(disc)
-            footprints.append(disc)
+            occupy(xy, r)
             break
 
     # Curved objects on the floor.
@@ -407,27 +412,25 @@ def build_layout(rng: np.random.Generator) -> Layout:
             mat = random_material(rng, "object")
             if kind == 0:
                 rad = rng.uniform(0.15, 0.35)
-                xy = rng.uniform([rad, rad], [lx - rad, ly - rad])
-                if not _free(xy, rad, discs, size):
+                xy = floor_spot(rad)
+                if xy is None:
                     continue
                 _sphere(b, np.array([xy[0], xy[1], rad]), rad, mat)
             elif kind == 1:
                 rad = rng.uniform(0.1, 0.25)
-                xy = rng.uniform([rad, rad], [lx - rad, ly - rad])
-                if not _free(xy, rad, discs, size):
+                xy = floor_spot(rad)
+                if xy is None:
                     continue
                 _domed_cylinder(b, np.array([xy[0], xy[1], 0.0]), rad, rng.uniform(0.3, 1.0),
                                 mat)
             else:
                 big, small = rng.uniform(0.2, 0.35), rng.uniform(0.05, 0.1)
                 rad = big + small
-                xy = rng.uniform([rad, rad], [lx - rad, ly - rad])
-                if not _free(xy, rad, discs, size):
+                xy = floor_spot(rad)
+                if xy is None:
                     continue
                 _torus(b, np.array([xy[0], xy[1], small]), big, small, mat)
-            disc = np.array([xy[0], xy[1], rad])
-            discs.append(disc)
-            footprints.append(disc)
+            occupy(xy, rad)
             break
 
     # Wall panels (pictures, boards) and doors: thin boxes whose back face lies on the wall.

@@ -52,33 +52,51 @@ def _camera_ok(layout: Layout, center: np.ndarray) -> bool:
                                    margin=0.3)
 
 
-def _view_zero(layout: Layout) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray, np.ndarray]:
-    """View 0's pose and its horizontal forward and sideways unit directions (world xy)."""
+def _view0_frame(layout: Layout) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray, np.ndarray]:
+    """View 0's pose and the horizontal directions camera paths step along.
+
+    Returns
+    -------
+    first : (R, t)
+        World-to-camera (3, 3) rotation and (3,) translation of view 0.
+    fwd, side : (2,) float arrays
+        Unit world-xy directions of view 0's gaze and of its left-hand side.
+    """
     c0, tgt0 = layout.camera_center, layout.camera_target
     fwd = (tgt0 - c0)[:2] / np.linalg.norm((tgt0 - c0)[:2])
     return look_at(c0, tgt0, WORLD_UP), fwd, np.array([-fwd[1], fwd[0]])
 
 
-def walk_poses(layout: Layout, n_views: int, rng: np.random.Generator
+def path_poses(layout: Layout, path: str, n_views: int, seed: int
                ) -> list[tuple[np.ndarray, np.ndarray]]:
-    """World-to-camera poses of a walk-through starting at view 0's camera.
+    """World-to-camera poses along a camera path that starts at view 0's camera.
 
     Parameters
     ----------
     layout : Layout
         The room (view 0 is ``look_at(layout.camera_center, layout.camera_target, WORLD_UP)``).
+    path : {"walk", "star"}
+        Camera path (see the module docstring).
     n_views : int
         Number of views, >= 1.
-    rng : numpy.random.Generator
-        Source of the path's randomness.
+    seed : int
+        Seed of the path's own random stream.
 
     Returns
     -------
     list of (R, t)
         (3, 3) rotation and (3,) translation per view.
     """
+    if path == "walk":
+        return _walk_poses(layout, n_views, np.random.default_rng([seed, _STREAM_WALK]))
+    return _star_poses(layout, n_views, np.random.default_rng([seed, _STREAM_STAR]))
+
+
+def _walk_poses(layout: Layout, n_views: int, rng: np.random.Generator
+                ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The ``"walk"`` path of :func:`path_poses`: each view steps on from the previous one."""
     c0, tgt0 = layout.camera_center, layout.camera_target
-    first, fwd, side = _view_zero(layout)
+    first, fwd, side = _view0_frame(layout)
     for _attempt in range(100):
         sign = 1.0 if rng.uniform() < 0.5 else -1.0
         poses, centers, targets = [first], [c0], [tgt0]
@@ -107,25 +125,11 @@ def walk_poses(layout: Layout, n_views: int, rng: np.random.Generator
     raise RuntimeError("could not place a walk-through in this room")  # not seen in practice
 
 
-def star_poses(layout: Layout, n_views: int, rng: np.random.Generator
-               ) -> list[tuple[np.ndarray, np.ndarray]]:
-    """World-to-camera poses of a star: every view overlaps view 0.
-
-    Parameters
-    ----------
-    layout : Layout
-        The room.
-    n_views : int
-        Number of views, >= 1.
-    rng : numpy.random.Generator
-        Source of the path's randomness.
-
-    Returns
-    -------
-    list of (R, t)
-    """
+def _star_poses(layout: Layout, n_views: int, rng: np.random.Generator
+                ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The ``"star"`` path of :func:`path_poses`: every view overlaps view 0."""
     c0, tgt0 = layout.camera_center, layout.camera_target
-    first, fwd, side = _view_zero(layout)
+    first, fwd, side = _view0_frame(layout)
     poses = [first]
     for _k in range(1, n_views):
         for _try in range(500):
@@ -180,8 +184,5 @@ def generate_sequence(seed: int, n_views: int = 5, path: str = "walk", level: st
         raise InvalidInput(f"a sequence needs at least 2 views, got {n_views}")
     seed = int(seed)
     layout = build_layout(np.random.default_rng([seed, _STREAM_LAYOUT]))
-    if path == "walk":
-        poses = walk_poses(layout, n_views, np.random.default_rng([seed, _STREAM_WALK]))
-    else:
-        poses = star_poses(layout, n_views, np.random.default_rng([seed, _STREAM_STAR]))
+    poses = path_poses(layout, path, n_views, seed)
     return render_scene(layout, poses, seed, level, width, height)

@@ -85,6 +85,19 @@ def test_eval_data_scores_segcomp(tmp_path: Path, extra: list[str],
     assert ours["correct"] == ours["n_gt"] and ours["voi"] < 0.2
 
 
+def test_eval_data_passes_baseline_options(tmp_path: Path,
+                                           capsys: pytest.CaptureFixture[str]) -> None:
+    make_dataset(tmp_path / "data")
+    out = tmp_path / "scores.json"
+    # A minimum support of 40 % keeps the back wall only: one correct detection of three.
+    assert main(["eval", "--data", str(tmp_path / "data"), "--baseline", "open3d-ransac",
+                 "--baseline-set", "open3d-ransac.min_support=0.4", "--no-progress",
+                 "--json", str(out)]) == 0
+    data = json.loads(out.read_text())
+    assert data["settings"]["baseline_options"] == {"open3d-ransac": {"min_support": 0.4}}
+    assert data["methods"][0]["correct"] == 1 and data["methods"][0]["n_gt"] == 3
+
+
 def test_eval_data_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["eval", "--data", str(tmp_path), "--preset", "range", "--no-progress"]) == 2
     assert "gt_labels.png" in capsys.readouterr().err

@@ -37,6 +37,12 @@ def test_eval_preset_row(capsys: pytest.CaptureFixture[str]) -> None:
     (["eval", "--baseline", "open3d-ransac", "--n", "0"], "--n must be at least 1"),
     (["eval", "--baseline", "open3d-ransac", "--size", "big"], "WIDTHxHEIGHT"),
     (["eval", "--multiview", "--baseline", "open3d-ransac", *TINY], "--multiview"),
+    (["eval", "--baseline", "open3d-ransac", "--baseline-set", "open3d-ransac.bogus=1", *TINY],
+     "no option 'bogus'; valid options: epsilon, max_planes"),
+    (["eval", "--baseline", "open3d-ransac", "--baseline-set", "open3d-ransac.max_planes=x",
+      *TINY], "open3d-ransac.max_planes must be an integer"),
+    (["eval", "--baseline", "open3d-ransac", "--baseline-set", "cgal.epsilon=0.01", *TINY],
+     "'cgal' is not a baseline of this run"),
     (["bench", "--sizes", "x", "--no-progress"], "WIDTHxHEIGHT"),
     (["bench", "--repeat", "0", "--no-progress"], "--repeat"),
 ])

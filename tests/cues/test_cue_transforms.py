@@ -19,8 +19,8 @@ from monoplane.cues import (
     restore_map,
     scaled_intrinsics,
 )
+from monoplane.datamodel import default_intrinsics, pixel_rays
 from monoplane.errors import ConfigError, InvalidInput
-from monoplane.types import default_intrinsics, pixel_rays
 
 
 def test_keep_aspect_pads_to_the_multiple() -> None:

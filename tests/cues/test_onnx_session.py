@@ -11,8 +11,8 @@ pytest.importorskip("onnx")
 
 from monoplane.cues import ModelSpec, OnnxModel, get_profile  # noqa: E402
 from monoplane.cues.tiny_models import tiny_depth_model, tiny_normals_model  # noqa: E402
+from monoplane.datamodel import default_intrinsics  # noqa: E402
 from monoplane.errors import InvalidInput  # noqa: E402
-from monoplane.types import default_intrinsics  # noqa: E402
 
 
 def grey(h: int, w: int, value: int) -> np.ndarray:

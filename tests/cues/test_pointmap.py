@@ -12,8 +12,8 @@ from monoplane.cues.pointmap import (
     focal_to_pixels,
     recover_focal_shift,
 )
+from monoplane.datamodel import default_intrinsics, pixel_rays
 from monoplane.errors import InvalidInput
-from monoplane.types import default_intrinsics, pixel_rays
 
 
 def corner_points(hfov: float, h: int = 60, w: int = 80) -> tuple[np.ndarray, np.ndarray]:

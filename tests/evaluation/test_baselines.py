@@ -14,8 +14,10 @@ from monoplane.evaluation.baselines import (
     CALL_TIMING,
     Open3DRansacConfig,
     baseline_names,
+    bind_baseline,
     get_baseline,
     open3d_ransac,
+    parse_baseline_options,
     run_baseline,
 )
 from monoplane.evaluation.segmentation import segmentation_scores
@@ -39,9 +41,9 @@ def test_open3d_ransac_finds_the_planes_of_an_exact_box() -> None:
 
 def test_open3d_ransac_respects_plane_limits() -> None:
     frame, _ = box_frame(64, 48)
-    assert open3d_ransac(frame, config=Open3DRansacConfig(max_planes=2)).num_planes == 2
+    assert open3d_ransac(frame, max_planes=2).num_planes == 2
     # The floor and the left wall are smaller than 40 % of the pixels; the back wall is not.
-    big_only = open3d_ransac(frame, config=Open3DRansacConfig(min_support=0.4))
+    big_only = open3d_ransac(frame, min_support=0.4)
     assert big_only.num_planes == 1
     np.testing.assert_allclose(big_only.params[0], BOX_PLANES[0], atol=1e-4)
 
@@ -96,3 +98,36 @@ def test_every_hook_is_documented_in_the_plugin_guide() -> None:
     assert "monoplane_register_baselines" in hooks
     missing = [h for h in hooks if not re.search(rf"`{h}\(", guide)]
     assert not missing, f"hooks missing from docs/plugins.md: {missing}"
+
+
+def test_options_are_checked_with_the_valid_ones_listed() -> None:
+    frame, _ = box_frame(32, 24)
+    with pytest.raises(ConfigError, match=r"no option 'min_suport'; valid options: epsilon, "
+                                          r"max_planes, min_support, min_support_points"):
+        open3d_ransac(frame, min_suport=0.1)
+    with pytest.raises(ConfigError, match=r"open3d-ransac.max_planes must be an integer.*"
+                                          r"valid options of baseline 'open3d-ransac'"):
+        open3d_ransac(frame, max_planes=2.5)
+    with pytest.raises(ConfigError, match="min_support must lie in"):
+        open3d_ransac(frame, min_support=2.0)
+    # An integer is a valid float.
+    assert open3d_ransac(frame, epsilon=1).num_planes >= 1
+
+
+def test_baseline_set_is_parsed_bound_and_checked_before_any_frame() -> None:
+    assert parse_baseline_options(
+        ["open3d-ransac.min_support=0.4", "open3d-ransac.max_planes=2",
+         "open3d-ransac.min_support=0.5"], ["open3d-ransac"]
+    ) == {"open3d-ransac": {"min_support": 0.5, "max_planes": 2}}
+    with pytest.raises(ConfigError, match="'cgal' is not a baseline of this run; baselines "
+                                          "run: open3d-ransac"):
+        parse_baseline_options(["cgal.min_support=0.001"], ["open3d-ransac"])
+    with pytest.raises(ConfigError, match="must look like NAME.FIELD=VALUE"):
+        parse_baseline_options(["min_support=0.001"], ["open3d-ransac"])
+    # Bad options fail when bound, not on the first frame.
+    with pytest.raises(ConfigError, match="valid options: epsilon"):
+        bind_baseline("open3d-ransac", {"bogus": 1})
+    frame, _ = box_frame(64, 48)
+    big_only = run_baseline("open3d-ransac", frame, options={"min_support": 0.4})
+    assert big_only.num_planes == 1 and big_only.config["min_support"] == 0.4
+    assert run_baseline("open3d-ransac", frame).num_planes == 3

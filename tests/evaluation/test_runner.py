@@ -7,6 +7,7 @@ import json
 import numpy as np
 import pytest
 
+from monoplane.datamodel import Frame, Reconstruction
 from monoplane.errors import ConfigError, InvalidInput, StageError
 from monoplane.evaluation.runner import (
     PAPER_PRESETS,
@@ -17,7 +18,6 @@ from monoplane.evaluation.runner import (
     resolve_methods,
 )
 from monoplane.synth import generate
-from monoplane.types import Frame, Reconstruction
 
 SIZE = (128, 96)
 

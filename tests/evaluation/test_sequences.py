@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from monoplane.datamodel import Reconstruction
 from monoplane.evaluation.sequences import consistency, plane_errors, similarity_to_truth
 from monoplane.evaluation.twoview import (
     ground_truth_sfm,
@@ -15,7 +16,6 @@ from monoplane.geometry.relative_pose import fallback_relative_pose
 from monoplane.stages.fusers import AverageFuser
 from monoplane.synth import generate
 from monoplane.synth.sequence import generate_sequence
-from monoplane.types import Reconstruction
 
 
 def test_similarity_recovers_a_known_transform() -> None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from monoplane.datamodel import Camera, Reconstruction, Scene, intrinsics_matrix
 from monoplane.evaluation.twoview import (
     average_precision,
     judge_pair,
@@ -14,7 +15,6 @@ from monoplane.evaluation.twoview import (
     translation_angle_deg,
 )
 from monoplane.synth import generate
-from monoplane.types import Camera, Reconstruction, Scene, intrinsics_matrix
 
 
 def _rot_y(deg: float) -> np.ndarray:

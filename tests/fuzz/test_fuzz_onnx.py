@@ -14,8 +14,8 @@ pytest.importorskip("onnx")
 
 from monoplane.cues import OnnxModel, get_profile  # noqa: E402
 from monoplane.cues.tiny_models import tiny_depth_model, tiny_normals_model  # noqa: E402
+from monoplane.datamodel import default_intrinsics  # noqa: E402
 from monoplane.errors import InvalidInput  # noqa: E402
-from monoplane.types import default_intrinsics  # noqa: E402
 
 # Small input boxes keep each inference in the millisecond range.
 SPECS = {f"{name}-{kind}": dataclasses.replace(spec, size=(32, 48))

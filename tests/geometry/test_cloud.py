@@ -3,15 +3,16 @@
 import numpy as np
 import pytest
 
+from monoplane.datamodel import Frame, intrinsics_matrix, pixel_rays
 from monoplane.errors import InvalidInput
 from monoplane.geometry.cloud import (
     PROPAGATION_NEIGHBOURS,
     PROPAGATION_RADIUS_FACTOR,
     PlaneCloud,
+    nearest_true_pixel,
 )
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.testing import ROOM, room_cues
-from monoplane.types import Frame, intrinsics_matrix, pixel_rays
 
 K = intrinsics_matrix(40.0, 40.0, 15.5, 11.5)
 
@@ -200,3 +201,21 @@ def test_unprojection_kernel_matches_frame_points(seed):
     np.testing.assert_allclose(cloud.center, center, rtol=1e-12, atol=1e-12)
     assert cloud.scale == pytest.approx(scale, rel=1e-12)
     np.testing.assert_allclose(cloud.all_points, (cam - center) / scale, atol=1e-12)
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_nearest_true_pixel_is_at_the_exact_euclidean_distance(seed):
+    # Reference: scipy's exact Euclidean distance transform; ties may pick another pixel at the
+    # same distance, so distances are compared.
+    from scipy.ndimage import distance_transform_edt
+
+    rng = np.random.default_rng(seed)
+    h, w = rng.integers(1, 60, size=2)
+    mask = rng.random((h, w)) < rng.uniform(0.002, 0.5)
+    mask[rng.integers(h), rng.integers(w)] = True
+    near = nearest_true_pixel(mask)
+    assert mask.ravel()[near].all()
+    rows, cols = np.divmod(np.arange(h * w), w)
+    dist = np.hypot(rows - near // w, cols - near % w).reshape(h, w)
+    np.testing.assert_allclose(dist, distance_transform_edt(~mask), rtol=0, atol=1e-12)
+    assert (nearest_true_pixel(np.zeros((3, 4), bool)) == -1).all()

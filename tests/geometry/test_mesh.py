@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from monoplane.datamodel import Frame, Reconstruction, intrinsics_matrix
 from monoplane.geometry.mesh import planar_mesh, reconstruction_to_open3d
-from monoplane.types import Frame, Reconstruction, intrinsics_matrix
 
 H, W = 12, 16
 K = intrinsics_matrix(20.0, 20.0, (W - 1) / 2, (H - 1) / 2)

@@ -7,10 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from monoplane.datamodel import default_intrinsics, intrinsics_matrix, pixel_rays, ray_plane_depth
 from monoplane.errors import InvalidInput
 from monoplane.geometry.normals import normals_from_depth
 from monoplane.testing import CORNER_PLANES, box_frame
-from monoplane.types import default_intrinsics, intrinsics_matrix, pixel_rays, ray_plane_depth
 
 LIVINGROOM = Path("/work/shared/data/rgbd-livingroom")
 

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from monoplane.datamodel import intrinsics_matrix
 from monoplane.geometry.camera import look_at
 from monoplane.geometry.plane_adjustment import AdjustmentProblem, adjust
 from monoplane.synth.scene import WORLD_UP
-from monoplane.types import intrinsics_matrix
 
 
 def _problem(rng: np.random.Generator, n_views: int = 4):

@@ -75,3 +75,32 @@ def test_per_label_fits_match_one_fit_per_label():
         ref, ref_rmse = fit_plane(group)
         np.testing.assert_allclose(params[k], ref, rtol=1e-9, atol=1e-9)
         assert rmse[k] == pytest.approx(ref_rmse, rel=1e-9, abs=1e-12)
+
+
+def reference_planes_from_triplets(t):
+    """The vectorised construction: cross products, scale-aware degeneracy, d >= 0."""
+    a, b, c = t[:, 0], t[:, 1], t[:, 2]
+    normal = np.cross(b - a, c - a)
+    norm = np.linalg.norm(normal, axis=1)
+    edge2 = np.maximum(((b - a) ** 2).sum(1), ((c - a) ** 2).sum(1))
+    valid = norm > 1e-9 * np.maximum(edge2, 1e-300)
+    planes = np.zeros((len(t), 4))
+    n = normal[valid] / norm[valid, None]
+    d = -np.einsum("ij,ij->i", n, a[valid])
+    n[d < 0] *= -1
+    planes[valid, :3] = n
+    planes[valid, 3] = np.abs(d)
+    return planes, valid
+
+
+def test_triplet_planes_match_the_vectorised_reference():
+    rng = np.random.default_rng(3)
+    t = rng.normal(size=(500, 3, 3))
+    t[:50, 2] = t[:50, 0] + 0.5 * (t[:50, 1] - t[:50, 0])  # collinear
+    t[50:60] = t[50:60, :1]  # one point three times
+    t[60:70, 2] = t[60:70, 0] + 2.0 * (t[60:70, 1] - t[60:70, 0]) + 1e-12  # nearly collinear
+    planes, valid = planes_from_triplets(t)
+    ref, ref_valid = reference_planes_from_triplets(t)
+    np.testing.assert_array_equal(valid, ref_valid)
+    assert not valid[:60].any() and valid[70:].all()
+    np.testing.assert_allclose(planes, ref, rtol=1e-12, atol=1e-15)

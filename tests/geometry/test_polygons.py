@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from monoplane.datamodel import Frame, Reconstruction, intrinsics_matrix
 from monoplane.geometry.polygons import (
     PlaneMesh,
     mask_outlines,
@@ -13,7 +14,6 @@ from monoplane.geometry.polygons import (
     reconstruction_mesh,
     triangulate_outline,
 )
-from monoplane.types import Frame, Reconstruction, intrinsics_matrix
 
 
 def _areas_2d(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:

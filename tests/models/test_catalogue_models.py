@@ -21,9 +21,9 @@ import pytest
 from monoplane.cli import main
 from monoplane.cues import IMAGENET_MEAN, IMAGENET_STD, get_profile, plan_letterbox
 from monoplane.cues.tiny_models import tiny_depth_model, tiny_joint_model, tiny_point_map_model
+from monoplane.datamodel import default_intrinsics, pixel_rays
 from monoplane.models import CATALOGUE, model_path, sha256_of
 from monoplane.testing import BOX_PLANES, box_frame
-from monoplane.types import default_intrinsics, pixel_rays
 
 pytest.importorskip("onnx")
 

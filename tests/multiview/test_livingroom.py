@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from monoplane.evaluation.twoview import relative_pose_error
-from monoplane.io import load_frame
+from monoplane.fileio import load_frame
 from monoplane.multiview import hold_intrinsics_fixed, reconstruct_multiview
 from monoplane.pipeline import Pipeline
 

@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from monoplane.datamodel import Reconstruction, default_intrinsics
 from monoplane.testing import plane_scene
-from monoplane.types import Reconstruction, default_intrinsics
 
 # (normal, d, lower bound, upper bound) in the room frame (x right, y down, z forward).
 _RECTS = [

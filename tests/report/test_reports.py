@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from monoplane.datamodel import Camera, Reconstruction, Scene
 from monoplane.report import write_eval_report, write_frame_report, write_scene_report
-from monoplane.types import Camera, Reconstruction, Scene
 
 
 def _assert_links_resolve(page: Path) -> str:

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 from monoplane.cues import assume_intrinsics, intrinsics_assumed
+from monoplane.datamodel import Frame, default_intrinsics, intrinsics_matrix, pixel_rays
 from monoplane.errors import ConfigError, InvalidInput
 from monoplane.stages.base import param
 from monoplane.stages.cues import GivenCues, GivenCuesConfig, OnnxCues, OnnxCuesConfig
 from monoplane.testing import check_stage_contract
-from monoplane.types import Frame, default_intrinsics, intrinsics_matrix, pixel_rays
 
 LIVINGROOM = Path("/work/shared/data/rgbd-livingroom")
 
@@ -80,7 +80,7 @@ def test_given_config_is_validated() -> None:
 
 
 def test_given_on_real_rgbd_frame() -> None:
-    from monoplane.io import load_frame
+    from monoplane.fileio import load_frame
 
     image = LIVINGROOM / "color_00000.jpg"
     if not image.is_file():

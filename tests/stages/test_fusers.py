@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from monoplane.datamodel import Reconstruction, orient_towards_camera, plane_to_camera
 from monoplane.evaluation.twoview import ground_truth_sfm
 from monoplane.geometry.plane_matching import (
     fuse_planes,
@@ -15,7 +16,6 @@ from monoplane.geometry.plane_matching import (
 )
 from monoplane.stages.fusers import AverageFuser, monoplane_register_fusers
 from monoplane.synth import generate
-from monoplane.types import Reconstruction, orient_towards_camera, plane_to_camera
 
 
 def _unit(v) -> np.ndarray:

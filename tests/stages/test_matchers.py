@@ -6,10 +6,10 @@ import cv2
 import numpy as np
 import pytest
 
+from monoplane.datamodel import Frame, intrinsics_matrix
 from monoplane.errors import InvalidInput
 from monoplane.geometry.camera import look_at
 from monoplane.stages.matchers import ColmapMatcher, SfmError, monoplane_register_matchers
-from monoplane.types import Frame, intrinsics_matrix
 
 W, H, F = 480, 360, 380.0
 K = intrinsics_matrix(F, F, (W - 1) / 2, (H - 1) / 2)

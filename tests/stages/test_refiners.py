@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
+from monoplane.datamodel import Frame, Reconstruction
 from monoplane.errors import ConfigError
 from monoplane.stages.refiners import DenseCrfRefiner, NoRefiner, monoplane_register_refiners
 from monoplane.testing import ROOM, check_stage_contract, room_cues
-from monoplane.types import Frame, Reconstruction
 
 
 def room(height: int = 96, width: int = 128, grey: bool = False, seed: int = 0):

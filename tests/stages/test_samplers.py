@@ -4,7 +4,12 @@ import numpy as np
 import pytest
 
 from monoplane.stages.base import RansacParams
-from monoplane.stages.samplers import NapsacSampler, NormalConsistentSampler, UniformSampler
+from monoplane.stages.samplers import (
+    NapsacSampler,
+    NormalConsistentSampler,
+    UniformSampler,
+    _consistent,
+)
 from monoplane.testing import cloud_from_arrays
 
 
@@ -77,3 +82,19 @@ def test_too_small_pools_give_no_samples(cloud):
         s = sampler.sample(cloud, np.array([1, 2], dtype=np.int64), 5,
                            np.random.default_rng(0), RansacParams())
         assert s.shape == (0, 3)
+
+
+def test_normal_consistency_kernel_matches_pairwise_dot_products():
+    # Reference: the three pairwise dot products of each sample's normals, vectorised.
+    rng = np.random.default_rng(4)
+    nrm = rng.normal(size=(300, 3))
+    nrm[:150] = [0.0, 0.0, -1.0] + 0.1 * rng.normal(size=(150, 3))
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    idx = rng.integers(0, 300, size=(2000, 3))
+    idx[:500] %= 150  # many consistent samples
+    n = nrm[idx]
+    cos_min = np.cos(np.deg2rad(10.0))
+    expected = ((n[:, 0] * n[:, 1]).sum(1) >= cos_min) & ((n[:, 0] * n[:, 2]).sum(1) >= cos_min) \
+        & ((n[:, 1] * n[:, 2]).sum(1) >= cos_min)
+    assert 100 < expected.sum() < 2000
+    np.testing.assert_array_equal(_consistent(nrm, idx, cos_min), expected)

@@ -7,12 +7,12 @@ import math
 import numpy as np
 import pytest
 
+from monoplane.datamodel import pixel_rays, plane_to_camera, plane_to_world
 from monoplane.errors import InvalidInput
 from monoplane.synth import LEVELS, MIN_PLANE_FRACTION, SynthScene, generate
 from monoplane.synth.generator import _STREAM_LAYOUT
 from monoplane.synth.render import make_raycaster, render_view
 from monoplane.synth.scene import build_layout
-from monoplane.types import pixel_rays, plane_to_camera, plane_to_world
 
 W, H = 128, 96
 SEEDS = (0, 1, 2, 3)

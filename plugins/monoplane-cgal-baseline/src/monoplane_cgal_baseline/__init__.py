@@ -2,9 +2,11 @@
 
 Registered under the name ``cgal`` through monoplane's ``monoplane_register_baselines`` hook
 (this module is a plugin in the ``monoplane`` entry-point group). The callable follows
-monoplane's baseline contract: ``baseline(frame, *, seed=0) -> Reconstruction``, planes in the
-frame's camera frame (OpenCV axes) and depth units, and ``timings["baseline.call"]`` the
-seconds of the ``efficient_RANSAC`` call alone (building CGAL's point set excluded).
+monoplane's baseline contract: ``baseline(frame, *, seed=0, **options) -> Reconstruction``,
+planes in the frame's camera frame (OpenCV axes) and depth units, and
+``timings["baseline.call"]`` the seconds of the ``efficient_RANSAC`` call alone (building
+CGAL's point set excluded). The keyword options are fields of :class:`CgalRansacConfig`
+(``monoplane eval --baseline cgal --baseline-set cgal.min_support=0.001``).
 
 License: GPL-3.0-or-later (CGAL's Shape_detection package is GPL).
 """
@@ -14,14 +16,16 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 
 from monoplane import hookimpl
+from monoplane.datamodel import Frame, Reconstruction
+from monoplane.evaluation.baselines import baseline_config
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.planes import fit_plane
 from monoplane.ransac import RansacConfig
-from monoplane.types import Frame, Reconstruction
 
 __version__ = "0.1.0"
 
@@ -57,6 +61,16 @@ class CgalRansacConfig:
     min_support: float = _RANSAC.min_support
     min_support_points: int = _RANSAC.min_support_points
 
+    def __post_init__(self) -> None:
+        if not (self.epsilon > 0 and self.cluster_epsilon > 0):
+            raise ValueError("epsilon and cluster_epsilon must be positive")
+        if not 0 < self.normal_deg < 90:
+            raise ValueError(f"normal_deg must lie in (0, 90), got {self.normal_deg}")
+        if not 0 < self.probability < 1:
+            raise ValueError(f"probability must lie in (0, 1), got {self.probability}")
+        if not 0 <= self.min_support < 1 or self.min_support_points < 0:
+            raise ValueError("min_support must lie in [0, 1) and min_support_points be >= 0")
+
 
 def _point_set(points: np.ndarray, normals: np.ndarray) -> object:
     from CGAL import CGAL_Point_set_3
@@ -71,8 +85,7 @@ def _point_set(points: np.ndarray, normals: np.ndarray) -> object:
     return ps
 
 
-def cgal_efficient_ransac(frame: Frame, *, seed: int = 0,
-                          config: CgalRansacConfig | None = None) -> Reconstruction:
+def cgal_efficient_ransac(frame: Frame, *, seed: int = 0, **options: Any) -> Reconstruction:
     """Detect planes with CGAL's Efficient RANSAC on the frame's normalised oriented cloud.
 
     Parameters
@@ -81,19 +94,25 @@ def cgal_efficient_ransac(frame: Frame, *, seed: int = 0,
         Frame with ``depth`` and ``normals`` (camera frame, facing the camera).
     seed : int
         Accepted for the baseline contract; CGAL's bindings expose no seed.
-    config : CgalRansacConfig, optional
-        Defaults as in the package README.
+    **options
+        Fields of :class:`CgalRansacConfig` to override (defaults as in the package README),
+        e.g. ``min_support=0.001``.
 
     Returns
     -------
     Reconstruction
         Labels 1..P in CGAL's detection order (0 = unassigned); planes are least-squares fits
         of each shape's points in the camera frame and depth units.
+
+    Raises
+    ------
+    monoplane.errors.ConfigError
+        On an unknown option or an ill-typed value (the message lists the valid options).
     """
     from CGAL import CGAL_Shape_detection
 
     del seed  # CGAL uses its own default random generator
-    cfg = config or CgalRansacConfig()
+    cfg = baseline_config(CgalRansacConfig, options, "cgal")
     cloud = PlaneCloud.from_frame(frame)
     normals = frame.normals.reshape(-1, 3)[cloud.all_pixels].astype(np.float64)
     ps = _point_set(cloud.all_points, normals)
@@ -128,6 +147,10 @@ def cgal_efficient_ransac(frame: Frame, *, seed: int = 0,
                           support=np.asarray(supports, dtype=np.int64),
                           config={"baseline": "cgal", **asdict(cfg)},
                           timings={"baseline.call": call})
+
+
+# Lets monoplane check --baseline-set options before the first frame.
+cgal_efficient_ransac.config_class = CgalRansacConfig  # type: ignore[attr-defined]
 
 
 @hookimpl

@@ -16,9 +16,9 @@ from dataclasses import dataclass
 
 from monoplane import hookimpl
 from monoplane.cues import IMAGENET_MEAN, IMAGENET_STD, CueNetwork, ModelSpec, OnnxProfile
+from monoplane.datamodel import Frame
 from monoplane.errors import ConfigError
 from monoplane.stages.base import CueProvider, Stage, param
-from monoplane.types import Frame
 
 #: Depth Anything (v1 and v2) predicts affine-invariant inverse depth from ImageNet-normalised
 #: RGB; its DINOv2 ViT-14 backbone needs input sides that are multiples of 14 (518 in training).

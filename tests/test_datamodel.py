@@ -1,9 +1,7 @@
 import numpy as np
 import pytest
 
-from monoplane.errors import InvalidInput
-from monoplane.testing import CORNER_PLANES, box_frame
-from monoplane.types import (
+from monoplane.datamodel import (
     Camera,
     Frame,
     Reconstruction,
@@ -14,6 +12,8 @@ from monoplane.types import (
     plane_to_camera,
     plane_to_world,
 )
+from monoplane.errors import InvalidInput
+from monoplane.testing import CORNER_PLANES, box_frame
 
 
 def frame(**kw):
@@ -104,12 +104,12 @@ def test_data_model_imports_nothing_of_the_project_but_errors() -> None:
     import subprocess
     import sys
 
-    code = ("import sys, monoplane.types; "
+    code = ("import sys, monoplane.datamodel; "
             "print(sorted(m for m in sys.modules if m.startswith('monoplane'))); "
             "print('cv2' in sys.modules, 'pluggy' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.split("\n")[:2] == ["['monoplane', 'monoplane.errors', 'monoplane.types']",
-                                          "False False"]
+    loaded = "['monoplane', 'monoplane.datamodel', 'monoplane.errors']"
+    assert out.stdout.split("\n")[:2] == [loaded, "False False"]
 
 
 def test_package_names_load_on_first_use() -> None:

@@ -30,9 +30,9 @@ import cv2
 import numpy as np
 
 from monoplane.cues.intrinsics import assume_intrinsics
+from monoplane.datamodel import Frame, Reconstruction, intrinsics_matrix
 from monoplane.errors import InvalidInput
 from monoplane.geometry.polygons import PlaneMesh, reconstruction_mesh
-from monoplane.types import Frame, Reconstruction, intrinsics_matrix
 
 
 def _require_file(path: str | Path, what: str) -> Path:

@@ -11,8 +11,9 @@ Conventions used everywhere in monoplane
   pixel. Plane offsets are in the depth's units.
 
 This module imports nothing of the project but :mod:`monoplane.errors`, so every other module
-can depend on it. Writing outputs lives in :mod:`monoplane.io` (``monoplane.save_reconstruction``)
-and meshes in :mod:`monoplane.geometry.mesh` (``reconstruction_to_open3d``).
+can depend on it. Writing outputs lives in :mod:`monoplane.fileio`
+(``monoplane.save_reconstruction``) and meshes in :mod:`monoplane.geometry.mesh`
+(``reconstruction_to_open3d``).
 """
 
 from __future__ import annotations
