@@ -27,6 +27,7 @@ z forward).
 
 from __future__ import annotations
 
+import contextlib
 import json
 import time
 from collections.abc import Callable
@@ -46,7 +47,7 @@ from monoplane.datamodel import (
     plane_to_camera,
     ray_plane_depth,
 )
-from monoplane.errors import InvalidInput
+from monoplane.errors import InvalidInput, StageError
 from monoplane.geometry.alignment import ScaleAlignment, align_scale
 from monoplane.geometry.polygons import PlaneMesh, points_plane_mesh
 from monoplane.stages.base import Fuser, Matcher
@@ -83,8 +84,9 @@ class MultiviewResult:
     frame_indices : list of int
         Input index of each scene view.
     registration : list of dict
-        Per scene view, how its pose was found (``method`` ``"sfm"`` or ``"fallback"``, with
-        ``reference`` and ``inliers`` for the latter).
+        Per scene view, how its pose was found: ``method`` ``"sfm"``, ``"fallback"`` (with
+        ``reference`` and ``inliers``) or ``"origin"`` (SfM built no model; this view's camera
+        is the world frame and the others were placed by fallback poses).
     unregistered : list of str
         Names of the input frames left out (no pose).
     adjustment : dict
@@ -130,6 +132,22 @@ def subset_sfm(sfm: SfmResult, views: list[int]) -> SfmResult:
                    registration=registration)
 
 
+def origin_sfm(frames: list[Frame], reason: str) -> SfmResult:
+    """A point-less SfM result whose world frame is view 0's camera; other views unplaced.
+
+    Used when the matcher builds no model at all, so that the fallback pose can still place
+    the views (each frame's ``K`` is taken as is).
+    """
+    n = len(frames)
+    cameras = [Camera(K=f.K, R=np.eye(3), t=np.zeros(3), width=f.width, height=f.height,
+                      name=f.name) for f in frames]
+    return SfmResult(cameras=cameras, points=np.zeros((0, 3)),
+                     keypoints=[np.zeros((0, 2)) for _ in frames],
+                     point_ids=[np.zeros(0, np.int64) for _ in frames],
+                     registration=[{"method": "origin"}] + [{"method": "none"}] * (n - 1),
+                     notes=[f"structure from motion failed: {reason}"])
+
+
 def hold_intrinsics_fixed(pipe: Pipeline) -> bool:
     """Make the pipeline's matcher keep every frame's ``K`` fixed, if it can.
 
@@ -145,54 +163,92 @@ def hold_intrinsics_fixed(pipe: Pipeline) -> bool:
     return True
 
 
-# Per-view work, as picklable top-level functions of (config, frame) so that views can run in
-# worker processes; each worker builds its pipeline once per config.
-_WORKER_PIPES: dict[str, Pipeline] = {}
+#: How the fallback placed a view, as written to cameras.json.
+FALLBACK_ESTIMATORS = {
+    "essential": "essential matrix (OpenCV USAC MAGSAC++), baseline from the reference "
+                 "view's depth",
+    "pnp": "PnP RANSAC on the reference view's depth-lifted keypoints",
+}
+
+# Per-view work (cues, RANSAC, refiner) runs in the worker pool of monoplane.batch: each
+# worker builds the pipeline once from the config (initializer), then takes one view per task.
+_PIPE: Pipeline | None = None
 
 
-def _worker_pipe(config: dict[str, Any]) -> Pipeline:
+def _init_view_worker(config: dict[str, Any]) -> None:
+    """Worker initializer: build this worker's pipeline from the resolved config."""
     from monoplane.pipeline import Pipeline
 
-    key = json.dumps(config, sort_keys=True, default=str)
-    if key not in _WORKER_PIPES:
-        _WORKER_PIPES[key] = Pipeline.from_config(config)
-    return _WORKER_PIPES[key]
+    global _PIPE
+    _PIPE = Pipeline.from_config(config)
 
 
-def prepare_view(config: dict[str, Any], frame: Frame) -> Frame:
-    """Run the cue provider of ``config`` on one frame (picklable per-view task)."""
-    return _worker_pipe(config).prepare(frame)
+def prepare_view(frame: Frame) -> Frame:
+    """Run the worker pipeline's cue provider on one frame (picklable per-view task)."""
+    assert _PIPE is not None, "prepare_view runs in a ViewPool"
+    return _PIPE.prepare(frame)
 
 
-def segment_view(config: dict[str, Any], frame: Frame) -> Reconstruction:
-    """Run RANSAC and the refiner of ``config`` on one frame with cues (picklable task)."""
-    return _worker_pipe(config).segment(frame)
+def segment_view(frame: Frame) -> Reconstruction:
+    """Run the worker pipeline's RANSAC and refiner on one frame with cues (per-view task)."""
+    assert _PIPE is not None, "segment_view runs in a ViewPool"
+    return _PIPE.segment(frame)
 
 
-def map_views(fn: Callable[[dict[str, Any], Frame], Any], config: dict[str, Any],
-              frames: list[Frame], workers: int) -> list[Any]:
-    """``[fn(config, f) for f in frames]``, in ``workers`` processes when more than one.
+class ViewPool:
+    """Runs per-view tasks in ``workers`` processes, or in this process when ``workers`` is 1.
 
-    Exceptions propagate from the first failing view.
+    Opened before structure from motion so that the workers start (and import) while the
+    matcher runs. In-process, the tasks use ``pipe`` itself.
     """
-    if workers <= 1 or len(frames) <= 1:
-        return [fn(config, f) for f in frames]
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
 
-    # fork shares the already imported modules with the workers (spawn would re-import them).
-    ctx = multiprocessing.get_context("fork" if "fork" in multiprocessing.get_all_start_methods()
-                                      else "spawn")
-    with ProcessPoolExecutor(max_workers=min(workers, len(frames)), mp_context=ctx) as pool:
-        return list(pool.map(fn, [config] * len(frames), frames))
+    def __init__(self, pipe: Pipeline, workers: int, n_views: int) -> None:
+        self.pipe = pipe
+        self.pool = None
+        if workers > 1 and n_views > 1:
+            from monoplane.batch import WorkerPool
+
+            self.pool = WorkerPool(min(workers, n_views), _init_view_worker,
+                                   (pipe.config.to_dict(),))
+
+    def __enter__(self) -> ViewPool:
+        if self.pool is not None:
+            self.pool.__enter__()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self.pool is not None:
+            self.pool.__exit__(*exc)
+
+    def map(self, fn: Callable[[Frame], Any], frames: list[Frame]) -> list[Any]:
+        """``[fn(f) for f in frames]`` in input order; the first failure propagates."""
+        global _PIPE
+        if self.pool is not None:
+            from monoplane.batch import WorkerInitError
+
+            try:
+                return self.pool.map(fn, frames)
+            except WorkerInitError as exc:
+                # E.g. a script without an ``if __name__ == "__main__":`` guard, which
+                # spawned workers cannot import: run the views here instead.
+                import sys
+
+                print(f"monoplane: warning: per-view workers could not start ({exc}); "
+                      "running the views in this process", file=sys.stderr)
+                self.pool.__exit__(None, None, None)
+                self.pool = None
+        previous, _PIPE = _PIPE, self.pipe
+        try:
+            return [fn(f) for f in frames]
+        finally:
+            _PIPE = previous
 
 
 def default_workers() -> int:
     """Worker processes for per-view stages: the CPUs this process may use."""
-    import os
+    from monoplane.batch import default_workers as batch_default
 
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (
-        os.cpu_count() or 1)
+    return batch_default()
 
 
 def reconstruct_multiview(frames: list[Frame], pipe: Pipeline, progress: bool = False,
@@ -234,124 +290,148 @@ def reconstruct_multiview(frames: list[Frame], pipe: Pipeline, progress: bool = 
     """
     import sys
 
+    from threadpoolctl import threadpool_limits
+
     from monoplane.geometry.relative_pose import fallback_relative_pose
     from monoplane.stages.base import Adjuster
 
     if len(frames) < 2:
         raise InvalidInput(f"multi-view reconstruction needs at least 2 images, got {len(frames)}")
     workers = default_workers() if workers is None else max(1, int(workers))
-    timings: dict[str, float] = {}
-    start = time.perf_counter()
-    if sfm is None:
-        matcher = pipe.stage("matcher", Matcher)
-        sfm = pipe.call("matcher", matcher.name, lambda: matcher.match(frames), "multiview",
-                        timings)
-    elif sfm.num_views != len(frames):
-        raise InvalidInput(f"{len(frames)} frames but the SfM result has {sfm.num_views} views")
-    registration = [dict(r) for r in sfm.registration] or [{"method": "sfm"} for _ in frames]
-    if strict and any(r["method"] == "none" for r in registration):
-        missing = [f.name for f, r in zip(frames, registration, strict=True)
-                   if r["method"] == "none"]
-        raise InvalidInput(f"could not register {len(missing)} of {len(frames)} images: "
-                           f"{', '.join(missing)}; they overlap too little with the others "
-                           "(drop --strict to reconstruct the registered views)")
-    if progress:
-        print(f"monoplane: SfM registered {sum(r['method'] != 'none' for r in registration)} "
-              f"of {len(frames)} views", file=sys.stderr)
+    with ViewPool(pipe, workers, len(frames)) as views_pool, contextlib.ExitStack() as blas_limit:
+        timings: dict[str, float] = {}
+        start = time.perf_counter()
+        sfm_failure = ""
+        if sfm is None:
+            matcher = pipe.stage("matcher", Matcher)
+            try:
+                sfm = pipe.call("matcher", matcher.name, lambda: matcher.match(frames), "multiview",
+                                timings)
+            except StageError as exc:
+                if strict:
+                    raise
+                # No model at all: view 0 becomes the world frame and every other view is
+                # tried with the two-view fallback pose below.
+                sfm_failure = str(exc)
+                print(f"monoplane: warning: {exc}; placing the views by two-view fallback poses",
+                      file=sys.stderr)
+                sfm = origin_sfm(frames, sfm_failure)
+        elif sfm.num_views != len(frames):
+            raise InvalidInput(f"{len(frames)} frames but the SfM result has {sfm.num_views} views")
+        registration = [dict(r) for r in sfm.registration] or [{"method": "sfm"} for _ in frames]
+        if strict and any(r["method"] == "none" for r in registration):
+            missing = [f.name for f, r in zip(frames, registration, strict=True)
+                       if r["method"] == "none"]
+            raise InvalidInput(f"could not register {len(missing)} of {len(frames)} images: "
+                               f"{', '.join(missing)}; they overlap too little with the others "
+                               "(drop --strict to reconstruct the registered views)")
+        if progress:
+            print(f"monoplane: SfM registered {sum(r['method'] != 'none' for r in registration)} "
+                  f"of {len(frames)} views", file=sys.stderr)
 
-    config = pipe.config.to_dict()
-    with_k = []
-    for v, frame in enumerate(frames):
-        cam = sfm.cameras[v]
-        if (cam.height, cam.width) != frame.shape:
-            raise InvalidInput(f"{frame.name}: SfM camera size differs from the image size")
-        with_k.append(frame.with_(K=cam.K) if not np.allclose(cam.K, frame.K) else frame)
-    t0 = time.perf_counter()
-    prepared = map_views(prepare_view, config, with_k, workers)
-    timings["cues"] = time.perf_counter() - t0
+        config = pipe.config.to_dict()
+        # Everything below runs small dense products ((N, 3) @ (3, k)), where OpenBLAS's
+        # threads cost far more than they give: 10x slower on a 2-core machine with one core
+        # busy (measured: 23 ms against 2.5 ms for a 76 800 x 3 product). One BLAS thread.
+        blas_limit.enter_context(threadpool_limits(1, user_api="blas"))
+        with_k = []
+        for v, frame in enumerate(frames):
+            cam = sfm.cameras[v]
+            if (cam.height, cam.width) != frame.shape:
+                raise InvalidInput(f"{frame.name}: SfM camera size differs from the image size")
+            with_k.append(frame.with_(K=cam.K) if not np.allclose(cam.K, frame.K) else frame)
+        t0 = time.perf_counter()
+        prepared = views_pool.map(prepare_view, with_k)
+        timings["cues"] = time.perf_counter() - t0
 
-    t0 = time.perf_counter()
-    alignments: dict[int, ScaleAlignment] = {}
-    for v, frame in enumerate(prepared):
-        if registration[v]["method"] == "none":
-            continue
-        pixels, depth = sfm.sparse_depth(v)
-        try:
-            alignments[v] = align_scale(frame.depth, pixels, depth)
-        except InvalidInput as exc:
-            if strict:
-                raise InvalidInput(f"{frame.name}: {exc}") from None
-            registration[v] = {"method": "none", "reason": str(exc)}
-    if sum(r["method"] != "none" for r in registration) == 0:
-        raise InvalidInput("no view could be registered and scale-aligned")
-    # Fallback: place each left-over view against the registered view it matches best.
-    cameras = list(sfm.cameras)
-    for v in [v for v, r in enumerate(registration) if r["method"] == "none"]:
-        best = None
-        for ref in [u for u, r in enumerate(registration) if r["method"] != "none"]:
-            depth_ref = prepared[ref].depth * alignments[ref].scale
-            found = fallback_relative_pose(prepared[ref].rgb, cameras[ref].K, depth_ref,
-                                           prepared[v].rgb, cameras[v].K, prepared[v].depth)
-            if found is not None and (best is None or found.inliers > best[1].inliers):
-                best = (ref, found)
-        if best is None:
-            continue
-        ref, fb = best
-        cam_ref = cameras[ref]
-        cameras[v] = replace(cameras[v], R=fb.R @ cam_ref.R, t=fb.R @ cam_ref.t + fb.t)
-        alignments[v] = ScaleAlignment(scale=fb.depth_scale_j, num_points=fb.matches,
-                                       num_inliers=fb.inliers, residual=float("nan"),
-                                       relative_residual=float("nan"))
-        registration[v] = {"method": "fallback", "reference": frames[ref].name,
-                           "inliers": fb.inliers, "matches": fb.matches,
-                           "estimator": "essential matrix (OpenCV USAC MAGSAC++) with the "
-                                        "baseline from the reference view's depth"}
-    sfm = replace(sfm, cameras=cameras, registration=registration)
-    keep = [v for v, r in enumerate(registration) if r["method"] != "none"]
-    unregistered = [frames[v].name for v, r in enumerate(registration) if r["method"] == "none"]
-    if len(keep) < 2:
-        raise InvalidInput(f"only {len(keep)} of {len(frames)} images could be registered "
-                           f"({', '.join(unregistered)} could not); a scene needs two")
-    if unregistered:
-        print(f"monoplane: warning: {len(unregistered)} of {len(frames)} images could not be "
-              f"registered and are left out: {', '.join(unregistered)}", file=sys.stderr)
-    sfm = subset_sfm(sfm, keep)
-    prepared = [prepared[v] for v in keep]
-    aligns = [alignments[v] for v in keep]
+        t0 = time.perf_counter()
+        alignments: dict[int, ScaleAlignment] = {}
+        for v, frame in enumerate(prepared):
+            if registration[v]["method"] == "none":
+                continue
+            if registration[v]["method"] == "origin":
+                # The world frame's own depth sets the units.
+                alignments[v] = ScaleAlignment(scale=1.0, num_points=0, num_inliers=0,
+                                               residual=float("nan"),
+                                               relative_residual=float("nan"))
+                continue
+            pixels, depth = sfm.sparse_depth(v)
+            try:
+                alignments[v] = align_scale(frame.depth, pixels, depth)
+            except InvalidInput as exc:
+                if strict:
+                    raise InvalidInput(f"{frame.name}: {exc}") from None
+                registration[v] = {"method": "none", "reason": str(exc)}
+        if sum(r["method"] != "none" for r in registration) == 0:
+            raise InvalidInput("no view could be registered and scale-aligned")
+        # Fallback: place each left-over view against the registered view it matches best.
+        cameras = list(sfm.cameras)
+        for v in [v for v, r in enumerate(registration) if r["method"] == "none"]:
+            best = None
+            for ref in [u for u, r in enumerate(registration) if r["method"] != "none"]:
+                depth_ref = prepared[ref].depth * alignments[ref].scale
+                found = fallback_relative_pose(prepared[ref].rgb, cameras[ref].K, depth_ref,
+                                               prepared[v].rgb, cameras[v].K, prepared[v].depth)
+                if found is not None and (best is None or found.inliers > best[1].inliers):
+                    best = (ref, found)
+            if best is None:
+                continue
+            ref, fb = best
+            cam_ref = cameras[ref]
+            cameras[v] = replace(cameras[v], R=fb.R @ cam_ref.R, t=fb.R @ cam_ref.t + fb.t)
+            alignments[v] = ScaleAlignment(scale=fb.depth_scale_j, num_points=fb.matches,
+                                           num_inliers=fb.inliers, residual=float("nan"),
+                                           relative_residual=float("nan"))
+            registration[v] = {"method": "fallback", "reference": frames[ref].name,
+                               "inliers": fb.inliers, "matches": fb.matches,
+                               "estimator": FALLBACK_ESTIMATORS[fb.estimator]}
+        sfm = replace(sfm, cameras=cameras, registration=registration)
+        keep = [v for v, r in enumerate(registration) if r["method"] != "none"]
+        unregistered = [frames[v].name for v, r in enumerate(registration) if r["method"] == "none"]
+        if len(keep) < 2:
+            why = f"; {sfm_failure}" if sfm_failure else ""
+            raise InvalidInput(f"only {len(keep)} of {len(frames)} images could be registered "
+                               f"({', '.join(unregistered)} could not){why}; a scene needs two")
+        if unregistered:
+            print(f"monoplane: warning: {len(unregistered)} of {len(frames)} images could not be "
+                  f"registered and are left out: {', '.join(unregistered)}", file=sys.stderr)
+        sfm = subset_sfm(sfm, keep)
+        prepared = [prepared[v] for v in keep]
+        aligns = [alignments[v] for v in keep]
 
-    metric = all(f.depth_kind == "metric" for f in prepared)
-    units = prepared[0].depth_units if metric and len(
-        {f.depth_units for f in prepared}) == 1 else "sfm"
-    world_factor = 1.0
-    if units != "sfm":
-        # Depth is metric: express the SfM world in the depth's unit instead of the reverse.
-        world_factor = float(np.median([1.0 / a.scale for a in aligns]))
-        sfm = scale_sfm(sfm, world_factor)
-    aligns = [replace(a, scale=a.scale * world_factor, residual=a.residual * world_factor)
-              for a in aligns]
-    scales = [a.scale for a in aligns]
-    aligned = [
-        f.with_(depth=(f.depth * s).astype(np.float32), depth_units=units,
-                notes=[*f.notes, f"depth scaled by {s:.6g} onto the SfM points "
-                       f"({a.num_inliers}/{a.num_points} inliers)"])
-        for f, s, a in zip(prepared, scales, aligns, strict=True)
-    ]
-    timings["alignment"] = time.perf_counter() - t0
+        metric = all(f.depth_kind == "metric" for f in prepared)
+        units = prepared[0].depth_units if metric and len(
+            {f.depth_units for f in prepared}) == 1 else "sfm"
+        world_factor = 1.0
+        if units != "sfm":
+            # Depth is metric: express the SfM world in the depth's unit instead of the reverse.
+            world_factor = float(np.median([1.0 / a.scale for a in aligns]))
+            sfm = scale_sfm(sfm, world_factor)
+        aligns = [replace(a, scale=a.scale * world_factor, residual=a.residual * world_factor)
+                  for a in aligns]
+        scales = [a.scale for a in aligns]
+        aligned = [
+            f.with_(depth=(f.depth * s).astype(np.float32), depth_units=units,
+                    notes=[*f.notes, f"depth scaled by {s:.6g} onto the SfM points "
+                           f"({a.num_inliers}/{a.num_points} inliers)"])
+            for f, s, a in zip(prepared, scales, aligns, strict=True)
+        ]
+        timings["alignment"] = time.perf_counter() - t0
 
-    t0 = time.perf_counter()
-    views: list[Reconstruction] = map_views(segment_view, config, aligned, workers)
-    timings["single_view"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        views: list[Reconstruction] = views_pool.map(segment_view, aligned)
+        timings["single_view"] = time.perf_counter() - t0
 
-    fuser = pipe.stage("fuser", Fuser)
-    scene, plane_matches = pipe.call("fuser", fuser.name,
-                                     lambda: fuser.fuse_with_matches(views, sfm), "multiview",
-                                     timings)
-    scene.scales = scales
-    fused = scene
-    adjuster = pipe.stage("adjuster", Adjuster)
-    scene, sfm, adjustment = pipe.call("adjuster", adjuster.name,
-                                       lambda: adjuster.adjust(scene, sfm), "multiview",
-                                       timings)
+        fuser = pipe.stage("fuser", Fuser)
+        scene, plane_matches = pipe.call("fuser", fuser.name,
+                                         lambda: fuser.fuse_with_matches(views, sfm), "multiview",
+                                         timings)
+        scene.scales = scales
+        fused = scene
+        adjuster = pipe.stage("adjuster", Adjuster)
+        scene, sfm, adjustment = pipe.call("adjuster", adjuster.name,
+                                           lambda: adjuster.adjust(scene, sfm), "multiview",
+                                           timings)
     timings["total"] = time.perf_counter() - start
     return MultiviewResult(scene=scene, sfm=sfm, alignments=aligns,
                            plane_matches=plane_matches, units=units, timings=timings,

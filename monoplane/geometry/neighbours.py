@@ -1,15 +1,16 @@
-"""Exact k-nearest-neighbour queries over a fixed 3D point set, on Open3D's KD-tree.
+"""Exact k-nearest-neighbour queries over a fixed 3D point set, on SciPy's ``cKDTree``.
 
 RANSAC needs one index per frame for three query patterns: every point's k nearest neighbours
 (the graph-cut neighbourhood graph), the few nearest samples of the pixels that propagation
 cannot settle from the image, and the NAPSAC sampler's neighbourhoods. :class:`PointIndex`
 serves all three with the call convention of :meth:`scipy.spatial.cKDTree.query`.
 
-Open3D's ``core.nns.NearestNeighborSearch`` (nanoflann, multithreaded) was measured against
-``cKDTree`` (``workers=1`` and ``2``) on the kNN graph of the 20 000 points of a bench frame
-(k = 9, index build included): 27-28 ms of CPU time for both, spread over the cores by both.
-The design puts Open3D at the heart of the cloud, so at equal speed it is the one used. It
-runs in float64: in float32 the rounding of the normalised points breaks exact distance ties
+Open3D's ``core.nns.NearestNeighborSearch`` (nanoflann) was measured against ``cKDTree`` on the
+kNN graph of the 20 000 points of a bench frame (k = 9, index build included): 27-28 ms of CPU
+time for both. ``cKDTree`` is used because importing Open3D costs about 2.2 s of CPU per
+process (it loads its ML datasets module, hence scikit-learn, and its Plotly visualiser); every
+worker process of the multi-view and batch pools paid it before its first frame. Queries run
+in float64: in float32 the rounding of the normalised points breaks exact distance ties
 differently when the depth's unit changes, and a frame in millimetres must give the labels it
 gives in metres.
 """
@@ -31,17 +32,13 @@ class PointIndex:
     """
 
     def __init__(self, points: np.ndarray) -> None:
-        import open3d.core as o3c
+        from scipy.spatial import cKDTree
 
         pts = np.asarray(points)
         if pts.ndim != 2 or pts.shape[1] != 3:
             raise InvalidInput(f"a point index needs (N, 3) points, got {pts.shape}")
         self.n = int(pts.shape[0])
-        self._search = None
-        if self.n:
-            self._search = o3c.nns.NearestNeighborSearch(
-                o3c.Tensor(np.ascontiguousarray(pts, dtype=np.float64)))
-            self._search.knn_index()
+        self._tree = cKDTree(np.ascontiguousarray(pts, dtype=np.float64)) if self.n else None
 
     def query(self, queries: np.ndarray, k: int = 1,
               distance_upper_bound: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
@@ -64,18 +61,14 @@ class PointIndex:
         idx : numpy.ndarray
             (Q, k) int64 indices into the indexed points; ``N`` where ``dist`` is ``inf``.
         """
-        import open3d.core as o3c
-
         if k < 1:
             raise InvalidInput(f"k must be at least 1, got {k}")
         q = np.ascontiguousarray(np.asarray(queries).reshape(-1, 3), dtype=np.float64)
         dist = np.full((q.shape[0], k), np.inf)
         idx = np.full((q.shape[0], k), self.n, dtype=np.int64)
         kk = min(k, self.n)
-        if q.shape[0] and self._search is not None:
-            found, d2 = self._search.knn_search(o3c.Tensor(q), kk)
-            d = np.sqrt(d2.numpy().astype(np.float64))
-            far = d > distance_upper_bound
-            dist[:, :kk] = np.where(far, np.inf, d)
-            idx[:, :kk] = np.where(far, self.n, found.numpy())
+        if q.shape[0] and self._tree is not None:
+            d, found = self._tree.query(q, k=kk, distance_upper_bound=distance_upper_bound)
+            dist[:, :kk] = np.asarray(d).reshape(-1, kk)
+            idx[:, :kk] = np.asarray(found).reshape(-1, kk)
         return dist, idx

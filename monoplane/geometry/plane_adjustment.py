@@ -6,7 +6,12 @@ residuals, each divided by its expected noise so that they are unitless and comp
 
 * **reprojection**: ``(π(K_v (R_v X_p + t_v)) − u_vp) / σ_px`` for every SfM observation
   (pixels);
-* **point-to-plane**: ``(n_g · R_vᵀ (s_v x_vi − t_v) + d_g) / (σ_rel · s_v z_vi)`` for a
+* **SfM point on plane**: ``(n_g · X_p + d_g) / (σ_point · z_p)`` for every SfM point whose
+  keypoints fall inside the mask of a view plane linked to global plane ``g`` (``z_p`` its
+  depth in the observing views). These triangulated points are the multi-view evidence on
+  the planes; without them a plane only averages its views' monocular depths, and the
+  refinement cannot make it more accurate than the fusion;
+* **point-to-plane**: ``(n_g · R_vᵀ (s_v x_vi − t_v) + d_g) / (σ_rel · z_vi)`` for a
   subsample of each view's plane pixels, where ``x_vi`` is the pixel lifted with the view's
   (scale-aligned) depth ``z_vi`` in camera ``v``, ``s_v`` the view's depth scale and ``g`` the
   global plane its local plane is linked to. Dividing by the depth makes the term a relative
@@ -59,10 +64,27 @@ class AdjustmentProblem:
         (S,) int view and global plane of each plane-pixel sample.
     samp_x : numpy.ndarray
         (S, 3) sample lifted into its camera with the current depth (scale 1), ``z > 0``.
+    norm_view, norm_plane : numpy.ndarray
+        (L,) int view and global plane of each view-plane normal.
+    norm_m : numpy.ndarray
+        (L, 3) unit normal of that view plane in its camera frame.
+    pp_point, pp_plane : numpy.ndarray
+        (Q,) int SfM point and global plane of each point-on-plane residual.
+    pp_depth : numpy.ndarray
+        (Q,) depth of that point in its observing views (weights the residual, fixed).
     sigma_px : float
         Expected reprojection noise (pixels).
     sigma_rel : float
         Expected relative depth noise of plane pixels.
+    sigma_normal_deg : float
+        Expected angle between a view plane's normal and its global plane's (degrees).
+    sigma_point : float
+        Expected distance of an SfM point to its plane, relative to its depth.
+    prior_rot_deg : float
+        Pose prior: expected rotation change (degrees).
+    prior_t : numpy.ndarray or None
+        (V,) pose prior: expected translation change of each view (world units); None
+        disables the prior.
     """
 
     K: np.ndarray
@@ -76,8 +98,18 @@ class AdjustmentProblem:
     samp_view: np.ndarray
     samp_plane: np.ndarray
     samp_x: np.ndarray
+    norm_view: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    norm_plane: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    norm_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    pp_point: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    pp_plane: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    pp_depth: np.ndarray = field(default_factory=lambda: np.zeros(0))
     sigma_px: float = 1.0
     sigma_rel: float = 0.03
+    sigma_normal_deg: float = 2.0
+    sigma_point: float = 0.01
+    prior_rot_deg: float = 1.0
+    prior_t: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         v = len(self.R)
@@ -88,8 +120,14 @@ class AdjustmentProblem:
         if len(self.samp_view) != len(self.samp_plane) or len(self.samp_x) != len(
                 self.samp_view):
             raise InvalidInput("plane adjustment: plane sample arrays differ in length")
-        if not self.sigma_px > 0 or not self.sigma_rel > 0:
-            raise InvalidInput("plane adjustment: sigma_px and sigma_rel must be positive")
+        if len(self.norm_view) != len(self.norm_plane) or len(self.norm_m) != len(
+                self.norm_view):
+            raise InvalidInput("plane adjustment: normal arrays differ in length")
+        if not len(self.pp_point) == len(self.pp_plane) == len(self.pp_depth):
+            raise InvalidInput("plane adjustment: point-on-plane arrays differ in length")
+        if not (self.sigma_px > 0 and self.sigma_rel > 0 and self.sigma_normal_deg > 0
+                and self.sigma_point > 0):
+            raise InvalidInput("plane adjustment: the sigmas must be positive")
 
 
 @dataclass
@@ -164,13 +202,24 @@ def _unpack(x: np.ndarray, lay: _Layout, prob: AdjustmentProblem, bases: np.ndar
     n = prob.planes[:, :3] + np.einsum("gij,gj->gi", bases, pl[:, :2])
     n /= np.linalg.norm(n, axis=1, keepdims=True)
     planes = np.concatenate([n, pl[:, 2:3]], axis=1)
-    points = x[lay.point:].reshape(-1, 3)
+    points = x[lay.point:].reshape(-1, 3) if lay.m else prob.points
     return R, t, scales, planes, points
 
 
+def _prior(x: np.ndarray, lay: _Layout, prob: AdjustmentProblem) -> np.ndarray:
+    """(V - 1, 6) pose-prior residuals in σ units (empty without a prior)."""
+    if prob.prior_t is None or lay.v < 2:
+        return np.zeros((0, 6))
+    pose = x[lay.pose:lay.scale].reshape(-1, 6)
+    rot = pose[:, :3] / np.radians(prob.prior_rot_deg)
+    trans = (pose[:, 3:] - prob.t[1:]) / np.asarray(prob.prior_t)[1:, None]
+    return np.concatenate([rot, trans], axis=1)
+
+
 def _residuals(x: np.ndarray, lay: _Layout, prob: AdjustmentProblem, bases: np.ndarray
-               ) -> tuple[np.ndarray, np.ndarray]:
-    """(reprojection (O, 2) in σ units, point-to-plane (S,) in σ units)."""
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(reprojection (O, 2), point-to-plane (S,), normal (L, 3), SfM point on plane (Q,)),
+    all in σ units."""
     R, t, scales, planes, points = _unpack(x, lay, prob, bases)
     v, p = prob.obs_view, prob.obs_point
     xc = np.einsum("oij,oj->oi", R[v], points[p]) + t[v]
@@ -181,13 +230,22 @@ def _residuals(x: np.ndarray, lay: _Layout, prob: AdjustmentProblem, bases: np.n
     s = scales[sv]
     xw = np.einsum("sji,sj->si", R[sv], s[:, None] * prob.samp_x - t[sv])  # Rᵀ (s x − t)
     dist = np.einsum("si,si->s", planes[sg, :3], xw) + planes[sg, 3]
-    plane = dist / (prob.sigma_rel * s * prob.samp_x[:, 2])
-    return reproj, plane
+    # Fixed weights (the initial depth), so that no scale can lower its residuals by growing.
+    plane = dist / (prob.sigma_rel * prob.samp_x[:, 2])
+    lv, lg = prob.norm_view, prob.norm_plane
+    m_world = np.einsum("lji,lj->li", R[lv], prob.norm_m)
+    normal = (m_world - planes[lg, :3]) / np.radians(prob.sigma_normal_deg)
+    qp, qg = prob.pp_point, prob.pp_plane
+    onplane = (np.einsum("qi,qi->q", planes[qg, :3], points[qp]) + planes[qg, 3]) / (
+        prob.sigma_point * prob.pp_depth)
+    return reproj, plane, normal, onplane
 
 
-def residual_summary(reproj: np.ndarray, plane: np.ndarray, prob: AdjustmentProblem
-                     ) -> dict[str, float]:
-    """RMS reprojection error (pixels) and RMS / median relative point-to-plane distance."""
+def residual_summary(reproj: np.ndarray, plane: np.ndarray, normal: np.ndarray,
+                     onplane: np.ndarray, prob: AdjustmentProblem) -> dict[str, float]:
+    """RMS reprojection error (pixels), RMS / median relative point-to-plane distance, RMS
+    view-to-global normal angle (degrees) and median relative SfM point-to-plane distance."""
+    ang = np.linalg.norm(normal, axis=1) * prob.sigma_normal_deg
     px = np.linalg.norm(reproj, axis=1) * prob.sigma_px if len(reproj) else np.zeros(0)
     rel = np.abs(plane) * prob.sigma_rel
     return {
@@ -195,6 +253,10 @@ def residual_summary(reproj: np.ndarray, plane: np.ndarray, prob: AdjustmentProb
         "reprojection_median_px": float(np.median(px)) if len(px) else 0.0,
         "plane_rms_rel": float(np.sqrt(np.mean(rel**2))) if len(rel) else 0.0,
         "plane_median_rel": float(np.median(rel)) if len(rel) else 0.0,
+        "normal_rms_deg": float(np.sqrt(np.mean(ang**2))) if len(ang) else 0.0,
+        "sfm_point_plane_median_rel": float(np.median(np.abs(onplane)) * prob.sigma_point)
+        if len(onplane) else 0.0,
+        "sfm_points_on_planes": int(len(onplane)),
         "observations": int(len(reproj)),
         "plane_samples": int(len(plane)),
     }
@@ -205,8 +267,10 @@ def _sparsity(lay: _Layout, prob: AdjustmentProblem) -> coo_matrix:
     o, s = len(prob.obs_view), len(prob.samp_view)
     rows, cols = [], []
     # Reprojection rows 2k, 2k+1: the view's pose and the point.
-    obs_cols = np.concatenate([lay.pose_cols(prob.obs_view),
-                               lay.point + 3 * prob.obs_point[:, None] + np.arange(3)], axis=1)
+    obs_cols = lay.pose_cols(prob.obs_view)
+    if lay.m:
+        obs_cols = np.concatenate([obs_cols, lay.point + 3 * prob.obs_point[:, None]
+                                   + np.arange(3)], axis=1)
     for r in range(2):
         rr = np.repeat(2 * np.arange(o) + r, obs_cols.shape[1])
         rows.append(rr)
@@ -217,14 +281,52 @@ def _sparsity(lay: _Layout, prob: AdjustmentProblem) -> coo_matrix:
                                axis=1)
     rows.append(np.repeat(2 * o + np.arange(s), samp_cols.shape[1]))
     cols.append(samp_cols.reshape(-1))
+    # Normal rows 3k..3k+2: the view's rotation (pose) and the plane's normal.
+    n_l = len(prob.norm_view)
+    norm_cols = np.concatenate([lay.pose_cols(prob.norm_view),
+                                lay.plane + 3 * prob.norm_plane[:, None] + np.arange(3)],
+                               axis=1)
+    for r in range(3):
+        rows.append(np.repeat(2 * o + s + 3 * np.arange(n_l) + r, norm_cols.shape[1]))
+        cols.append(norm_cols.reshape(-1))
+    n_rows = 2 * o + s + 3 * n_l
+    # SfM point-on-plane rows: the point and the plane.
+    q = len(prob.pp_point)
+    pp_cols = lay.plane + 3 * prob.pp_plane[:, None] + np.arange(3)
+    if lay.m:
+        pp_cols = np.concatenate([pp_cols, lay.point + 3 * prob.pp_point[:, None]
+                                  + np.arange(3)], axis=1)
+    rows.append(np.repeat(n_rows + np.arange(q), pp_cols.shape[1]))
+    cols.append(pp_cols.reshape(-1))
+    n_rows += q
+    if prob.prior_t is not None and lay.v > 1:
+        # Prior rows: 6 per view 1..V-1, each on one pose parameter.
+        rows.append(n_rows + np.arange(6 * (lay.v - 1)))
+        cols.append(lay.pose + np.arange(6 * (lay.v - 1)))
+        n_rows += 6 * (lay.v - 1)
     r, c = np.concatenate(rows), np.concatenate(cols)
     keep = c >= 0
     return coo_matrix((np.ones(int(keep.sum())), (r[keep], c[keep])),
-                      shape=(2 * o + s, lay.size))
+                      shape=(n_rows, lay.size))
 
 
-def adjust(prob: AdjustmentProblem, max_evaluations: int = 100, loss: str = "soft_l1"
-           ) -> AdjustmentResult:
+#: ρ(z) of scipy's robust losses, z the squared residual (f_scale 1).
+_LOSSES = {
+    "linear": lambda z: z,
+    "soft_l1": lambda z: 2.0 * (np.sqrt(1.0 + z) - 1.0),
+    "huber": lambda z: np.where(z <= 1.0, z, 2.0 * np.sqrt(z) - 1.0),
+    "cauchy": np.log1p,
+    "arctan": np.arctan,
+}
+
+
+def _robust_cost(f: np.ndarray, loss: str) -> float:
+    """The solver's objective ``½ Σ ρ(f²)`` (what it lowers), for the before/after report."""
+    return float(0.5 * np.sum(_LOSSES[loss](f * f)))
+
+
+def adjust(prob: AdjustmentProblem, max_evaluations: int = 100, loss: str = "soft_l1",
+           refine_points: bool = True) -> AdjustmentResult:
     """Solve the joint plane–camera refinement.
 
     Parameters
@@ -233,27 +335,36 @@ def adjust(prob: AdjustmentProblem, max_evaluations: int = 100, loss: str = "sof
         Cameras, points, observations, planes and plane-pixel samples.
     max_evaluations : int
         Cap on the solver's function evaluations.
+    refine_points : bool
+        Refine the SfM points too; False holds them fixed (COLMAP has already adjusted them
+        with these cameras), which leaves a problem of a few dozen unknowns.
     loss : str
-        Robust loss of :func:`scipy.optimize.least_squares` on the unitless residuals.
+        Robust loss of :func:`scipy.optimize.least_squares` on the unitless residuals (one
+        of ``linear``, ``soft_l1``, ``huber``, ``cauchy``, ``arctan``).
 
     Returns
     -------
     AdjustmentResult
     """
-    lay = _Layout(len(prob.R), len(prob.planes), len(prob.points))
+    if loss not in _LOSSES:
+        raise InvalidInput(f"unknown loss {loss!r}; choose one of {', '.join(_LOSSES)}")
+    lay = _Layout(len(prob.R), len(prob.planes), len(prob.points) if refine_points else 0)
     bases = np.stack([np.stack(plane_basis(n), axis=1) for n in prob.planes[:, :3]]) \
         if len(prob.planes) else np.zeros((0, 3, 2))
     x0 = np.zeros(lay.size)
     if lay.v > 1:
         x0[lay.pose:lay.scale].reshape(-1, 6)[:, 3:] = prob.t[1:]
     x0[lay.plane:lay.point].reshape(-1, 3)[:, 2] = prob.planes[:, 3]
-    x0[lay.point:] = prob.points.reshape(-1)
+    if lay.m:
+        x0[lay.point:] = prob.points.reshape(-1)
 
     def fun(x: np.ndarray) -> np.ndarray:
-        reproj, plane = _residuals(x, lay, prob, bases)
-        return np.concatenate([reproj.reshape(-1), plane])
+        reproj, plane, normal, onplane = _residuals(x, lay, prob, bases)
+        return np.concatenate([reproj.reshape(-1), plane, normal.reshape(-1), onplane,
+                               _prior(x, lay, prob).reshape(-1)])
 
     before = residual_summary(*_residuals(x0, lay, prob, bases), prob)
+    before["cost"] = _robust_cost(fun(x0), loss)
     if lay.size == 0 or (len(prob.obs_view) + len(prob.samp_view)) == 0:
         return AdjustmentResult(prob.R.copy(), prob.t.copy(), np.ones(lay.v),
                                 prob.planes.copy(), prob.points.copy(), before, before,
@@ -262,5 +373,6 @@ def adjust(prob: AdjustmentProblem, max_evaluations: int = 100, loss: str = "sof
                         f_scale=1.0, x_scale="jac", max_nfev=max_evaluations)
     R, t, scales, planes, points = _unpack(sol.x, lay, prob, bases)
     after = residual_summary(*_residuals(sol.x, lay, prob, bases), prob)
+    after["cost"] = _robust_cost(fun(sol.x), loss)
     return AdjustmentResult(R, t, scales, planes, points, before, after,
                             bool(sol.success), str(sol.message))

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from monoplane.datamodel import pixel_rays
 from monoplane.errors import InvalidInput
 
 
@@ -144,35 +143,39 @@ def reprojection_iou(labels_i: np.ndarray, params_i: np.ndarray, K_i: np.ndarray
     if p_i == 0 or p_j == 0:
         return out
     h_i, w_i = labels_i.shape
-    rays = pixel_rays(K_j, *labels_j.shape)[::step, ::step].reshape(-1, 3)
+    rows, cols = np.arange(0, labels_j.shape[0], step), np.arange(0, labels_j.shape[1], step)
+    u, v = np.meshgrid(cols.astype(np.float64), rows.astype(np.float64))
+    rays = np.stack([u.ravel(), v.ravel(), np.ones(u.size)], axis=1) @ np.linalg.inv(K_j).T
     lab_j = labels_j[::step, ::step].reshape(-1).astype(np.int64)
-    # Plane p in camera j: n_j = R n_i, d_j = d_i − n_j · t.
+    # Plane p in camera j: n_j = R n_i, d_j = d_i − n_j · t. A ray r of camera j meets it at
+    # x_j = z r, z = −d_j / (n_j · r), and x_i = Rᵀ (x_j − t) = z Rᵀ (I + t n_jᵀ / d_j) r, so
+    # view i's homogeneous pixel is z H_p r with H_p = K_i Rᵀ (I + t n_jᵀ / d_j): one (3, 3)
+    # product per plane and ray instead of lifting, moving and projecting.
     n_j = params_i[:, :3] @ R_ji.T
     d_j = params_i[:, 3] - n_j @ t_ji
-    for p in range(p_i):
-        denom = rays @ n_j[p]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            z = -d_j[p] / denom
+    d_safe = np.where(np.abs(d_j) > 1e-12, d_j, 1e-12)
+    H = np.asarray(K_i, dtype=np.float64) @ R_ji.T @ (
+        np.eye(3)[None] + t_ji[None, :, None] * (n_j / d_safe[:, None])[:, None, :])
+    w = (rays @ H.reshape(3 * p_i, 3).T).reshape(-1, p_i, 3)     # (N, P_i, 3)
+    ray_n = rays @ n_j.T                                           # (N, P_i)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = -d_safe[None, :] / ray_n
         front = np.isfinite(z) & (z > 0)
-        x_i = ((rays[front] * z[front, None]) - t_ji) @ R_ji  # R^T (x_j − t)
-        uvw = x_i @ np.asarray(K_i).T
-        ok = uvw[:, 2] > 1e-9
-        u = np.full(len(uvw), -1, dtype=np.int64)
-        v = np.full(len(uvw), -1, dtype=np.int64)
-        u[ok] = np.rint(uvw[ok, 0] / uvw[ok, 2]).astype(np.int64)
-        v[ok] = np.rint(uvw[ok, 1] / uvw[ok, 2]).astype(np.int64)
-        inside = ok & (u >= 0) & (u < w_i) & (v >= 0) & (v < h_i)
-        visible = np.zeros(len(rays), dtype=bool)
-        visible[np.flatnonzero(front)[inside]] = True
-        warped = np.zeros(len(rays), dtype=bool)
-        warped[np.flatnonzero(front)[inside]] = labels_i[v[inside], u[inside]] == p + 1
-        n_warped = int(warped.sum())
-        if n_warped == 0:
-            continue
-        inter = np.bincount(lab_j[warped], minlength=p_j + 1)[1:]
-        area_visible = np.bincount(lab_j[visible], minlength=p_j + 1)[1:]
-        union = n_warped + area_visible - inter
-        out[p] = inter / np.maximum(union, 1)
+        ok = front & (z * w[..., 2] > 1e-9)
+        u = np.rint(np.where(ok, w[..., 0] / w[..., 2], -1.0))
+        v = np.rint(np.where(ok, w[..., 1] / w[..., 2], -1.0))
+    visible = ok & (u >= 0) & (u < w_i) & (v >= 0) & (v < h_i)
+    plane_of = np.broadcast_to(np.arange(1, p_i + 1)[None, :], visible.shape)
+    hit = np.zeros(visible.shape, dtype=bool)
+    hit[visible] = labels_i[v[visible].astype(np.int64),
+                            u[visible].astype(np.int64)] == plane_of[visible]
+    bins = p_j + 1
+    lab = lab_j[:, None] + (np.arange(p_i) * bins)[None, :]
+    inter = np.bincount(lab[hit], minlength=p_i * bins).reshape(p_i, bins)[:, 1:]
+    area_visible = np.bincount(lab[visible], minlength=p_i * bins).reshape(p_i, bins)[:, 1:]
+    n_warped = hit.sum(axis=0)
+    union = n_warped[:, None] + area_visible - inter
+    out[:] = np.where(n_warped[:, None] > 0, inter / np.maximum(union, 1), 0.0)
     return out
 
 

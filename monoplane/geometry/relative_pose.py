@@ -3,9 +3,9 @@
 SIFT keypoints (OpenCV) matched with Lowe's ratio test and a mutual check, then an essential
 matrix with OpenCV's USAC MAGSAC++ and the cheirality check (``recoverPose``) give the rotation
 and the translation direction. The translation's length, which two views alone cannot give,
-comes from the monocular depth: the inliers triangulated with a unit baseline are compared with
-the reference view's scale-aligned depth at the same pixels (median ratio), and the second
-view's own depth scale follows from the same points seen from it.
+comes from the monocular depth: the inliers lifted with the reference view's scale-aligned
+depth must reproject onto their matches, which fixes the length per point (median over the
+inliers); the second view's own depth scale follows from the same points seen from it.
 
 Frames: ``x_j = R x_i + t`` with OpenCV camera axes; pixel centres at integer coordinates.
 """
@@ -35,6 +35,8 @@ class FallbackPose:
         Essential-matrix inliers used.
     matches : int
         Putative matches before the robust fit.
+    estimator : str
+        ``"essential"`` or ``"pnp"``.
     """
 
     R: np.ndarray
@@ -42,6 +44,7 @@ class FallbackPose:
     depth_scale_j: float
     inliers: int
     matches: int
+    estimator: str = "essential"
 
 
 def _gray(rgb: np.ndarray) -> np.ndarray:
@@ -101,6 +104,45 @@ def fallback_relative_pose(rgb_i: np.ndarray, K_i: np.ndarray, depth_i: np.ndarr
     pi, pj = match_sift(rgb_i, rgb_j)
     if len(pi) < max(min_inliers, 5):
         return None
+    found = _essential_pose(pi, pj, K_i, depth_i, K_j, depth_j, min_inliers)
+    if found is None:
+        # A very short baseline makes the essential matrix degenerate; with view i's depth
+        # the matches are 2D-3D correspondences, and PnP needs no parallax. (PnP is not the
+        # first choice: keypoints sit on edges, where a depth lookup is often off.)
+        found = _pnp_pose(pi, pj, K_i, depth_i, K_j, depth_j, min_inliers)
+    return found
+
+
+def _pnp_pose(pi: np.ndarray, pj: np.ndarray, K_i: np.ndarray, depth_i: np.ndarray,
+              K_j: np.ndarray, depth_j: np.ndarray, min_inliers: int) -> FallbackPose | None:
+    """Pose of j from view i's depth-lifted keypoints and their matches in j (PnP RANSAC)."""
+    d_i = sample_depth(depth_i, pi)
+    ok = d_i > 0
+    if ok.sum() < min_inliers:
+        return None
+    ni = cv2.undistortPoints(pi[ok].reshape(-1, 1, 2), K_i, None).reshape(-1, 2)
+    X = np.concatenate([ni, np.ones((len(ni), 1))], axis=1) * d_i[ok, None]
+    done, rvec, tvec, inliers = cv2.solvePnPRansac(
+        X, pj[ok].reshape(-1, 1, 2), K_j, None, reprojectionError=2.0, iterationsCount=500,
+        confidence=0.999, flags=cv2.SOLVEPNP_SQPNP)
+    if not done or inliers is None or len(inliers) < min_inliers:
+        return None
+    R = cv2.Rodrigues(rvec)[0]
+    t = tvec.reshape(3)
+    idx = inliers.reshape(-1)
+    z_j = (X[idx] @ R.T + t)[:, 2]
+    d_j = sample_depth(depth_j, pj[ok][idx])
+    good = (z_j > 0) & (d_j > 0)
+    if good.sum() < min_inliers:
+        return None
+    return FallbackPose(R=R, t=t, depth_scale_j=float(np.median(z_j[good] / d_j[good])),
+                        inliers=int(len(idx)), matches=int(len(pi)), estimator="pnp")
+
+
+def _essential_pose(pi: np.ndarray, pj: np.ndarray, K_i: np.ndarray, depth_i: np.ndarray,
+                    K_j: np.ndarray, depth_j: np.ndarray, min_inliers: int
+                    ) -> FallbackPose | None:
+    """Essential matrix (USAC MAGSAC++) rotation and direction, baseline from the depth."""
     ni = cv2.undistortPoints(pi.reshape(-1, 1, 2), K_i, None).reshape(-1, 2)
     nj = cv2.undistortPoints(pj.reshape(-1, 1, 2), K_j, None).reshape(-1, 2)
     focal = 0.5 * (K_i[0, 0] + K_j[0, 0])
@@ -113,18 +155,26 @@ def fallback_relative_pose(rgb_i: np.ndarray, K_i: np.ndarray, depth_i: np.ndarr
     if inl.sum() < min_inliers:
         return None
     t = t.reshape(3)
-    P_i = np.hstack([np.eye(3), np.zeros((3, 1))])
-    P_j = np.hstack([R, t[:, None]])
-    X = cv2.triangulatePoints(P_i, P_j, ni[inl].T, nj[inl].T)
-    X = (X[:3] / X[3]).T                              # camera i, unit baseline
-    z_i = X[:, 2]
-    z_j = (X @ R.T + t)[:, 2]
+    # Baseline length: lift the inliers with view i's depth and, per point, find the length
+    # along t that makes them reproject onto their match in j (least squares of the cross
+    # product); the median is robust to depth outliers. Triangulating instead would make
+    # the length hostage to the small angle errors of a short baseline.
     d_i = sample_depth(depth_i, pi[inl])
     d_j = sample_depth(depth_j, pj[inl])
-    ok = (z_i > 0) & (z_j > 0) & (d_i > 0) & (d_j > 0)
+    X = np.concatenate([ni[inl], np.ones((int(inl.sum()), 1))], axis=1) * d_i[:, None]
+    u = np.concatenate([nj[inl], np.ones((int(inl.sum()), 1))], axis=1)
+    A = X @ R.T
+    ub, ua = np.cross(u, t), np.cross(u, A)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lam = -np.einsum("ij,ij->i", ub, ua) / np.einsum("ij,ij->i", ub, ub)
+    ok = (d_i > 0) & (d_j > 0) & np.isfinite(lam) & (lam > 0)
     if ok.sum() < min_inliers:
         return None
-    baseline = float(np.median(d_i[ok] / z_i[ok]))
-    scale_j = float(np.median(baseline * z_j[ok] / d_j[ok]))
+    baseline = float(np.median(lam[ok]))
+    z_j = (A + baseline * t)[:, 2]
+    ok &= z_j > 0
+    if ok.sum() < min_inliers:
+        return None
+    scale_j = float(np.median(z_j[ok] / d_j[ok]))
     return FallbackPose(R=R, t=t * baseline, depth_scale_j=scale_j, inliers=int(ok.sum()),
                         matches=int(len(pi)))

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from monoplane.datamodel import Scene, SfmResult, pixel_rays, plane_to_camera, plane_to_world
+from monoplane.errors import InvalidInput
 from monoplane.geometry.plane_adjustment import AdjustmentProblem, adjust
 from monoplane.geometry.plane_matching import fuse_planes
 from monoplane.hookspecs import hookimpl
@@ -28,10 +29,26 @@ class PlaneBundleConfig:
         64, "plane pixels sampled per view plane for the point-to-plane term")
     sigma_px: float = param(1.0, "expected SfM reprojection noise (pixels)")
     sigma_rel: float = param(
-        0.03, "expected relative depth noise of plane pixels (point-to-plane term weight)")
+        0.1, "expected relative depth noise of plane pixels (point-to-plane term weight); "
+        "monocular depth warps by several percent, so this is loose")
+    lift: str = param(
+        "planar", "depth that lifts the plane pixels: 'planar' (each view's own plane fit, "
+        "which carries its normal cues) or 'cues' (the scale-aligned monocular depth)")
+    sigma_normal_deg: float = param(
+        1.0, "expected angle between a view plane's normal and its global plane's (degrees)")
+    sigma_point: float = param(
+        0.03, "expected distance of an SfM point seen inside a plane to that plane, relative "
+        "to its depth (0 drops the term)")
+    prior_rot_deg: float = param(
+        0.5, "pose prior: expected rotation change of a view (degrees)")
+    prior_t_rel: float = param(
+        0.003, "pose prior: expected translation change, as a share of the view's median "
+        "plane depth")
     multi_view_only: bool = param(
         True, "refine only global planes seen in two or more views (others follow their view)")
-    max_evaluations: int = param(60, "cap on the solver's residual evaluations")
+    refine_points: bool = param(
+        True, "refine the SfM points too (False: hold them as COLMAP adjusted them)")
+    max_evaluations: int = param(20, "cap on the solver's residual evaluations")
     seed: int = param(0, "seed of the plane-pixel subsampling")
 
 
@@ -66,12 +83,20 @@ class PlaneBundleAdjuster(Adjuster):
         row = {g: k for k, g in enumerate(refined)}
         rng = np.random.default_rng(cfg.seed)
         samp_view, samp_plane, samp_x = [], [], []
+        norm_view, norm_plane, norm_m = [], [], []
+        if cfg.lift not in ("planar", "cues"):
+            raise InvalidInput(f"adjuster.lift must be 'planar' or 'cues', got {cfg.lift!r}")
         for v, (rec, cam) in enumerate(zip(scene.views, scene.cameras, strict=True)):
-            depth = rec.frame.depth
+            depth = rec.planar_depth() if cfg.lift == "planar" else rec.frame.depth
             rays = None
             for local, glob in scene.links[v].items():
                 if glob not in row:
                     continue
+                norm_view.append(v)
+                norm_plane.append(row[glob])
+                m = rec.params[local - 1, :3]
+                # Same side as the global plane (both normally face the cameras).
+                norm_m.append(m if (cam.R.T @ m) @ scene.planes[glob, :3] >= 0 else -m)
                 idx = np.flatnonzero((rec.labels.ravel() == local) & (depth.ravel() > 0))
                 if len(idx) == 0:
                     continue
@@ -88,6 +113,9 @@ class PlaneBundleAdjuster(Adjuster):
             obs_view.append(np.full(int(ok.sum()), v))
             obs_point.append(ids[ok])
             obs_uv.append(sfm.keypoints[v][ok])
+        pp_point, pp_plane, pp_depth = (self._points_on_planes(scene, sfm, row)
+                                        if cfg.sigma_point > 0 else
+                                        (np.zeros(0, np.int64),) * 2 + (np.zeros(0),))
         prob = AdjustmentProblem(
             K=np.stack([c.K for c in scene.cameras]), R=np.stack([c.R for c in scene.cameras]),
             t=np.stack([c.t for c in scene.cameras]), points=sfm.points.copy(),
@@ -98,9 +126,16 @@ class PlaneBundleAdjuster(Adjuster):
             samp_view=np.concatenate(samp_view or [np.zeros(0)]).astype(np.int64),
             samp_plane=np.concatenate(samp_plane or [np.zeros(0)]).astype(np.int64),
             samp_x=np.concatenate(samp_x or [np.zeros((0, 3))]).reshape(-1, 3),
+            norm_view=np.array(norm_view, dtype=np.int64),
+            norm_plane=np.array(norm_plane, dtype=np.int64),
+            norm_m=np.array(norm_m, dtype=np.float64).reshape(-1, 3),
+            pp_point=pp_point, pp_plane=pp_plane, pp_depth=pp_depth,
             sigma_px=cfg.sigma_px, sigma_rel=cfg.sigma_rel,
+            sigma_normal_deg=cfg.sigma_normal_deg, sigma_point=max(cfg.sigma_point, 1e-9),
+            prior_rot_deg=cfg.prior_rot_deg,
+            prior_t=self._prior_t(samp_view, samp_x, n_views),
         )
-        res = adjust(prob, max_evaluations=cfg.max_evaluations)
+        res = adjust(prob, max_evaluations=cfg.max_evaluations, refine_points=cfg.refine_points)
 
         cameras = [replace(c, R=res.R[v], t=res.t[v]) for v, c in enumerate(scene.cameras)]
         views = []
@@ -134,6 +169,67 @@ class PlaneBundleAdjuster(Adjuster):
                   "message": res.message, "planes_refined": len(refined),
                   "depth_scale_factors": [float(s) for s in res.scales]}
         return new_scene, new_sfm, report
+
+
+    @staticmethod
+    def _points_on_planes(scene: Scene, sfm: SfmResult, row: dict[int, int]
+                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """SfM points that lie on a refined global plane, by the masks they are seen in.
+
+        A point counts when every view that sees it places its keypoint well inside (a 5x5
+        window of one label) a view plane linked to the same refined global plane; points near
+        plane borders or with disagreeing views are left out.
+
+        Returns
+        -------
+        (numpy.ndarray, numpy.ndarray, numpy.ndarray)
+            (Q,) point index, (Q,) row of the global plane in the solve, (Q,) mean depth of
+            the point in its views.
+        """
+        plane_of: dict[int, int] = {}
+        depths: dict[int, list[float]] = {}
+        for v, (rec, cam) in enumerate(zip(scene.views, scene.cameras, strict=True)):
+            ids = sfm.point_ids[v]
+            ok = ids >= 0
+            if not np.any(ok):
+                continue
+            h, w = rec.labels.shape
+            uv = np.rint(sfm.keypoints[v][ok]).astype(np.int64)
+            x = np.clip(uv[:, 0], 2, w - 3)
+            y = np.clip(uv[:, 1], 2, h - 3)
+            lab = rec.labels[y, x]
+            uniform = np.ones(len(lab), dtype=bool)
+            for dy in (-2, 0, 2):
+                for dx in (-2, 0, 2):
+                    uniform &= rec.labels[y + dy, x + dx] == lab
+            lut = np.full(int(rec.labels.max()) + 1, -1)
+            for local, glob in scene.links[v].items():
+                lut[local] = row.get(glob, -1)
+            g = np.where(uniform, lut[lab], -1)
+            pts = ids[ok]
+            z = (sfm.points[pts] @ cam.R.T + cam.t)[:, 2]
+            for p, gp, zp in zip(pts.tolist(), g.tolist(), z.tolist(), strict=True):
+                if plane_of.get(p, gp) != gp:
+                    gp = -1
+                plane_of[p] = gp
+                depths.setdefault(p, []).append(zp)
+        keep = [(p, g) for p, g in plane_of.items() if g >= 0]
+        z = np.array([np.mean(depths[p]) for p, _ in keep], dtype=np.float64)
+        good = z > 0
+        return (np.array([p for p, _ in keep], dtype=np.int64)[good],
+                np.array([g for _, g in keep], dtype=np.int64)[good], z[good])
+
+    def _prior_t(self, samp_view: list[np.ndarray], samp_x: list[np.ndarray],
+                 n_views: int) -> np.ndarray:
+        """(V,) translation prior sigma: ``prior_t_rel`` times each view's median plane depth."""
+        views = np.concatenate(samp_view or [np.zeros(0)]).astype(np.int64)
+        z = np.concatenate(samp_x or [np.zeros((0, 3))]).reshape(-1, 3)[:, 2]
+        overall = float(np.median(z)) if len(z) else 1.0
+        out = np.full(n_views, overall)
+        for v in range(n_views):
+            if np.any(views == v):
+                out[v] = float(np.median(z[views == v]))
+        return self.config.prior_t_rel * np.maximum(out, 1e-9)
 
 
 @hookimpl

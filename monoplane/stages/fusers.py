@@ -42,8 +42,17 @@ class AverageConfig:
         0.5, "IoU, in the visible region, a reprojected plane needs with its match")
     max_normal_angle_deg: float = param(
         30.0, "matched planes' normals may differ by at most this in the world frame (deg)")
+    use_geometry: bool = param(
+        True, "also match planes that overlap some and agree closely in 3D (see docs)")
+    geometry_min_iou: float = param(
+        0.2, "reprojection IoU a geometric match needs at least")
+    geometry_max_angle_deg: float = param(
+        10.0, "world normals of a geometric match differ by at most this (deg)")
+    geometry_max_distance: float = param(
+        0.05, "each plane's 3D centroid lies within this share of its depth of the other plane")
     grid_width: int = param(
-        256, "reprojection check resolution: pixel columns sampled per view")
+        160, "reprojection check resolution: every (width // grid_width)-th pixel row and "
+        "column of a view is warped (all pixels below 320 px)")
 
 
 @dataclass
@@ -52,7 +61,8 @@ class PlaneMatch:
 
     ``strength`` orders matches when global planes are formed: ``1 + share`` for keypoint
     matches (``share`` the smaller of the two mutual keypoint shares, so any keypoint match
-    outranks any reprojection match) and the IoU score for reprojection matches.
+    outranks any reprojection match), the IoU score for reprojection matches and half the IoU
+    for geometric matches.
     """
 
     view_i: int
@@ -138,6 +148,10 @@ class AverageFuser(Fuser):
         """
         cfg = self.config
         out: list[PlaneMatch] = []
+        centroids = [_world_centroids(rec, cam) for rec, cam in zip(views, sfm.cameras,
+                                                                      strict=True)]
+        world = [plane_to_world(rec.params, cam.R, cam.t).reshape(-1, 4)
+                 for rec, cam in zip(views, sfm.cameras, strict=True)]
         for i in range(len(views)):
             for j in range(i + 1, len(views)):
                 a, b = views[i], views[j]
@@ -168,13 +182,63 @@ class AverageFuser(Fuser):
                                                            cfg.min_reprojection_iou):
                         found.setdefault((int(p), int(q)),
                                          ("reprojection", float(score[p - 1, q - 1])))
+                    if cfg.use_geometry:
+                        for p, q in _geometric_matches(score, angles, centroids[i],
+                                                       centroids[j], world[i], world[j], cfg):
+                            found.setdefault((p, q), ("geometry",
+                                                      0.5 * float(score[p - 1, q - 1])))
                 for (p, q), (criterion, strength) in found.items():
                     if angles[p - 1, q - 1] <= cfg.max_normal_angle_deg:
                         out.append(PlaneMatch(i, p, j, q, criterion, strength))
         return out
 
     def _step(self, rec: Reconstruction) -> int:
-        return max(1, int(round(rec.frame.width / max(self.config.grid_width, 1))))
+        return max(1, rec.frame.width // max(self.config.grid_width, 1))
+
+
+def _world_centroids(rec: Reconstruction, cam: object) -> np.ndarray:
+    """(P, 4) world centroid of each plane's pixels (lifted on its plane) and its mean depth."""
+    from monoplane.datamodel import pixel_rays
+
+    out = np.full((rec.num_planes, 4), np.nan)
+    if rec.num_planes == 0:
+        return out
+    depth = rec.planar_depth()[::2, ::2]
+    labels = rec.labels[::2, ::2]
+    rays = pixel_rays(cam.K, cam.height, cam.width)[::2, ::2]
+    ok = (labels > 0) & (depth > 0)
+    x = rays[ok] * depth[ok, None]
+    lab = labels[ok] - 1
+    count = np.bincount(lab, minlength=rec.num_planes)
+    has = count > 0
+    for axis in range(3):
+        out[has, axis] = np.bincount(lab, weights=x[:, axis], minlength=rec.num_planes)[
+            has] / count[has]
+    out[has, 3] = out[has, 2]
+    out[:, :3] = (out[:, :3] - cam.t) @ cam.R
+    return out
+
+
+def _geometric_matches(score: np.ndarray, angles: np.ndarray, cent_i: np.ndarray,
+                       cent_j: np.ndarray, world_i: np.ndarray, world_j: np.ndarray,
+                       cfg: AverageConfig) -> list[tuple[int, int]]:
+    """Plane pairs that overlap some (IoU) and agree in 3D: normals and centroid distances.
+
+    This catches a plane that one view segments larger than another (e.g. together with a
+    coplanar neighbour), whose IoU stays below the reprojection threshold.
+    """
+    out = []
+    for p, q in np.argwhere(score >= cfg.geometry_min_iou):
+        if angles[p, q] > cfg.geometry_max_angle_deg:
+            continue
+        ci, cj = cent_i[p], cent_j[q]
+        if not (np.isfinite(ci).all() and np.isfinite(cj).all()):
+            continue
+        d_ij = abs(world_j[q, :3] @ ci[:3] + world_j[q, 3]) / max(ci[3], 1e-9)
+        d_ji = abs(world_i[p, :3] @ cj[:3] + world_i[p, 3]) / max(cj[3], 1e-9)
+        if max(d_ij, d_ji) <= cfg.geometry_max_distance:
+            out.append((int(p) + 1, int(q) + 1))
+    return out
 
 
 @hookimpl

@@ -106,7 +106,7 @@ def test_unrelated_images_fail_with_reason() -> None:
     rng = np.random.default_rng(1)
     frames = [Frame(rgb=cv2.GaussianBlur(rng.integers(0, 256, (240, 320, 3), dtype=np.uint8),
                                          (0, 0), 1.0), K=K, name=f"noise{i}") for i in range(2)]
-    with pytest.raises(SfmError, match="verified matches structure from motion needs"):
+    with pytest.raises(SfmError, match="too few verified matches"):
         ColmapMatcher().match(frames)
 
 
