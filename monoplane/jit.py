@@ -19,6 +19,7 @@ exactly one specialisation. Their plain-Python originals stay available as ``.py
 from __future__ import annotations
 
 import functools
+import types
 import warnings
 from collections.abc import Callable
 from typing import Any, TypeVar
@@ -26,16 +27,21 @@ from typing import Any, TypeVar
 F = TypeVar("F", bound=Callable[..., Any])
 
 
-def _compile(fn: Callable[..., Any]) -> Callable[..., Any]:
+def _compile(fn: Callable[..., Any], parallel: bool) -> Callable[..., Any]:
     import numba
 
+    if parallel:
+        # The same code with numba's prange in place of this module's plain one.
+        scope = dict(fn.__globals__, prange=numba.prange)
+        fn = types.FunctionType(fn.__code__, scope, fn.__name__, fn.__defaults__, fn.__closure__)
+
     try:
-        return numba.njit(cache=True, nogil=True)(fn)
+        return numba.njit(cache=True, nogil=True, parallel=parallel)(fn)
     except RuntimeError as exc:  # no writable cache location for this module
         warnings.warn(f"numba cannot cache {fn.__module__}.{fn.__qualname__} ({exc}); "
                       f"it will be compiled again in every process", RuntimeWarning,
                       stacklevel=3)
-        return numba.njit(cache=False, nogil=True)(fn)
+        return numba.njit(cache=False, nogil=True, parallel=parallel)(fn)
 
 
 def kernel(fn: F) -> F:
@@ -52,13 +58,38 @@ def kernel(fn: F) -> F:
     callable
         A wrapper with the same signature; ``wrapper.py_func`` is ``fn`` itself.
     """
+    return _lazy(fn, parallel=False)
+
+
+def parallel_kernel(fn: F) -> F:
+    """:func:`kernel` compiled with ``parallel=True``: its ``numba.prange`` loops run on
+    ``NUMBA_NUM_THREADS`` threads (all cores unless set; ``monoplane batch`` sets it to the
+    cores per worker).
+
+    Only loops whose iterations write disjoint outputs may use ``prange``: no reduction
+    across iterations, so that the result does not depend on the thread count or schedule.
+    In ``py_func`` ``prange`` is the plain ``range``.
+    """
+    return _lazy(fn, parallel=True)
+
+
+def prange(*args: int) -> range:
+    """The plain ``range``; in a :func:`parallel_kernel` it is compiled as ``numba.prange``.
+
+    Kernels import it from here rather than from numba so that importing a kernel module does
+    not import numba (:func:`_compile` swaps it in when the kernel is compiled).
+    """
+    return range(*args)
+
+
+def _lazy(fn: F, parallel: bool) -> F:
     compiled: Callable[..., Any] | None = None
 
     @functools.wraps(fn)
     def call(*args: Any) -> Any:
         nonlocal compiled
         if compiled is None:
-            compiled = _compile(fn)
+            compiled = _compile(fn, parallel)
         return compiled(*args)
 
     call.py_func = fn  # type: ignore[attr-defined]
