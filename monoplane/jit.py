@@ -19,6 +19,8 @@ exactly one specialisation. Their plain-Python originals stay available as ``.py
 from __future__ import annotations
 
 import functools
+import os
+import threading
 import types
 import warnings
 from collections.abc import Callable
@@ -31,6 +33,13 @@ def _compile(fn: Callable[..., Any], parallel: bool) -> Callable[..., Any]:
     import numba
 
     if parallel:
+        if not os.environ.get("NUMBA_THREADING_LAYER"):
+            # OpenMP's fork-join waits for every thread at each launch: on a busy machine
+            # (more runnable threads than cores) the many short kernel calls of a RANSAC then
+            # ran several times slower than on one thread (measured on 2 cores, load 8).
+            # numba's own work queue did not degrade; it only serves one launching thread at a
+            # time, which _lazy guarantees. Effective until the first parallel launch.
+            numba.config.THREADING_LAYER = "workqueue"
         # The same code with numba's prange in place of this module's plain one.
         scope = dict(fn.__globals__, prange=numba.prange)
         fn = types.FunctionType(fn.__code__, scope, fn.__name__, fn.__defaults__, fn.__closure__)
@@ -42,6 +51,16 @@ def _compile(fn: Callable[..., Any], parallel: bool) -> Callable[..., Any]:
                       f"it will be compiled again in every process", RuntimeWarning,
                       stacklevel=3)
         return numba.njit(cache=False, nogil=True, parallel=parallel)(fn)
+
+
+def _compile_serial(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """A parallel kernel's loops compiled serially (``prange`` as ``range``). Not cached on
+    disk: its cache entry would share the parallel version's file and signature."""
+    import numba
+
+    scope = dict(fn.__globals__, prange=range)
+    fn = types.FunctionType(fn.__code__, scope, fn.__name__, fn.__defaults__, fn.__closure__)
+    return numba.njit(cache=False, nogil=True)(fn)
 
 
 def kernel(fn: F) -> F:
@@ -64,7 +83,7 @@ def kernel(fn: F) -> F:
 def parallel_kernel(fn: F) -> F:
     """:func:`kernel` compiled with ``parallel=True``: its ``numba.prange`` loops run on
     ``NUMBA_NUM_THREADS`` threads (all cores unless set; ``monoplane batch`` sets it to the
-    cores per worker).
+    cores per worker) when called from the main thread, serially from other threads.
 
     Only loops whose iterations write disjoint outputs may use ``prange``: no reduction
     across iterations, so that the result does not depend on the thread count or schedule.
@@ -84,10 +103,18 @@ def prange(*args: int) -> range:
 
 def _lazy(fn: F, parallel: bool) -> F:
     compiled: Callable[..., Any] | None = None
+    serial: Callable[..., Any] | None = None
 
     @functools.wraps(fn)
     def call(*args: Any) -> Any:
-        nonlocal compiled
+        nonlocal compiled, serial
+        if parallel and threading.current_thread() is not threading.main_thread():
+            # Parallel launches come from the main thread only (the work-queue threading
+            # layer is not re-entrant); other threads run the same loops serially, with
+            # the same results (no reduction crosses prange iterations).
+            if serial is None:
+                serial = _compile_serial(fn)
+            return serial(*args)
         if compiled is None:
             compiled = _compile(fn, parallel)
         return compiled(*args)

@@ -60,3 +60,16 @@ def test_parallel_kernels_are_thread_count_independent_and_match_python(cloud):
         expected = expected if isinstance(expected, tuple) else (expected,)
         for got, want in zip(one, expected, strict=True):
             np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)
+
+
+def test_parallel_kernels_run_serially_off_the_main_thread(cloud):
+    from concurrent.futures import ThreadPoolExecutor
+
+    calls = _calls(cloud)
+    with ThreadPoolExecutor(2) as pool:
+        results = list(pool.map(lambda c: c[0](*c[1]), calls + calls))
+    for (fn, args), got in zip(calls + calls, results, strict=True):
+        want = _run(fn, args, 1)
+        got = list(got) if isinstance(got, tuple) else [got]
+        for g, w in zip(got, want, strict=True):
+            np.testing.assert_array_equal(g, w)
