@@ -33,7 +33,7 @@ import maxflow
 import numpy as np
 
 from monoplane.errors import InvalidInput
-from monoplane.jit import kernel, parallel_kernel, prange
+from monoplane.jit import kernel
 
 
 def msac_costs(dist: np.ndarray, epsilon: float) -> tuple[np.ndarray, np.ndarray]:
@@ -129,7 +129,7 @@ def data_costs(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, plane:
                        float(epsilon_n), use_normal)
 
 
-@parallel_kernel
+@kernel
 def _data_costs(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, plane: np.ndarray,
                 model_normal: np.ndarray, epsilon: float, epsilon_n: float, use_normal: bool
                 ) -> tuple[np.ndarray, np.ndarray]:
@@ -137,7 +137,7 @@ def _data_costs(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, plane
     m = pool.shape[0]
     f0 = np.zeros(m)
     data1 = np.empty(m)
-    for i in prange(m):
+    for i in range(m):
         p = pool[i]
         phi = (plane[0] * points[p, 0] + plane[1] * points[p, 1] + plane[2] * points[p, 2]
                + plane[3])
@@ -196,14 +196,14 @@ def proximity_weights(points: np.ndarray, edges: np.ndarray, normals: np.ndarray
         float(alpha_p2), float(alpha_c2), float(alpha_n2), float(w_p), float(w_c), float(w_n))
 
 
-@parallel_kernel
+@kernel
 def _proximity_weights(points: np.ndarray, edges: np.ndarray, normals: np.ndarray,
                        colors: np.ndarray, alpha_p2: float, alpha_c2: float, alpha_n2: float,
                        w_p: float, w_c: float, w_n: float) -> np.ndarray:
     """:func:`proximity_weights` in one pass; empty (0, 3) ``normals``/``colors`` drop a term."""
     use_n, use_c = normals.shape[0] > 0, colors.shape[0] > 0
     out = np.empty(edges.shape[0])
-    for e in prange(edges.shape[0]):
+    for e in range(edges.shape[0]):
         i, j = edges[e, 0], edges[e, 1]
         d2 = 0.0
         for c in range(3):

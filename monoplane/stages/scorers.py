@@ -8,7 +8,7 @@
 
 All three run in one compiled loop over (hypothesis, point) pairs (:func:`_costs`): no
 (H, M) matrix is materialised, and a batch on a small pool costs microseconds rather than
-the fixed overhead of a dozen numpy passes. The hypotheses of a batch are scored in parallel.
+the fixed overhead of a dozen numpy passes.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ import numpy as np
 
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.hookspecs import hookimpl
-from monoplane.jit import parallel_kernel, prange
+from monoplane.jit import kernel
 from monoplane.stages.base import RansacParams, Scorer, Stage
 
 #: Cost kinds of :func:`_costs`.
@@ -61,7 +61,7 @@ class MsacNormalScorer(_KernelScorer):
     cost_kind = _MSAC_NORMAL
 
 
-@parallel_kernel
+@kernel
 def _costs(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, planes: np.ndarray,
            model_normals: np.ndarray, epsilon: float, epsilon_n: float, kind: int
            ) -> np.ndarray:
@@ -73,9 +73,7 @@ def _costs(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, planes: np
     n_planes = planes.shape[0]
     out = np.zeros(n_planes)
     cos_n = np.cos(epsilon_n)
-    # Hypotheses on the threads, each summed in point order by one thread: the costs do not
-    # depend on the thread count.
-    for h in prange(n_planes):
+    for h in range(n_planes):
         a, b, c, d = planes[h, 0], planes[h, 1], planes[h, 2], planes[h, 3]
         m0, m1, m2 = model_normals[h, 0], model_normals[h, 1], model_normals[h, 2]
         total = 0.0
