@@ -81,7 +81,7 @@ class RansacConfig:
     max_planes: int = param(20, "most planes extracted from one frame")
     knn: int = param(8, "neighbours per point in the graph-cut neighbourhood graph")
     max_points: int = param(20000, "subsample the valid pixels to at most this many points")
-    lo_iterations: int = param(3, "local optimisation rounds (refit + relabel) per plane")
+    lo_iterations: int = param(1, "local optimisation rounds (refit + relabel) per plane")
     split_components: bool = param(
         False, "keep only the largest graph-connected component of each plane's inliers")
     score_points: int = param(

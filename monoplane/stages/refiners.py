@@ -92,7 +92,7 @@ class DenseCrfRefiner(Refiner):
         w_normal: float = param(1.0, "weight of the normal kernel (0 disables)")
         confidence: float = param(
             0.55, "unary: probability of the RANSAC label, rest spread evenly over the others")
-        iterations: int = param(5, "mean-field iterations (0 skips the CRF, keeps the clean-up)")
+        iterations: int = param(3, "mean-field iterations (0 skips the CRF, keeps the clean-up)")
         max_pixels: int = param(
             REFERENCE_AREA // 4,
             "above this many pixels mean field runs on a coarser block grid, edges are decided "
