@@ -256,15 +256,26 @@ def mean_field(unary: np.ndarray, kernels: list[GaussianKernel], iterations: int
     return q
 
 
+def thread_budget() -> int:
+    """Threads one frame may use: ``OMP_NUM_THREADS`` when set (the batch and multi-view worker
+    pools set it to cores / workers, so parallel frames do not oversubscribe the cores), else
+    the number of CPUs."""
+    try:
+        return max(1, int(os.environ.get("OMP_NUM_THREADS", "")))
+    except ValueError:
+        return max(1, os.cpu_count() or 1)
+
+
 def pairwise(kernels: list[GaussianKernel], q: np.ndarray) -> np.ndarray:
     """(N, L) float32 sum of every kernel's :meth:`~GaussianKernel.message` to marginals q.
 
     The kernels' lattice filters are numba kernels that release the GIL, so they run in
-    parallel threads, one per kernel (up to the number of CPUs).
+    parallel threads, one per kernel (up to :func:`thread_budget`).
     """
-    if len(kernels) < 2 or (os.cpu_count() or 1) < 2:
+    threads = min(len(kernels), thread_budget())
+    if threads < 2:
         return sum((k.message(q) for k in kernels), np.zeros(q.shape, np.float32))
-    with ThreadPoolExecutor(min(len(kernels), os.cpu_count() or 1)) as pool:
+    with ThreadPoolExecutor(threads) as pool:
         return sum(pool.map(lambda k: k.message(q), kernels), np.zeros(q.shape, np.float32))
 
 
@@ -374,9 +385,10 @@ def crf_features(
 
 def _kernels(specs: list[tuple[np.ndarray, float]]) -> list[GaussianKernel]:
     """Build kernels from (features, weight) pairs, in parallel threads (numba, no GIL)."""
-    if len(specs) < 2 or (os.cpu_count() or 1) < 2:
+    threads = min(len(specs), thread_budget())
+    if threads < 2:
         return [GaussianKernel(f, weight) for f, weight in specs]
-    with ThreadPoolExecutor(min(len(specs), os.cpu_count() or 1)) as pool:
+    with ThreadPoolExecutor(threads) as pool:
         return list(pool.map(lambda spec: GaussianKernel(*spec), specs))
 
 
