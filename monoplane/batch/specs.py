@@ -16,6 +16,7 @@ and the row (1-based line number in the file).
 from __future__ import annotations
 
 import csv
+import io
 import json
 import re
 from dataclasses import dataclass, replace
@@ -126,9 +127,17 @@ def frames_from_folder(root: Path, depth_scale: float | None = None,
     return specs
 
 
+def _manifest_text(path: Path) -> str:
+    """The manifest's text; one line naming the file when it is not UTF-8 text."""
+    try:
+        return path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise InvalidInput(f"{path}: not UTF-8 text (byte {exc.start})") from None
+
+
 def _rows_jsonl(path: Path) -> list[tuple[int, dict[str, Any]]]:
     rows = []
-    for lineno, line in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1):
+    for lineno, line in enumerate(_manifest_text(path).splitlines(), start=1):
         if not line.strip():
             continue
         try:
@@ -143,7 +152,7 @@ def _rows_jsonl(path: Path) -> list[tuple[int, dict[str, Any]]]:
 
 
 def _rows_csv(path: Path) -> list[tuple[int, dict[str, Any]]]:
-    with path.open(newline="", encoding="utf-8") as fh:
+    with io.StringIO(_manifest_text(path), newline="") as fh:
         reader = csv.DictReader(fh)
         header = reader.fieldnames or []
         if "image" not in header:
