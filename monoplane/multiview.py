@@ -77,8 +77,10 @@ class MultiviewResult:
         Unit of the scene's coordinates: the depths' unit when all views had metric depth,
         otherwise ``"sfm"`` (the SfM model's arbitrary scale).
     timings : dict
-        Seconds per step: ``matcher``, ``cues``, ``alignment``, ``single_view``, ``fuser``,
-        ``adjuster``, ``total``.
+        Wall seconds per step: ``matcher``, ``single_view`` (waiting for the per-view cues,
+        RANSAC and refiner after SfM: the part SfM did not hide), ``alignment``, ``fuser``,
+        ``adjuster``, ``total``; and ``per_view``, the mean seconds one view's stages took
+        (where they ran).
     config : dict
         The resolved pipeline config.
     frame_indices : list of int
@@ -163,6 +165,17 @@ def hold_intrinsics_fixed(pipe: Pipeline) -> bool:
     return True
 
 
+def matcher_keeps_intrinsics(pipe: Pipeline) -> bool:
+    """True when the pipeline's matcher returns every frame's ``K`` unchanged.
+
+    That is when its config already is what :meth:`Matcher.fixed_intrinsics_config` would make
+    of it (e.g. after :func:`hold_intrinsics_fixed`).
+    """
+    name, cfg = pipe.config.stages["matcher"]
+    fixed = pipe.registry.get("matcher", name).cls.fixed_intrinsics_config(cfg)
+    return fixed is not None and fixed == cfg
+
+
 #: How the fallback placed a view, as written to cameras.json.
 FALLBACK_ESTIMATORS = {
     "essential": "essential matrix (OpenCV USAC MAGSAC++), baseline from the reference "
@@ -174,6 +187,9 @@ FALLBACK_ESTIMATORS = {
 # worker builds the pipeline once from the config (initializer), then takes one view per task.
 _PIPE: Pipeline | None = None
 
+#: Per-view stages whose seconds make up a view's time (``timings["per_view"]``).
+VIEW_STAGES = ("cues", "ransac", "refiner")
+
 
 def _init_view_worker(config: dict[str, Any]) -> None:
     """Worker initializer: build this worker's pipeline from the resolved config."""
@@ -183,20 +199,136 @@ def _init_view_worker(config: dict[str, Any]) -> None:
     _PIPE = Pipeline.from_config(config)
 
 
-def prepare_view(frame: Frame) -> Frame:
-    """Run the worker pipeline's cue provider on one frame (picklable per-view task)."""
-    assert _PIPE is not None, "prepare_view runs in a ViewPool"
-    return _PIPE.prepare(frame)
+def process_view(frame: Frame) -> Reconstruction:
+    """Cues, RANSAC and refiner on one frame with the pool's pipeline (picklable view task).
+
+    ``rec.frame`` is the frame with its cues; ``rec.timings`` holds each stage's seconds.
+    """
+    assert _PIPE is not None, "process_view runs in a ViewPool"
+    timings: dict[str, float] = {}
+    return _PIPE.segment(_PIPE.prepare(frame, timings), timings)
 
 
-def segment_view(frame: Frame) -> Reconstruction:
-    """Run the worker pipeline's RANSAC and refiner on one frame with cues (per-view task)."""
-    assert _PIPE is not None, "segment_view runs in a ViewPool"
-    return _PIPE.segment(frame)
+def rescale_reconstruction(rec: Reconstruction, frame: Frame, scale: float) -> Reconstruction:
+    """A reconstruction of ``rec.frame`` expressed for ``frame``, its depth times ``scale``.
+
+    The single-view stages are free of the depth's scale: the cloud is normalised into the
+    unit sphere and every tolerance is a fraction of the scene radius, so segmenting depth
+    ``s·D`` gives the labels of ``D`` and planes whose offsets (and RMS errors) are ``s``
+    times larger (to float rounding; ``tests/multiview/test_overlap.py`` checks the labels
+    are identical). That lets the views be segmented before SfM has fixed their scale.
+
+    Parameters
+    ----------
+    rec : Reconstruction
+        Segmentation of a frame with depth ``D``.
+    frame : Frame
+        The same frame with depth ``scale·D`` (and the units and notes that go with it).
+    scale : float
+        Positive depth factor.
+
+    Returns
+    -------
+    Reconstruction
+        Same labels and normals; offsets ``d`` and ``rmse`` multiplied by ``scale``; ``frame``
+        as given.
+    """
+    params = rec.params.copy()
+    params[:, 3] *= scale
+    return replace(rec, frame=frame, params=params, rmse=rec.rmse * scale)
+
+
+class ViewTasks:
+    """Per-view tasks under way in a :class:`ViewPool`; :meth:`result` collects them.
+
+    The pool's workers take the views one at a time, driven from a background thread (which
+    only waits on the workers' pipes), so this process is free meanwhile, e.g. to run SfM.
+    Views no worker has taken when :meth:`result` is called are run in this process, so the
+    host's core helps finish the batch instead of idling.
+    """
+
+    def __init__(self, views: ViewPool, fn: Callable[[Frame], Any], frames: list[Frame]) -> None:
+        import threading
+
+        self._views, self._fn, self._frames = views, fn, list(frames)
+        self._lock = threading.Lock()
+        self._next = 0  # first view nobody has taken
+        self._values: dict[int, Any] = {}
+        self._errors: dict[int, BaseException] = {}
+        self._pool_failure: BaseException | None = None
+        self._thread = None
+        if views.pool is not None:
+            self._thread = threading.Thread(target=self._drive, args=(views.pool,), daemon=True,
+                                            name="monoplane-view-pool")
+            self._thread.start()
+
+    def _take(self) -> int | None:
+        with self._lock:
+            if self._next >= len(self._frames):
+                return None
+            self._next += 1
+            return self._next - 1
+
+    def cancel(self) -> None:
+        """Hand out no further views (those running finish)."""
+        with self._lock:
+            self._next = len(self._frames)
+
+    def _drive(self, pool: Any) -> None:
+        taken: list[int] = []  # view of each item handed to the pool, in hand-out order
+
+        def hand_out():  # pulled by the pool whenever a worker is idle
+            while (v := self._take()) is not None:
+                taken.append(v)
+                yield self._frames[v]
+
+        try:
+            for outcome in pool.imap_unordered(self._fn, hand_out()):
+                v = taken[outcome.index]
+                if outcome.error is None:
+                    self._values[v] = outcome.value
+                else:
+                    self._errors[v] = outcome.error
+        except BaseException as exc:  # e.g. WorkerInitError: result() runs the rest here
+            self._pool_failure = exc
+
+    def result(self) -> list[Any]:
+        """Every view's result, in input order, once all are done.
+
+        Raises
+        ------
+        Exception
+            The error of the first failing view (by input position), after all views ran.
+        """
+        global _PIPE
+        previous, _PIPE = _PIPE, self._views.pipe
+        try:
+            while (v := self._take()) is not None:
+                self._run_here(v)
+            if self._thread is not None:
+                self._thread.join()
+                self._thread = None
+                if self._pool_failure is not None:
+                    self._views.pool_failed(self._pool_failure)
+                    # Views the pool took but never finished run here.
+                    for v in range(len(self._frames)):
+                        if v not in self._values and v not in self._errors:
+                            self._run_here(v)
+        finally:
+            _PIPE = previous
+        for v in sorted(self._errors):
+            raise self._errors[v]
+        return [self._values[v] for v in range(len(self._frames))]
+
+    def _run_here(self, v: int) -> None:
+        try:
+            self._values[v] = self._fn(self._frames[v])
+        except Exception as exc:
+            self._errors[v] = exc
 
 
 class ViewPool:
-    """Runs per-view tasks in ``workers`` processes, or in this process when ``workers`` is 1.
+    """Runs per-view tasks in ``workers`` processes and this one, or here alone (``workers`` 1).
 
     Opened before structure from motion so that the workers start (and import) while the
     matcher runs. In-process, the tasks use ``pipe`` itself.
@@ -205,6 +337,7 @@ class ViewPool:
     def __init__(self, pipe: Pipeline, workers: int, n_views: int) -> None:
         self.pipe = pipe
         self.pool = None
+        self._tasks: list[ViewTasks] = []
         if workers > 1 and n_views > 1:
             from monoplane.batch import WorkerPool
 
@@ -217,31 +350,40 @@ class ViewPool:
         return self
 
     def __exit__(self, *exc: object) -> None:
+        # Tasks nobody collected (the host failed meanwhile): let their running views finish,
+        # so the driver thread is done with the workers before they are stopped.
+        for tasks in self._tasks:
+            tasks.cancel()
+            if tasks._thread is not None:
+                tasks._thread.join()
         if self.pool is not None:
             self.pool.__exit__(*exc)
 
+    def submit(self, fn: Callable[[Frame], Any], frames: list[Frame]) -> ViewTasks:
+        """Start ``fn`` on every frame in the workers; :meth:`ViewTasks.result` collects."""
+        tasks = ViewTasks(self, fn, frames)
+        self._tasks.append(tasks)
+        return tasks
+
     def map(self, fn: Callable[[Frame], Any], frames: list[Frame]) -> list[Any]:
         """``[fn(f) for f in frames]`` in input order; the first failure propagates."""
-        global _PIPE
+        return self.submit(fn, frames).result()
+
+    def pool_failed(self, exc: BaseException) -> None:
+        """Stop using the workers after ``exc``; later views run in this process."""
+        import sys
+
+        from monoplane.batch import WorkerInitError
+
+        if not isinstance(exc, WorkerInitError):
+            raise exc
+        # E.g. a script without an ``if __name__ == "__main__":`` guard, which spawned
+        # workers cannot import: run the views here instead.
+        print(f"monoplane: warning: per-view workers could not start ({exc}); "
+              "running the views in this process", file=sys.stderr)
         if self.pool is not None:
-            from monoplane.batch import WorkerInitError
-
-            try:
-                return self.pool.map(fn, frames)
-            except WorkerInitError as exc:
-                # E.g. a script without an ``if __name__ == "__main__":`` guard, which
-                # spawned workers cannot import: run the views here instead.
-                import sys
-
-                print(f"monoplane: warning: per-view workers could not start ({exc}); "
-                      "running the views in this process", file=sys.stderr)
-                self.pool.__exit__(None, None, None)
-                self.pool = None
-        previous, _PIPE = _PIPE, self.pipe
-        try:
-            return [fn(f) for f in frames]
-        finally:
-            _PIPE = previous
+            self.pool.__exit__(None, None, None)
+            self.pool = None
 
 
 def default_workers() -> int:
@@ -302,6 +444,11 @@ def reconstruct_multiview(frames: list[Frame], pipe: Pipeline, progress: bool = 
         timings: dict[str, float] = {}
         start = time.perf_counter()
         sfm_failure = ""
+        # The single-view stages do not depend on the depth's scale (see
+        # rescale_reconstruction), only on K. When the matcher keeps every K as given, the
+        # views are segmented while SfM runs, and only scaled once it is done.
+        early = (views_pool.submit(process_view, frames)
+                 if sfm is None and matcher_keeps_intrinsics(pipe) else None)
         if sfm is None:
             matcher = pipe.stage("matcher", Matcher)
             try:
@@ -341,8 +488,20 @@ def reconstruct_multiview(frames: list[Frame], pipe: Pipeline, progress: bool = 
                 raise InvalidInput(f"{frame.name}: SfM camera size differs from the image size")
             with_k.append(frame.with_(K=cam.K) if not np.allclose(cam.K, frame.K) else frame)
         t0 = time.perf_counter()
-        prepared = views_pool.map(prepare_view, with_k)
-        timings["cues"] = time.perf_counter() - t0
+        if early is None:
+            segmented = views_pool.map(process_view, with_k)
+        else:
+            segmented = early.result()
+            # A view whose K SfM changed after all (a matcher that did not hold it) is redone.
+            redo = [v for v in range(len(frames)) if with_k[v] is not frames[v]]
+            if redo:
+                for v, rec in zip(redo, views_pool.map(process_view, [with_k[v] for v in redo]),
+                                  strict=True):
+                    segmented[v] = rec
+        prepared = [rec.frame for rec in segmented]
+        timings["single_view"] = time.perf_counter() - t0
+        timings["per_view"] = float(np.mean([sum(rec.timings.get(k, 0.0) for k in VIEW_STAGES)
+                                             for rec in segmented]))
 
         t0 = time.perf_counter()
         alignments: dict[int, ScaleAlignment] = {}
@@ -417,10 +576,8 @@ def reconstruct_multiview(frames: list[Frame], pipe: Pipeline, progress: bool = 
             for f, s, a in zip(prepared, scales, aligns, strict=True)
         ]
         timings["alignment"] = time.perf_counter() - t0
-
-        t0 = time.perf_counter()
-        views: list[Reconstruction] = views_pool.map(segment_view, aligned)
-        timings["single_view"] = time.perf_counter() - t0
+        views = [rescale_reconstruction(segmented[v], frame, s)
+                 for v, frame, s in zip(keep, aligned, scales, strict=True)]
 
         fuser = pipe.stage("fuser", Fuser)
         scene, plane_matches = pipe.call("fuser", fuser.name,
