@@ -23,7 +23,7 @@ from __future__ import annotations
 import time
 import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -123,7 +123,7 @@ class DatasetFrameResult:
 
     def to_dict(self) -> dict[str, Any]:
         """One flat JSON record: the frame, every score and count by name, the run's facts."""
-        return {"frame": self.frame, **self.segmentation.to_dict(), **self.segcomp.to_dict(),
+        return {"frame": self.frame, **asdict(self.segmentation), **asdict(self.segcomp),
                 "n_planes": self.n_planes, "seconds": self.seconds, "failed": self.failed,
                 "error": self.error}
 
