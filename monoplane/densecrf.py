@@ -16,8 +16,6 @@ install time: numba ships as wheels); the rest is numpy.
 
 from __future__ import annotations
 
-import os
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import cv2
@@ -26,6 +24,7 @@ from scipy import ndimage
 
 from monoplane import lattice_kernels as lk
 from monoplane.errors import InvalidInput
+from monoplane.jit import run_threaded
 
 #: Image area (256 x 192) at which the paper's pixel-valued parameters (θ_s = 10 px, minimum
 #: region 300 px) are stated; other resolutions scale them.
@@ -115,29 +114,30 @@ class PermutohedralLattice:
         return lk.splat_blur(self._vertex_of, self._weights, self._neighbours, v,
                              self.num_vertices)
 
-    def slice_at(self, features: np.ndarray, blurred: np.ndarray) -> np.ndarray:
-        """Interpolate lattice values at other points (e.g. full-resolution pixels).
+    def locate(self, features: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Simplex vertices and weights of other points (e.g. full-resolution pixels), to
+        slice this lattice's values there with :func:`monoplane.lattice_kernels.slice_values`.
 
         Parameters
         ----------
         features : numpy.ndarray
             (K, d) features in the lattice's units.
-        blurred : numpy.ndarray
-            (M, C) lattice values from :meth:`blurred`.
 
         Returns
         -------
-        numpy.ndarray
-            (K, C) float32 ``≈ c · Σ_j exp(-½|g_k - f_j|²) values_j`` over the lattice's own
-            points j; 0 where a point's simplex lies outside the lattice.
+        vertex_of : numpy.ndarray
+            (K, d+1) int32 vertex indices.
+        weights : numpy.ndarray
+            (K, d+1) float32 barycentric weights; 0 where a vertex is not in the lattice, so
+            a slice gives ``≈ c · Σ_j exp(-½|g_k - f_j|²) values_j`` over the lattice's own
+            points j, and 0 where the whole simplex lies outside it.
         """
         g = np.ascontiguousarray(features, dtype=np.float64)
         if g.ndim != 2 or g.shape[1] != self.dim or not np.all(np.isfinite(g)):
             raise InvalidInput(f"slice features must be finite (K, {self.dim}), got {g.shape}")
         key0, rank, weights = lk.enclosing_simplices(g)
-        vertex_of, weights = lk.locate_vertices(key0 - self._lo, rank, weights, self._radix,
-                                                self._place, self._table, self._index)
-        return lk.slice_values(vertex_of, weights, blurred)
+        return lk.locate_vertices(key0 - self._lo, rank, weights, self._radix, self._place,
+                                  self._table, self._index)
 
 
 @dataclass
@@ -173,16 +173,28 @@ class GaussianKernel:
         """(N, L) float32 weighted, normalised kernel response to marginals ``q`` (N, L)."""
         return self.weight * self._norm * self.lattice.filter(self._norm * q)
 
-    def message_at(self, features: np.ndarray, q: np.ndarray) -> np.ndarray:
-        """(K, L) float32 message that (K, d) other points get from this kernel's points.
+    def messages(self, q: np.ndarray, features: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`message`, and the message that (K, d) other points get, from one blur.
 
-        The same normalised kernel as :meth:`message`, evaluated at points that are not in
-        the lattice (full-resolution pixels of a CRF run on a coarser grid): ``w · D_k^-½
-        Σ_j k(g_k, f_j) D_j^-½ q_j`` with ``D_k = Σ_j k(g_k, f_j)``.
+        The message at other points (full-resolution pixels of a CRF run on a coarser grid)
+        is the same normalised kernel evaluated at points that are not in the lattice:
+        ``w · D_k^-½ Σ_j k(g_k, f_j) D_j^-½ q_j`` with ``D_k = Σ_j k(g_k, f_j)``.
+
+        Returns
+        -------
+        own : numpy.ndarray
+            (N, L) float32, equal to ``message(q)``.
+        at : numpy.ndarray
+            (K, L) float32 messages at ``features``.
         """
-        num = self.lattice.slice_at(features, self.lattice.blurred(self._norm * q))
-        den = self.lattice.slice_at(features, self._ones)
-        return self.weight * num / np.sqrt(np.maximum(den, 1e-20))
+        blurred = self.lattice.blurred(self._norm * q)
+        lat = self.lattice
+        own = self.weight * self._norm * lk.slice_values(lat._vertex_of, lat._weights, blurred)
+        vertex_of, weights = lat.locate(features)
+        # Numerator and normaliser sliced together: one pass over the located vertices.
+        both = lk.slice_values(vertex_of, weights, np.hstack([blurred, self._ones]))
+        at = self.weight * both[:, :-1] / np.sqrt(np.maximum(both[:, -1:], 1e-20))
+        return own, at
 
 
 def unary_from_labels(labels: np.ndarray, num_labels: int, confidence: float,
@@ -256,27 +268,24 @@ def mean_field(unary: np.ndarray, kernels: list[GaussianKernel], iterations: int
     return q
 
 
-def thread_budget() -> int:
-    """Threads one frame may use: ``OMP_NUM_THREADS`` when set (the batch and multi-view worker
-    pools set it to cores / workers, so parallel frames do not oversubscribe the cores), else
-    the number of CPUs."""
-    try:
-        return max(1, int(os.environ.get("OMP_NUM_THREADS", "")))
-    except ValueError:
-        return max(1, os.cpu_count() or 1)
-
-
 def pairwise(kernels: list[GaussianKernel], q: np.ndarray) -> np.ndarray:
     """(N, L) float32 sum of every kernel's :meth:`~GaussianKernel.message` to marginals q.
 
     The kernels' lattice filters are numba kernels that release the GIL, so they run in
-    parallel threads, one per kernel (up to :func:`thread_budget`).
+    parallel threads (:func:`monoplane.jit.run_threaded`), dearest first; the messages are
+    summed in kernel order whatever the threads, so results do not depend on them.
     """
-    threads = min(len(kernels), thread_budget())
-    if threads < 2:
-        return sum((k.message(q) for k in kernels), np.zeros(q.shape, np.float32))
-    with ThreadPoolExecutor(threads) as pool:
-        return sum(pool.map(lambda k: k.message(q), kernels), np.zeros(q.shape, np.float32))
+    order = _dearest_first(kernels)
+    messages = run_threaded([lambda k=kernels[i]: k.message(q) for i in order])
+    by_kernel = dict(zip(order, messages, strict=True))
+    return sum((by_kernel[i] for i in range(len(kernels))), np.zeros(q.shape, np.float32))
+
+
+def _dearest_first(kernels: list[GaussianKernel]) -> list[int]:
+    """Kernel positions by decreasing lattice cost (feature dimension, then vertices), so that
+    two threads finish together: the 5-d kernels first, the 2-d smoothness one last."""
+    return sorted(range(len(kernels)), key=lambda i: (-kernels[i].lattice.dim,
+                                                      -kernels[i].lattice.num_vertices, i))
 
 
 def _softmax(x: np.ndarray) -> np.ndarray:
@@ -384,12 +393,12 @@ def crf_features(
 
 
 def _kernels(specs: list[tuple[np.ndarray, float]]) -> list[GaussianKernel]:
-    """Build kernels from (features, weight) pairs, in parallel threads (numba, no GIL)."""
-    threads = min(len(specs), thread_budget())
-    if threads < 2:
-        return [GaussianKernel(f, weight) for f, weight in specs]
-    with ThreadPoolExecutor(threads) as pool:
-        return list(pool.map(lambda spec: GaussianKernel(*spec), specs))
+    """Build kernels from (features, weight) pairs, in parallel threads (numba, no GIL), the
+    highest-dimensional first."""
+    order = sorted(range(len(specs)), key=lambda i: (-specs[i][0].shape[1], i))
+    built = run_threaded([lambda s=specs[i]: GaussianKernel(*s) for i in order])
+    by_spec = dict(zip(order, built, strict=True))
+    return [by_spec[i] for i in range(len(specs))]
 
 
 @dataclass
@@ -505,22 +514,26 @@ def dense_crf(
     cues = _Cues.of(params, rgb, depth, normals)
     kernels = _kernels(cues.features(params, cu.ravel(), cv.ravel(), hs * ws, centre))
     q = mean_field(-np.log(mean), kernels, params.iterations)
-    coarse_pairwise = pairwise(kernels, q)
+    # Near a label change of the coarse result, interpolated messages would blur the edge:
+    # there each pixel gets its messages from the coarse lattices sliced at its own features,
+    # so the boundary follows the full-resolution colour, depth and normal edges.
+    coarse = q.argmax(axis=1).reshape(hs, ws)
+    edge = ndimage.maximum_filter(coarse, 3) != ndimage.minimum_filter(coarse, 3)
+    band = np.flatnonzero(edge.ravel()[block])
+    fu = (band % w + 0.5) / step - 0.5
+    fv = (band // w + 0.5) / step - 0.5
+    specs = cues.features(params, fu, fv, hs * ws, band)
+    order = _dearest_first(kernels)
+    done = run_threaded([lambda k=kernels[i], f=specs[i][0]: k.messages(q, f) for i in order])
+    by_kernel = dict(zip(order, done, strict=True))
+    coarse_pairwise = sum((by_kernel[i][0] for i in range(len(kernels))),
+                          np.zeros(q.shape, np.float32))
     # cv2 maps fine pixel u to coarse position (u + 0.5) / step - 0.5.
     fine = cv2.resize(coarse_pairwise.reshape(hs, ws, num_labels), (ws * step, hs * step),
                       interpolation=cv2.INTER_LINEAR).reshape(hs * step, ws * step, -1)[:h, :w]
     energy = fine.reshape(-1, num_labels) - unary
-    # Near a label change of the coarse result the interpolated messages blur the edge: there
-    # each pixel gets its messages from the coarse lattices sliced at its own features, so
-    # the boundary follows the full-resolution colour, depth and normal edges.
-    coarse = q.argmax(axis=1).reshape(hs, ws)
-    edge = ndimage.maximum_filter(coarse, 3) != ndimage.minimum_filter(coarse, 3)
-    band = np.flatnonzero(edge.ravel()[block])
     if band.size:
-        fu = (band % w + 0.5) / step - 0.5
-        fv = (band // w + 0.5) / step - 0.5
-        specs = cues.features(params, fu, fv, hs * ws, band)
-        exact = sum((k.message_at(f, q) for k, (f, _) in zip(kernels, specs, strict=True)),
+        exact = sum((by_kernel[i][1] for i in range(len(kernels))),
                     np.zeros((band.size, num_labels), np.float32))
         energy[band] = exact - unary[band]
     return energy.argmax(axis=1).astype(np.int32).reshape(lab.shape)

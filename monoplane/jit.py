@@ -1,4 +1,4 @@
-"""Compiled kernels: numba, compiled on first use and cached on disk.
+"""Compiled kernels (numba, compiled on first use and cached on disk) and the threads they run on.
 
 :func:`kernel` marks a plain-Python loop function as a numba ``nopython`` kernel. It is
 compiled the first time it is called, not when its module is imported (importing numba alone
@@ -14,16 +14,25 @@ process).
 
 Kernels are called only with arrays of fixed dtypes (documented per kernel), so each compiles
 exactly one specialisation. Their plain-Python originals stay available as ``.py_func``.
+
+Kernels release the GIL (``nogil``), so independent calls (the dense CRF's kernels, chunks of a
+kNN query) run in parallel Python threads: :func:`run_threaded`, on at most
+:func:`thread_budget` threads. Threads rather than numba's ``parallel=True`` because the work
+comes in a few coarse pieces, and because numba's threading layers must not be running when
+the batch driver forks its workers.
 """
 
 from __future__ import annotations
 
 import functools
+import os
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any, TypeVar
 
 F = TypeVar("F", bound=Callable[..., Any])
+T = TypeVar("T")
 
 
 def _compile(fn: Callable[..., Any]) -> Callable[..., Any]:
@@ -63,3 +72,55 @@ def kernel(fn: F) -> F:
 
     call.py_func = fn  # type: ignore[attr-defined]
     return call  # type: ignore[return-value]
+
+
+def thread_budget() -> int:
+    """Threads one frame may use: ``OMP_NUM_THREADS`` when set (the batch and multi-view worker
+    pools set it to cores / workers, so parallel frames do not oversubscribe the cores), else
+    the number of CPUs."""
+    try:
+        return max(1, int(os.environ.get("OMP_NUM_THREADS", "")))
+    except ValueError:
+        return max(1, os.cpu_count() or 1)
+
+
+_POOL: dict[str, Any] = {"key": None, "pool": None}
+
+
+def _executor(threads: int) -> ThreadPoolExecutor:
+    # One long-lived pool per process and size: starting threads for every call would cost
+    # more than small calls take. Keyed by pid too, since a forked child has none of the
+    # parent's threads.
+    key = (os.getpid(), threads)
+    if _POOL["key"] != key:
+        _POOL["key"], _POOL["pool"] = key, ThreadPoolExecutor(threads,
+                                                               thread_name_prefix="monoplane")
+    return _POOL["pool"]
+
+
+def run_threaded(tasks: Sequence[Callable[[], T]]) -> list[T]:
+    """Call every task, on up to :func:`thread_budget` threads; results in task order.
+
+    Parameters
+    ----------
+    tasks : sequence of callables
+        Independent zero-argument calls, normally of ``nogil`` kernels (pure-Python work
+        gains nothing from threads). Pass the most expensive first: they start first.
+
+    Returns
+    -------
+    list
+        ``[task() for task in tasks]``.
+    """
+    threads = min(len(tasks), thread_budget())
+    if threads < 2:
+        return [task() for task in tasks]
+    return list(_executor(threads).map(lambda task: task(), tasks))
+
+
+def chunks(n: int, min_size: int) -> list[tuple[int, int]]:
+    """Split ``range(n)`` into at most :func:`thread_budget` contiguous ``(start, stop)``
+    pieces of at least ``min_size`` items (one piece when ``n`` is small)."""
+    parts = max(1, min(thread_budget(), n // max(min_size, 1)))
+    bounds = [round(i * n / parts) for i in range(parts + 1)]
+    return list(zip(bounds[:-1], bounds[1:], strict=True))

@@ -148,21 +148,36 @@ def test_slicing_at_other_points():
     rng = np.random.default_rng(4)
     f = rng.normal(size=(500, 3))
     lat = PermutohedralLattice(f)
+
+    def slice_at(points, blurred):
+        return lk.slice_values(*lat.locate(points), blurred)
+
     values = rng.random((500, 2))
     blurred = lat.blurred(values)
     # At the lattice's own points slicing is filtering, exactly.
-    np.testing.assert_array_equal(lat.slice_at(f, blurred), lat.filter(values))
+    np.testing.assert_array_equal(slice_at(f, blurred), lat.filter(values))
     # Far outside the data (outside the key range, or in cells without vertices) nothing.
     far = np.array([[100.0, 0.0, 0.0], [0.0, -1e5, 3.0]])
-    np.testing.assert_array_equal(lat.slice_at(far, blurred), 0.0)
+    np.testing.assert_array_equal(slice_at(far, blurred), 0.0)
     # Between the points, the normalised slice follows the exact normalised Gaussian.
     g = rng.normal(size=(200, 3)) * 0.8
-    approx = lat.slice_at(g, blurred) / lat.slice_at(g, lat.blurred(np.ones((500, 1))))
+    approx = slice_at(g, blurred) / slice_at(g, lat.blurred(np.ones((500, 1))))
     k = np.exp(-0.5 * ((g[:, None] - f[None]) ** 2).sum(-1))
     exact = k @ values / k.sum(axis=1, keepdims=True)
     assert np.abs(approx - exact).mean() < 0.01
     with pytest.raises(InvalidInput):
-        lat.slice_at(np.zeros((3, 2)), blurred)
+        lat.locate(np.zeros((3, 2)))
+
+
+def test_messages_at_own_points_are_the_message():
+    rng = np.random.default_rng(5)
+    f = rng.normal(size=(400, 3))
+    kernel = GaussianKernel(f, 2.5)
+    q = rng.random((400, 3)).astype(np.float32)
+    own, at = kernel.messages(q, f)
+    np.testing.assert_array_equal(own, kernel.message(q))
+    # At its own points the kernel's message to them is the same normalised response.
+    np.testing.assert_allclose(at, own, rtol=1e-5, atol=1e-6)
 
 
 def test_lattice_is_nearly_symmetric_linear_and_local():

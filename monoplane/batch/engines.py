@@ -48,10 +48,13 @@ def run_local(job: BatchJob, specs: Sequence[FrameSpec], workers: int
     """Run frames on ``workers`` local processes (never more than there are frames)."""
     if not specs:
         return
-    from monoplane.batch.pool import WorkerInitError
+    from monoplane.batch.pool import WorkerInitError, fork_if_available
 
     try:
-        with WorkerPool(min(workers, len(specs)), _init_local_worker, (job,)) as pool:
+        # The batch driver only reads files and resolves the config, so its workers may fork
+        # from it and skip re-importing everything (see monoplane.batch.pool).
+        with WorkerPool(min(workers, len(specs)), _init_local_worker, (job,),
+                        start_method=fork_if_available()) as pool:
             for outcome in pool.imap_unordered(_run_local_frame, specs):
                 if outcome.error is not None:
                     yield FrameResult(specs[outcome.index].name, "failed",

@@ -20,8 +20,15 @@ Typical use (results in input order)::
 
     results = map_ordered(work, items, workers=2, initializer=setup, initargs=(config,))
 
-``work`` and ``setup`` must be importable module-level functions (workers are started with the
-``spawn`` method, which re-imports them) and items and results must pickle.
+``work`` and ``setup`` must be importable module-level functions and items and results must
+pickle.
+
+Start method: ``spawn`` by default, which is safe whatever the parent has done but makes every
+worker import numpy, SciPy, OpenCV and the project again (about 0.7 s of CPU each). A caller
+whose process has run no threaded native code yet (no ONNX session, no SfM, no parallel
+kernel) may ask for ``fork`` (:func:`fork_if_available`): workers then start from the parent's
+already imported modules in a few milliseconds. The batch driver does so; the multi-view driver,
+which runs COLMAP in the parent, does not.
 """
 
 from __future__ import annotations
@@ -29,6 +36,7 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 import signal
+import sys
 import traceback
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
@@ -112,11 +120,27 @@ def _die_with_parent() -> None:
         pass
 
 
+def fork_if_available() -> str:
+    """``"fork"`` where the OS has it with the semantics the pool needs (Linux), else
+    ``"spawn"``. Only for callers that have run no threaded native code (see the module note)."""
+    return "fork" if sys.platform.startswith("linux") else "spawn"
+
+
+def _limit_native_threads(threads: int) -> None:
+    """Cap the BLAS pools a forked worker inherited: they read their size from the environment
+    when the parent loaded them, before the pool set the thread variables."""
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(threads)
+
+
 def _worker_main(conn: Connection, initializer: Callable[..., Any] | None,
-                 initargs: tuple) -> None:
+                 initargs: tuple, forked_threads: int | None = None) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, _on_sigterm)
     _die_with_parent()
+    if forked_threads is not None:
+        _limit_native_threads(forked_threads)
     try:
         if initializer is not None:
             initializer(*initargs)
@@ -140,12 +164,13 @@ def _worker_main(conn: Connection, initializer: Callable[..., Any] | None,
 
 class _Worker:
     def __init__(self, ctx: Any, initializer: Callable[..., Any] | None, initargs: tuple,
-                 env: dict[str, str]) -> None:
+                 env: dict[str, str], threads: int) -> None:
         self.conn, child = ctx.Pipe(duplex=True)
-        self.process = ctx.Process(target=_worker_main, args=(child, initializer, initargs),
-                                   daemon=True)
+        forked = threads if ctx.get_start_method() == "fork" else None
+        self.process = ctx.Process(target=_worker_main,
+                                   args=(child, initializer, initargs, forked), daemon=True)
         saved = {k: os.environ.get(k) for k in env}
-        os.environ.update(env)  # a spawned child copies the environment at start()
+        os.environ.update(env)  # the child copies the environment at start()
         try:
             self.process.start()
         finally:
@@ -174,25 +199,30 @@ class WorkerPool:
     threads_per_worker : int, optional
         Value of the thread-count variables (:data:`THREAD_VARIABLES`) in the workers; default:
         cores // workers (at least 1). Variables the user already set are left alone.
+    start_method : {"spawn", "fork", "forkserver"}
+        How workers start; ``"fork"`` only from a process that has run no threaded native
+        code (see the module note).
 
     Use it as a context manager; leaving the block stops the workers (SIGTERM, then SIGKILL
     after :data:`TERMINATE_GRACE` seconds for a worker that does not stop).
     """
 
     def __init__(self, workers: int, initializer: Callable[..., Any] | None = None,
-                 initargs: tuple = (), threads_per_worker: int | None = None) -> None:
+                 initargs: tuple = (), threads_per_worker: int | None = None,
+                 start_method: str = "spawn") -> None:
         if int(workers) < 1:
             raise ValueError(f"workers must be at least 1, got {workers}")
         self.workers = int(workers)
-        self._ctx = mp.get_context("spawn")  # fork is unsafe with ONNX Runtime/OpenMP threads
+        self._ctx = mp.get_context(start_method)
         self._initializer = initializer
         self._initargs = initargs
         threads = threads_per_worker or max(1, default_workers() // self.workers)
+        self._threads = threads
         self._env = {k: str(threads) for k in THREAD_VARIABLES if k not in os.environ}
         self._pool = [self._spawn() for _ in range(self.workers)]
 
     def _spawn(self) -> _Worker:
-        return _Worker(self._ctx, self._initializer, self._initargs, self._env)
+        return _Worker(self._ctx, self._initializer, self._initargs, self._env, self._threads)
 
     def __enter__(self) -> WorkerPool:
         return self

@@ -85,6 +85,12 @@ class BatchSummary:
         }
 
 
+
+class _Bar(tqdm):
+    # No monitor thread: the local engine forks its workers from this process, and forking is
+    # only clean from a process that runs no other thread.
+    monitor_interval = 0
+
 def write_json_atomic(path: Path, doc: dict[str, Any]) -> None:
     """Write JSON to a temporary sibling and rename it over ``path``."""
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
@@ -229,7 +235,7 @@ def run_batch(source: str | Path | Sequence[FrameSpec], out: str | Path,
         results = dict(decided)
         counts = {"ok": 0, "failed": sum(r.status == "failed" for r in decided.values()),
                   "skipped": sum(r.status == "skipped" for r in decided.values())}
-        bar = tqdm(total=len(specs), initial=len(decided), unit="frame", desc="batch",
+        bar = _Bar(total=len(specs), initial=len(decided), unit="frame", desc="batch",
                    disable=not progress, file=sys.stderr, dynamic_ncols=True)
         run_start = time.perf_counter()
         ran = 0

@@ -31,8 +31,8 @@ import numpy as np
 
 from monoplane.datamodel import Frame, Reconstruction
 from monoplane.errors import ConfigError, InvalidInput, MonoplaneError
-from monoplane.evaluation.segcomp import DEFAULT_TOLERANCE, segcomp
-from monoplane.evaluation.segmentation import segmentation_scores
+from monoplane.evaluation.segcomp import DEFAULT_TOLERANCE, SegCompScores, segcomp
+from monoplane.evaluation.segmentation import SegmentationScores, segmentation_scores
 
 _RGB_NAMES = ("rgb.png", "rgb.jpg", "color.png", "color.jpg")
 
@@ -93,22 +93,39 @@ def load_dataset(folder: str | Path) -> list[LabelledFrame]:
 
 @dataclass
 class DatasetFrameResult:
-    """Scores of one method on one frame."""
+    """Scores of one method on one frame.
+
+    Attributes
+    ----------
+    frame : str
+        Name of the frame folder.
+    segmentation : SegmentationScores
+        VOI, RI and SC on the frame's ground-truth planar pixels.
+    segcomp : SegCompScores
+        Hoover et al.'s region counts.
+    n_planes : int
+        Planes the method found.
+    seconds : float
+        Wall time of the method's call.
+    failed : bool
+        The method raised; its labels count as all non-planar.
+    error : str
+        The error of a failed call.
+    """
 
     frame: str
-    voi: float
-    ri: float
-    sc: float
-    correct: int
-    over: int
-    under: int
-    missed: int
-    noise: int
-    n_gt: int
+    segmentation: SegmentationScores
+    segcomp: SegCompScores
     n_planes: int
     seconds: float
     failed: bool = False
     error: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        """One flat JSON record: the frame, every score and count by name, the run's facts."""
+        return {"frame": self.frame, **asdict(self.segmentation), **asdict(self.segcomp),
+                "n_planes": self.n_planes, "seconds": self.seconds, "failed": self.failed,
+                "error": self.error}
 
 
 @dataclass
@@ -119,9 +136,10 @@ class DatasetMethodResult:
     kind: str
     frames: list[DatasetFrameResult] = field(default_factory=list)
 
-    def mean(self, attr: str) -> float:
-        """Mean of a per-frame attribute (NaN without frames)."""
-        values = [getattr(f, attr) for f in self.frames]
+    def mean(self, key: str) -> float:
+        """Mean over frames of one key of :meth:`DatasetFrameResult.to_dict` (NaN without
+        frames)."""
+        values = [f.to_dict()[key] for f in self.frames]
         return float(np.mean(values)) if values else float("nan")
 
     def summary(self) -> dict[str, Any]:
@@ -143,7 +161,7 @@ class DatasetResults:
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready form."""
         return {"settings": dict(self.settings),
-                "methods": [{**m.summary(), "frames": [asdict(f) for f in m.frames]}
+                "methods": [{**m.summary(), "frames": [f.to_dict() for f in m.frames]}
                             for m in self.methods]}
 
 
@@ -252,13 +270,11 @@ def evaluate_dataset(folder: str | Path, presets: Sequence[str] = (),
                     warnings.warn(f"{name} failed on {item.name}: {exc}", stacklevel=2)
                     labels = np.zeros(item.frame.shape, dtype=np.int32)
                 seconds = time.perf_counter() - start
-                seg = segmentation_scores(labels, item.gt_labels)
-                sc = segcomp(labels, item.gt_labels, tolerance)
                 result.frames.append(DatasetFrameResult(
-                    frame=item.name, voi=seg.voi, ri=seg.ri, sc=seg.sc, correct=sc.correct,
-                    over=sc.over, under=sc.under, missed=sc.missed, noise=sc.noise,
-                    n_gt=sc.n_gt, n_planes=int(labels.max(initial=0)), seconds=seconds,
-                    failed=failed, error=error))
+                    frame=item.name, segmentation=segmentation_scores(labels, item.gt_labels),
+                    segcomp=segcomp(labels, item.gt_labels, tolerance),
+                    n_planes=int(labels.max(initial=0)), seconds=seconds, failed=failed,
+                    error=error))
                 bar.update(1)
     finally:
         bar.close()

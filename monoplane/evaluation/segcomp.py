@@ -27,7 +27,7 @@ Conventions (the ones of the SegComp comparison tool):
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -70,10 +70,6 @@ class SegCompScores:
     n_gt: int
     n_pred: int
     tolerance: float
-
-    def to_dict(self) -> dict[str, float | int]:
-        """Plain-dict form for JSON."""
-        return asdict(self)
 
 
 def _compact(labels: np.ndarray) -> tuple[np.ndarray, int]:

@@ -20,7 +20,7 @@ and predicted segment ``j``), so they cost ``O(H·W + #gt · #pred)``, never ``O
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -47,10 +47,6 @@ class SegmentationScores:
     ri: float
     sc: float
     n_pixels: int
-
-    def to_dict(self) -> dict[str, float | int]:
-        """Plain-dict form for JSON."""
-        return asdict(self)
 
 
 def check_label_pair(pred: np.ndarray, gt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

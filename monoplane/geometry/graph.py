@@ -95,25 +95,12 @@ class NeighbourGraph:
         """Mean number of neighbours per node, ``2E / N`` (0 for an empty graph)."""
         return 2.0 * self.num_edges / self.num_nodes if self.num_nodes else 0.0
 
-    def largest_component(self, nodes: np.ndarray) -> np.ndarray:
-        """Which of ``nodes`` lie in the largest connected component of their subgraph.
-
-        Parameters
-        ----------
-        nodes : numpy.ndarray
-            (M,) int64 distinct node indices.
-
-        Returns
-        -------
-        numpy.ndarray
-            (M,) bool, True on the nodes of the largest component of the subgraph induced by
-            ``nodes`` (the lowest-numbered one among equally large components).
-        """
-        nodes = np.asarray(nodes, dtype=np.int64)
-        return self.largest_component_within(nodes, np.ones(nodes.size, dtype=bool))
-
     def largest_component_within(self, pool: np.ndarray, members: np.ndarray) -> np.ndarray:
-        """:meth:`largest_component` of ``pool[members]``, from the pool's (cached) subgraph.
+        """Which of ``pool[members]`` lie in the largest connected component of their subgraph.
+
+        The subgraph comes from the pool's (cached, see :meth:`subgraph`) one, so asking again
+        with fewer members of the same pool costs no new subgraph; pass ``members`` all True
+        for the component of a plain node subset.
 
         Parameters
         ----------

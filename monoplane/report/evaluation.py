@@ -114,9 +114,7 @@ def write_eval_report(results: EvalResults, out_dir: Path,
         title = f"{kind}: scene {seed}, {metric.upper()} {score:.3f}"
         name = f"case_{_slug(m.name)}_{kind}.png"
         if pred is None:
-            rgb = view.frame.rgb if view.frame.rgb is not None else fig.grey_image(
-                view.gt_labels.shape)
-            panel = fig.hstack([fig.titled(fig.enlarge(rgb, fig.display_scale(view.frame.width)),
+            panel = fig.hstack([fig.titled(fig.input_image(view.frame.rgb, view.gt_labels.shape),
                                            title),
                                 fig.titled(fig.overlay_labels(view.frame.rgb, view.gt_labels,
                                                               ids=False), "ground truth")])

@@ -61,6 +61,13 @@ def grey_image(shape: tuple[int, int]) -> np.ndarray:
     return np.full((*shape, 3), 128, dtype=np.uint8)
 
 
+def input_image(rgb: np.ndarray | None, shape: tuple[int, int]) -> np.ndarray:
+    """A frame's (H, W, 3) uint8 colour image, or :func:`grey_image` when it has none
+    (``shape`` is ``(H, W)``), enlarged by :func:`display_scale` for a report."""
+    image = grey_image(shape) if rgb is None else rgb
+    return enlarge(image, display_scale(shape[1]))
+
+
 def label_anchors(labels: np.ndarray) -> dict[int, tuple[int, int]]:
     """A point deep inside each labelled region, where its id can be written.
 

@@ -144,6 +144,22 @@ def views_3d_body(views: list[html.Figure], reason: str | None, complete: str) -
     return body
 
 
+def open_report(out_dir: Path, steps: int, desc: str, progress: bool) -> tuple[Path, tqdm]:
+    """The report's folder (created if missing) and its progress bar of ``steps`` steps, shown
+    on stderr when ``progress``; :func:`finish_report` takes the last step."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    return out, tqdm(total=steps, desc=desc, unit="step", disable=not progress)
+
+
+def finish_report(out: Path, bar: tqdm, title: str, subtitle: str, sections: list[str]) -> Path:
+    """Write ``report.html`` into ``out``, take the progress bar's last step and close it."""
+    path = html.write_page(out / "report.html", title, subtitle, sections)
+    bar.update()
+    bar.close()
+    return path
+
+
 def write_frame_report(rec: Reconstruction, out_dir: Path, render_3d: bool = True,
                        progress: bool = False, timeout: float = DEFAULT_TIMEOUT) -> Path:
     """Write ``report.html`` and its PNG figures for one reconstruction.
@@ -168,15 +184,12 @@ def write_frame_report(rec: Reconstruction, out_dir: Path, render_3d: bool = Tru
         Path of ``report.html``.
     """
     start = time.perf_counter()
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    out, bar = open_report(out_dir, 4, "report", progress)
     frame = rec.frame
-    bar = tqdm(total=4, desc="report", unit="step", disable=not progress)
 
     bar.set_postfix_str("inputs")
     inputs = [html.Figure("input.png", "input image")]
-    rgb = frame.rgb if frame.rgb is not None else fig.grey_image(frame.shape)
-    fig.save_png(out / "input.png", fig.enlarge(rgb, fig.display_scale(frame.width)))
+    fig.save_png(out / "input.png", fig.input_image(frame.rgb, frame.shape))
     if frame.depth is not None:
         fig.save_png(out / "depth.png", fig.colorized_depth_figure(frame.depth,
                                                                    frame.depth_units))
@@ -254,8 +267,4 @@ def write_frame_report(rec: Reconstruction, out_dir: Path, render_3d: bool = Tru
                 f"{coverage:.1f} % of the image · depth {frame.depth_kind} in "
                 f"{frame.depth_units} · fx={K[0, 0]:.1f} fy={K[1, 1]:.1f} "
                 f"cx={K[0, 2]:.1f} cy={K[1, 2]:.1f} · {datetime.now():%Y-%m-%d %H:%M}")
-    path = html.write_page(out / "report.html", f"monoplane report: {frame.name}", subtitle,
-                           sections)
-    bar.update()
-    bar.close()
-    return path
+    return finish_report(out, bar, f"monoplane report: {frame.name}", subtitle, sections)

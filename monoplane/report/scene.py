@@ -7,7 +7,6 @@ from datetime import datetime
 from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
 from monoplane.datamodel import Reconstruction, Scene, plane_to_camera, plane_to_world
 from monoplane.geometry.mesh import planar_mesh
@@ -16,7 +15,9 @@ from monoplane.report import html
 from monoplane.report.colors import LIGHT_DIRECTION, plane_palette, shade
 from monoplane.report.frame import (
     estimate_up,
+    finish_report,
     mesh_step,
+    open_report,
     render_size,
     rendered_views,
     views_3d_body,
@@ -183,10 +184,8 @@ def write_scene_report(scene: Scene, out_dir: Path, render_3d: bool = True,
     render_3d : bool
         Render cameras and fused planes with Open3D (in a child process). When false, or when
         rendering fails, the report keeps its 2D figures and says why 3D views are missing.
-    progress : bool
-        Show a progress bar on stderr.
-    timeout : float
-        Seconds the 3D renderer may take.
+    progress, timeout : bool, float
+        As for :func:`~monoplane.report.frame.write_frame_report`.
 
     Returns
     -------
@@ -194,10 +193,8 @@ def write_scene_report(scene: Scene, out_dir: Path, render_3d: bool = True,
         Path of ``report.html``.
     """
     start = time.perf_counter()
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     n_views, G = len(scene.views), scene.planes.shape[0]
-    bar = tqdm(total=n_views + 2, desc="scene report", unit="step", disable=not progress)
+    out, bar = open_report(out_dir, n_views + 2, "scene report", progress)
 
     bar.set_postfix_str("3D views")
     views3d, rendered = rendered_views(render_3d, lambda: scene_views(scene, out, timeout))
@@ -211,9 +208,8 @@ def write_scene_report(scene: Scene, out_dir: Path, render_3d: bool = True,
         names = {g + 1: f"G{g}" for g in range(G)}
         names.update({G + k: f"L{local}" for k, local in enumerate(
             [lo for lo in range(1, rec.num_planes + 1) if lo not in links], start=1)})
-        rgb = rec.frame.rgb if rec.frame.rgb is not None else fig.grey_image(rec.frame.shape)
-        fig.save_png(out / f"view{v + 1}_input.png",
-                     fig.enlarge(rgb, fig.display_scale(rec.frame.width)))
+        fig.save_png(out / f"view{v + 1}_input.png", fig.input_image(rec.frame.rgb,
+                                                                     rec.frame.shape))
         fig.save_png(out / f"view{v + 1}_labels.png",
                      fig.overlay_labels(rec.frame.rgb, lab, n_planes=n_colours, id_names=names))
         title = rec.frame.name or scene.cameras[v].name
@@ -268,8 +264,4 @@ def write_scene_report(scene: Scene, out_dir: Path, render_3d: bool = True,
     ]
     subtitle = (f"{n_views} views · {G} global planes · {len(scene.points)} sparse points · "
                 f"{datetime.now():%Y-%m-%d %H:%M}")
-    path = html.write_page(out / "report.html", "monoplane multi-view report", subtitle,
-                           sections)
-    bar.update()
-    bar.close()
-    return path
+    return finish_report(out, bar, "monoplane multi-view report", subtitle, sections)

@@ -26,6 +26,7 @@ did in ``frame.notes`` (written to ``planes.json``).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -172,20 +173,39 @@ class OnnxCuesConfig(NormalsFromDepthOptions):
             normal_axes=self.normal_axes or None)
 
 
-class OnnxCues(CueProvider):
+class NetworkCues(CueProvider):
+    """Base of cue providers that run a :class:`~monoplane.cues.CueNetwork`.
+
+    A subclass says how to build its network from its config (:meth:`build_network`, called
+    once, at construction); :meth:`provide` runs it on each frame. Third-party cue plugins that
+    wrap an ONNX profile subclass this too.
+    """
+
+    def __init__(self, config: Any | None = None) -> None:
+        super().__init__(config)
+        self.network = self.build_network(self.config)
+
+    def build_network(self, config: Any) -> CueNetwork:
+        """The network this provider runs, from its config (an instance of ``Config``)."""
+        raise NotImplementedError
+
+    def provide(self, frame: Frame) -> Frame:
+        """Predict the frame's missing depth and normals (see :meth:`CueNetwork.provide`)."""
+        return self.network.provide(frame)
+
+
+class OnnxCues(NetworkCues):
     """Monocular depth and normals from ONNX networks, described by a profile."""
 
     name = "onnx"
     Config = OnnxCuesConfig
 
-    def __init__(self, config: OnnxCuesConfig | None = None) -> None:
-        super().__init__(config)
-        cfg = self.config
-        self.network = CueNetwork(
-            cfg.resolved_profile(), cfg.depth_model or None, cfg.normal_model or None,
-            threads=cfg.threads, disparity_floor=cfg.disparity_floor,
-            hfov_deg=cfg.hfov_deg or None,
-            normals_options=cfg.normals_options())
+    def build_network(self, config: OnnxCuesConfig) -> CueNetwork:
+        """The profile's networks, with the config's files and options."""
+        return CueNetwork(
+            config.resolved_profile(), config.depth_model or None, config.normal_model or None,
+            threads=config.threads, disparity_floor=config.disparity_floor,
+            hfov_deg=config.hfov_deg or None, normals_options=config.normals_options())
 
     def catalogue_model(self, missing_depth: bool, missing_normals: bool) -> str | None:
         """``cues.model`` when a frame lacking these cues needs the network: always without
@@ -207,7 +227,7 @@ class OnnxCues(CueProvider):
             net.profile.depth.joint_normals and frame.normals is None and frame.rgb is not None)
         if cfg.model and net.depth_path is None and needs_net:
             net.depth_path = require_model(cfg.model)
-        return net.provide(frame)
+        return super().provide(frame)
 
 
 @hookimpl

@@ -327,6 +327,19 @@ def build_layout(rng: np.random.Generator) -> Layout:
         xy = rng.uniform([r, r], [lx - r, ly - r])
         return xy if _free(xy, r, discs, size) else None
 
+    def floor_object(width: tuple[float, float], depth: tuple[float, float],
+                     height: tuple[float, float]
+                     ) -> tuple[float, float, float, float, np.ndarray] | None:
+        """Draw a box-shaped object's size (uniform in each range) and a free floor spot for
+        its footprint disc, up to 30 times: ``(w, depth, h, disc radius, xy)``, else None."""
+        for _try in range(30):
+            w, dpt, h = rng.uniform(*width), rng.uniform(*depth), rng.uniform(*height)
+            r = float(np.hypot(w, dpt) / 2)
+            xy = floor_spot(r)
+            if xy is not None:
+                return w, dpt, h, r, xy
+        return None
+
     def occupy(xy: np.ndarray, r: float) -> None:
         """Reserve the disc for later placements and record it as a footprint."""
         disc = np.array([xy[0], xy[1], r])
@@ -355,55 +368,49 @@ def build_layout(rng: np.random.Generator) -> Layout:
 
     # Free-standing boxes with random yaw.
     for _ in range(int(rng.integers(0, 3))):
-        for _try in range(30):
-            w, dpt, h = rng.uniform(0.3, 0.8), rng.uniform(0.3, 0.8), rng.uniform(0.3, 1.0)
-            r = float(np.hypot(w, dpt) / 2)
-            xy = floor_spot(r)
-            if xy is None:
-                continue
-            b.box(np.array([xy[0], xy[1], h / 2]), np.array([w / 2, dpt / 2, h / 2]),
-                  float(rng.uniform(0, np.pi)), "box", random_material(rng, "object"))
-            occupy(xy, r)
-            break
+        placed = floor_object((0.3, 0.8), (0.3, 0.8), (0.3, 1.0))
+        if placed is None:
+            continue
+        w, dpt, h, r, xy = placed
+        b.box(np.array([xy[0], xy[1], h / 2]), np.array([w / 2, dpt / 2, h / 2]),
+              float(rng.uniform(0, np.pi)), "box", random_material(rng, "object"))
+        occupy(xy, r)
 
     # Tables: slab top, tube legs, and something on top.
     for _ in range(int(rng.integers(1, 3))):
-        for _try in range(30):
-            w, dpt, h = rng.uniform(0.8, 1.6), rng.uniform(0.6, 1.0), rng.uniform(0.68, 0.8)
-            r = float(np.hypot(w, dpt) / 2)
-            xy = floor_spot(r)
-            if xy is None:
-                continue
-            yaw = float(rng.uniform(0, np.pi))
-            th = 0.04
-            b.box(np.array([xy[0], xy[1], h - th / 2]), np.array([w / 2, dpt / 2, th / 2]), yaw,
-                  "table", random_material(rng, "object"), skip_bottom=False)
-            c, s = np.cos(yaw), np.sin(yaw)
-            ax, ay = np.array([c, s]), np.array([-s, c])
-            leg_mat = random_material(rng, "object")
-            leg_r = rng.uniform(0.02, 0.035)
-            for sx in (-1, 1):
-                for sy in (-1, 1):
-                    lxy = xy + sx * (w / 2 - 0.07) * ax + sy * (dpt / 2 - 0.07) * ay
-                    _tube(b, np.array([lxy[0], lxy[1], 0.0]), leg_r, h - th, leg_mat)
-            for _obj in range(int(rng.integers(1, 3))):
-                oxy = xy + rng.uniform(-0.3, 0.3) * w * ax + rng.uniform(-0.25, 0.25) * dpt * ay
-                kind = int(rng.integers(3))
-                mat = random_material(rng, "object")
-                if kind == 0:
-                    rad = rng.uniform(0.08, 0.15)
-                    _sphere(b, np.array([oxy[0], oxy[1], h + rad]), rad, mat)
-                elif kind == 1:
-                    bw, bd, bh = rng.uniform(0.15, 0.35, size=3)
-                    b.box(np.array([oxy[0], oxy[1], h + bh / 2]),
-                          np.array([bw / 2, bd / 2, bh / 2]), float(rng.uniform(0, np.pi)),
-                          "box", mat)
-                else:
-                    rr = rng.uniform(0.03, 0.06)
-                    _torus(b, np.array([oxy[0], oxy[1], h + rr]), rng.uniform(0.1, 0.18), rr,
-                           mat)
-            occupy(xy, r)
-            break
+        placed = floor_object((0.8, 1.6), (0.6, 1.0), (0.68, 0.8))
+        if placed is None:
+            continue
+        w, dpt, h, r, xy = placed
+        yaw = float(rng.uniform(0, np.pi))
+        th = 0.04
+        b.box(np.array([xy[0], xy[1], h - th / 2]), np.array([w / 2, dpt / 2, th / 2]), yaw,
+              "table", random_material(rng, "object"), skip_bottom=False)
+        c, s = np.cos(yaw), np.sin(yaw)
+        ax, ay = np.array([c, s]), np.array([-s, c])
+        leg_mat = random_material(rng, "object")
+        leg_r = rng.uniform(0.02, 0.035)
+        for sx in (-1, 1):
+            for sy in (-1, 1):
+                lxy = xy + sx * (w / 2 - 0.07) * ax + sy * (dpt / 2 - 0.07) * ay
+                _tube(b, np.array([lxy[0], lxy[1], 0.0]), leg_r, h - th, leg_mat)
+        for _obj in range(int(rng.integers(1, 3))):
+            oxy = xy + rng.uniform(-0.3, 0.3) * w * ax + rng.uniform(-0.25, 0.25) * dpt * ay
+            kind = int(rng.integers(3))
+            mat = random_material(rng, "object")
+            if kind == 0:
+                rad = rng.uniform(0.08, 0.15)
+                _sphere(b, np.array([oxy[0], oxy[1], h + rad]), rad, mat)
+            elif kind == 1:
+                bw, bd, bh = rng.uniform(0.15, 0.35, size=3)
+                b.box(np.array([oxy[0], oxy[1], h + bh / 2]),
+                      np.array([bw / 2, bd / 2, bh / 2]), float(rng.uniform(0, np.pi)),
+                      "box", mat)
+            else:
+                rr = rng.uniform(0.03, 0.06)
+                _torus(b, np.array([oxy[0], oxy[1], h + rr]), rng.uniform(0.1, 0.18), rr,
+                       mat)
+        occupy(xy, r)
 
     # Curved objects on the floor.
     for _ in range(int(rng.integers(2, 5))):

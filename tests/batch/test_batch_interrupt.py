@@ -56,7 +56,7 @@ def worker_pids(pid: int) -> list[int]:
             cmdline = Path(f"/proc/{kid}/cmdline").read_bytes()
         except FileNotFoundError:
             continue
-        if b"spawn_main" in cmdline:
+        if b"resource_tracker" not in cmdline:  # forked workers share the driver's cmdline
             out.append(kid)
     return out
 

@@ -7,6 +7,7 @@ import os
 import pytest
 
 from monoplane.batch import WorkerDied, WorkerInitError, WorkerPool, map_ordered
+from monoplane.batch.pool import fork_if_available
 
 _STATE: dict[str, object] = {}
 
@@ -37,8 +38,25 @@ def test_map_ordered_runs_setup_once_per_worker():
     assert len({r[1] for r in results}) <= 2 and os.getpid() not in {r[1] for r in results}
 
 
-def test_item_errors_and_dead_workers_are_reported_per_item():
-    with WorkerPool(2, setup_worker, (0,)) as pool:
+def thread_limits(_: object) -> tuple[str | None, set[int]]:
+    from threadpoolctl import threadpool_info
+
+    return os.environ.get("OMP_NUM_THREADS"), {p["num_threads"] for p in threadpool_info()}
+
+
+@pytest.mark.skipif(fork_if_available() != "fork", reason="fork is Linux-only here")
+def test_forked_workers_get_their_thread_share(monkeypatch):
+    import numpy  # noqa: F401  (loads a BLAS pool in this process before the fork)
+
+    monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
+    with WorkerPool(2, threads_per_worker=1, start_method="fork") as pool:
+        env, blas = pool.map(thread_limits, [0])[0]
+    assert env == "1" and blas == {1}
+
+
+@pytest.mark.parametrize("start_method", ["spawn", fork_if_available()])
+def test_item_errors_and_dead_workers_are_reported_per_item(start_method):
+    with WorkerPool(2, setup_worker, (0,), start_method=start_method) as pool:
         outcomes = sorted(pool.imap_unordered(add_offset, [1, 13, 666, 4, 5]),
                           key=lambda o: o.index)
         assert [o.value[0] if o.error is None else None for o in outcomes] == [

@@ -83,6 +83,10 @@ def test_eval_data_scores_segcomp(tmp_path: Path, extra: list[str],
     ours = data["methods"][0]
     assert ours["n_frames"] == 2 and ours["n_gt"] == 3
     assert ours["correct"] == ours["n_gt"] and ours["voi"] < 0.2
+    # Per-frame records are flat: scores and SegComp counts by name beside the run's facts.
+    first = ours["frames"][0]
+    assert first["frame"] == "frame_0" and first["tolerance"] == 0.8 and not first["failed"]
+    assert {"voi", "ri", "sc", "correct", "missed", "n_gt", "n_planes", "seconds"} <= set(first)
 
 
 def test_eval_data_passes_baseline_options(tmp_path: Path,

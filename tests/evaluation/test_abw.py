@@ -20,5 +20,6 @@ def test_range_preset_on_two_abw_images(tmp_path: Path) -> None:
     res = evaluate_dataset(sub, presets=["range"], progress=False)
     frames = res.methods[0].frames
     # Published best (UE, 1996) finds 13.4 of 15.2 faces; we ask for most faces here.
-    assert all(f.correct >= f.n_gt - 2 for f in frames), [(f.correct, f.n_gt) for f in frames]
-    assert all(f.voi < 0.3 for f in frames)
+    counts = [f.segcomp for f in frames]
+    assert all(c.correct >= c.n_gt - 2 for c in counts), [(c.correct, c.n_gt) for c in counts]
+    assert all(f.segmentation.voi < 0.3 for f in frames)

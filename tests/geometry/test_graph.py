@@ -91,12 +91,14 @@ def test_largest_component_of_a_node_subset():
     # Chain 0-1-2 and pair 3-4 far away.
     pts = np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0], [10, 0, 0], [11, 0, 0]])
     g = NeighbourGraph.build(pts, k=1)
-    np.testing.assert_array_equal(g.largest_component(np.arange(5)),
-                                  [True, True, True, False, False])
+
+    def largest(nodes: np.ndarray) -> np.ndarray:
+        return g.largest_component_within(nodes, np.ones(nodes.size, dtype=bool))
+
+    np.testing.assert_array_equal(largest(np.arange(5)), [True, True, True, False, False])
     # Without node 1 the chain falls apart: {0}, {2}, {3, 4}.
-    np.testing.assert_array_equal(g.largest_component(np.array([0, 2, 3, 4])),
-                                  [False, False, True, True])
-    assert g.largest_component(np.zeros(0, dtype=np.int64)).shape == (0,)
+    np.testing.assert_array_equal(largest(np.array([0, 2, 3, 4])), [False, False, True, True])
+    assert largest(np.zeros(0, dtype=np.int64)).shape == (0,)
 
 
 def test_subgraph_of_the_same_pool_is_reused_and_read_only():
@@ -119,7 +121,9 @@ def test_largest_component_within_a_pool_matches_the_subset_one():
     pool = np.sort(rng.choice(130, size=100, replace=False))
     members = rng.random(100) < 0.7
     within = g.largest_component_within(pool, members)
-    np.testing.assert_array_equal(within, g.largest_component(pool[members]))
+    subset = pool[members]  # the same nodes as a pool of their own: a fresh subgraph
+    np.testing.assert_array_equal(
+        within, g.largest_component_within(subset, np.ones(subset.size, dtype=bool)))
     assert np.all(pool[members][within] < 80)
     assert g.largest_component_within(pool, np.zeros(100, bool)).shape == (0,)
 

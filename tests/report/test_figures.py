@@ -41,3 +41,15 @@ def test_depth_comparison_and_sheet(room, tmp_path: Path) -> None:
     assert sheet.shape[1] == 3 * 100 + 2 * 8
     path = fig.save_png(tmp_path / "x.png", sheet)
     np.testing.assert_array_equal(fig.load_png(path), sheet)
+
+
+def test_input_image_is_the_colour_image_or_grey_enlarged_for_display() -> None:
+    rgb = np.zeros((10, 20, 3), dtype=np.uint8)
+    rgb[:, :10] = 255
+    k = fig.display_scale(20)
+    assert k > 1
+    shown = fig.input_image(rgb, (10, 20))
+    assert shown.shape == (10 * k, 20 * k, 3)
+    assert shown[0, 0].tolist() == [255, 255, 255] and shown[-1, -1].tolist() == [0, 0, 0]
+    grey = fig.input_image(None, (10, 20))
+    assert grey.shape == (10 * k, 20 * k, 3) and np.all(grey == 128)

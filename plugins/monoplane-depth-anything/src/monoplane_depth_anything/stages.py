@@ -16,9 +16,9 @@ from dataclasses import dataclass
 
 from monoplane import hookimpl
 from monoplane.cues import IMAGENET_MEAN, IMAGENET_STD, CueNetwork, ModelSpec, OnnxProfile
-from monoplane.datamodel import Frame
 from monoplane.errors import ConfigError
-from monoplane.stages.base import CueProvider, Stage, param
+from monoplane.stages.base import Stage, param
+from monoplane.stages.cues import NetworkCues
 
 #: Depth Anything (v1 and v2) predicts affine-invariant inverse depth from ImageNet-normalised
 #: RGB; its DINOv2 ViT-14 backbone needs input sides that are multiples of 14 (518 in training).
@@ -49,24 +49,17 @@ class DepthAnythingConfig:
             raise ConfigError(f"disparity_floor must be in (0, 1), got {self.disparity_floor}")
 
 
-class DepthAnythingCues(CueProvider):
+class DepthAnythingCues(NetworkCues):
     """Relative depth from Depth Anything; normals estimated from it."""
 
     name = "depth-anything"
     Config = DepthAnythingConfig
 
-    def __init__(self, config: DepthAnythingConfig | None = None) -> None:
-        super().__init__(config)
-        cfg = self.config
-        side = cfg.input_size
-        profile = PROFILE.with_overrides(size=(side, side))
-        self.network = CueNetwork(profile, cfg.model or None, threads=cfg.threads,
-                                  disparity_floor=cfg.disparity_floor,
-                                  depth_model_key="cues.model")
-
-    def provide(self, frame: Frame) -> Frame:
-        """Predict missing depth (relative) and normals; see ``monoplane.cues.CueNetwork``."""
-        return self.network.provide(frame)
+    def build_network(self, config: DepthAnythingConfig) -> CueNetwork:
+        """:data:`PROFILE` at the configured input size, on the configured file."""
+        profile = PROFILE.with_overrides(size=(config.input_size, config.input_size))
+        return CueNetwork(profile, config.model or None, threads=config.threads,
+                          disparity_floor=config.disparity_floor, depth_model_key="cues.model")
 
 
 @hookimpl
