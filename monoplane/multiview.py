@@ -13,13 +13,15 @@ Steps:
 1. the configured matcher (``[matcher]``) gives cameras, sparse points and
    keypoint matches;
 2. the cue provider fills each view's depth and normals (at the view's native resolution, with
-   the SfM intrinsics);
+   the SfM intrinsics) and the single-view pipeline segments each view. Both ignore the
+   depth's scale, so when the matcher keeps every ``K`` as given they run while SfM does
+   (in the view pool's workers), on the unscaled depth;
 3. each view's depth is scaled onto the SfM points (:func:`~monoplane.geometry.alignment.
-   align_scale`); when every view's depth is metric the SfM world is then rescaled to the views'
-   median metric scale, so outputs keep the depth's units;
-4. the single-view pipeline segments each view;
-5. the configured fuser (``[fuser]``) matches and fuses planes into a
-   :class:`~monoplane.datamodel.Scene`.
+   align_scale`), and its planes with it (:func:`rescale_reconstruction`); when every view's
+   depth is metric the SfM world is then rescaled to the views' median metric scale, so
+   outputs keep the depth's units;
+4. the configured fuser (``[fuser]``) matches and fuses planes into a
+   :class:`~monoplane.datamodel.Scene`, and the adjuster (``[adjuster]``) refines it.
 
 Frames: cameras are world-to-camera ``x_cam = R x_world + t`` with OpenCV axes (x right, y down,
 z forward).
@@ -30,7 +32,7 @@ from __future__ import annotations
 import contextlib
 import json
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -238,6 +240,23 @@ def rescale_reconstruction(rec: Reconstruction, frame: Frame, scale: float) -> R
     return replace(rec, frame=frame, params=params, rmse=rec.rmse * scale)
 
 
+@contextlib.contextmanager
+def _thread_budget(threads: int | None) -> Iterator[None]:
+    """Within the block, this process's kernels use ``threads`` threads, like a worker's
+    (:func:`monoplane.jit.thread_budget` reads ``OMP_NUM_THREADS``); None or a value the user
+    set leaves it alone."""
+    import os
+
+    if threads is None or "OMP_NUM_THREADS" in os.environ:
+        yield
+        return
+    os.environ["OMP_NUM_THREADS"] = str(threads)
+    try:
+        yield
+    finally:
+        os.environ.pop("OMP_NUM_THREADS", None)
+
+
 class ViewTasks:
     """Per-view tasks under way in a :class:`ViewPool`; :meth:`result` collects them.
 
@@ -303,8 +322,9 @@ class ViewTasks:
         global _PIPE
         previous, _PIPE = _PIPE, self._views.pipe
         try:
-            while (v := self._take()) is not None:
-                self._run_here(v)
+            with _thread_budget(self._views.threads):
+                while (v := self._take()) is not None:
+                    self._run_here(v)
             if self._thread is not None:
                 self._thread.join()
                 self._thread = None
@@ -328,21 +348,39 @@ class ViewTasks:
 
 
 class ViewPool:
-    """Runs per-view tasks in ``workers`` processes and this one, or here alone (``workers`` 1).
+    """Runs per-view tasks in ``workers`` processes: this one and ``workers - 1`` workers.
 
     Opened before structure from motion so that the workers start (and import) while the
-    matcher runs. In-process, the tasks use ``pipe`` itself.
+    matcher runs; this process joins in once it waits for the results
+    (:meth:`ViewTasks.result`). A worker costs its start-up (a fresh interpreter importing
+    NumPy, SciPy, OpenCV and the project, and loading the compiled kernels: about a second of
+    CPU), so with ``workers`` 2 one worker and this process share the views rather than two
+    workers while this one waits. In-process, the tasks use ``pipe`` itself.
+
+    Parameters
+    ----------
+    pipe : Pipeline
+        The pipeline whose config the workers rebuild.
+    workers : int
+        Processes that run views, this one included (1: this process alone).
+    n_views : int
+        Number of views (no more workers than views are started).
     """
 
     def __init__(self, pipe: Pipeline, workers: int, n_views: int) -> None:
         self.pipe = pipe
         self.pool = None
         self._tasks: list[ViewTasks] = []
-        if workers > 1 and n_views > 1:
-            from monoplane.batch import WorkerPool
+        #: Threads each view may use (the thread budget of the workers and of this process
+        #: while it runs views), so that the processes together fill the cores once.
+        self.threads: int | None = None
+        size = min(workers, n_views) - 1
+        if size >= 1:
+            from monoplane.batch import WorkerPool, default_workers
 
-            self.pool = WorkerPool(min(workers, n_views), _init_view_worker,
-                                   (pipe.config.to_dict(),))
+            self.threads = max(1, default_workers() // (size + 1))
+            self.pool = WorkerPool(size, _init_view_worker, (pipe.config.to_dict(),),
+                                   threads_per_worker=self.threads)
 
     def __enter__(self) -> ViewPool:
         if self.pool is not None:
