@@ -288,10 +288,12 @@ class ViewTasks:
             self._next += 1
             return self._next - 1
 
-    def cancel(self) -> None:
-        """Hand out no further views (those running finish)."""
+    def stop(self) -> None:
+        """Hand out no further views; return once the workers' running views have finished."""
         with self._lock:
             self._next = len(self._frames)
+        if self._thread is not None:
+            self._thread.join()
 
     def _drive(self, pool: Any) -> None:
         taken: list[int] = []  # view of each item handed to the pool, in hand-out order
@@ -353,7 +355,7 @@ class ViewPool:
     Opened before structure from motion so that the workers start (and import) while the
     matcher runs; this process joins in once it waits for the results
     (:meth:`ViewTasks.result`). A worker costs its start-up (a fresh interpreter importing
-    NumPy, SciPy, OpenCV and the project, and loading the compiled kernels: about a second of
+    NumPy, SciPy, OpenCV and the project, and loading the compiled kernels: over a second of
     CPU), so with ``workers`` 2 one worker and this process share the views rather than two
     workers while this one waits. In-process, the tasks use ``pipe`` itself.
 
@@ -391,9 +393,7 @@ class ViewPool:
         # Tasks nobody collected (the host failed meanwhile): let their running views finish,
         # so the driver thread is done with the workers before they are stopped.
         for tasks in self._tasks:
-            tasks.cancel()
-            if tasks._thread is not None:
-                tasks._thread.join()
+            tasks.stop()
         if self.pool is not None:
             self.pool.__exit__(*exc)
 
@@ -422,6 +422,7 @@ class ViewPool:
         if self.pool is not None:
             self.pool.__exit__(None, None, None)
             self.pool = None
+            self.threads = None  # this process alone: all its cores
 
 
 def default_workers() -> int:
