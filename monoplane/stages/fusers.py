@@ -8,11 +8,20 @@ matched planes (over any number of views) are fused by the principal eigenvector
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
+import cv2
 import numpy as np
 
-from monoplane.datamodel import Reconstruction, Scene, SfmResult, plane_to_world
+from monoplane.datamodel import (
+    Reconstruction,
+    Scene,
+    SfmResult,
+    pixel_rays,
+    plane_to_camera,
+    plane_to_world,
+    ray_plane_depth,
+)
 from monoplane.errors import InvalidInput
 from monoplane.geometry.plane_matching import (
     consistent_groups,
@@ -53,6 +62,15 @@ class AverageConfig:
     grid_width: int = param(
         160, "reprojection check resolution: every (width // grid_width)-th pixel row and "
         "column of a view is warped (all pixels below 320 px)")
+    recover_planes: bool = param(
+        True, "give a view the global planes that other views see where it merged them into a "
+        "neighbour (see docs/multiview.md)")
+    recover_min_views: int = param(
+        2, "views that must see a global plane before it is recovered in another view")
+    recover_max_distance: float = param(
+        0.1, "a recovered pixel's depth lies within this share of itself from the global plane")
+    recover_min_area: float = param(
+        0.001, "smallest recovered region, as a share of the view's pixels")
 
 
 @dataclass
@@ -134,9 +152,74 @@ class AverageFuser(Fuser):
             for v, local in members:
                 links[v][local] = len(planes)
             planes.append(fused)
-        scene = Scene(cameras=list(sfm.cameras), views=list(views),
-                      planes=np.array(planes).reshape(-1, 4), links=links, points=sfm.points)
+        planes_array = np.array(planes).reshape(-1, 4)
+        views = list(views)
+        if self.config.recover_planes:
+            views, links = self.recover_planes(views, sfm, planes_array, links)
+        scene = Scene(cameras=list(sfm.cameras), views=views, planes=planes_array, links=links,
+                      points=sfm.points)
         return scene, matches
+
+    def recover_planes(self, views: list[Reconstruction], sfm: SfmResult, planes: np.ndarray,
+                       links: list[dict[int, int]]
+                       ) -> tuple[list[Reconstruction], list[dict[int, int]]]:
+        """Relabel a view's pixels onto a global plane that other views see and it merged away.
+
+        A view's segmentation sometimes swallows a small plane into a larger neighbour while
+        the other views keep it apart; the views then disagree on that surface. For every
+        global plane seen in at least ``recover_min_views`` views and every other view ``i``:
+        the members' masks are carried into view ``i`` through the global plane (each pixel of
+        ``i`` is lifted onto the plane and projected into the member views). The pixels they
+        cover whose depth in view ``i`` lies on the global plane (within
+        ``recover_max_distance`` of their depth) and closer to it than to their own plane
+        become a new plane of view ``i``, linked to the global plane: the largest such
+        4-connected region, when it covers ``recover_min_area`` of the view.
+
+        Parameters
+        ----------
+        views : list of Reconstruction
+            Scale-aligned views (camera frames, SfM units).
+        sfm : SfmResult
+            Their cameras.
+        planes : numpy.ndarray
+            (G, 4) global planes, world frame.
+        links : list of dict
+            ``links[v][local] = global``.
+
+        Returns
+        -------
+        (list of Reconstruction, list of dict)
+            Views with recovered planes appended (new local ids ``P + 1``, ...), and the links.
+        """
+        cfg = self.config
+        views, links = list(views), [dict(t) for t in links]
+        members: dict[int, list[tuple[int, int]]] = {}
+        for v, table in enumerate(links):
+            for local, g in table.items():
+                members.setdefault(g, []).append((v, local))
+        for g in sorted(members):
+            seen = {v for v, _ in members[g]}
+            if len(seen) < cfg.recover_min_views:
+                continue
+            for i in range(len(views)):
+                if i in seen:
+                    continue
+                region = _recovered_region(views, sfm.cameras, members[g], i, planes[g], cfg,
+                                           self._step(views[i]))
+                if region is None:
+                    continue
+                rec, cam = views[i], sfm.cameras[i]
+                plane = plane_to_camera(planes[g], cam.R, cam.t)[0]
+                labels = rec.labels.copy()
+                labels[region] = rec.num_planes + 1
+                rays = pixel_rays(cam.K, cam.height, cam.width)[region]
+                points = rays * rec.frame.depth[region, None]
+                rmse = float(np.sqrt(np.mean((points @ plane[:3] + plane[3]) ** 2)))
+                views[i] = replace(rec, labels=labels, params=np.vstack([rec.params, plane]),
+                                   rmse=np.append(rec.rmse, rmse),
+                                   support=np.append(rec.support, int(region.sum())))
+                links[i][rec.num_planes + 1] = g
+        return views, links
 
     def match_planes(self, views: list[Reconstruction], sfm: SfmResult) -> list[PlaneMatch]:
         """Plane correspondences between every pair of views.
@@ -217,6 +300,64 @@ def _world_centroids(rec: Reconstruction, cam: object) -> np.ndarray:
     out[has, 3] = out[has, 2]
     out[:, :3] = (out[:, :3] - cam.t) @ cam.R
     return out
+
+
+def _recovered_region(views: list[Reconstruction], cameras: list, members: list[tuple[int, int]],
+                      i: int, plane_world: np.ndarray, cfg: AverageConfig,
+                      step: int) -> np.ndarray | None:
+    """(H, W) bool pixels of view ``i`` to relabel onto ``plane_world``, or None (see
+    :meth:`AverageFuser.recover_planes`). A pass on every ``step``-th pixel finds whether
+    there is anything to recover and where; the full-resolution pass runs on that box only."""
+    rec, cam = views[i], cameras[i]
+    h, w = rec.labels.shape
+    min_pixels = cfg.recover_min_area * h * w
+    rays_all = pixel_rays(cam.K, h, w)
+    plane = plane_to_camera(plane_world, cam.R, cam.t)[0]
+
+    def candidates(rows: slice, cols: slice) -> np.ndarray:
+        rays = rays_all[rows, cols]
+        z = ray_plane_depth(rays, plane)
+        ahead = z > 0
+        x_world = (rays * z[..., None] - cam.t) @ cam.R
+        covered = np.zeros(z.shape, dtype=bool)
+        for v, local in members:
+            other = cameras[v]
+            x = x_world @ other.R.T + other.t
+            with np.errstate(divide="ignore", invalid="ignore"):
+                uv = x @ other.K.T
+                u = np.rint(uv[..., 0] / uv[..., 2])
+                r = np.rint(uv[..., 1] / uv[..., 2])
+            inside = ahead & (x[..., 2] > 0) & (u >= 0) & (u < other.width) & (r >= 0) & (
+                r < other.height)
+            hit = np.zeros(z.shape, dtype=bool)
+            hit[inside] = views[v].labels[r[inside].astype(np.int64),
+                                          u[inside].astype(np.int64)] == local
+            covered |= hit
+        depth = rec.frame.depth[rows, cols]
+        labels = rec.labels[rows, cols]
+        off = np.abs(depth - z)
+        own = np.full(z.shape, np.inf)
+        if rec.num_planes:
+            z_own = ray_plane_depth(rays, rec.params[np.maximum(labels, 1) - 1])
+            own = np.where(labels > 0, np.abs(depth - z_own), np.inf)
+        return covered & (depth > 0) & (off <= cfg.recover_max_distance * depth) & (off < own)
+
+    coarse = candidates(slice(None, None, step), slice(None, None, step))
+    if coarse.sum() * step * step < min_pixels:
+        return None
+    rr, cc = np.nonzero(coarse)
+    r0, r1 = max(0, rr.min() * step - step), min(h, rr.max() * step + 2 * step)
+    c0, c1 = max(0, cc.min() * step - step), min(w, cc.max() * step + 2 * step)
+    fine = candidates(slice(r0, r1), slice(c0, c1))
+    n, comp, stats, _ = cv2.connectedComponentsWithStats(fine.astype(np.uint8), connectivity=4)
+    if n <= 1:
+        return None
+    best = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+    if stats[best, cv2.CC_STAT_AREA] < min_pixels:
+        return None
+    region = np.zeros((h, w), dtype=bool)
+    region[r0:r1, c0:c1] = comp == best
+    return region
 
 
 def _geometric_matches(score: np.ndarray, angles: np.ndarray, cent_i: np.ndarray,
