@@ -111,3 +111,65 @@ def test_exact_planes_fuse_to_ground_truth(n_views: int) -> None:
 
 def test_registered_through_hook() -> None:
     assert AverageFuser in monoplane_register_fusers()
+
+
+def _merge_into_neighbour(rec: Reconstruction, local: int) -> Reconstruction:
+    """``rec`` with plane ``local`` swallowed by the neighbour it borders most (ids shifted)."""
+    import cv2
+
+    mask = rec.labels == local
+    ring = cv2.dilate(mask.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool) & ~mask
+    around = rec.labels[ring]
+    neighbour = int(np.bincount(around[around > 0]).argmax())
+    labels = rec.labels.copy()
+    labels[mask] = neighbour
+    labels[labels > local] -= 1
+    params = np.delete(rec.params, local - 1, axis=0)
+    return Reconstruction(frame=rec.frame, labels=labels, params=params)
+
+
+def test_a_plane_merged_away_in_one_view_is_recovered_from_the_others() -> None:
+    from monoplane.synth.sequence import generate_sequence
+
+    synth = generate_sequence(2, 3, "walk", level="clean")
+    sfm = ground_truth_sfm(synth, seed=0)
+    views = [Reconstruction(frame=v.frame, labels=v.gt_labels, params=v.gt_params)
+             for v in synth.views]
+    # A true plane every view sees, small in view 0: view 0 merges it into a neighbour.
+    seen_by_all = set.intersection(*[set(t.values()) for t in synth.view_to_global])
+    areas = {t: (synth.views[0].gt_labels == local).mean()
+             for local, t in synth.view_to_global[0].items() if t in seen_by_all}
+    true_id = min((t for t, a in areas.items() if a > 0.005), key=areas.get)
+    local = next(k for k, t in synth.view_to_global[0].items() if t == true_id)
+    truth_mask = synth.views[0].gt_labels == local
+    views[0] = _merge_into_neighbour(views[0], local)
+
+    kept = AverageFuser(AverageFuser.Config(recover_planes=False)).fuse(views, sfm)
+    scene = AverageFuser().fuse(views, sfm)
+    assert kept.views[0].num_planes == views[0].num_planes
+    assert scene.views[0].num_planes == views[0].num_planes + 1
+    new = views[0].num_planes + 1
+    recovered = scene.views[0].labels == new
+    iou = (recovered & truth_mask).sum() / (recovered | truth_mask).sum()
+    assert iou > 0.9
+    # It joins the global plane the other views give that true plane.
+    other = next(k for k, t in synth.view_to_global[1].items() if t == true_id)
+    assert scene.links[0][new] == scene.links[1][other]
+    # The other views' labels and the global planes are left as they were.
+    for v in (1, 2):
+        np.testing.assert_array_equal(scene.views[v].labels, kept.views[v].labels)
+    np.testing.assert_allclose(scene.planes, kept.planes)
+
+
+def test_no_recovery_without_enough_views_or_on_exact_segmentations() -> None:
+    from monoplane.synth.sequence import generate_sequence
+
+    synth = generate_sequence(2, 3, "walk", level="clean")
+    sfm = ground_truth_sfm(synth, seed=0)
+    views = [Reconstruction(frame=v.frame, labels=v.gt_labels, params=v.gt_params)
+             for v in synth.views]
+    exact = AverageFuser().fuse(views, sfm)
+    assert [r.num_planes for r in exact.views] == [r.num_planes for r in views]
+    strict = AverageFuser(AverageFuser.Config(recover_min_views=3))
+    merged = [_merge_into_neighbour(views[0], 1), *views[1:]]
+    assert strict.fuse(merged, sfm).views[0].num_planes == merged[0].num_planes
