@@ -197,6 +197,7 @@ class AverageFuser(Fuser):
         for v, table in enumerate(links):
             for local, g in table.items():
                 members.setdefault(g, []).append((v, local))
+        rays: dict[int, np.ndarray] = {}  # each view's pixel rays, computed once
         for g in sorted(members):
             seen = {v for v, _ in members[g]}
             if len(seen) < cfg.recover_min_views:
@@ -204,16 +205,17 @@ class AverageFuser(Fuser):
             for i in range(len(views)):
                 if i in seen:
                     continue
+                rec, cam = views[i], sfm.cameras[i]
+                if i not in rays:
+                    rays[i] = pixel_rays(cam.K, cam.height, cam.width)
                 region = _recovered_region(views, sfm.cameras, members[g], i, planes[g], cfg,
-                                           self._step(views[i]))
+                                           self._step(rec), rays[i])
                 if region is None:
                     continue
-                rec, cam = views[i], sfm.cameras[i]
                 plane = plane_to_camera(planes[g], cam.R, cam.t)[0]
                 labels = rec.labels.copy()
                 labels[region] = rec.num_planes + 1
-                rays = pixel_rays(cam.K, cam.height, cam.width)[region]
-                points = rays * rec.frame.depth[region, None]
+                points = rays[i][region] * rec.frame.depth[region, None]
                 rmse = float(np.sqrt(np.mean((points @ plane[:3] + plane[3]) ** 2)))
                 views[i] = replace(rec, labels=labels, params=np.vstack([rec.params, plane]),
                                    rmse=np.append(rec.rmse, rmse),
@@ -304,14 +306,14 @@ def _world_centroids(rec: Reconstruction, cam: object) -> np.ndarray:
 
 def _recovered_region(views: list[Reconstruction], cameras: list, members: list[tuple[int, int]],
                       i: int, plane_world: np.ndarray, cfg: AverageConfig,
-                      step: int) -> np.ndarray | None:
+                      step: int, rays_all: np.ndarray) -> np.ndarray | None:
     """(H, W) bool pixels of view ``i`` to relabel onto ``plane_world``, or None (see
-    :meth:`AverageFuser.recover_planes`). A pass on every ``step``-th pixel finds whether
-    there is anything to recover and where; the full-resolution pass runs on that box only."""
+    :meth:`AverageFuser.recover_planes`; ``rays_all`` is view ``i``'s (H, W, 3)
+    :func:`pixel_rays`). A pass on every ``step``-th pixel finds whether there is anything to
+    recover and where; the full-resolution pass runs on that box only."""
     rec, cam = views[i], cameras[i]
     h, w = rec.labels.shape
     min_pixels = cfg.recover_min_area * h * w
-    rays_all = pixel_rays(cam.K, h, w)
     plane = plane_to_camera(plane_world, cam.R, cam.t)[0]
 
     def candidates(rows: slice, cols: slice) -> np.ndarray:
