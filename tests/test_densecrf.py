@@ -373,3 +373,23 @@ def test_dense_crf_trivial_cases():
     np.testing.assert_array_equal(dense_crf(labels, 2, params(iterations=0)), labels)
     with pytest.raises(InvalidInput):
         dense_crf(labels, 1, params())
+
+
+@pytest.mark.parametrize("uniform", [True, False])
+@pytest.mark.parametrize("num_labels", [2, 11])
+@pytest.mark.parametrize("step, shape", [(3, (192, 256)), (8, (480, 640)), (2, (37, 53))])
+def test_block_means_from_counts_equal_the_per_pixel_sums(uniform, num_labels, step, shape):
+    from monoplane.densecrf import _block_mean_probabilities
+
+    h, w = shape
+    lab = np.random.default_rng(num_labels).integers(0, num_labels, size=shape)
+    p = replace(DenseCrfRefiner().crf, uniform_nonplanar=uniform)
+    unary = unary_from_labels(lab, num_labels, p.confidence, uniform_label=0 if uniform else None)
+    hs, ws = -(-h // step), -(-w // step)
+    block = (np.minimum(np.arange(h) // step, hs - 1)[:, None] * ws
+             + np.minimum(np.arange(w) // step, ws - 1)[None, :]).ravel()
+    prob = np.exp(-unary)  # the per-pixel formulation it replaces
+    ref = np.stack([np.bincount(block, prob[:, k], hs * ws) for k in range(num_labels)], 1)
+    ref /= np.bincount(block, minlength=hs * ws)[:, None]
+    got = _block_mean_probabilities(lab.ravel(), block, hs * ws, num_labels, p)
+    np.testing.assert_array_equal(got, ref)
