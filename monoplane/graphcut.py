@@ -33,7 +33,10 @@ import maxflow
 import numpy as np
 
 from monoplane.errors import InvalidInput
-from monoplane.jit import kernel
+from monoplane.jit import chunks, kernel, run_threaded
+
+#: Edges per thread below which proximity weights are computed on one thread.
+THREADED_EDGES = 20_000
 
 
 def msac_costs(dist: np.ndarray, epsilon: float) -> tuple[np.ndarray, np.ndarray]:
@@ -188,12 +191,17 @@ def proximity_weights(points: np.ndarray, edges: np.ndarray, normals: np.ndarray
         (E,) float64 cut costs, all >= 0.5.
     """
     none = np.zeros((0, 3))
-    return _proximity_weights(
-        np.ascontiguousarray(points, dtype=np.float64),
-        np.ascontiguousarray(np.asarray(edges, dtype=np.int64).reshape(-1, 2)),
-        none if normals is None else np.ascontiguousarray(normals, dtype=np.float64),
-        none if colors is None else np.ascontiguousarray(colors, dtype=np.float64),
-        float(alpha_p2), float(alpha_c2), float(alpha_n2), float(w_p), float(w_c), float(w_n))
+    pts = np.ascontiguousarray(points, dtype=np.float64)
+    pairs = np.ascontiguousarray(np.asarray(edges, dtype=np.int64).reshape(-1, 2))
+    nor = none if normals is None else np.ascontiguousarray(normals, dtype=np.float64)
+    col = none if colors is None else np.ascontiguousarray(colors, dtype=np.float64)
+    # Each edge's weight is computed alone: chunks of edges on parallel threads change nothing.
+    parts = run_threaded([
+        lambda a=a, b=b: _proximity_weights(pts, pairs[a:b], nor, col, float(alpha_p2),
+                                            float(alpha_c2), float(alpha_n2), float(w_p),
+                                            float(w_c), float(w_n))
+        for a, b in chunks(pairs.shape[0], THREADED_EDGES)])
+    return np.concatenate(parts) if len(parts) > 1 else parts[0]
 
 
 @kernel

@@ -38,6 +38,7 @@ from monoplane.errors import ConfigError, InvalidInput, StageError
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.geometry.planes import fit_plane, fit_planes_per_label, planes_from_triplets
+from monoplane.jit import kernel
 from monoplane.stages.base import (
     Labeler,
     Labeling,
@@ -130,6 +131,24 @@ def _unit_mean(normals: np.ndarray, fallback: np.ndarray) -> np.ndarray:
     m = normals.mean(axis=-2)
     norm = np.linalg.norm(m, axis=-1, keepdims=True)
     return np.where(norm > 1e-9, m / np.maximum(norm, 1e-300), fallback)
+
+
+@kernel
+def _sample_normals(normals: np.ndarray, samples: np.ndarray, fallback: np.ndarray
+                    ) -> np.ndarray:
+    """:func:`_unit_mean` of each (S, 3) int64 sample's three (N, 3) ``normals``, without
+    gathering them first; (S, 3) ``fallback`` where the mean vanishes. Same arithmetic order as
+    numpy's mean and norm, so the same values."""
+    out = np.empty((samples.shape[0], 3))
+    for s in range(samples.shape[0]):
+        m = np.empty(3)
+        for k in range(3):
+            m[k] = (normals[samples[s, 0], k] + normals[samples[s, 1], k]
+                    + normals[samples[s, 2], k]) / 3.0
+        norm = np.sqrt(m[0] * m[0] + m[1] * m[1] + m[2] * m[2])
+        for k in range(3):
+            out[s, k] = m[k] / max(norm, 1e-300) if norm > 1e-9 else fallback[s, k]
+    return out
 
 
 def required_iterations(inlier_ratio: float, confidence: float, sample_size: int = 3) -> float:
@@ -296,7 +315,7 @@ class SequentialRansac:
             if not valid.any():
                 continue
             planes = planes[valid]
-            model_normals = _unit_mean(cloud.normals[samples[valid]], planes[:, :3])
+            model_normals = _sample_normals(cloud.normals, samples[valid], planes[:, :3])
             costs = _call(self.scorer, self.scorer.score, cloud, scored, planes,
                           model_normals, params)
             i = int(np.argmin(costs))

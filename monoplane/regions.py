@@ -32,6 +32,7 @@ from scipy.sparse.csgraph import connected_components
 from monoplane.datamodel import Reconstruction
 from monoplane.densecrf import REFERENCE_AREA
 from monoplane.errors import InvalidInput
+from monoplane.jit import kernel
 
 #: The paper's minimum region size, in pixels at 256 x 192 (appendix).
 MIN_AREA_AT_REFERENCE = 300
@@ -157,19 +158,12 @@ class RegionMoments:
     def of(cls, points: np.ndarray, valid: np.ndarray, labels: np.ndarray,
            num: int) -> RegionMoments:
         """Moments of labels 1..num of an (H, W) label map over (H, W, 3) points where valid."""
-        mask = np.asarray(valid) & (np.asarray(labels) > 0)
-        lab = np.asarray(labels)[mask]
-        pts = np.asarray(points, dtype=np.float64)[mask]
-        centre = pts.mean(axis=0) if len(pts) else np.zeros(3)
-        pts = pts - centre
-        size = num + 1
-        count = np.bincount(lab, minlength=size)[1:size].astype(np.int64)
-        total = np.stack([np.bincount(lab, pts[:, k], size)[1:size] for k in range(3)], axis=1)
-        outer = np.empty((num, 3, 3))
-        for i in range(3):
-            for j in range(i, 3):
-                outer[:, i, j] = outer[:, j, i] = np.bincount(lab, pts[:, i] * pts[:, j],
-                                                              size)[1:size]
+        labels = np.asarray(labels)
+        mask = np.asarray(valid) & (labels > 0)
+        points = np.asarray(points, dtype=np.float64)
+        centre = points[mask].mean(axis=0) if mask.any() else np.zeros(3)
+        count, total, outer = _moments(points.reshape(-1, 3), mask.ravel(),
+                                       labels.ravel().astype(np.int64), int(num), centre)
         return cls(count, total, outer, centre)
 
     def combine(self, group_of: np.ndarray, num_groups: int) -> RegionMoments:
@@ -372,17 +366,11 @@ def region_adjacency(labels: np.ndarray, connectivity: int = 8) -> np.ndarray:
     numpy.ndarray
         (E, 2) int64 sorted, distinct pairs ``(a, b)`` with ``0 < a < b``.
     """
-    lab = np.asarray(labels)
-    h, w = lab.shape
-    offsets = [(0, 1), (1, 0)] + ([(1, 1), (1, -1)] if connectivity == 8 else [])
-    pairs = []
-    for dy, dx in offsets:
-        ys, yd = slice(0, h - dy), slice(dy, h)
-        xs, xd = (slice(0, w - dx), slice(dx, w)) if dx >= 0 else (slice(-dx, w), slice(0, w + dx))
-        a, b = lab[ys, xs].ravel(), lab[yd, xd].ravel()
-        touch = (a != b) & (a > 0) & (b > 0)
-        pairs.append(np.stack([np.minimum(a, b)[touch], np.maximum(a, b)[touch]], axis=1))
-    return np.unique(np.concatenate(pairs).astype(np.int64).reshape(-1, 2), axis=0)
+    lab = np.ascontiguousarray(labels, dtype=np.int64)
+    if lab.size == 0:
+        return np.zeros((0, 2), dtype=np.int64)
+    touch = _touching(lab, int(lab.max()), connectivity == 8)
+    return np.argwhere(np.triu(touch, 1)).astype(np.int64)
 
 
 def absorb_small_regions(points: np.ndarray, valid: np.ndarray, labels: np.ndarray,
@@ -572,3 +560,56 @@ def clean_regions(rec: Reconstruction, labels: np.ndarray, min_area: int,
     params, rmse, support = moments.planes(inherited)
     return Reconstruction(frame=frame, labels=final, params=params, rmse=rmse, support=support,
                           config=rec.config, timings=dict(rec.timings))
+
+
+@kernel
+def _moments(points: np.ndarray, mask: np.ndarray, labels: np.ndarray, num: int,
+             centre: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:meth:`RegionMoments.of` in one pass over the pixels, in raster order (the order
+    ``numpy.bincount`` sums in). ``points`` (H W, 3) float64, ``mask`` (H W,) bool, ``labels``
+    (H W,) int64; labels above ``num`` are ignored. Returns count (num,) int64, total (num, 3)
+    and outer (num, 3, 3) float64."""
+    count = np.zeros(num + 1, dtype=np.int64)
+    total = np.zeros((num + 1, 3))
+    outer = np.zeros((num + 1, 3, 3))
+    x = np.empty(3)
+    for i in range(labels.shape[0]):
+        lab = labels[i]
+        if not mask[i] or lab > num:
+            continue
+        for a in range(3):
+            x[a] = points[i, a] - centre[a]
+        count[lab] += 1
+        for a in range(3):
+            total[lab, a] += x[a]
+            for b in range(a, 3):
+                outer[lab, a, b] += x[a] * x[b]
+    for lab in range(num + 1):
+        for a in range(3):
+            for b in range(a):
+                outer[lab, a, b] = outer[lab, b, a]
+    return count[1:], total[1:], outer[1:]
+
+
+@kernel
+def _touching(labels: np.ndarray, top: int, diagonal: bool) -> np.ndarray:
+    """(top+1, top+1) bool: labels a != b, both > 0, at 4- (or 8-, ``diagonal``) neighbouring
+    pixels of the (H, W) int64 map, symmetric."""
+    h, w = labels.shape
+    touch = np.zeros((top + 1, top + 1), dtype=np.bool_)
+    for y in range(h):
+        for x in range(w):
+            a = labels[y, x]
+            if a <= 0:
+                continue
+            for dy, dx in ((0, 1), (1, 0), (1, 1), (1, -1)):
+                if dx != 0 and dy != 0 and not diagonal:
+                    continue
+                yy, xx = y + dy, x + dx
+                if yy >= h or xx < 0 or xx >= w:
+                    continue
+                b = labels[yy, xx]
+                if b > 0 and b != a:
+                    touch[a, b] = True
+                    touch[b, a] = True
+    return touch

@@ -209,3 +209,19 @@ def test_run_cloud_rejects_a_graph_of_another_cloud():
     graph = NeighbourGraph.build(cloud.points[:-1], 8)
     with pytest.raises(InvalidInput, match="graph has"):
         make("gc-ransac").run_cloud(cloud, graph)
+
+
+def test_sample_normals_kernel_equals_the_numpy_mean():
+    from monoplane.ransac import _sample_normals, _unit_mean
+
+    rng = np.random.default_rng(3)
+    normals = rng.normal(size=(50, 3))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    normals[7] = -normals[8]  # with 8 and a zero vector the mean vanishes
+    normals[9] = 0.0
+    samples = rng.integers(0, 50, size=(200, 3))
+    samples[0] = [7, 8, 9]
+    fallback = rng.normal(size=(200, 3))
+    got = _sample_normals(normals, samples, fallback)
+    np.testing.assert_array_equal(got, _unit_mean(normals[samples], fallback))
+    np.testing.assert_array_equal(got[0], fallback[0])

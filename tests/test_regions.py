@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy import ndimage
 
 from monoplane.datamodel import Frame, Reconstruction, intrinsics_matrix, pixel_rays
 from monoplane.errors import InvalidInput
@@ -300,3 +301,56 @@ def test_clean_regions_merge_and_absorb_on_one_plane_cut_by_an_occluder():
     expected[18:22, :30] = 0
     np.testing.assert_array_equal(out.labels, expected)
     np.testing.assert_allclose(out.params, planes, atol=1e-5)
+
+
+def _reference_moments(points, valid, labels, num):
+    """The numpy formulation the compiled pass replaces (bincounts over the masked pixels)."""
+    mask = valid & (labels > 0)
+    lab, pts = labels[mask], points[mask]
+    centre = pts.mean(axis=0)
+    pts = pts - centre
+    count = np.bincount(lab, minlength=num + 1)[1:num + 1]
+    total = np.stack([np.bincount(lab, pts[:, k], num + 1)[1:num + 1] for k in range(3)], 1)
+    outer = np.empty((num, 3, 3))
+    for i in range(3):
+        for j in range(3):
+            outer[:, i, j] = np.bincount(lab, pts[:, i] * pts[:, j], num + 1)[1:num + 1]
+    return count, total, outer, centre
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_region_moments_match_the_bincount_reference(seed):
+    from monoplane.regions import RegionMoments
+
+    rng = np.random.default_rng(seed)
+    labels = rng.integers(0, 7, size=(30, 40))
+    valid = rng.random((30, 40)) > 0.2
+    points = rng.normal(size=(30, 40, 3)) * 3.0 + [0.0, 0.0, 5.0]
+    got = RegionMoments.of(points, valid, labels, 5)  # labels 6 are beyond num: ignored
+    for a, b in zip((got.count, got.total, got.outer, got.centre),
+                    _reference_moments(points, valid, labels, 5), strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
+def _reference_adjacency(lab, connectivity):
+    h, w = lab.shape
+    offsets = [(0, 1), (1, 0)] + ([(1, 1), (1, -1)] if connectivity == 8 else [])
+    pairs = set()
+    for y in range(h):
+        for x in range(w):
+            for dy, dx in offsets:
+                yy, xx = y + dy, x + dx
+                if 0 <= yy < h and 0 <= xx < w:
+                    a, b = lab[y, x], lab[yy, xx]
+                    if a > 0 and b > 0 and a != b:
+                        pairs.add((min(a, b), max(a, b)))
+    return np.array(sorted(pairs), dtype=np.int64).reshape(-1, 2)
+
+
+@pytest.mark.parametrize("connectivity", [4, 8])
+@pytest.mark.parametrize("seed", range(3))
+def test_region_adjacency_matches_a_pixel_walk(seed, connectivity):
+    rng = np.random.default_rng(seed)
+    lab = ndimage.zoom(rng.integers(0, 9, size=(6, 8)), 4, order=0)[:21, :29]
+    np.testing.assert_array_equal(region_adjacency(lab, connectivity),
+                                  _reference_adjacency(lab, connectivity))

@@ -92,9 +92,9 @@ class DenseCrfRefiner(Refiner):
         w_normal: float = param(1.0, "weight of the normal kernel (0 disables)")
         confidence: float = param(
             0.55, "unary: probability of the RANSAC label, rest spread evenly over the others")
-        iterations: int = param(3, "mean-field iterations (0 skips the CRF, keeps the clean-up)")
+        iterations: int = param(2, "mean-field iterations (0 skips the CRF, keeps the clean-up)")
         max_pixels: int = param(
-            REFERENCE_AREA // 4,
+            REFERENCE_AREA // 8,
             "above this many pixels mean field runs on a coarser block grid, edges are decided "
             "at full resolution (0: never)")
         min_area: int = param(
