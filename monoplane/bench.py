@@ -14,16 +14,19 @@ Time
 
 Baselines
     Every registered baseline (``monoplane_register_baselines``: the built-in one and those of
-    installed plugins) runs on the same frames in the same process, after the preset. ``call``
-    is the baseline's own call alone (``timings["baseline.call"]``, without converting the
-    cloud into the library's data structure), ``total`` the whole baseline call.
-    The ratio is the preset's median ``total`` over the baseline's median ``call``.
+    installed plugins) runs on the same frames in the same process. ``call`` is the baseline's
+    own call alone (``timings["baseline.call"]``, without converting the cloud into the
+    library's data structure), ``total`` the whole baseline call. The ratio is the preset's
+    median ``total`` over the baseline's median ``call``. Timed runs are interleaved: each
+    frame's preset run is followed at once by the baselines' runs on that frame, so a machine
+    whose speed drifts over the minutes of a run (a shared virtual machine's does, by 20-30 %)
+    slows both sides of the ratio alike.
 
 Memory
     Each size runs in a fresh child process, so that its peak resident set size
-    (``ru_maxrss``, read right after the preset's runs and before any baseline runs) is that
-    size's own: imports, the frames and the preset's peak. One extra untimed run traces
-    allocations with :mod:`tracemalloc` and listens to the ``monoplane_stage_finished`` hook:
+    (``ru_maxrss``, read after one untimed preset run on every frame and before any baseline
+    runs) is that size's own: imports, the frames and the preset's peak. One extra untimed run
+    traces allocations with :mod:`tracemalloc` and listens to the ``monoplane_stage_finished`` hook:
     a stage's ``MiB`` is the peak of traced memory while it ran, above what was allocated when
     it started. tracemalloc sees Python and numpy allocations, not memory that C++ libraries
     (Open3D, the max-flow solver) allocate for themselves; the RSS covers those.
@@ -290,9 +293,15 @@ def _bench_size(preset: str, overrides: list[str], size: tuple[int, int], seed: 
     finally:
         tracemalloc.stop()
     peaks = {**tracker.peaks, "total": total_peak}
+    for frame in views[1:]:  # every frame once before the RSS is read
+        pipe.run(frame)
+    rss = _max_rss_mib()  # before any baseline runs: the preset's own peak
+    fns = [get_baseline(name, pm) for name in baselines]
     runs: list[dict[str, float]] = []
     planes = []
-    for frame in views:
+    calls: list[list[float]] = [[] for _ in baselines]
+    totals: list[list[float]] = [[] for _ in baselines]
+    for i, frame in enumerate(views):
         for _ in range(repeat):
             start = time.perf_counter()
             rec = pipe.run(frame)
@@ -300,21 +309,16 @@ def _bench_size(preset: str, overrides: list[str], size: tuple[int, int], seed: 
             timings.setdefault("total", time.perf_counter() - start)
             runs.append(timings)
             planes.append(rec.num_planes)
-    rss = _max_rss_mib()  # before any baseline runs: the preset's own peak
+            for b, fn in enumerate(fns):  # right after, on the same frame (see "Baselines")
+                start = time.perf_counter()
+                base = fn(frame, seed=seed + i)
+                totals[b].append(time.perf_counter() - start)
+                calls[b].append(base.timings.get(CALL_TIMING, totals[b][-1]))
     keys = _ordered([k for r in runs for k in r])
     stages = [StageBench(k, float(np.median([r.get(k, 0.0) for r in runs])),
                          peaks[k] / 2**20 if k in peaks else None) for k in keys]
-    timed = []
-    for name in baselines:
-        fn = get_baseline(name, pm)
-        calls, totals = [], []
-        for i, frame in enumerate(views):
-            for _ in range(repeat):
-                start = time.perf_counter()
-                rec = fn(frame, seed=seed + i)
-                totals.append(time.perf_counter() - start)
-                calls.append(rec.timings.get(CALL_TIMING, totals[-1]))
-        timed.append(BaselineBench(name, float(np.median(calls)), float(np.median(totals))))
+    timed = [BaselineBench(name, float(np.median(c)), float(np.median(t)))
+             for name, c, t in zip(baselines, calls, totals, strict=True)]
     return BenchResult(preset, width, height, repeat, stages, float(np.mean(planes)), rss,
                        frames, first_call, timed)
 

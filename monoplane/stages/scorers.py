@@ -19,11 +19,9 @@ import numpy as np
 
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.hookspecs import hookimpl
-from monoplane.jit import chunks, kernel, run_threaded
+from monoplane.jit import kernel
 from monoplane.stages.base import RansacParams, Scorer, Stage
 
-#: (hypothesis, point) pairs per thread below which a batch is scored on one thread.
-THREADED_PAIRS = 100_000
 #: Cost kinds of :func:`_costs`.
 _INLIERS, _MSAC, _MSAC_NORMAL = 0, 1, 2
 
@@ -36,18 +34,10 @@ class _KernelScorer(Scorer):
     def score(self, cloud: PlaneCloud, pool: np.ndarray, planes: np.ndarray,
               model_normals: np.ndarray, params: RansacParams) -> np.ndarray:
         """See :meth:`monoplane.stages.base.Scorer.score`; (H,) float64 costs."""
-        pool = np.ascontiguousarray(pool, dtype=np.int64)
-        planes = np.ascontiguousarray(planes, dtype=np.float64)
-        model_normals = np.ascontiguousarray(model_normals, dtype=np.float64)
-        # A batch of hypotheses is split over threads when it is large enough to pay for them;
-        # each hypothesis' cost is computed alone, so the split changes no value.
-        per_thread = max(1, THREADED_PAIRS // max(pool.size, 1))
-        parts = run_threaded([
-            lambda a=a, b=b: _costs(cloud.points, cloud.normals, pool, planes[a:b],
-                                    model_normals[a:b], float(params.epsilon),
-                                    float(params.epsilon_n), self.cost_kind)
-            for a, b in chunks(planes.shape[0], per_thread)])
-        return np.concatenate(parts) if len(parts) > 1 else parts[0]
+        return _costs(cloud.points, cloud.normals, np.ascontiguousarray(pool, dtype=np.int64),
+                      np.ascontiguousarray(planes, dtype=np.float64),
+                      np.ascontiguousarray(model_normals, dtype=np.float64),
+                      float(params.epsilon), float(params.epsilon_n), self.cost_kind)
 
 
 class InlierCountScorer(_KernelScorer):

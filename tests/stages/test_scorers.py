@@ -63,13 +63,3 @@ def test_normal_term_penalises_a_wrong_model_normal(setup):
     plain = MsacScorer().score(cloud, pool, planes[:1], mn[:1], params)
     assert bad[0] > good[0] >= plain[0]
 
-
-@pytest.mark.parametrize("scorer", [MsacScorer(), MsacNormalScorer()])
-def test_threaded_batches_give_the_single_thread_costs(setup, scorer, monkeypatch):
-    cloud, pool, planes, mn = setup
-    params = RansacParams()
-    monkeypatch.setenv("OMP_NUM_THREADS", "1")
-    one = scorer.score(cloud, pool, planes, mn, params)
-    monkeypatch.setenv("OMP_NUM_THREADS", "3")
-    monkeypatch.setattr("monoplane.stages.scorers.THREADED_PAIRS", 2000)  # 8 planes a thread
-    np.testing.assert_array_equal(scorer.score(cloud, pool, planes, mn, params), one)
