@@ -24,7 +24,7 @@ from scipy import ndimage
 
 from monoplane import lattice_kernels as lk
 from monoplane.errors import InvalidInput
-from monoplane.jit import run_threaded
+from monoplane.jit import kernel, run_threaded
 
 #: Image area (256 x 192) at which the paper's pixel-valued parameters (θ_s = 10 px, minimum
 #: region 300 px) are stated; other resolutions scale them.
@@ -468,6 +468,46 @@ def _block_mean_probabilities(labels: np.ndarray, block: np.ndarray, num_blocks:
     return total / size[:, None]
 
 
+@kernel
+def _final_labels(fine: np.ndarray, labels: np.ndarray, band: np.ndarray, exact: np.ndarray,
+                  u_own: np.float32, u_other: np.float32, u_uniform: np.float32,
+                  uniform_nonplanar: bool) -> np.ndarray:
+    """(H, W) int32 argmax over labels of ``message - unary`` at full resolution.
+
+    ``fine`` (≥H, ≥W, L) float32 upsampled coarse messages, ``labels`` (H, W) int64 observed
+    labels, ``band`` (K,) int64 flat pixels whose messages are ``exact`` (K, L) float32
+    instead; the unary of a pixel is ``u_own`` at its label and ``u_other`` elsewhere, or
+    ``u_uniform`` everywhere for label 0 when ``uniform_nonplanar``. float32 arithmetic and the
+    first maximum, as ``(fine - unary).argmax(axis=1)`` gives.
+    """
+    h, w = labels.shape
+    num = fine.shape[2]
+    out = np.empty((h, w), dtype=np.int32)
+    row = np.full(h * w, -1, dtype=np.int64)
+    for k in range(band.shape[0]):
+        row[band[k]] = k
+    for y in range(h):
+        for x in range(w):
+            lab = labels[y, x]
+            k = row[y * w + x]
+            best = -np.inf
+            arg = 0
+            for label in range(num):
+                if uniform_nonplanar and lab == 0:
+                    u = u_uniform
+                elif label == lab:
+                    u = u_own
+                else:
+                    u = u_other
+                m = exact[k, label] if k >= 0 else fine[y, x, label]
+                e = np.float32(m - u)
+                if e > best:
+                    best = e
+                    arg = label
+            out[y, x] = arg
+    return out
+
+
 def dense_crf(
     labels: np.ndarray,
     num_labels: int,
@@ -515,14 +555,14 @@ def dense_crf(
         raise InvalidInput(f"labels must lie in 0..{num_labels - 1}")
     if num_labels < 2 or params.iterations == 0:
         return lab.astype(np.int32)
-    unary = unary_from_labels(lab, num_labels, params.confidence,
-                              uniform_label=0 if params.uniform_nonplanar else None)
     h, w = lab.shape
     step = 1
     if params.max_pixels:
         while -(-h // step) * -(-w // step) > params.max_pixels:
             step += 1
     if step == 1:
+        unary = unary_from_labels(lab, num_labels, params.confidence,
+                                  uniform_label=0 if params.uniform_nonplanar else None)
         kernels = crf_features(lab.shape, params, rgb=rgb, depth=depth, normals=normals)
         q = mean_field(unary, kernels, params.iterations)
         return q.argmax(axis=1).astype(np.int32).reshape(lab.shape)
@@ -553,10 +593,11 @@ def dense_crf(
                           np.zeros(q.shape, np.float32))
     # cv2 maps fine pixel u to coarse position (u + 0.5) / step - 0.5.
     fine = cv2.resize(coarse_pairwise.reshape(hs, ws, num_labels), (ws * step, hs * step),
-                      interpolation=cv2.INTER_LINEAR).reshape(hs * step, ws * step, -1)[:h, :w]
-    energy = fine.reshape(-1, num_labels) - unary
-    if band.size:
-        exact = sum((by_kernel[i][1] for i in range(len(kernels))),
-                    np.zeros((band.size, num_labels), np.float32))
-        energy[band] = exact - unary[band]
-    return energy.argmax(axis=1).astype(np.int32).reshape(lab.shape)
+                      interpolation=cv2.INTER_LINEAR).reshape(hs * step, ws * step, -1)
+    exact = sum((by_kernel[i][1] for i in range(len(kernels))),
+                np.zeros((band.size, num_labels), np.float32))
+    # The unary takes three values per label map (own label, other label, uniform): the
+    # final argmax reads them instead of an (H W, L) unary array.
+    values = unary_from_labels(np.array([1, 0]), num_labels, params.confidence, uniform_label=0)
+    return _final_labels(fine, lab.astype(np.int64), band, exact, values[0, 1], values[0, 0],
+                         values[1, 0], bool(params.uniform_nonplanar))

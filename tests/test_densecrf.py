@@ -393,3 +393,22 @@ def test_block_means_from_counts_equal_the_per_pixel_sums(uniform, num_labels, s
     ref /= np.bincount(block, minlength=hs * ws)[:, None]
     got = _block_mean_probabilities(lab.ravel(), block, hs * ws, num_labels, p)
     np.testing.assert_array_equal(got, ref)
+
+
+@pytest.mark.parametrize("uniform", [True, False])
+def test_final_labels_kernel_equals_the_numpy_argmax(uniform):
+    from monoplane.densecrf import _final_labels
+
+    rng = np.random.default_rng(11)
+    h, w, num = 23, 31, 6
+    lab = rng.integers(0, num, size=(h, w))
+    fine = rng.normal(size=(h + 2, w + 3, num)).astype(np.float32)  # resize may overhang
+    band = np.sort(rng.choice(h * w, 200, replace=False))
+    exact = rng.normal(size=(200, num)).astype(np.float32)
+    unary = unary_from_labels(lab, num, 0.55, uniform_label=0 if uniform else None)
+    energy = fine[:h, :w].reshape(-1, num) - unary
+    energy[band] = exact - unary[band]
+    values = unary_from_labels(np.array([1, 0]), num, 0.55, uniform_label=0)
+    got = _final_labels(fine, lab.astype(np.int64), band, exact, values[0, 1], values[0, 0],
+                        values[1, 0], uniform)
+    np.testing.assert_array_equal(got, energy.argmax(axis=1).reshape(h, w))
