@@ -11,7 +11,6 @@ best focal length is a closed-form least-squares ratio, so only the shift is sea
 from __future__ import annotations
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from monoplane.errors import InvalidInput
 
@@ -81,6 +80,10 @@ def recover_focal_shift(points: np.ndarray, valid: np.ndarray,
         return (f * p - uv).ravel()
 
     start = max(0.0, 1e-3 * spread - float(z.min()))
+    # Imported here: scipy.optimize costs about 0.3 s to import, which every command that
+    # merely imports the cue providers (all of them, through the pipeline) would pay.
+    from scipy.optimize import least_squares
+
     shift = float(least_squares(residual, x0=[start], method="lm").x[0])
     f = best_focal(projected(shift)) if focal is None else float(focal)
     if not np.isfinite(f) or f <= 0:
