@@ -116,3 +116,16 @@ def test_parse_size(text: str, expected: tuple[int, int]) -> None:
 def test_parse_size_rejects(text: str) -> None:
     with pytest.raises(InvalidInput):
         parse_size(text)
+
+
+def test_each_method_warms_up_once_untimed_before_the_timed_runs() -> None:
+    calls: list[int] = []
+
+    def counting(frame: Frame, seed: int) -> Reconstruction:
+        calls.append(seed)
+        return oracle(frame, seed)
+
+    res = evaluate([Method("counting", "baseline", counting)], n=2, level="mild", seed=7,
+                   size=SIZE, progress=False)
+    assert calls == [7, 7, 8]  # the warm-up on the first scene, then one timed run per scene
+    assert len(res.methods[0].frames) == 2
