@@ -20,7 +20,7 @@ nearest 3D sample is non-planar, else the closest plane among its few nearest sa
 planes. The 3D candidates are the sample and its neighbours in the kNN graph (the pixel is
 next to the sample, so its nearest samples are the sample's); only pixels farther in 3D from
 their image-nearest sample than a radius tied to the sampling density (across a depth jump)
-query the KD-tree, and are non-planar when no sample lies within the radius.
+query the point index, and are non-planar when no sample lies within the radius.
 Neighbour transfer keeps region extents where the graph cut put them (a plain per-plane
 distance test would re-open holes that the proximity terms had closed), choosing by plane
 distance keeps creases sharp, and the 3D radius stops labels leaking across depth jumps.
@@ -264,7 +264,7 @@ class PlaneCloud:
         full, gap = _propagate(self.all_points, near, self.points, labels, p, graph.indptr,
                                graph.indices, radius**2, float(tolerance), k)
         # Pixels farther than the radius from their image-nearest sample lie across a depth
-        # jump from it: their nearest samples in 3D come from the KD-tree.
+        # jump from it: their nearest samples in 3D come from the point index.
         gap = np.flatnonzero(gap)
         if gap.size:
             d_k, n_k = self.tree.query(self.all_points[gap], k=k, distance_upper_bound=radius)
@@ -389,7 +389,7 @@ def _normalised_points(depth: np.ndarray, k_inv: np.ndarray, pixels: np.ndarray
 
 def _closest_plane(x: np.ndarray, d_k: np.ndarray, n_k: np.ndarray, labels: np.ndarray,
                    planes: np.ndarray) -> np.ndarray:
-    """Labels of pixels from their k nearest samples (KD-tree query with an upper bound).
+    """Labels of pixels from their k nearest samples (point-index query with an upper bound).
 
     ``x`` (U, 3) pixel points, ``d_k``/``n_k`` (U, k) distances (inf beyond the bound) and
     sample indices, ``labels`` (N,), ``planes`` (P, 4). Non-planar if the nearest sample is

@@ -158,7 +158,7 @@ class NeighbourGraph:
 def _knn_edges(nbr: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Unique undirected edges and symmetric CSR adjacency of kNN lists.
 
-    ``nbr`` is the (N, K) int64 neighbour table of a KD-tree query (a row may contain the point
+    ``nbr`` is the (N, K) int64 neighbour table of a kNN query (a row may contain the point
     itself, anywhere among exact duplicates). Returns the (E, 2) edges ``i < j`` sorted by
     ``(i, j)`` without self-loops or repeats, and ``indptr`` (N + 1,), ``indices`` (2E,) with
     every node's neighbours in ascending order. A bucket per smaller end, sorted in place,
