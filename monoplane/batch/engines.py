@@ -15,7 +15,14 @@ from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
 
-from monoplane.batch.frame import BatchJob, FrameResult, one_line, pipeline_for, process_frame
+from monoplane.batch.frame import (
+    BatchJob,
+    FrameResult,
+    has_pipeline,
+    one_line,
+    pipeline_for,
+    process_frame,
+)
 from monoplane.batch.pool import WorkerPool
 from monoplane.batch.specs import FrameSpec
 from monoplane.errors import InvalidInput, MonoplaneError
@@ -52,9 +59,12 @@ def run_local(job: BatchJob, specs: Sequence[FrameSpec], workers: int
 
     try:
         # The batch driver only reads files and resolves the config, so its workers may fork
-        # from it and skip re-importing everything (see monoplane.batch.pool).
+        # from it and skip re-importing everything (see monoplane.batch.pool). Not when this
+        # process has built a pipeline itself (Python API use): its ONNX sessions' threads
+        # would not exist in the children.
+        method = "spawn" if has_pipeline() else fork_if_available()
         with WorkerPool(min(workers, len(specs)), _init_local_worker, (job,),
-                        start_method=fork_if_available()) as pool:
+                        start_method=method) as pool:
             for outcome in pool.imap_unordered(_run_local_frame, specs):
                 if outcome.error is not None:
                     yield FrameResult(specs[outcome.index].name, "failed",

@@ -97,6 +97,12 @@ class _Cache:
 _CACHE = _Cache()  # one pipeline per process: the last config asked for
 
 
+def has_pipeline() -> bool:
+    """Whether this process has built a pipeline (and any ONNX session) with
+    :func:`pipeline_for`."""
+    return _CACHE.pipeline is not None
+
+
 def pipeline_for(config: dict[str, Any]):  # -> monoplane.Pipeline
     """This process's pipeline for ``config``, built (with every stage) on first use."""
     from monoplane.pipeline import Pipeline

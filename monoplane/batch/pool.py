@@ -121,9 +121,17 @@ def _die_with_parent() -> None:
 
 
 def fork_if_available() -> str:
-    """``"fork"`` where the OS has it with the semantics the pool needs (Linux), else
-    ``"spawn"``. Only for callers that have run no threaded native code (see the module note)."""
-    return "fork" if sys.platform.startswith("linux") else "spawn"
+    """``"fork"`` on Linux from a process running no other Python thread, else ``"spawn"``.
+
+    Only for callers that have run no threaded native code (see the module note). A live
+    Python thread (monoplane's own kernel thread pool, a progress monitor, the caller's
+    threads) means the process has been doing threaded work, so the safe method is chosen.
+    """
+    import threading
+
+    if not sys.platform.startswith("linux") or threading.active_count() > 1:
+        return "spawn"
+    return "fork"
 
 
 def _limit_native_threads(threads: int) -> None:

@@ -74,3 +74,17 @@ def test_item_errors_and_dead_workers_are_reported_per_item(start_method):
 def test_failing_initializer_is_one_clear_error():
     with pytest.raises(WorkerInitError, match="no model file"):
         map_ordered(add_offset, [1], workers=1, initializer=failing_setup)
+
+
+def test_fork_is_chosen_only_without_other_threads():
+    import threading
+
+    assert fork_if_available() in ("fork", "spawn")
+    stop = threading.Event()
+    helper = threading.Thread(target=stop.wait)
+    helper.start()
+    try:
+        assert fork_if_available() == "spawn"  # another thread is alive: forking is not safe
+    finally:
+        stop.set()
+        helper.join()
