@@ -22,4 +22,4 @@ for plugin in plugins/*/; do
     "$PYTHON" -m pip install --quiet -e "$plugin"
   fi
 done
-"$PYTHON" -c "import monoplane, open3d, pycolmap, onnxruntime, maxflow; print('monoplane', monoplane.__version__, 'ready')"
+"$PYTHON" -c "import monoplane, open3d, pycolmap, onnxruntime; print('monoplane', monoplane.__version__, 'ready')"

@@ -15,7 +15,8 @@ The energy of a labelling L of M points with a neighbourhood graph (paper §III-
   0.5 + k_p + k_c + k_n (paper eqs. kp, kc, kn).
 
 Each edge table is reduced to unaries plus one directed edge (Kolmogorov & Zabih 2004) and the
-energy is minimised exactly with PyMaxflow. Nothing here knows about stages or frames.
+energy is minimised exactly by max-flow (:mod:`monoplane.mincut`). Nothing here knows about
+stages or frames.
 
 Two forms of the same minimisation live here. :class:`BinaryEnergy` (built by
 :func:`gc_ransac_energy`, solved by :func:`minimize`) holds explicit (E, 2, 2) edge tables: the
@@ -29,11 +30,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import maxflow
 import numpy as np
 
 from monoplane.errors import InvalidInput
 from monoplane.jit import chunks, kernel, run_threaded
+from monoplane.mincut import min_cut
 
 #: Edges per thread below which proximity weights are computed on one thread.
 THREADED_EDGES = 20_000
@@ -140,6 +141,9 @@ def _data_costs(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, plane
     m = pool.shape[0]
     f0 = np.zeros(m)
     data1 = np.empty(m)
+    # arccos only where the angle can reach ε_n: above this cosine it is surely smaller (the
+    # margin is far wider than arccos's rounding), so the result is that of testing every point.
+    cos_skip = np.cos(epsilon_n) + 1e-9
     for i in range(m):
         p = pool[i]
         phi = (plane[0] * points[p, 0] + plane[1] * points[p, 1] + plane[2] * points[p, 2]
@@ -153,9 +157,10 @@ def _data_costs(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, plane
         if use_normal:
             cos = (model_normal[0] * normals[p, 0] + model_normal[1] * normals[p, 1]
                    + model_normal[2] * normals[p, 2])
-            rho = np.arccos(min(max(cos, -1.0), 1.0))
-            if rho >= epsilon_n:
-                data1[i] += np.exp(rho / epsilon_n - 1.0)
+            if cos < cos_skip:
+                rho = np.arccos(min(max(cos, -1.0), 1.0))
+                if rho >= epsilon_n:
+                    data1[i] += np.exp(rho / epsilon_n - 1.0)
     return f0, data1
 
 
@@ -435,14 +440,9 @@ def minimize(unary: np.ndarray, edges: np.ndarray, tables: np.ndarray) -> np.nda
         cap = np.maximum(cap, 0.0)
         slope = slope + np.bincount(edges[:, 0], weights=c - a, minlength=m)
         slope = slope + np.bincount(edges[:, 1], weights=d - c, minlength=m)
-    g = maxflow.Graph[float](m, max(int(edges.shape[0]), 1))
-    nodes = g.add_nodes(m)
-    if edges.shape[0]:
-        g.add_edges(edges[:, 0], edges[:, 1], cap, np.zeros_like(cap))
     # A positive slope makes label 1 (sink side) dearer: capacity on the source edge.
-    g.add_grid_tedges(nodes, np.maximum(slope, 0.0), np.maximum(-slope, 0.0))
-    g.maxflow()
-    return np.asarray(g.get_grid_segments(nodes), dtype=bool)
+    _, sink_side = min_cut(m, edges[:, 0], edges[:, 1], cap, np.zeros_like(cap), slope)
+    return sink_side
 
 
 def minimize_gc_ransac(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray,
@@ -504,14 +504,9 @@ def minimize_gc_ransac(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray,
                            "minimise this energy")
     labels = np.zeros(f0.shape[0], dtype=bool)
     if nodes.size:
-        g = maxflow.Graph[float](nodes.size, max(src.size, 1))
-        ids = g.add_nodes(nodes.size)
-        if src.size:
-            g.add_edges(src, dst, cap, np.zeros_like(cap))
         # A positive slope makes label 1 (sink side) dearer: capacity on the source edge.
-        g.add_grid_tedges(ids, np.maximum(slope, 0.0), np.maximum(-slope, 0.0))
-        g.maxflow()
-        labels[nodes] = g.get_grid_segments(ids)
+        labels[nodes] = min_cut(nodes.size, src, dst, cap, np.zeros_like(cap), slope,
+                                validate=False)[1]
     return labels, float(_gc_ransac_energy(f0, data1, edges, cut, lam, ls, labels))
 
 

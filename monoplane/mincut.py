@@ -1,0 +1,350 @@
+"""Exact s-t minimum cut of a sparse graph: the Boykov-Kolmogorov max-flow, compiled.
+
+The graph-cut labelers solve one binary energy per plane hypothesis, on graphs of a few hundred
+to about ten thousand nodes. Building such a graph through a Python binding of a C++ solver
+costs more than solving it: every edge crosses the binding one call at a time (about 40 ns an
+edge, 6 ms of a 256×192 frame against 7 ms of solving). Here the graph arrives as arrays and
+is solved in one compiled call.
+
+Algorithm: Boykov and Kolmogorov, "An Experimental Comparison of Min-Cut/Max-Flow Algorithms
+for Energy Minimization in Vision" (PAMI 2004), in the form of Kolmogorov's reference
+implementation (maxflow 3.0x, which PyMaxflow wraps): two search trees grown from the
+terminals in first-in first-out order, augmentation along the path where they meet, adoption
+of orphans with the distance and timestamp heuristics. Arcs are visited in the order that
+implementation stores them (each node's arcs newest first) and every step is taken in the same
+order, so the flow, the residual capacities and hence the returned cut are bit for bit those
+of PyMaxflow's ``Graph[float]`` for the same edges added in the same order; the tests check
+this on random graphs.
+
+Which minimum cut: a node is on the sink side iff it belongs to the sink search tree when the
+search ends, i.e. iff the sink is reachable from it in the residual graph. Among all minimum
+cuts this puts the fewest nodes on the sink side.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from monoplane.errors import InvalidInput
+from monoplane.jit import kernel
+
+#: Values of ``parent`` for nodes without a parent arc.
+_FREE, _TERMINAL, _ORPHAN = -1, -2, -3
+#: Distance of a node whose origin is not a terminal.
+_INFINITE_D = 2**31 - 1
+
+
+def min_cut(num_nodes: int, tails: np.ndarray, heads: np.ndarray, caps: np.ndarray,
+            rev_caps: np.ndarray, terminal: np.ndarray, validate: bool = True
+            ) -> tuple[float, np.ndarray]:
+    """Maximum flow and a minimum cut of a graph with terminal edges.
+
+    Parameters
+    ----------
+    num_nodes : int
+        Number N of non-terminal nodes.
+    tails, heads : numpy.ndarray
+        (E,) int node indices in [0, N) of each edge's ends.
+    caps, rev_caps : numpy.ndarray
+        (E,) non-negative float capacities of each edge from tail to head and back.
+    terminal : numpy.ndarray
+        (N,) float terminal capacity of each node: ``c(source → i) - c(i → sink)``; a
+        positive value links the node to the source, a negative one to the sink. (A node with
+        both terminal edges contributes ``min`` of the two to the flow and only their
+        difference to the cut; add that constant yourself.)
+    validate : bool
+        Check ranges and capacities (callers that build the graph themselves, such as the
+        graph-cut labelers on every hypothesis, skip the checks).
+
+    Returns
+    -------
+    flow : float
+        Value of the maximum flow (equal to the capacity of the minimum cut).
+    sink_side : numpy.ndarray
+        (N,) bool, True for the nodes on the sink side of the cut.
+
+    Raises
+    ------
+    InvalidInput
+        If shapes disagree, an index is out of range or a capacity is negative or not finite.
+    """
+    tails = np.ascontiguousarray(tails, dtype=np.int64).ravel()
+    heads = np.ascontiguousarray(heads, dtype=np.int64).ravel()
+    caps = np.ascontiguousarray(caps, dtype=np.float64).ravel()
+    rev_caps = np.ascontiguousarray(rev_caps, dtype=np.float64).ravel()
+    terminal = np.ascontiguousarray(terminal, dtype=np.float64).ravel()
+    n_edges = tails.shape[0]
+    if not validate:
+        flow, sink_side = _bk_min_cut(int(num_nodes), tails, heads, caps, rev_caps, terminal)
+        return float(flow), sink_side
+    if heads.shape[0] != n_edges or caps.shape[0] != n_edges or rev_caps.shape[0] != n_edges:
+        raise InvalidInput(f"min_cut: tails, heads, caps and rev_caps must have one length, got "
+                           f"{tails.shape[0]}, {heads.shape[0]}, {caps.shape[0]}, "
+                           f"{rev_caps.shape[0]}")
+    if terminal.shape[0] != num_nodes:
+        raise InvalidInput(f"min_cut: terminal has {terminal.shape[0]} entries for "
+                           f"{num_nodes} nodes")
+    if n_edges and (min(tails.min(), heads.min()) < 0
+                    or max(tails.max(), heads.max()) >= num_nodes):
+        raise InvalidInput(f"min_cut: edge ends must lie in [0, {num_nodes})")
+    if not (np.isfinite(terminal).all() and np.isfinite(caps).all()
+            and np.isfinite(rev_caps).all()):
+        raise InvalidInput("min_cut: capacities must be finite")
+    if n_edges and min(caps.min(), rev_caps.min()) < 0:
+        raise InvalidInput("min_cut: edge capacities must be non-negative")
+    flow, sink_side = _bk_min_cut(int(num_nodes), tails, heads, caps, rev_caps, terminal)
+    return float(flow), sink_side
+
+
+@kernel
+def _bk_min_cut(n: int, tails: np.ndarray, heads: np.ndarray, caps: np.ndarray,
+                rev_caps: np.ndarray, terminal: np.ndarray) -> tuple[float, np.ndarray]:
+    """:func:`min_cut` on validated int64 / float64 arrays.
+
+    Arcs are numbered by their slot in the per-node lists (node i's arcs are
+    ``first[i]:first[i + 1]``), so a node's arcs are read from contiguous memory; ``sister[a]``
+    is the opposite arc. ``parent[i]`` is the arc from i towards its parent in its search
+    tree, or ``_FREE``, ``_TERMINAL`` or ``_ORPHAN``.
+    """
+    m = tails.shape[0]
+    # Each node's arcs, newest first (the order the reference implementation visits them).
+    first = np.zeros(n + 1, dtype=np.int64)
+    for e in range(m):
+        first[tails[e] + 1] += 1
+        first[heads[e] + 1] += 1
+    for i in range(n):
+        first[i + 1] += first[i]
+    fill = first[1:].copy()
+    sister = np.empty(2 * m, dtype=np.int32)
+    head = np.empty(2 * m, dtype=np.int32)
+    rcap = np.empty(2 * m)
+    for e in range(m):
+        u, v = tails[e], heads[e]
+        fill[u] -= 1
+        a = fill[u]
+        fill[v] -= 1
+        b = fill[v]
+        head[a], rcap[a], sister[a] = v, caps[e], b
+        head[b], rcap[b], sister[b] = u, rev_caps[e], a
+    tr = terminal.copy()
+    parent = np.full(n, _FREE, dtype=np.int32)
+    is_sink = np.zeros(n, dtype=np.bool_)
+    ts = np.zeros(n, dtype=np.int64)
+    dist = np.zeros(n, dtype=np.int32)
+    # Active nodes: one FIFO ring (the reference's two queues pop in the same order);
+    # ``flagged`` marks queued nodes and the current node.
+    size = n + 1  # ring buffers: at most n entries at a time, empty when head == tail
+    queue = np.empty(size, dtype=np.int64)
+    q_head = 0
+    q_tail = 0
+    flagged = np.zeros(n, dtype=np.bool_)
+    # Orphans: those an augmentation creates (taken newest first), each followed by the
+    # orphans its adoption creates (first in, first out).
+    found = np.empty(n, dtype=np.int64)
+    orphans = np.empty(size, dtype=np.int64)
+    clock = 0
+    flow = 0.0
+    for i in range(n):
+        if tr[i] != 0.0:
+            is_sink[i] = tr[i] < 0.0
+            parent[i] = _TERMINAL
+            dist[i] = 1
+            queue[q_tail] = i
+            q_tail += 1
+            flagged[i] = True
+    current = -1
+    while True:
+        i = current
+        if i >= 0:
+            flagged[i] = False
+            if parent[i] == _FREE:
+                i = -1
+        while i < 0 and q_head != q_tail:
+            j = queue[q_head]
+            q_head += 1
+            if q_head == size:
+                q_head = 0
+            flagged[j] = False
+            if parent[j] != _FREE:
+                i = j
+        if i < 0:
+            break
+        # Growth: the first arc to the other tree is the middle of an augmenting path.
+        middle = -1
+        if not is_sink[i]:
+            for a in range(first[i], first[i + 1]):
+                if rcap[a] != 0.0:
+                    j = head[a]
+                    if parent[j] == _FREE:
+                        is_sink[j] = False
+                        parent[j] = sister[a]
+                        ts[j] = ts[i]
+                        dist[j] = dist[i] + 1
+                        if not flagged[j]:
+                            queue[q_tail] = j
+                            q_tail += 1
+                            if q_tail == size:
+                                q_tail = 0
+                            flagged[j] = True
+                    elif is_sink[j]:
+                        middle = a
+                        break
+                    elif ts[j] <= ts[i] and dist[j] > dist[i]:
+                        parent[j] = sister[a]
+                        ts[j] = ts[i]
+                        dist[j] = dist[i] + 1
+        else:
+            for a in range(first[i], first[i + 1]):
+                if rcap[sister[a]] != 0.0:
+                    j = head[a]
+                    if parent[j] == _FREE:
+                        is_sink[j] = True
+                        parent[j] = sister[a]
+                        ts[j] = ts[i]
+                        dist[j] = dist[i] + 1
+                        if not flagged[j]:
+                            queue[q_tail] = j
+                            q_tail += 1
+                            if q_tail == size:
+                                q_tail = 0
+                            flagged[j] = True
+                    elif not is_sink[j]:
+                        middle = sister[a]
+                        break
+                    elif ts[j] <= ts[i] and dist[j] > dist[i]:
+                        parent[j] = sister[a]
+                        ts[j] = ts[i]
+                        dist[j] = dist[i] + 1
+        clock += 1
+        if middle < 0:
+            current = -1
+            continue
+        flagged[i] = True
+        current = i
+        # Augmentation: the bottleneck along source root -> middle arc -> sink root.
+        bottleneck = rcap[middle]
+        j = head[sister[middle]]
+        while parent[j] != _TERMINAL:
+            a = parent[j]
+            if bottleneck > rcap[sister[a]]:
+                bottleneck = rcap[sister[a]]
+            j = head[a]
+        if bottleneck > tr[j]:
+            bottleneck = tr[j]
+        j = head[middle]
+        while parent[j] != _TERMINAL:
+            a = parent[j]
+            if bottleneck > rcap[a]:
+                bottleneck = rcap[a]
+            j = head[a]
+        if bottleneck > -tr[j]:
+            bottleneck = -tr[j]
+        rcap[sister[middle]] += bottleneck
+        rcap[middle] -= bottleneck
+        n_found = 0
+        j = head[sister[middle]]
+        while parent[j] != _TERMINAL:
+            a = parent[j]
+            rcap[a] += bottleneck
+            rcap[sister[a]] -= bottleneck
+            nxt = head[a]
+            if rcap[sister[a]] == 0.0:
+                parent[j] = _ORPHAN
+                found[n_found] = j
+                n_found += 1
+            j = nxt
+        tr[j] -= bottleneck
+        if tr[j] == 0.0:
+            parent[j] = _ORPHAN
+            found[n_found] = j
+            n_found += 1
+        j = head[middle]
+        while parent[j] != _TERMINAL:
+            a = parent[j]
+            rcap[sister[a]] += bottleneck
+            rcap[a] -= bottleneck
+            nxt = head[a]
+            if rcap[a] == 0.0:
+                parent[j] = _ORPHAN
+                found[n_found] = j
+                n_found += 1
+            j = nxt
+        tr[j] += bottleneck
+        if tr[j] == 0.0:
+            parent[j] = _ORPHAN
+            found[n_found] = j
+            n_found += 1
+        flow += bottleneck
+        # Adoption.
+        for f in range(n_found - 1, -1, -1):
+            orphans[0] = found[f]
+            o_head = 0
+            o_tail = 1
+            while o_head != o_tail:
+                o = orphans[o_head]
+                o_head += 1
+                if o_head == size:
+                    o_head = 0
+                sink = is_sink[o]
+                best = -1
+                d_min = _INFINITE_D
+                for a0 in range(first[o], first[o + 1]):
+                    # The residual arc that would carry flow from the candidate parent to o
+                    # (source tree) or from o to it (sink tree).
+                    if rcap[a0 if sink else sister[a0]] == 0.0:
+                        continue
+                    j = head[a0]
+                    if is_sink[j] != sink or parent[j] == _FREE:
+                        continue
+                    d = 0
+                    while True:
+                        if ts[j] == clock:
+                            d += dist[j]
+                            break
+                        a = parent[j]
+                        d += 1
+                        if a == _TERMINAL:
+                            ts[j] = clock
+                            dist[j] = 1
+                            break
+                        if a == _ORPHAN:
+                            d = _INFINITE_D
+                            break
+                        j = head[a]
+                    if d < _INFINITE_D:
+                        if d < d_min:
+                            best = a0
+                            d_min = d
+                        j = head[a0]
+                        while ts[j] != clock:
+                            ts[j] = clock
+                            dist[j] = d
+                            d -= 1
+                            j = head[parent[j]]
+                if best >= 0:
+                    parent[o] = best
+                    ts[o] = clock
+                    dist[o] = d_min + 1
+                    continue
+                parent[o] = _FREE
+                for a0 in range(first[o], first[o + 1]):
+                    j = head[a0]
+                    a = parent[j]
+                    if is_sink[j] != sink or a == _FREE:
+                        continue
+                    if rcap[a0 if sink else sister[a0]] != 0.0 and not flagged[j]:
+                        queue[q_tail] = j
+                        q_tail += 1
+                        if q_tail == size:
+                            q_tail = 0
+                        flagged[j] = True
+                    if a >= 0 and head[a] == o:
+                        parent[j] = _ORPHAN
+                        orphans[o_tail] = j
+                        o_tail += 1
+                        if o_tail == size:
+                            o_tail = 0
+    sink_side = np.zeros(n, dtype=np.bool_)
+    for i in range(n):
+        sink_side[i] = is_sink[i] and parent[i] != _FREE
+    return flow, sink_side

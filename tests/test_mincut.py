@@ -1,0 +1,116 @@
+"""Compiled Boykov-Kolmogorov max-flow: closed forms, brute force and the C++ reference."""
+
+import itertools
+
+import numpy as np
+import pytest
+
+from monoplane.errors import InvalidInput
+from monoplane.mincut import min_cut
+
+
+def cut_capacity(sink_side, tails, heads, caps, rev_caps, terminal):
+    """Capacity of the cut whose sink side is ``sink_side`` (terminal differences only)."""
+    s = np.asarray(sink_side, dtype=bool)
+    total = np.where(s, np.maximum(terminal, 0.0), np.maximum(-terminal, 0.0)).sum()
+    forward = ~s[tails] & s[heads]
+    backward = s[tails] & ~s[heads]
+    return total + caps[forward].sum() + rev_caps[backward].sum()
+
+
+def random_graph(rng, n, m, integer=False):
+    tails, heads = rng.integers(0, n, m), rng.integers(0, n, m)
+    caps = rng.random(m) * (rng.random(m) < 0.8)
+    rev = rng.random(m) * (rng.random(m) < 0.5)
+    terminal = rng.normal(size=n) * (rng.random(n) < 0.7)
+    if integer:
+        caps, rev, terminal = np.round(caps * 4), np.round(rev * 4), np.round(terminal * 3)
+    return tails, heads, caps, rev, terminal
+
+
+def test_four_node_chain_closed_form():
+    # s -> 0 (3), 0 -> 1 (2), 1 -> 2 (5), 2 -> 3 (1), 3 -> t (4) and 1 -> t (1). Two paths,
+    # s-0-1-t and s-0-1-2-3-t, carry one unit each and saturate 0 -> 1: flow 2.
+    tails = np.array([0, 1, 2])
+    heads = np.array([1, 2, 3])
+    caps = np.array([2.0, 5.0, 1.0])
+    terminal = np.array([3.0, -1.0, 0.0, -4.0])
+    flow, sink = min_cut(4, tails, heads, caps, np.zeros(3), terminal)
+    assert flow == 2.0
+    # The sink side is what still reaches t in the residual graph: 3 (3 -> t keeps 3 units).
+    # 2 -> 3 and 1 -> t are saturated, so 2 and 1 do not.
+    assert sink.tolist() == [False, False, False, True]
+    assert cut_capacity(sink, tails, heads, caps, np.zeros(3), terminal) == flow
+
+
+def test_energy_minimum_of_a_two_node_potts_problem():
+    # E = 3 x0 - 2 x1 (unaries) + 4 [x0 != x1], split as a directed edge each way.
+    flow, sink = min_cut(2, np.array([0]), np.array([1]), np.array([4.0]), np.array([4.0]),
+                         np.array([3.0, -2.0]))
+    # Labellings: 00 -> 0, 11 -> 1, 01 -> -2 + 4 = 2, 10 -> 3 + 4 = 7; the minimum 00 has
+    # energy 0 = flow - 2 (the constant taken out by the terminal form is -2).
+    assert sink.tolist() == [False, False]
+    assert flow == 2.0
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_flow_equals_brute_force_min_cut_and_the_cut_is_the_smallest_sink_side(seed):
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 9))
+    graph = random_graph(rng, n, int(rng.integers(0, 3 * n + 1)), integer=seed % 2 == 0)
+    flow, sink = min_cut(n, *graph)
+    values = {}
+    for bits in itertools.product([False, True], repeat=n):
+        values[bits] = cut_capacity(np.array(bits), *graph)
+    best = min(values.values())
+    assert flow == pytest.approx(best, abs=1e-9)
+    assert cut_capacity(sink, *graph) == pytest.approx(best, abs=1e-9)
+    # The returned sink side lies inside every minimum cut's sink side (integer capacities
+    # make the minima exact).
+    if seed % 2 == 0:
+        for bits, value in values.items():
+            if value == best:
+                assert not (sink & ~np.array(bits)).any()
+
+
+def test_bit_identical_to_pymaxflow_on_random_graphs():
+    maxflow = pytest.importorskip("maxflow")
+    rng = np.random.default_rng(7)
+    for trial in range(300):
+        n = int(rng.integers(1, 80))
+        tails, heads, caps, rev, terminal = random_graph(rng, n, int(rng.integers(0, 5 * n)),
+                                                         integer=trial % 3 == 0)
+        g = maxflow.Graph[float](n, max(tails.size, 1))
+        ids = g.add_nodes(n)
+        if tails.size:
+            g.add_edges(tails, heads, caps, rev)
+        g.add_grid_tedges(ids, np.maximum(terminal, 0.0), np.maximum(-terminal, 0.0))
+        expected_flow = g.maxflow()
+        expected = np.asarray(g.get_grid_segments(ids), dtype=bool)
+        flow, sink = min_cut(n, tails, heads, caps, rev, terminal)
+        assert flow == expected_flow
+        np.testing.assert_array_equal(sink, expected)
+
+
+def test_empty_graph_and_isolated_nodes():
+    flow, sink = min_cut(0, np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0))
+    assert flow == 0.0 and sink.shape == (0,)
+    flow, sink = min_cut(3, np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0),
+                         np.array([1.0, 0.0, -2.0]))
+    assert flow == 0.0 and sink.tolist() == [False, False, True]
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"tails": np.array([0, 5])}, r"edge ends must lie in \[0, 3\)"),
+    ({"caps": np.array([1.0, -1.0])}, "non-negative"),
+    ({"terminal": np.array([np.nan, 0.0, 0.0])}, "finite"),
+    ({"terminal": np.zeros(2)}, "2 entries for 3 nodes"),
+    ({"heads": np.array([1])}, "one length"),
+])
+def test_bad_graphs_are_rejected(kwargs, match):
+    args = {"tails": np.array([0, 1]), "heads": np.array([1, 2]), "caps": np.ones(2),
+            "rev_caps": np.zeros(2), "terminal": np.array([1.0, 0.0, -1.0])}
+    args.update(kwargs)
+    with pytest.raises(InvalidInput, match=match):
+        min_cut(3, args["tails"], args["heads"], args["caps"], args["rev_caps"],
+                args["terminal"])
