@@ -20,18 +20,24 @@ from monoplane.jit import kernel
 from monoplane.stages.base import RansacParams, Sampler, Stage, param
 
 
-def _distinct_triplets(m: int, count: int, rng: np.random.Generator) -> np.ndarray:
-    """(count, 3) int64 positions in ``range(m)``, the three of each row distinct (m >= 3)."""
+def _triplets(pool: np.ndarray, count: int, rng: np.random.Generator,
+              normals: np.ndarray | None = None, cos_min: float = -2.0,
+              limit: int | None = None) -> np.ndarray:
+    """``count`` uniform samples of three distinct pool points, optionally normal-checked.
+
+    Returns the (S, 3) int64 point indices of the samples whose three (N, 3) ``normals`` are
+    pairwise within ``cos_min`` (all of them without ``normals``), in draw order, at most
+    ``limit`` of them. Needs at least three pool points.
+    """
+    m = pool.shape[0]
     # Draw without replacement per row by offsetting: a in [0, m), b in [0, m-1), c in [0, m-2),
     # then shift b past a and c past the two others; this is exact and needs no rejection.
     a = rng.integers(0, m, size=count)
     b = rng.integers(0, m - 1, size=count)
     c = rng.integers(0, m - 2, size=count)
-    b = b + (b >= a)
-    lo, hi = np.minimum(a, b), np.maximum(a, b)
-    c = c + (c >= lo)
-    c = c + (c >= hi)
-    return np.stack([a, b, c], axis=1).astype(np.int64)
+    return _kept_triplets(np.ascontiguousarray(pool, dtype=np.int64), a, b, c,
+                          np.zeros((0, 3)) if normals is None else normals, normals is not None,
+                          float(cos_min), count if limit is None else int(limit))
 
 
 class UniformSampler(Sampler):
@@ -44,7 +50,7 @@ class UniformSampler(Sampler):
         """See :meth:`monoplane.stages.base.Sampler.sample`; returns (count, 3) int64."""
         if pool.size < 3 or count <= 0:
             return np.zeros((0, 3), dtype=np.int64)
-        return pool[_distinct_triplets(pool.size, count, rng)]
+        return _triplets(pool, count, rng)
 
 
 @dataclass
@@ -78,9 +84,8 @@ class NormalConsistentSampler(Sampler):
         budget = self.config.max_draw_factor * count
         while n_ok < count and drawn < budget:
             batch = min(2 * count, budget) if drawn == 0 else budget - drawn
-            idx = pool[_distinct_triplets(pool.size, batch, rng)]
+            good = _triplets(pool, batch, rng, cloud.normals, cos_min, count - n_ok)
             drawn += batch
-            good = idx[_consistent(cloud.normals, idx, cos_min)][: count - n_ok]
             accepted.append(good)
             n_ok += good.shape[0]
         return np.concatenate(accepted) if accepted else np.zeros((0, 3), dtype=np.int64)
@@ -129,18 +134,39 @@ class NapsacSampler(Sampler):
 
 
 @kernel
-def _consistent(normals: np.ndarray, idx: np.ndarray, cos_min: float) -> np.ndarray:
-    """(S,) bool: the three (N, 3) ``normals`` of each (S, 3) sample are pairwise within ε_n."""
-    ok = np.empty(idx.shape[0], dtype=np.bool_)
-    for s in range(idx.shape[0]):
-        a, b, c = idx[s, 0], idx[s, 1], idx[s, 2]
-        ab = ac = bc = 0.0
-        for k in range(3):
-            ab += normals[a, k] * normals[b, k]
-            ac += normals[a, k] * normals[c, k]
-            bc += normals[b, k] * normals[c, k]
-        ok[s] = ab >= cos_min and ac >= cos_min and bc >= cos_min
-    return ok
+def _kept_triplets(pool: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray,
+                   normals: np.ndarray, check: bool, cos_min: float, limit: int) -> np.ndarray:
+    """Samples of :func:`_triplets` from the raw (S,) int64 draws ``a``, ``b``, ``c``.
+
+    Positions are made distinct (``b`` shifted past ``a``, ``c`` past both), mapped through
+    ``pool``, and with ``check`` kept only when the three normals' pairwise dot products all
+    reach ``cos_min``; returns the first ``limit`` kept rows, (K, 3) int64.
+    """
+    out = np.empty((min(a.shape[0], max(limit, 0)), 3), dtype=np.int64)
+    kept = 0
+    for s in range(a.shape[0]):
+        if kept == out.shape[0]:
+            break
+        pa, pb, pc = a[s], b[s], c[s]
+        if pb >= pa:
+            pb += 1
+        lo, hi = min(pa, pb), max(pa, pb)
+        if pc >= lo:
+            pc += 1
+        if pc >= hi:
+            pc += 1
+        i, j, k = pool[pa], pool[pb], pool[pc]
+        if check:
+            ij = ik = jk = 0.0
+            for d in range(3):
+                ij += normals[i, d] * normals[j, d]
+                ik += normals[i, d] * normals[k, d]
+                jk += normals[j, d] * normals[k, d]
+            if not (ij >= cos_min and ik >= cos_min and jk >= cos_min):
+                continue
+        out[kept, 0], out[kept, 1], out[kept, 2] = i, j, k
+        kept += 1
+    return out[:kept].copy()
 
 
 @hookimpl

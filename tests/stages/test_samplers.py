@@ -8,7 +8,7 @@ from monoplane.stages.samplers import (
     NapsacSampler,
     NormalConsistentSampler,
     UniformSampler,
-    _consistent,
+    _triplets,
 )
 from monoplane.testing import cloud_from_arrays
 
@@ -84,17 +84,37 @@ def test_too_small_pools_give_no_samples(cloud):
         assert s.shape == (0, 3)
 
 
-def test_normal_consistency_kernel_matches_pairwise_dot_products():
-    # Reference: the three pairwise dot products of each sample's normals, vectorised.
+def reference_triplets(pool, count, rng, normals=None, cos_min=-2.0, limit=None):
+    """numpy form of _triplets: offset draws, pool mapping, pairwise dot products, limit."""
+    m = pool.size
+    a, b, c = (rng.integers(0, m - i, size=count) for i in range(3))
+    b = b + (b >= a)
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    c = c + (c >= lo)
+    c = c + (c >= hi)
+    idx = pool[np.stack([a, b, c], axis=1)]
+    if normals is not None:
+        n = normals[idx]
+        ok = ((n[:, 0] * n[:, 1]).sum(1) >= cos_min) & ((n[:, 0] * n[:, 2]).sum(1) >= cos_min) \
+            & ((n[:, 1] * n[:, 2]).sum(1) >= cos_min)
+        idx = idx[ok]
+    return idx[: count if limit is None else limit]
+
+
+@pytest.mark.parametrize("limit", [None, 0, 37, 5000])
+def test_triplet_kernel_matches_the_numpy_reference(limit):
     rng = np.random.default_rng(4)
     nrm = rng.normal(size=(300, 3))
     nrm[:150] = [0.0, 0.0, -1.0] + 0.1 * rng.normal(size=(150, 3))
     nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
-    idx = rng.integers(0, 300, size=(2000, 3))
-    idx[:500] %= 150  # many consistent samples
-    n = nrm[idx]
+    pool = np.sort(rng.choice(300, 200, replace=False))
     cos_min = np.cos(np.deg2rad(10.0))
-    expected = ((n[:, 0] * n[:, 1]).sum(1) >= cos_min) & ((n[:, 0] * n[:, 2]).sum(1) >= cos_min) \
-        & ((n[:, 1] * n[:, 2]).sum(1) >= cos_min)
-    assert 100 < expected.sum() < 2000
-    np.testing.assert_array_equal(_consistent(nrm, idx, cos_min), expected)
+    for normals in (None, nrm):
+        got = _triplets(pool, 2000, np.random.default_rng(9), normals, cos_min, limit)
+        want = reference_triplets(pool, 2000, np.random.default_rng(9), normals, cos_min, limit)
+        np.testing.assert_array_equal(got, want)
+        assert got.dtype == np.int64
+        assert (got[:, 0] != got[:, 1]).all() and (got[:, 1] != got[:, 2]).all() \
+            and (got[:, 0] != got[:, 2]).all()
+    assert 0 < reference_triplets(pool, 2000, np.random.default_rng(9), nrm, cos_min).shape[0] \
+        < 2000
