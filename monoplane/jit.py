@@ -84,18 +84,19 @@ def thread_budget() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-_POOL: dict[str, Any] = {"key": None, "pool": None}
+_POOLS: dict[str, tuple[Any, ThreadPoolExecutor] | None] = {"work": None, "background": None}
 
 
-def _executor(threads: int) -> ThreadPoolExecutor:
-    # One long-lived pool per process and size: starting threads for every call would cost
-    # more than small calls take. Keyed by pid too, since a forked child has none of the
+def _executor(threads: int, role: str = "work") -> ThreadPoolExecutor:
+    # One long-lived pool per process, role and size: starting threads for every call would
+    # cost more than small calls take. Keyed by pid too, since a forked child has none of the
     # parent's threads.
     key = (os.getpid(), threads)
-    if _POOL["key"] != key:
-        _POOL["key"], _POOL["pool"] = key, ThreadPoolExecutor(threads,
-                                                               thread_name_prefix="monoplane")
-    return _POOL["pool"]
+    entry = _POOLS[role]
+    if entry is None or entry[0] != key:
+        entry = _POOLS[role] = (key, ThreadPoolExecutor(threads,
+                                                         thread_name_prefix=f"monoplane-{role}"))
+    return entry[1]
 
 
 def run_threaded(tasks: Sequence[Callable[[], T]]) -> list[T]:
@@ -116,6 +117,30 @@ def run_threaded(tasks: Sequence[Callable[[], T]]) -> list[T]:
     if threads < 2:
         return [task() for task in tasks]
     return list(_executor(threads).map(lambda task: task(), tasks))
+
+
+def in_background(task: Callable[[], T]) -> Callable[[], T]:
+    """Start ``task`` on a background thread, when the thread budget allows two or more.
+
+    The caller goes on with work that does not need the result, then calls the returned
+    function, which waits for the task and returns its result (or raises its exception). With
+    a budget of one thread the task runs here and now, before this returns.
+
+    Parameters
+    ----------
+    task : callable
+        A zero-argument call; its own :func:`run_threaded` calls run on the worker threads
+        (the background thread is not one of them, so it cannot starve them).
+
+    Returns
+    -------
+    callable
+        Zero-argument function returning ``task()``.
+    """
+    if thread_budget() < 2:
+        result = task()
+        return lambda: result
+    return _executor(1, "background").submit(task).result
 
 
 def chunks(n: int, min_size: int) -> list[tuple[int, int]]:

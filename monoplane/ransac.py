@@ -38,7 +38,7 @@ from monoplane.errors import ConfigError, InvalidInput, StageError
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.geometry.planes import fit_plane, fit_planes_per_label, planes_from_triplets
-from monoplane.jit import kernel
+from monoplane.jit import in_background, kernel
 from monoplane.stages.base import (
     Labeler,
     Labeling,
@@ -215,16 +215,25 @@ class SequentialRansac:
         t = time.perf_counter()
         cloud = PlaneCloud.from_frame(frame, cfg.max_points, rng)
         t_cloud = time.perf_counter() - t
-        t = time.perf_counter()
-        graph = NeighbourGraph.build(cloud.points, cfg.knn, tree=cloud.tree)
-        t_graph = time.perf_counter() - t
+        t_graph = 0.0
 
-        result = self.run_cloud(cloud, graph, rng)
+        def build_graph() -> NeighbourGraph:
+            nonlocal t_graph
+            t = time.perf_counter()
+            graph = NeighbourGraph.build(cloud.points, cfg.knn, tree=cloud.tree)
+            t_graph = time.perf_counter() - t
+            return graph
+
+        # The first plane's hypothesis search needs the cloud only, so the graph is built
+        # meanwhile on another thread (when the thread budget has one); the results are those
+        # of building it first.
+        graph = in_background(build_graph)
+        result = self._run(cloud, graph, rng)
 
         t = time.perf_counter()
         # Pixels within ε/4 of their nearest sample's plane keep its label outright.
         labels = cloud.propagate(result.labels, result.planes, tolerance=0.25 * cfg.epsilon,
-                                 graph=graph)
+                                 graph=graph())
         rec = self._finalize(frame, cloud, labels)
         t_final = time.perf_counter() - t
         rec.timings.update({"ransac.cloud": t_cloud, "ransac.graph": t_graph,
@@ -258,13 +267,19 @@ class SequentialRansac:
             frame in detection order, and ``timings`` in seconds (``ransac.search``,
             ``ransac.label``).
         """
-        cfg = self.config
-        params = cfg.params
         if rng is None:
-            rng = np.random.default_rng(cfg.seed)
+            rng = np.random.default_rng(self.config.seed)
         if graph.num_nodes != cloud.size:
             raise InvalidInput(f"graph has {graph.num_nodes} nodes for a cloud of "
                                f"{cloud.size} points")
+        return self._run(cloud, lambda: graph, rng)
+
+    def _run(self, cloud: PlaneCloud, get_graph: Callable[[], NeighbourGraph],
+             rng: np.random.Generator) -> CloudPlanes:
+        """:meth:`run_cloud` with the graph asked for only when the first plane is labelled
+        (``get_graph`` may wait for it to be built)."""
+        cfg = self.config
+        params = cfg.params
         timings = {"ransac.search": 0.0, "ransac.label": 0.0}
         min_support = max(cfg.min_support_points, math.ceil(cfg.min_support * cloud.size))
         point_labels = np.zeros(cloud.size, dtype=np.int32)
@@ -276,6 +291,7 @@ class SequentialRansac:
             timings["ransac.search"] += time.perf_counter() - t
             if best is None:
                 break
+            graph = get_graph()
             t = time.perf_counter()
             plane, inliers = self._label(cloud, graph, pool, best[0], best[1], params)
             if cfg.split_components and inliers.any():
