@@ -20,7 +20,6 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from scipy import ndimage
 
 from monoplane import lattice_kernels as lk
 from monoplane.errors import InvalidInput
@@ -507,6 +506,18 @@ def _final_labels(fine: np.ndarray, labels: np.ndarray, band: np.ndarray, exact:
             out[y, x] = arg
     return out
 
+def _not_constant_3x3(image: np.ndarray) -> np.ndarray:
+    """(H, W) bool: the 3 x 3 window around each pixel (clipped at the border) holds two
+    different values, i.e. some pixel of it differs from the centre."""
+    padded = np.pad(image, 1, mode="edge")
+    h, w = image.shape
+    out = np.zeros((h, w), dtype=bool)
+    for dv in range(3):
+        for du in range(3):
+            out |= padded[dv:dv + h, du:du + w] != image
+    return out
+
+
 
 def dense_crf(
     labels: np.ndarray,
@@ -581,7 +592,7 @@ def dense_crf(
     # there each pixel gets its messages from the coarse lattices sliced at its own features,
     # so the boundary follows the full-resolution colour, depth and normal edges.
     coarse = q.argmax(axis=1).reshape(hs, ws)
-    edge = ndimage.maximum_filter(coarse, 3) != ndimage.minimum_filter(coarse, 3)
+    edge = _not_constant_3x3(coarse)
     band = np.flatnonzero(edge.ravel()[block])
     fu = (band % w + 0.5) / step - 0.5
     fv = (band // w + 0.5) / step - 0.5

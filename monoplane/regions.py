@@ -26,12 +26,12 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy import ndimage
 from scipy.sparse.csgraph import connected_components
 
 from monoplane.datamodel import Reconstruction
 from monoplane.densecrf import REFERENCE_AREA
 from monoplane.errors import InvalidInput
+from monoplane.geometry.components import label_regions
 from monoplane.jit import kernel
 
 #: The paper's minimum region size, in pixels at 256 x 192 (appendix).
@@ -78,27 +78,7 @@ def split_components(labels: np.ndarray, connectivity: int = 8) -> tuple[np.ndar
     origin : numpy.ndarray
         (P',) int64 original label of each new label (``origin[k - 1]`` for label ``k``).
     """
-    lab = np.asarray(labels)
-    if lab.ndim != 2:
-        raise InvalidInput(f"labels must be (H, W), got {lab.shape}")
-    if connectivity not in (4, 8):
-        raise InvalidInput(f"connectivity must be 4 or 8, got {connectivity}")
-    if lab.size and lab.min() < 0:
-        raise InvalidInput("labels must be >= 0")
-    structure = ndimage.generate_binary_structure(2, 1 if connectivity == 4 else 2)
-    out = np.zeros(lab.shape, dtype=np.int32)
-    origin: list[int] = []
-    # Each label is labelled inside its bounding box only. ndimage numbers components by the
-    # raster position of their first pixel, and raster order inside a box is raster order in
-    # the image, so the numbering is by label, then by first pixel.
-    for index, box in enumerate(ndimage.find_objects(lab)):
-        if box is None:
-            continue
-        mask = lab[box] == index + 1
-        comp, count = ndimage.label(mask, structure=structure)
-        out[box][mask] = comp[mask] + len(origin)
-        origin += [index + 1] * count
-    return out, np.asarray(origin, dtype=np.int64)
+    return label_regions(labels, connectivity)
 
 
 def remove_small_regions(labels: np.ndarray, min_area: int) -> tuple[np.ndarray, np.ndarray]:

@@ -14,6 +14,7 @@ from monoplane.densecrf import (
     CrfParams,
     GaussianKernel,
     PermutohedralLattice,
+    _not_constant_3x3,
     crf_features,
     dense_crf,
     mean_field,
@@ -412,3 +413,13 @@ def test_final_labels_kernel_equals_the_numpy_argmax(uniform):
     got = _final_labels(fine, lab.astype(np.int64), band, exact, values[0, 1], values[0, 0],
                         values[1, 0], uniform)
     np.testing.assert_array_equal(got, energy.argmax(axis=1).reshape(h, w))
+
+
+def test_label_change_band_matches_max_and_min_filters():
+    # Reference: a 3 x 3 window is not constant where its maximum and minimum differ.
+    rng = np.random.default_rng(3)
+    for _ in range(50):
+        h, w = rng.integers(1, 30, 2)
+        coarse = np.kron(rng.integers(0, 3, (h, w)), np.ones((3, 2), dtype=np.int64))
+        expected = ndimage.maximum_filter(coarse, 3) != ndimage.minimum_filter(coarse, 3)
+        np.testing.assert_array_equal(_not_constant_3x3(coarse), expected)

@@ -33,9 +33,9 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
-from scipy import ndimage
 
 from monoplane.errors import InvalidInput
+from monoplane.geometry.components import label_regions
 
 
 def _rim_and_components(depth: np.ndarray, valid: np.ndarray,
@@ -75,8 +75,8 @@ def _rim_and_components(depth: np.ndarray, valid: np.ndarray,
         r = np.moveaxis(rim, axis, -1)
         r[..., :-1] |= jump & (step < 0)         # first pixel farther (smaller inverse depth)
         r[..., 1:] |= jump & (step > 0)
-    labels, _ = ndimage.label(valid & ~rim)
-    return rim, labels.astype(np.int32)
+    labels, _ = label_regions(valid & ~rim, connectivity=4)
+    return rim, labels
 
 
 def _relative_slope(inv: np.ndarray, labels: np.ndarray) -> np.ndarray:

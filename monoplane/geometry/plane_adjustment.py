@@ -34,9 +34,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import least_squares
 from scipy.sparse import coo_matrix
-from scipy.spatial.transform import Rotation
 
 from monoplane.errors import InvalidInput
 from monoplane.geometry.polygons import plane_basis
@@ -194,6 +192,8 @@ def _unpack(x: np.ndarray, lay: _Layout, prob: AdjustmentProblem, bases: np.ndar
     R, t = prob.R.copy(), prob.t.copy()
     scales = np.ones(lay.v)
     if lay.v > 1:
+        from scipy.spatial.transform import Rotation
+
         pose = x[lay.pose:lay.scale].reshape(-1, 6)
         R[1:] = Rotation.from_rotvec(pose[:, :3]).as_matrix() @ prob.R[1:]
         t[1:] = pose[:, 3:]
@@ -369,6 +369,10 @@ def adjust(prob: AdjustmentProblem, max_evaluations: int = 100, loss: str = "sof
         return AdjustmentResult(prob.R.copy(), prob.t.copy(), np.ones(lay.v),
                                 prob.planes.copy(), prob.points.copy(), before, before,
                                 True, "nothing to adjust")
+    # Imported here: scipy.optimize costs about 0.1 s to import, which the single-view
+    # commands (and every batch worker) would otherwise pay for nothing.
+    from scipy.optimize import least_squares
+
     sol = least_squares(fun, x0, jac_sparsity=_sparsity(lay, prob), method="trf", loss=loss,
                         f_scale=1.0, x_scale="jac", max_nfev=max_evaluations)
     R, t, scales, planes, points = _unpack(sol.x, lay, prob, bases)

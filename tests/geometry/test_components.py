@@ -1,0 +1,59 @@
+"""Connected regions of label images: scipy.ndimage.label as the reference."""
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from monoplane.errors import InvalidInput
+from monoplane.geometry.components import label_regions
+
+
+def blocky(rng, h, w, labels):
+    """A label image of 4 x 4 blocks (large regions) or single pixels (many small ones)."""
+    small = rng.integers(0, labels, (h, w))
+    return np.kron(small, np.ones((4, 4), dtype=np.int64)) if rng.random() < 0.5 else small
+
+
+@pytest.mark.parametrize("connectivity", [4, 8])
+def test_binary_masks_are_numbered_as_ndimage_does(connectivity):
+    structure = ndimage.generate_binary_structure(2, 1 if connectivity == 4 else 2)
+    rng = np.random.default_rng(connectivity)
+    for _ in range(60):
+        mask = blocky(rng, *rng.integers(1, 40, 2), 2) > 0
+        expected, count = ndimage.label(mask, structure=structure)
+        regions, origin = label_regions(mask, connectivity)
+        np.testing.assert_array_equal(regions, expected)
+        assert regions.dtype == np.int32 and origin.tolist() == [1] * count
+
+
+@pytest.mark.parametrize("connectivity", [4, 8])
+def test_regions_are_numbered_by_label_then_first_pixel(connectivity):
+    structure = ndimage.generate_binary_structure(2, 1 if connectivity == 4 else 2)
+    rng = np.random.default_rng(10 + connectivity)
+    for _ in range(40):
+        lab = blocky(rng, *rng.integers(1, 30, 2), 5)
+        regions, origin = label_regions(lab, connectivity)
+        offset = 0
+        for value in range(1, 5):
+            comp, count = ndimage.label(lab == value, structure=structure)
+            np.testing.assert_array_equal(regions[lab == value], comp[lab == value] + offset)
+            assert origin[offset:offset + count].tolist() == [value] * count
+            offset += count
+        assert regions.max(initial=0) == offset == origin.size
+        assert (regions[lab == 0] == 0).all()
+
+
+def test_diagonal_touch_joins_only_with_eight_connectivity():
+    lab = np.array([[1, 0], [0, 1]])
+    assert label_regions(lab, 8)[0].tolist() == [[1, 0], [0, 1]]
+    assert label_regions(lab, 4)[0].tolist() == [[1, 0], [0, 2]]
+
+
+@pytest.mark.parametrize("labels, connectivity, match", [
+    (np.zeros(3), 8, r"\(H, W\)"),
+    (np.zeros((2, 2)), 6, "4 or 8"),
+    (-np.ones((2, 2)), 8, ">= 0"),
+])
+def test_bad_input_is_rejected(labels, connectivity, match):
+    with pytest.raises(InvalidInput, match=match):
+        label_regions(labels, connectivity)
