@@ -75,12 +75,14 @@ class NeighbourGraph:
         n = pts.shape[0]
         if tree is None:
             tree = PointIndex(pts)
+        elif tree.n != n:
+            raise InvalidInput(f"the index holds {tree.n} points, not the graph's {n}")
         kk = min(k, n - 1)
         if kk < 1:
             empty = np.zeros((0, 2), dtype=np.int64)
             return cls(n, empty, np.zeros(n + 1, dtype=np.int64), np.zeros(0, dtype=np.int64),
                        tree, 0.0)
-        dist, nbr = tree.query(pts, k=kk + 1)
+        dist, nbr = tree.query_indexed(kk + 1)
         edges, indptr, indices = _knn_edges(np.ascontiguousarray(nbr, dtype=np.int64))
         spacing = float(np.median(dist[:, 1]))
         return cls(n, edges, indptr, indices, tree, spacing)

@@ -10,9 +10,11 @@ unprojected and normalised into the unit sphere), and every query asks for a han
 neighbours. Points are bucketed by a counting sort into cubic cells about as wide as a typical
 k-th neighbour distance, and a query scans the shells of cells around its own, nearest shell
 first, until no unvisited cell can hold a point nearer than its k-th best (the distance to the
-faces of the visited block bounds that). The answer is exact. On the 20 000-point kNN graph of
-a 256×192 bench frame (k = 9) index and query take about 60 % of ``cKDTree``'s CPU time (20
-against 34 ms, measured 2026-11-22 in one run). Open3D's
+faces of the visited block bounds that). The answer is exact. The kNN graph asks for the
+neighbours of every indexed point (:meth:`PointIndex.query_indexed`): points of one cell share
+their candidates, gathered nearest cells first. On the 20 000-point kNN graph of a 256×192 bench
+frame (k = 9) index and query take about half of ``cKDTree``'s CPU time (15 against 28 ms on one
+thread, medians of 15 runs, 2026-11-22). Open3D's
 ``core.nns.NearestNeighborSearch`` (nanoflann) measured the same as ``cKDTree`` and costs
 about 2.2 s of CPU per process to import, which every batch and multi-view worker would pay.
 
@@ -129,6 +131,47 @@ class PointIndex:
         return np.sqrt(d2), idx
 
 
+    def query_indexed(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """The ``k`` nearest indexed points of every indexed point: ``query(points, k)``.
+
+        The kNN graph asks this of every point. Points sharing a cell share their candidates
+        (the points of the 3 x 3 x 3 cells around it), gathered once per cell; a point whose
+        k-th candidate is not provably nearer than every point outside that block is searched
+        again with :meth:`query`. The answer is exactly :meth:`query`'s.
+
+        Parameters
+        ----------
+        k : int
+            Neighbours per point, >= 1 (the point itself comes first, at distance 0).
+
+        Returns
+        -------
+        dist, idx : numpy.ndarray
+            As :meth:`query`, (N, k).
+        """
+        if k < 1:
+            raise InvalidInput(f"k must be at least 1, got {k}")
+        if self.n == 0:
+            return np.zeros((0, k)), np.zeros((0, k), dtype=np.int64)
+        cells = np.flatnonzero(np.diff(self._start))
+        d2 = np.zeros((self.n, k))  # rows left to redo keep zeros, not garbage
+        idx = np.zeros((self.n, k), dtype=np.int64)
+        redo = np.zeros(self.n, dtype=np.bool_)
+        # Contiguous runs of cells with about equal numbers of points per thread.
+        bounds = np.searchsorted(self._start[cells], [a for a, _ in chunks(self.n,
+                                                                          THREADED_QUERIES)])
+        parts = [cells[a:b] for a, b in zip(bounds, [*bounds[1:], cells.size], strict=True)]
+        run_threaded([
+            lambda part=part: _cell_knn(self._sorted, self._order, self._start, self._lo,
+                                        self._width, self._dims, part, int(k), d2, idx, redo)
+            for part in parts])
+        dist = np.sqrt(d2, out=d2)
+        again = np.flatnonzero(redo)
+        if again.size:
+            dist[again], idx[again] = self.query(self._points[again], k)
+        return dist, idx
+
+
 @kernel
 def _bucket(points: np.ndarray, lo: np.ndarray, width: float, dims: np.ndarray
             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -240,3 +283,96 @@ def _grid_knn(sorted_pts: np.ndarray, order: np.ndarray, start: np.ndarray, lo: 
         out_d[qi] = bd
         out_i[qi] = bi
     return out_d, out_i
+
+
+@kernel
+def _cell_knn(sorted_pts: np.ndarray, order: np.ndarray, start: np.ndarray, lo: np.ndarray,
+              width: float, dims: np.ndarray, cells: np.ndarray, k: int, out_d2: np.ndarray,
+              out_i: np.ndarray, redo: np.ndarray) -> None:
+    """kNN of the indexed points of the given cells among the points of their 3 x 3 x 3 block.
+
+    Writes the (k,) squared distances and indices of point ``order[p]`` into row ``order[p]``
+    of ``out_d2`` / ``out_i`` when the k-th is provably exact (nearer than every face of the
+    block with cells beyond it), else sets ``redo[order[p]]``. Same ordering as
+    :func:`_grid_knn`: by squared distance, then index.
+    """
+    n = order.shape[0]
+    gx, gy, gz = dims[0], dims[1], dims[2]
+    cand_x = np.empty(n)
+    cand_y = np.empty(n)
+    cand_z = np.empty(n)
+    cand_i = np.empty(n, dtype=np.int64)
+    cand_d2 = np.empty(n)
+    bd = np.empty(k)
+    bi = np.empty(k, dtype=np.int64)
+    for c in cells:
+        cz = c % gz
+        cy = (c // gz) % gy
+        cx = c // (gz * gy)
+        # Nearest cells first (the cell itself, then those sharing a face, an edge, a
+        # corner): the k best fill early with near points, and the later, farther candidates
+        # are mostly rejected at the first comparison instead of inserted.
+        m = 0
+        for ring in range(4):
+            for ix in range(max(cx - 1, 0), min(cx + 1, gx - 1) + 1):
+                for iy in range(max(cy - 1, 0), min(cy + 1, gy - 1) + 1):
+                    for iz in range(max(cz - 1, 0), min(cz + 1, gz - 1) + 1):
+                        if abs(ix - cx) + abs(iy - cy) + abs(iz - cz) != ring:
+                            continue
+                        cell = (ix * gy + iy) * gz + iz
+                        for p in range(start[cell], start[cell + 1]):
+                            cand_x[m] = sorted_pts[p, 0]
+                            cand_y[m] = sorted_pts[p, 1]
+                            cand_z[m] = sorted_pts[p, 2]
+                            cand_i[m] = order[p]
+                            m += 1
+        # Distance from a point of this cell to the block's faces with cells beyond them.
+        x0, x1 = lo[0] + (cx - 1) * width, lo[0] + (cx + 2) * width
+        y0, y1 = lo[1] + (cy - 1) * width, lo[1] + (cy + 2) * width
+        z0, z1 = lo[2] + (cz - 1) * width, lo[2] + (cz + 2) * width
+        for p0 in range(start[c], start[c + 1]):
+            qx, qy, qz = sorted_pts[p0, 0], sorted_pts[p0, 1], sorted_pts[p0, 2]
+            for t in range(m):  # a separate pass, so that it vectorises
+                dx = cand_x[t] - qx
+                dy = cand_y[t] - qy
+                dz = cand_z[t] - qz
+                cand_d2[t] = dx * dx + dy * dy + dz * dz
+            bd[:] = np.inf
+            bi[:] = n
+            worst = np.inf
+            worst_i = n
+            for t in range(m):
+                d2 = cand_d2[t]
+                if d2 > worst:
+                    continue
+                j = cand_i[t]
+                if d2 == worst and j >= worst_i:
+                    continue
+                s = k - 1
+                while s > 0 and (bd[s - 1] > d2 or (bd[s - 1] == d2 and bi[s - 1] > j)):
+                    bd[s] = bd[s - 1]
+                    bi[s] = bi[s - 1]
+                    s -= 1
+                bd[s] = d2
+                bi[s] = j
+                worst = bd[k - 1]
+                worst_i = bi[k - 1]
+            gap = np.inf
+            if cx - 1 > 0:
+                gap = min(gap, qx - x0)
+            if cx + 1 < gx - 1:
+                gap = min(gap, x1 - qx)
+            if cy - 1 > 0:
+                gap = min(gap, qy - y0)
+            if cy + 1 < gy - 1:
+                gap = min(gap, y1 - qy)
+            if cz - 1 > 0:
+                gap = min(gap, qz - z0)
+            if cz + 1 < gz - 1:
+                gap = min(gap, z1 - qz)
+            row = order[p0]
+            if gap == np.inf or worst < max(gap, 0.0) ** 2:
+                out_d2[row] = bd
+                out_i[row] = bi
+            else:
+                redo[row] = True

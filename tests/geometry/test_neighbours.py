@@ -59,3 +59,32 @@ def test_ties_are_broken_by_index():
     for row in range(len(pts)):
         order = np.lexsort((np.arange(len(pts)), brute[row]))[:7]
         np.testing.assert_array_equal(idx[row], order)
+
+
+@pytest.mark.parametrize("threads", ["1", "3"])
+@pytest.mark.parametrize("case", ["sheet", "blob", "grid ties", "tiny", "clusters"])
+def test_query_indexed_equals_query_on_the_indexed_points(case, threads, monkeypatch):
+    rng = np.random.default_rng(len(case))
+    if case == "sheet":
+        pts = rng.normal(size=(4000, 3)) * [1.0, 1.0, 0.01]
+    elif case == "blob":
+        pts = rng.uniform(-1, 1, size=(1500, 3))
+    elif case == "grid ties":
+        g = np.stack(np.meshgrid(np.arange(9.0), np.arange(9.0), [0.0, 1.0]), -1)
+        pts = np.vstack([g.reshape(-1, 3), g.reshape(-1, 3)[::7]])
+    elif case == "tiny":
+        pts = rng.normal(size=(5, 3))
+    else:  # far-apart clusters: many points whose k-th neighbour lies outside their block
+        pts = np.vstack([c + 0.01 * rng.normal(size=(40, 3))
+                         for c in rng.uniform(-5, 5, size=(12, 3))])
+    monkeypatch.setenv("OMP_NUM_THREADS", threads)
+    monkeypatch.setattr("monoplane.geometry.neighbours.THREADED_QUERIES", 300)
+    index = PointIndex(pts)
+    for k in (1, 9, 12):
+        dist, idx = index.query_indexed(k)
+        ref_d, ref_i = index.query(pts, k=k)
+        np.testing.assert_array_equal(dist, ref_d)
+        np.testing.assert_array_equal(idx, ref_i)
+    with pytest.raises(InvalidInput):
+        index.query_indexed(0)
+    assert PointIndex(np.zeros((0, 3))).query_indexed(3)[0].shape == (0, 3)
