@@ -152,6 +152,7 @@ def _bk_min_cut(n: int, tails: np.ndarray, heads: np.ndarray, caps: np.ndarray,
             queue[q_tail] = i
             q_tail += 1
             flagged[i] = True
+    # A node whose growth found a path is grown again next, until it finds none.
     current = -1
     while True:
         i = current
@@ -169,52 +170,32 @@ def _bk_min_cut(n: int, tails: np.ndarray, heads: np.ndarray, caps: np.ndarray,
                 i = j
         if i < 0:
             break
-        # Growth: the first arc to the other tree is the middle of an augmenting path.
+        # Growth along the residual arcs leaving i's tree (out of i in the source tree, into
+        # i in the sink tree): the first arc to the other tree is the middle of a path.
         middle = -1
-        if not is_sink[i]:
-            for a in range(first[i], first[i + 1]):
-                if rcap[a] != 0.0:
-                    j = head[a]
-                    if parent[j] == _FREE:
-                        is_sink[j] = False
-                        parent[j] = sister[a]
-                        ts[j] = ts[i]
-                        dist[j] = dist[i] + 1
-                        if not flagged[j]:
-                            queue[q_tail] = j
-                            q_tail += 1
-                            if q_tail == size:
-                                q_tail = 0
-                            flagged[j] = True
-                    elif is_sink[j]:
-                        middle = a
-                        break
-                    elif ts[j] <= ts[i] and dist[j] > dist[i]:
-                        parent[j] = sister[a]
-                        ts[j] = ts[i]
-                        dist[j] = dist[i] + 1
-        else:
-            for a in range(first[i], first[i + 1]):
-                if rcap[sister[a]] != 0.0:
-                    j = head[a]
-                    if parent[j] == _FREE:
-                        is_sink[j] = True
-                        parent[j] = sister[a]
-                        ts[j] = ts[i]
-                        dist[j] = dist[i] + 1
-                        if not flagged[j]:
-                            queue[q_tail] = j
-                            q_tail += 1
-                            if q_tail == size:
-                                q_tail = 0
-                            flagged[j] = True
-                    elif not is_sink[j]:
-                        middle = sister[a]
-                        break
-                    elif ts[j] <= ts[i] and dist[j] > dist[i]:
-                        parent[j] = sister[a]
-                        ts[j] = ts[i]
-                        dist[j] = dist[i] + 1
+        sink = is_sink[i]
+        for a in range(first[i], first[i + 1]):
+            if rcap[sister[a] if sink else a] == 0.0:
+                continue
+            j = head[a]
+            if parent[j] == _FREE:
+                is_sink[j] = sink
+                parent[j] = sister[a]
+                ts[j] = ts[i]
+                dist[j] = dist[i] + 1
+                if not flagged[j]:
+                    queue[q_tail] = j
+                    q_tail += 1
+                    if q_tail == size:
+                        q_tail = 0
+                    flagged[j] = True
+            elif is_sink[j] != sink:
+                middle = sister[a] if sink else a  # oriented source tree -> sink tree
+                break
+            elif ts[j] <= ts[i] and dist[j] > dist[i]:
+                parent[j] = sister[a]
+                ts[j] = ts[i]
+                dist[j] = dist[i] + 1
         clock += 1
         if middle < 0:
             current = -1
