@@ -106,7 +106,10 @@ def _costs(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, planes: np
             for i in range(m):
                 phi = abs(a * x[i] + b * y[i] + c * z[i] + d)
                 cos = m0 * nx[i] + m1 * ny[i] + m2 * nz[i]
-                term[i] = min((phi / epsilon) ** 2, 1.0) if cos > cos_n else 1.0
+                # Both operands first, then a select: a conditional expression around min()
+                # compiles to a branch, which keeps the loop from being vectorised.
+                q = min((phi / epsilon) ** 2, 1.0)
+                term[i] = q if cos > cos_n else 1.0
         s0 = s1 = s2 = s3 = 0.0
         j = 0
         while j + 4 <= m:
