@@ -247,11 +247,32 @@ def scene_radius(points: np.ndarray, valid: np.ndarray) -> float:
     float
         Radius in depth units; 0 when there are no valid points.
     """
-    pts = np.asarray(points, dtype=np.float64)[valid]
-    if not len(pts):
+    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+    return float(_radius(pts, np.ascontiguousarray(valid, dtype=np.bool_).ravel()))
+
+
+@kernel
+def _radius(points: np.ndarray, valid: np.ndarray) -> float:
+    """:func:`scene_radius` of (N, 3) float64 points and their (N,) bool mask, in two passes
+    without copying the valid points out."""
+    total = np.zeros(3)
+    count = 0
+    for i in range(points.shape[0]):
+        if valid[i]:
+            for c in range(3):
+                total[c] += points[i, c]
+            count += 1
+    if count == 0:
         return 0.0
-    pts -= pts.mean(axis=0)
-    return float(np.sqrt(np.einsum("ij,ij->i", pts, pts).max()))
+    centre = total / count
+    best = 0.0
+    for i in range(points.shape[0]):
+        if valid[i]:
+            d2 = 0.0
+            for c in range(3):
+                d2 += (points[i, c] - centre[c]) ** 2
+            best = max(best, d2)
+    return np.sqrt(best)
 
 
 def merge_coplanar(points: np.ndarray, valid: np.ndarray, labels: np.ndarray,

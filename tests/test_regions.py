@@ -354,3 +354,14 @@ def test_region_adjacency_matches_a_pixel_walk(seed, connectivity):
     lab = ndimage.zoom(rng.integers(0, 9, size=(6, 8)), 4, order=0)[:21, :29]
     np.testing.assert_array_equal(region_adjacency(lab, connectivity),
                                   _reference_adjacency(lab, connectivity))
+
+
+def test_scene_radius_kernel_matches_the_numpy_formula():
+    # Reference: gather the valid points, centre them, largest norm (only rounding differs).
+    rng = np.random.default_rng(2)
+    for _ in range(20):
+        pts = rng.normal(size=(30, 40, 3)) * [1.0, 2.0, 0.5] + [0.0, 0.0, 3.0]
+        valid = rng.random((30, 40)) < 0.7
+        sel = pts[valid] - pts[valid].mean(axis=0)
+        expected = np.sqrt((sel**2).sum(axis=1).max())
+        assert scene_radius(pts, valid) == pytest.approx(expected, rel=1e-12)
