@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import functools
 import os
+import types
 import warnings
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -35,9 +36,47 @@ F = TypeVar("F", bound=Callable[..., Any])
 T = TypeVar("T")
 
 
+def inline(fn: F) -> F:
+    """Mark a small function as callable from the kernels of its own module.
+
+    It stays a plain Python function; when a kernel that calls it is compiled, it is compiled
+    too and inlined into that kernel. Keep it in the module of the kernels that call it:
+    numba's disk cache of a kernel is invalidated when the kernel's own source file changes,
+    not when a helper in another file does.
+
+    Parameters
+    ----------
+    fn : callable
+        A function numba can compile in nopython mode, calling no kernels or other helpers.
+
+    Returns
+    -------
+    callable
+        ``fn`` itself, marked.
+    """
+    fn._monoplane_inline = True  # type: ignore[attr-defined]
+    return fn
+
+
+def _with_helpers(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """``fn``, or a copy of it whose globals map the :func:`inline` helpers it names to their
+    compiled versions (numba resolves a kernel's global names when it compiles it)."""
+    import numba
+
+    env = fn.__globals__
+    names = [n for n in fn.__code__.co_names if getattr(env.get(n), "_monoplane_inline", False)]
+    if not names:
+        return fn
+    env = {**env, **{n: numba.njit(inline="always")(env[n]) for n in names}}
+    clone = types.FunctionType(fn.__code__, env, fn.__name__, fn.__defaults__, fn.__closure__)
+    clone.__qualname__, clone.__module__, clone.__doc__ = fn.__qualname__, fn.__module__, fn.__doc__
+    return clone
+
+
 def _compile(fn: Callable[..., Any]) -> Callable[..., Any]:
     import numba
 
+    fn = _with_helpers(fn)
     try:
         return numba.njit(cache=True, nogil=True)(fn)
     except RuntimeError as exc:  # no writable cache location for this module
@@ -54,7 +93,8 @@ def kernel(fn: F) -> F:
     ----------
     fn : callable
         A function numba can compile in nopython mode. It must not call other kernels
-        (they are ordinary Python callables until compiled).
+        (they are ordinary Python callables until compiled); it may call :func:`inline`
+        helpers of its own module.
 
     Returns
     -------

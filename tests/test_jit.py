@@ -36,3 +36,20 @@ def test_without_a_writable_cache_the_kernel_still_runs(monkeypatch):
 
     with pytest.warns(RuntimeWarning, match="numba cannot cache"):
         assert kernel(double)(21) == 42
+
+
+def test_kernels_inline_the_helpers_of_their_module(tmp_path, monkeypatch):
+    # A module with a helper and a kernel calling it, as the library's modules have them.
+    (tmp_path / "helper_module.py").write_text(
+        "from monoplane.jit import inline, kernel\n"
+        "@inline\n"
+        "def twice(x):\n"
+        "    return 2 * x\n"
+        "@kernel\n"
+        "def plus_one_twice(x):\n"
+        "    return twice(x) + 1\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    import helper_module
+
+    assert helper_module.plus_one_twice(3) == 7 == helper_module.plus_one_twice.py_func(3)
+    assert helper_module.twice(3) == 6  # still a plain function outside kernels

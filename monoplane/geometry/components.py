@@ -1,10 +1,11 @@
-"""Connected regions of a label image, in one compiled pass.
+"""Connected regions of a label image, and the largest connected part of a graph's nodes.
 
 Both the region clean-up after refinement (every plane label split into its connected regions)
 and the depth-edge segmentation of normal estimation need the connected regions of an image
-whose pixels carry integer labels. One union-find pass over the pixels finds the regions of all
-labels at once, where labelling each label's mask separately would scan the image once per
-label.
+whose pixels carry integer labels; RANSAC keeps the largest connected part of each plane's
+inliers in the neighbourhood graph. Both are union-find passes sharing :func:`_union`. One
+pass over the pixels finds the regions of all labels at once, where labelling each label's mask
+separately would scan the image once per label.
 
 Numbering: regions are numbered from 1 by their label, then by the raster position (row-major)
 of their first pixel. For a binary mask this is the numbering of ``scipy.ndimage.label`` with
@@ -16,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from monoplane.errors import InvalidInput
-from monoplane.jit import kernel
+from monoplane.jit import inline, kernel
 
 
 def label_regions(labels: np.ndarray, connectivity: int = 8) -> tuple[np.ndarray, np.ndarray]:
@@ -53,6 +54,73 @@ def label_regions(labels: np.ndarray, connectivity: int = 8) -> tuple[np.ndarray
     return _label_regions(lab, connectivity == 8)
 
 
+def largest_component(members: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """Largest connected component among some nodes of a graph.
+
+    Parameters
+    ----------
+    members : numpy.ndarray
+        (M,) bool selection of the graph's M nodes.
+    edges : numpy.ndarray
+        (E, 2) int node pairs; only those between two members count.
+
+    Returns
+    -------
+    numpy.ndarray
+        (K,) bool over the K members in order, True on the largest component; among equally
+        large ones, the one holding the lowest-numbered member.
+    """
+    return _largest_component(np.ascontiguousarray(members, dtype=np.bool_),
+                              np.ascontiguousarray(edges, dtype=np.int64).reshape(-1, 2))
+
+
+@inline
+def _union(parent: np.ndarray, a: int, b: int) -> None:
+    """Join the sets of ``a`` and ``b`` in the union-find forest ``parent``, keeping the
+    smaller root (so a root is always its set's smallest index); paths are halved."""
+    while parent[a] != a:
+        parent[a] = parent[parent[a]]
+        a = parent[a]
+    while parent[b] != b:
+        parent[b] = parent[parent[b]]
+        b = parent[b]
+    if a < b:
+        parent[b] = a
+    elif b < a:
+        parent[a] = b
+
+
+@kernel
+def _largest_component(members: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """:func:`largest_component` of (M,) bool ``members`` and (E, 2) int64 ``edges``."""
+    m = members.shape[0]
+    parent = np.arange(m)
+    for e in range(edges.shape[0]):
+        a, b = edges[e, 0], edges[e, 1]
+        if members[a] and members[b]:
+            _union(parent, a, b)
+    size = np.zeros(m, dtype=np.int64)
+    root = np.empty(m, dtype=np.int64)
+    for p in range(m):
+        if members[p]:
+            r = p
+            while parent[r] != r:
+                r = parent[r]
+            root[p] = r
+            size[r] += 1
+    best = -1
+    for p in range(m):  # ascending, so ties go to the component of the lowest member
+        if members[p] and (best < 0 or size[root[p]] > size[best]):
+            best = root[p]
+    out = np.zeros(members.sum(), dtype=np.bool_)
+    k = 0
+    for p in range(m):
+        if members[p]:
+            out[k] = root[p] == best
+            k += 1
+    return out
+
+
 @kernel
 def _label_regions(lab: np.ndarray, corners: bool) -> tuple[np.ndarray, np.ndarray]:
     """:func:`label_regions` of a (H, W) int64 image (``corners``: 8-connectivity)."""
@@ -73,17 +141,7 @@ def _label_regions(lab: np.ndarray, corners: bool) -> tuple[np.ndarray, np.ndarr
             q = p + dv * w + du
             if flat[q] != value:
                 continue
-            a, b = p, q
-            while parent[a] != a:
-                parent[a] = parent[parent[a]]
-                a = parent[a]
-            while parent[b] != b:
-                parent[b] = parent[parent[b]]
-                b = parent[b]
-            if a < b:
-                parent[b] = a
-            elif b < a:
-                parent[a] = b
+            _union(parent, p, q)
     top = flat.max() if n else 0
     per_label = np.zeros(top + 2, dtype=np.int64)
     for p in range(n):

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from monoplane.errors import InvalidInput
+from monoplane.geometry.components import largest_component
 from monoplane.geometry.neighbours import PointIndex
 from monoplane.jit import kernel
 
@@ -119,7 +120,7 @@ class NeighbourGraph:
         """
         members = np.ascontiguousarray(members, dtype=bool)
         edges, _ = self.subgraph(pool)
-        return _largest_component(members, edges)
+        return largest_component(members, edges)
 
     def neighbours(self, i: int) -> np.ndarray:
         """(deg,) int64 neighbours of node ``i``."""
@@ -218,50 +219,6 @@ def _knn_edges(nbr: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         pos[hi] += 1
     return edges[:count].copy(), indptr, indices
 
-
-@kernel
-def _largest_component(members: np.ndarray, edges: np.ndarray) -> np.ndarray:
-    """Largest connected component among the ``members`` (M,) bool of a graph on M nodes.
-
-    ``edges`` (E, 2) int64 are the graph's edges; only those between two members count.
-    Returns (K,) bool over the K members in order, True on the largest component; among
-    equally large ones, the one holding the lowest-numbered member. Union-find with path
-    halving.
-    """
-    m = members.shape[0]
-    parent = np.arange(m)
-    for e in range(edges.shape[0]):
-        a, b = edges[e, 0], edges[e, 1]
-        if not (members[a] and members[b]):
-            continue
-        while parent[a] != a:
-            parent[a] = parent[parent[a]]
-            a = parent[a]
-        while parent[b] != b:
-            parent[b] = parent[parent[b]]
-            b = parent[b]
-        if a != b:
-            parent[max(a, b)] = min(a, b)
-    size = np.zeros(m, dtype=np.int64)
-    root = np.empty(m, dtype=np.int64)
-    for p in range(m):
-        if members[p]:
-            r = p
-            while parent[r] != r:
-                r = parent[r]
-            root[p] = r
-            size[r] += 1
-    best = -1
-    for p in range(m):  # ascending, so ties go to the component of the lowest member
-        if members[p] and (best < 0 or size[root[p]] > size[best]):
-            best = root[p]
-    out = np.zeros(members.sum(), dtype=np.bool_)
-    k = 0
-    for p in range(m):
-        if members[p]:
-            out[k] = root[p] == best
-            k += 1
-    return out
 
 
 @kernel

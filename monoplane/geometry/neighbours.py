@@ -31,7 +31,7 @@ import math
 import numpy as np
 
 from monoplane.errors import InvalidInput
-from monoplane.jit import chunks, kernel, run_threaded
+from monoplane.jit import chunks, inline, kernel, run_threaded
 
 #: Points sampled to size the cells, and the quantile of their k-th neighbour distance taken
 #: as the cell width: wide enough that most queries end after the first shell of cells.
@@ -172,6 +172,20 @@ class PointIndex:
         return dist, idx
 
 
+@inline
+def _keep_best(bd: np.ndarray, bi: np.ndarray, d2: float, j: int) -> None:
+    """Insert candidate ``(d2, j)`` into the (k,) best lists ``bd`` / ``bi``, kept sorted by
+    (squared distance, index); the last entry drops out. The caller has checked that it
+    beats that last entry."""
+    s = bd.shape[0] - 1
+    while s > 0 and (bd[s - 1] > d2 or (bd[s - 1] == d2 and bi[s - 1] > j)):
+        bd[s] = bd[s - 1]
+        bi[s] = bi[s - 1]
+        s -= 1
+    bd[s] = d2
+    bi[s] = j
+
+
 @kernel
 def _bucket(points: np.ndarray, lo: np.ndarray, width: float, dims: np.ndarray
             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -248,14 +262,7 @@ def _grid_knn(sorted_pts: np.ndarray, order: np.ndarray, start: np.ndarray, lo: 
                                 j = order[p]
                                 if d2 > worst or (d2 == worst and j >= worst_i):
                                     continue
-                                s = k - 1
-                                while s > 0 and (bd[s - 1] > d2 or (bd[s - 1] == d2
-                                                                    and bi[s - 1] > j)):
-                                    bd[s] = bd[s - 1]
-                                    bi[s] = bi[s - 1]
-                                    s -= 1
-                                bd[s] = d2
-                                bi[s] = j
+                                _keep_best(bd, bi, d2, j)
                                 worst = bd[k - 1]
                                 worst_i = bi[k - 1]
                         iz += step
@@ -348,13 +355,7 @@ def _cell_knn(sorted_pts: np.ndarray, order: np.ndarray, start: np.ndarray, lo: 
                 j = cand_i[t]
                 if d2 == worst and j >= worst_i:
                     continue
-                s = k - 1
-                while s > 0 and (bd[s - 1] > d2 or (bd[s - 1] == d2 and bi[s - 1] > j)):
-                    bd[s] = bd[s - 1]
-                    bi[s] = bi[s - 1]
-                    s -= 1
-                bd[s] = d2
-                bi[s] = j
+                _keep_best(bd, bi, d2, j)
                 worst = bd[k - 1]
                 worst_i = bi[k - 1]
             gap = np.inf

@@ -6,7 +6,8 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from monoplane.geometry.graph import NeighbourGraph, _knn_edges, _largest_component
+from monoplane.geometry.components import largest_component
+from monoplane.geometry.graph import NeighbourGraph, _knn_edges
 
 
 def grid_points(n=6):
@@ -184,5 +185,5 @@ def test_largest_component_kernel_matches_scipy(seed):
     members = rng.random(m) < rng.uniform(0.2, 1.0)
     if not members.any():
         members[0] = True
-    np.testing.assert_array_equal(_largest_component(members, edges),
+    np.testing.assert_array_equal(largest_component(members, edges),
                                   reference_largest_component(members, edges))
