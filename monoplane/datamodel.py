@@ -10,7 +10,8 @@ Conventions used everywhere in monoplane
 * Depth is z-depth (distance along the optical axis), not ray length. ``0`` marks an invalid
   pixel. Plane offsets are in the depth's units.
 
-This module imports nothing of the project but :mod:`monoplane.errors`, so every other module
+This module imports nothing of the project but :mod:`monoplane.errors` and
+:mod:`monoplane.jit` (which loads numba only when a kernel first runs), so every other module
 can depend on it. Writing outputs lives in :mod:`monoplane.fileio`
 (``monoplane.save_reconstruction``) and meshes in :mod:`monoplane.geometry.mesh`
 (``reconstruction_to_open3d``).
@@ -24,6 +25,7 @@ from typing import Literal
 import numpy as np
 
 from monoplane.errors import InvalidInput
+from monoplane.jit import kernel
 
 DepthKind = Literal["metric", "relative"]
 DEPTH_KINDS: tuple[str, ...] = ("metric", "relative")
@@ -186,14 +188,15 @@ class Frame:
                     f"{self.name}: depth size {depth.shape[1]}x{depth.shape[0]} differs from "
                     f"image size {shape[1]}x{shape[0]}"
                 )
-            depth = depth.astype(np.float32)
-            if not np.all(np.isfinite(depth)):
+            depth = np.ascontiguousarray(depth, dtype=np.float32)
+            nonfinite, negative, positive = _depth_counts(depth)
+            if nonfinite:
                 raise InvalidInput(
                     f"{self.name}: depth contains NaN or inf; mark invalid pixels with 0"
                 )
-            if np.any(depth < 0):
+            if negative:
                 raise InvalidInput(f"{self.name}: depth has negative values")
-            if not np.any(depth > 0):
+            if not positive:
                 raise InvalidInput(f"{self.name}: depth has no valid (positive) pixel")
             self.depth = depth
             shape = shape or depth.shape
@@ -208,15 +211,14 @@ class Frame:
                     f"{self.name}: normals size {normals.shape[1]}x{normals.shape[0]} differs "
                     f"from image size {shape[1]}x{shape[0]}"
                 )
-            normals = normals.astype(np.float32)
-            if not np.all(np.isfinite(normals)):
+            normals = np.ascontiguousarray(normals, dtype=np.float32)
+            nonfinite, bad = _normal_counts(normals)
+            if nonfinite:
                 raise InvalidInput(f"{self.name}: normals contain NaN or inf")
-            norm = np.linalg.norm(normals, axis=-1)
-            bad = (norm > 0) & (np.abs(norm - 1.0) > 1e-2)
-            if np.any(bad):
+            if bad:
                 raise InvalidInput(
                     f"{self.name}: normals must be unit length (or all-zero where invalid); "
-                    f"{int(bad.sum())} pixels are not"
+                    f"{bad} pixels are not"
                 )
             self.normals = normals
             shape = shape or normals.shape[:2]
@@ -654,3 +656,39 @@ class SfmResult:
         x_cam = self.points[self.point_ids[view][has]] @ cam.R.T + cam.t
         front = x_cam[:, 2] > 0
         return pix[front], x_cam[front, 2]
+
+
+# Frame validation runs on every frame (and every ``with_``); one compiled pass per array
+# replaces the half-dozen numpy passes of the checks (6 ms at 640x480).
+
+
+@kernel
+def _depth_counts(depth: np.ndarray) -> tuple[int, int, int]:
+    """(non-finite, negative, positive) pixel counts of a (H, W) float32 depth map."""
+    nonfinite = negative = positive = 0
+    for d in depth.ravel():
+        if not np.isfinite(d):
+            nonfinite += 1
+        elif d < 0:
+            negative += 1
+        elif d > 0:
+            positive += 1
+    return nonfinite, negative, positive
+
+
+@kernel
+def _normal_counts(normals: np.ndarray) -> tuple[int, int]:
+    """(H, W, 3) float32 normals: pixels with a non-finite component, and non-zero normals
+    whose length differs from 1 by more than 1e-2 (computed in float32, as numpy's norm is)."""
+    flat = normals.reshape(-1, 3)
+    nonfinite = bad = 0
+    tol = np.float32(1e-2)
+    for i in range(flat.shape[0]):
+        x, y, z = flat[i, 0], flat[i, 1], flat[i, 2]
+        if not (np.isfinite(x) and np.isfinite(y) and np.isfinite(z)):
+            nonfinite += 1
+            continue
+        norm = np.sqrt(x * x + y * y + z * z)
+        if norm > 0 and abs(norm - np.float32(1.0)) > tol:
+            bad += 1
+    return nonfinite, bad

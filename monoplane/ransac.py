@@ -228,6 +228,8 @@ class SequentialRansac:
         # meanwhile on another thread (when the thread budget has one); the results are those
         # of building it first.
         graph = in_background(build_graph)
+        if cloud.subsampled:  # the finaliser's image-nearest samples, while the graph builds
+            cloud.image_nearest_sample  # noqa: B018 (fills the cached property)
         result = self._run(cloud, graph, rng)
 
         t = time.perf_counter()

@@ -100,16 +100,16 @@ def test_plane_world_round_trip():
     assert np.allclose(cam.center, R.T @ -t)
 
 
-def test_data_model_imports_nothing_of_the_project_but_errors() -> None:
+def test_data_model_imports_nothing_of_the_project_but_errors_and_jit() -> None:
     import subprocess
     import sys
 
     code = ("import sys, monoplane.datamodel; "
             "print(sorted(m for m in sys.modules if m.startswith('monoplane'))); "
-            "print('cv2' in sys.modules, 'pluggy' in sys.modules)")
+            "print('cv2' in sys.modules, 'pluggy' in sys.modules, 'numba' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    loaded = "['monoplane', 'monoplane.datamodel', 'monoplane.errors']"
-    assert out.stdout.split("\n")[:2] == [loaded, "False False"]
+    loaded = "['monoplane', 'monoplane.datamodel', 'monoplane.errors', 'monoplane.jit']"
+    assert out.stdout.split("\n")[:2] == [loaded, "False False False"]
 
 
 def test_package_names_load_on_first_use() -> None:
@@ -120,3 +120,24 @@ def test_package_names_load_on_first_use() -> None:
     assert set(monoplane.__all__) <= set(dir(monoplane))
     with pytest.raises(AttributeError, match="no attribute 'nope'"):
         _ = monoplane.nope
+
+
+def test_validation_kernels_count_as_the_numpy_checks() -> None:
+    from monoplane.datamodel import _depth_counts, _normal_counts
+
+    rng = np.random.default_rng(5)
+    depth = rng.normal(1.0, 1.0, size=(20, 30)).astype(np.float32)
+    depth[0, :3] = [np.nan, np.inf, 0.0]
+    assert _depth_counts(depth) == (int((~np.isfinite(depth)).sum()),
+                                    int((depth[np.isfinite(depth)] < 0).sum()),
+                                    int((depth[np.isfinite(depth)] > 0).sum()))
+    normals = rng.normal(size=(20, 30, 3)).astype(np.float32)
+    normals /= np.linalg.norm(normals, axis=-1, keepdims=True)
+    normals[1] *= np.float32(1.0 + np.linspace(-0.02, 0.02, 30, dtype=np.float32))[:, None]
+    normals[2, :4] = [np.nan, 0.0, 0.0]
+    normals[3, :4] = 0.0
+    finite = np.isfinite(normals).all(axis=-1)
+    norm = np.linalg.norm(np.where(finite[..., None], normals, 0), axis=-1)
+    bad = finite & (norm > 0) & (np.abs(norm - 1.0) > 1e-2)
+    assert _normal_counts(normals) == (int((~finite).sum()), int(bad.sum()))
+    assert 0 < bad.sum() < 30

@@ -108,6 +108,21 @@ class PlaneCloud:
         """Nearest-neighbour index over ``points`` (built on first use)."""
         return PointIndex(self.points)
 
+    @cached_property
+    def image_nearest_sample(self) -> np.ndarray:
+        """(M,) int64 index into ``points`` of the sample nearest in the image to each of the
+        ``all_pixels`` (exact Euclidean distance in pixels).
+
+        It depends on the sampling only, not on labels, so RANSAC computes it while the
+        neighbour graph is being built; :meth:`propagate` starts from it.
+        """
+        h, w = self.shape
+        sampled = np.zeros((h, w), dtype=bool)
+        sampled.ravel()[self.pixels] = True
+        sample_of = np.full(h * w, -1, dtype=np.int64)
+        sample_of[self.pixels] = np.arange(self.size)
+        return sample_of[nearest_true_pixel(sampled)[self.all_pixels]]
+
     @property
     def subsampled(self) -> bool:
         """True when RANSAC works on a subset of the valid pixels."""
@@ -254,11 +269,7 @@ class PlaneCloud:
         radius = PROPAGATION_RADIUS_FACTOR * (graph.spacing if spacing is None else spacing)
         # Nearest sample in the image first (a distance transform, far cheaper than a 3D query
         # for every pixel); pixels where that choice is doubtful are resolved in 3D.
-        sampled = np.zeros((h, w), dtype=bool)
-        sampled.ravel()[self.pixels] = True
-        sample_of = np.full(h * w, -1, dtype=np.int64)
-        sample_of[self.pixels] = np.arange(self.size)
-        near = sample_of[nearest_true_pixel(sampled)[self.all_pixels]]
+        near = self.image_nearest_sample
         p = np.zeros((0, 4)) if planes is None else np.asarray(planes, dtype=np.float64)
         k = min(PROPAGATION_NEIGHBOURS, self.size) if len(p) else 1
         full, gap = _propagate(self.all_points, near, self.points, labels, p, graph.indptr,

@@ -85,3 +85,22 @@ def test_given_provider_still_recomputes_normals_when_asked() -> None:
     frame = complete_frame()
     assert cues.needs_cues(frame)
     assert any("estimated from depth" in n for n in pipe.prepare(frame).notes)
+
+
+def test_given_cues_kernel_matches_orient_normals_and_masking() -> None:
+    # Reference: the numpy composition the kernel fuses, compared bit for bit.
+    from monoplane.cues.transforms import orient_normals
+
+    rng = np.random.default_rng(3)
+    frame = complete_frame()
+    normals = rng.normal(size=frame.normals.shape).astype(np.float32)
+    normals /= np.linalg.norm(normals, axis=-1, keepdims=True)
+    normals[5, :7] = 0.0
+    depth = frame.depth.copy()
+    depth[::3, ::5] = 0
+    out = use_given_cues(frame.with_(depth=depth, normals=normals))
+    oriented = orient_normals(normals, frame.K)
+    expected = np.where((depth > 0)[..., None], oriented, 0).astype(np.float32)
+    np.testing.assert_array_equal(out.normals, expected)
+    flipped = int(np.sum(np.any(oriented != normals, axis=-1)))
+    assert any(note.startswith(f"normals: {flipped} given normals") for note in out.notes)
