@@ -175,7 +175,10 @@ class PlaneCloud:
                 raise InvalidInput(f"max_points must be at least 3, got {max_points}")
             if rng is None:
                 raise InvalidInput("subsampling a cloud needs a random generator")
-            chosen = np.sort(rng.choice(all_pixels.size, size=max_points, replace=False))
+            # Ascending order through a mask: linear, where sorting the draw is not.
+            drawn = np.zeros(all_pixels.size, dtype=bool)
+            drawn[rng.choice(all_pixels.size, size=max_points, replace=False)] = True
+            chosen = np.flatnonzero(drawn)
             keep = all_pixels[chosen]
             points = all_points[chosen]
 
