@@ -534,22 +534,29 @@ def _gc_ransac_graph(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray, cut: 
         payback[ei[e]] += b
         payback[ej[e]] += b
     local = np.full(m, -1, dtype=np.int64)
-    nodes = np.empty(m, dtype=np.int64)
     count = 0
     for p in range(m):
         # Submodularity makes e(0,1) the most an edge gives back when its end turns inlier,
         # so u1 - u0 > Σ e(0,1) means outlier in every minimiser (kept with a margin).
         if keep * (data1[p] - f0[p]) <= payback[p] * (1.0 + 1e-9) + 1e-12:
             local[p] = count
-            nodes[count] = p
             count += 1
+    # Outputs are allocated at their size (counted first): untouched tails of oversized
+    # buffers and the copies that trim them cost page faults on every call.
+    nodes = np.empty(count, dtype=np.int64)
     slope = np.empty(count)
-    for q in range(count):
-        p = nodes[q]
-        slope[q] = keep * (data1[p] - f0[p])
-    src = np.empty(n_edges, dtype=np.int64)
-    dst = np.empty(n_edges, dtype=np.int64)
-    cap = np.empty(n_edges)
+    for p in range(m):
+        q = local[p]
+        if q >= 0:
+            nodes[q] = p
+            slope[q] = keep * (data1[p] - f0[p])
+    inner = 0
+    for e in range(n_edges):
+        if local[ei[e]] >= 0 and local[ej[e]] >= 0:
+            inner += 1
+    src = np.empty(inner, dtype=np.int64)
+    dst = np.empty(inner, dtype=np.int64)
+    cap = np.empty(inner)
     inner = 0
     for e in range(n_edges):
         li, lj = local[ei[e]], local[ej[e]]
@@ -568,8 +575,7 @@ def _gc_ransac_graph(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray, cut: 
         else:
             # An edge to a fixed outlier costs e(0,0) = a or e(1,0) = b: a unary of its free end.
             slope[max(li, lj)] += b - a
-    return (bad, nodes[:count].copy(), src[:inner].copy(), dst[:inner].copy(),
-            cap[:inner].copy(), slope)
+    return bad, nodes, src, dst, cap, slope
 
 
 @kernel

@@ -37,7 +37,7 @@ from monoplane.datamodel import Frame
 from monoplane.errors import InvalidInput
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.geometry.neighbours import PointIndex
-from monoplane.jit import kernel
+from monoplane.jit import chunks, kernel, run_threaded
 
 #: A non-sampled pixel inherits its nearest sample's label only within this many times the
 #: median sample-to-nearest-sample spacing.
@@ -46,6 +46,8 @@ PROPAGATION_RADIUS_FACTOR = 4.0
 PROPAGATION_NEIGHBOURS = 4
 #: Neighbours per sample of the graph :meth:`PlaneCloud.propagate` builds when given none.
 PROPAGATION_GRAPH_K = 8
+#: Pixels per thread below which propagation runs on one thread.
+THREADED_PIXELS = 16_384
 
 
 @dataclass
@@ -275,8 +277,14 @@ class PlaneCloud:
         near = self.image_nearest_sample
         p = np.zeros((0, 4)) if planes is None else np.asarray(planes, dtype=np.float64)
         k = min(PROPAGATION_NEIGHBOURS, self.size) if len(p) else 1
-        full, gap = _propagate(self.all_points, near, self.points, labels, p, graph.indptr,
-                               graph.indices, radius**2, float(tolerance), k)
+        # Pixels are labelled independently: contiguous chunks run on parallel threads.
+        parts = run_threaded([
+            lambda a=a, b=b: _propagate(self.all_points[a:b], near[a:b], self.points, labels, p,
+                                        graph.indptr, graph.indices, radius**2,
+                                        float(tolerance), k)
+            for a, b in chunks(near.shape[0], THREADED_PIXELS)])
+        full = np.concatenate([part[0] for part in parts])
+        gap = np.concatenate([part[1] for part in parts])
         # Pixels farther than the radius from their image-nearest sample lie across a depth
         # jump from it: their nearest samples in 3D come from the point index.
         gap = np.flatnonzero(gap)

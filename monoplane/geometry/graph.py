@@ -150,7 +150,11 @@ class NeighbourGraph:
         last = self._last_subgraph
         if last is not None and np.array_equal(last[0], pool):
             return last[1], last[2]
-        edges, edge_ids = _pool_edges(self.num_nodes, self.edges, pool)
+        if pool.size == self.num_nodes and _ascending(pool):
+            # Every node, in order (the first plane's pool): the graph itself.
+            edges, edge_ids = self.edges.view(), np.arange(self.num_edges, dtype=np.int64)
+        else:
+            edges, edge_ids = _pool_edges(self.num_nodes, self.edges, pool)
         for a in (edges, edge_ids):
             a.flags.writeable = False
         self._last_subgraph = (pool.copy(), edges, edge_ids)
@@ -222,14 +226,29 @@ def _knn_edges(nbr: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 @kernel
+def _ascending(values: np.ndarray) -> bool:
+    """Whether a (M,) int64 array is strictly increasing."""
+    for i in range(1, values.shape[0]):
+        if values[i] <= values[i - 1]:
+            return False
+    return True
+
+
+@kernel
 def _pool_edges(num_nodes: int, edges: np.ndarray, pool: np.ndarray
                 ) -> tuple[np.ndarray, np.ndarray]:
     """(E', 2) edges among the (M,) ``pool`` in pool positions and their (E',) rows."""
     local = np.full(num_nodes, -1, dtype=np.int64)
     for i in range(pool.shape[0]):
         local[pool[i]] = i
-    out = np.empty((edges.shape[0], 2), dtype=np.int64)
-    ids = np.empty(edges.shape[0], dtype=np.int64)
+    # Counted first, so that the outputs are allocated at their size: untouched tails of
+    # oversized buffers and the copies that trim them cost page faults on every call.
+    count = 0
+    for e in range(edges.shape[0]):
+        if local[edges[e, 0]] >= 0 and local[edges[e, 1]] >= 0:
+            count += 1
+    out = np.empty((count, 2), dtype=np.int64)
+    ids = np.empty(count, dtype=np.int64)
     count = 0
     for e in range(edges.shape[0]):
         a, b = local[edges[e, 0]], local[edges[e, 1]]
@@ -238,4 +257,4 @@ def _pool_edges(num_nodes: int, edges: np.ndarray, pool: np.ndarray
             out[count, 1] = b
             ids[count] = e
             count += 1
-    return out[:count].copy(), ids[:count].copy()
+    return out, ids

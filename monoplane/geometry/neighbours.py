@@ -63,10 +63,10 @@ class PointIndex:
         self._points = np.ascontiguousarray(pts, dtype=np.float64)
         if self.n == 0:
             return
-        if not np.isfinite(self._points).all():
+        self._lo, self._hi, finite = _bounds(self._points)
+        if not finite:
             raise InvalidInput("a point index needs finite points")
-        self._lo = self._points.min(axis=0)
-        extent = float((self._points.max(axis=0) - self._lo).max())
+        extent = float((self._hi - self._lo).max())
         # A first grid of about one point per cell, as if the points filled their bounding
         # box; its queries on a sample size the real cells from the data's own spacing.
         self._build(max(extent, 1e-12) / max(self.n, 1) ** (1 / 3))
@@ -79,7 +79,7 @@ class PointIndex:
                 self._build(width)
 
     def _build(self, width: float) -> None:
-        extent = self._points.max(axis=0) - self._lo
+        extent = self._hi - self._lo
         dims = np.floor(extent / width).astype(np.int64) + 1
         cells = int(np.prod(dims))
         limit = CELLS_PER_POINT * self.n + 64
@@ -184,6 +184,26 @@ def _keep_best(bd: np.ndarray, bi: np.ndarray, d2: float, j: int) -> None:
         s -= 1
     bd[s] = d2
     bi[s] = j
+
+
+@kernel
+def _bounds(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
+    """(3,) per-axis minimum and maximum of (N >= 1, 3) float64 points, and whether all are
+    finite, in one pass (numpy's axis-0 reductions of an (N, 3) array take several passes of
+    short strided loops)."""
+    lo = points[0].copy()
+    hi = points[0].copy()
+    finite = True
+    for i in range(points.shape[0]):
+        for c in range(3):
+            v = points[i, c]
+            if not np.isfinite(v):
+                finite = False
+            if v < lo[c]:
+                lo[c] = v
+            if v > hi[c]:
+                hi[c] = v
+    return lo, hi, finite
 
 
 @kernel

@@ -106,6 +106,7 @@ class ProximityGraphCutLabeler(Labeler):
         if w is None:
             w = proximity_weights(cloud.points, graph.edges, cloud.normals, cloud.colors,
                                   *c.affinities())
+            w.flags.writeable = False  # shared by every pool of the frame
             graph.cache[key] = w
         return w
 
@@ -114,8 +115,10 @@ class ProximityGraphCutLabeler(Labeler):
         """Cut costs of a pool's subgraph edges; kept while the pool (its ``edge_ids``) is."""
         last = self._last_pool_weights
         if last is None or last[0] is not edge_ids:
-            last = self._last_pool_weights = (edge_ids,
-                                              self._edge_weights(cloud, graph)[edge_ids])
+            weights = self._edge_weights(cloud, graph)
+            # Ascending distinct edge rows as many as the graph's are all of them, in order.
+            pooled = weights if edge_ids.size == weights.size else weights[edge_ids]
+            last = self._last_pool_weights = (edge_ids, pooled)
         return last[1]
 
     def label(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray,

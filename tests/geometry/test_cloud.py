@@ -182,6 +182,17 @@ def test_propagation_kernel_follows_its_rule_and_nearly_matches_exact_3d_neighbo
     assert np.mean(got.ravel()[valid] != exact.ravel()[valid]) < 0.005
 
 
+def test_propagation_in_threaded_chunks_gives_the_single_thread_labels(monkeypatch):
+    cloud, labels, planes = noisy_room_cloud(1)
+    graph = NeighbourGraph.build(cloud.points, 8)
+    monkeypatch.setenv("OMP_NUM_THREADS", "1")
+    one = cloud.propagate(labels, planes, tolerance=0.005, graph=graph)
+    monkeypatch.setenv("OMP_NUM_THREADS", "3")
+    monkeypatch.setattr("monoplane.geometry.cloud.THREADED_PIXELS", 1000)
+    np.testing.assert_array_equal(
+        cloud.propagate(labels, planes, tolerance=0.005, graph=graph), one)
+
+
 @pytest.mark.parametrize("seed", range(4))
 def test_unprojection_kernel_matches_frame_points(seed):
     # Reference: Frame.points() (pixel rays times depth), centred and scaled with numpy; random

@@ -7,7 +7,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from monoplane.geometry.components import largest_component
-from monoplane.geometry.graph import NeighbourGraph, _knn_edges
+from monoplane.geometry.graph import NeighbourGraph, _knn_edges, _pool_edges
 
 
 def grid_points(n=6):
@@ -69,6 +69,21 @@ def test_subgraph_keeps_edges_among_pool_in_local_indices():
     np.testing.assert_array_equal(pool[local], g.edges[ids])
     inside = np.isin(g.edges, pool).all(axis=1)
     assert inside.sum() == len(ids)
+
+
+def test_subgraph_of_every_node_is_the_graph_itself():
+    rng = np.random.default_rng(4)
+    g = NeighbourGraph.build(rng.uniform(size=(150, 3)), k=5)
+    every = np.arange(150)
+    local, ids = g.subgraph(every)
+    ref_local, ref_ids = _pool_edges(150, g.edges, every)
+    np.testing.assert_array_equal(local, ref_local)
+    np.testing.assert_array_equal(ids, ref_ids)
+    assert not local.flags.writeable and not ids.flags.writeable
+    # All nodes in another order are not the identity: renumbered like any pool.
+    shuffled = rng.permutation(150)
+    local, ids = g.subgraph(shuffled)
+    np.testing.assert_array_equal(shuffled[local], g.edges[ids])
 
 
 def test_duplicate_points_do_not_create_self_loops_and_tiny_clouds_work():

@@ -5,7 +5,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from monoplane.errors import InvalidInput
-from monoplane.geometry.neighbours import PointIndex
+from monoplane.geometry.neighbours import PointIndex, _bounds
 
 
 @pytest.mark.parametrize("seed", range(5))
@@ -88,3 +88,18 @@ def test_query_indexed_equals_query_on_the_indexed_points(case, threads, monkeyp
     with pytest.raises(InvalidInput):
         index.query_indexed(0)
     assert PointIndex(np.zeros((0, 3))).query_indexed(3)[0].shape == (0, 3)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_bounds_kernel_matches_numpy(seed):
+    rng = np.random.default_rng(seed)
+    pts = rng.normal(size=(int(rng.integers(1, 400)), 3)) * rng.uniform(0.01, 100, 3)
+    lo, hi, finite = _bounds(pts)
+    np.testing.assert_array_equal(lo, pts.min(axis=0))
+    np.testing.assert_array_equal(hi, pts.max(axis=0))
+    assert finite
+    bad = pts.copy()
+    bad[rng.integers(len(bad)), rng.integers(3)] = [np.nan, np.inf, -np.inf][seed % 3]
+    assert not _bounds(bad)[2]
+    with pytest.raises(InvalidInput, match="finite"):
+        PointIndex(bad)
