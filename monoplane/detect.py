@@ -23,7 +23,6 @@ from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from monoplane.errors import ConfigError, InvalidInput
 from monoplane.geometry.cloud import PROPAGATION_NEIGHBOURS, PROPAGATION_RADIUS_FACTOR, PlaneCloud
@@ -140,6 +139,8 @@ class CloudPlaneResult:
         if cell is None:
             pts = self.points[finite & (self.labels > 0)]
             if len(pts) >= 2:
+                from scipy.spatial import cKDTree  # imported here: config loading imports us
+
                 d, _ = cKDTree(pts).query(pts[:: max(1, len(pts) // 2000)], k=2)
                 cell = 2.0 * float(np.median(d[:, 1]))
             cell = cell if cell and cell > 0 else 1.0
@@ -249,6 +250,8 @@ def _propagate(points: np.ndarray, sample: np.ndarray, labels: np.ndarray,
         out = np.zeros(points.shape[0], dtype=np.int32)
         out[sample] = labels
         return out
+    from scipy.spatial import cKDTree  # imported here: config loading imports this module
+
     tree = cKDTree(points[sample])
     k = min(PROPAGATION_NEIGHBOURS, sample.size)
     radius = PROPAGATION_RADIUS_FACTOR * max(spacing, 1e-12)

@@ -25,13 +25,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
 from monoplane.datamodel import Reconstruction
 from monoplane.densecrf import REFERENCE_AREA
 from monoplane.errors import InvalidInput
-from monoplane.geometry.components import label_regions
+from monoplane.geometry.components import graph_components, label_regions
 from monoplane.jit import kernel
 
 #: The paper's minimum region size, in pixels at 256 x 192 (appendix).
@@ -337,8 +335,7 @@ def _merge_groups(moments: RegionMoments, area: np.ndarray, origin: np.ndarray,
     a, b = pairs[:, 0], pairs[:, 1]
     ok = ((np.abs(np.einsum("ek,ek->e", params[a, :3], params[b, :3])) >= cos_min)
           & (rms[a, b] <= max_distance) & (rms[b, a] <= max_distance))
-    graph = sp.coo_matrix((np.ones(int(ok.sum()), np.int8), (a[ok], b[ok])), shape=(num, num))
-    _, group = connected_components(graph, directed=False)
+    group = graph_components(num, np.stack([a[ok], b[ok]], axis=1))
     # The largest region (then the lower label) of a group represents it: it names the group's
     # position in the numbering and its original plane.
     order = np.lexsort((np.arange(num), -area, group))

@@ -112,6 +112,26 @@ def test_data_model_imports_nothing_of_the_project_but_errors_and_jit() -> None:
     assert out.stdout.split("\n")[:2] == [loaded, "False False False"]
 
 
+def test_a_single_view_run_imports_no_scipy_submodule_it_does_not_use() -> None:
+    # Each costs 0.1-0.15 s of start-up in every command and batch driver.
+    import subprocess
+    import sys
+
+    code = ("import sys, numpy as np; from monoplane.pipeline import Pipeline; "
+            "from monoplane.datamodel import Frame; "
+            "v, u = np.mgrid[0:72, 0:96]; "
+            "depth = np.where(u < 48, 2.0, 1.5 + 0.01 * u).astype(np.float32); "
+            "normals = np.zeros((72, 96, 3), np.float32); normals[..., 2] = -1; "
+            "rgb = (np.random.default_rng(0).random((72, 96, 3)) * 255).astype(np.uint8); "
+            "K = np.array([[80.0, 0, 48], [0, 80.0, 36], [0, 0, 1]]); "
+            "Pipeline.from_preset('monoplane').run(Frame(rgb=rgb, K=K, depth=depth, "
+            "normals=normals)); "
+            "print(sorted(m for m in ('scipy.sparse', 'scipy.spatial', 'scipy.optimize', "
+            "'scipy.ndimage') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
+
+
 def test_package_names_load_on_first_use() -> None:
     import monoplane
     from monoplane.pipeline import Pipeline

@@ -1,4 +1,4 @@
-"""Connected regions of a label image, and the largest connected part of a graph's nodes.
+"""Connected regions of a label image, and connected components of a graph's nodes.
 
 Both the region clean-up after refinement (every plane label split into its connected regions)
 and the depth-edge segmentation of normal estimation need the connected regions of an image
@@ -72,6 +72,48 @@ def largest_component(members: np.ndarray, edges: np.ndarray) -> np.ndarray:
     """
     return _largest_component(np.ascontiguousarray(members, dtype=np.bool_),
                               np.ascontiguousarray(edges, dtype=np.int64).reshape(-1, 2))
+
+
+def graph_components(num_nodes: int, edges: np.ndarray) -> np.ndarray:
+    """Connected component of every node of an undirected graph.
+
+    Parameters
+    ----------
+    num_nodes : int
+        Number N of nodes.
+    edges : numpy.ndarray
+        (E, 2) int node pairs in ``0 .. N-1``.
+
+    Returns
+    -------
+    numpy.ndarray
+        (N,) int64 component ids ``0 .. C-1``, numbered by each component's smallest node
+        (the numbering of ``scipy.sparse.csgraph.connected_components``).
+    """
+    pairs = np.ascontiguousarray(edges, dtype=np.int64).reshape(-1, 2)
+    if pairs.size and (pairs.min() < 0 or pairs.max() >= num_nodes):
+        raise InvalidInput(f"edge ends must lie in 0..{num_nodes - 1}")
+    return _graph_components(int(num_nodes), pairs)
+
+
+@kernel
+def _graph_components(n: int, edges: np.ndarray) -> np.ndarray:
+    """:func:`graph_components` of ``n`` nodes and (E, 2) int64 ``edges``."""
+    parent = np.arange(n)
+    for e in range(edges.shape[0]):
+        _union(parent, edges[e, 0], edges[e, 1])
+    comp = np.empty(n, dtype=np.int64)
+    count = 0
+    for p in range(n):  # a root is its set's smallest node, met before the rest of its set
+        r = p
+        while parent[r] != r:
+            r = parent[r]
+        if r == p:
+            comp[p] = count
+            count += 1
+        else:
+            comp[p] = comp[r]
+    return comp
 
 
 @inline

@@ -32,12 +32,15 @@ integer coordinates; planes ``n · x + d = 0``.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.sparse import coo_matrix
 
 from monoplane.errors import InvalidInput
 from monoplane.geometry.polygons import plane_basis
+
+if TYPE_CHECKING:
+    from scipy.sparse import coo_matrix
 
 
 @dataclass
@@ -264,6 +267,8 @@ def residual_summary(reproj: np.ndarray, plane: np.ndarray, normal: np.ndarray,
 
 def _sparsity(lay: _Layout, prob: AdjustmentProblem) -> coo_matrix:
     """Which parameters each residual depends on."""
+    from scipy.sparse import coo_matrix  # imported with scipy.optimize, see adjust()
+
     o, s = len(prob.obs_view), len(prob.samp_view)
     rows, cols = [], []
     # Reprojection rows 2k, 2k+1: the view's pose and the point.
@@ -369,8 +374,8 @@ def adjust(prob: AdjustmentProblem, max_evaluations: int = 100, loss: str = "sof
         return AdjustmentResult(prob.R.copy(), prob.t.copy(), np.ones(lay.v),
                                 prob.planes.copy(), prob.points.copy(), before, before,
                                 True, "nothing to adjust")
-    # Imported here: scipy.optimize costs about 0.1 s to import, which the single-view
-    # commands (and every batch worker) would otherwise pay for nothing.
+    # Imported here: scipy.optimize and scipy.sparse cost about 0.25 s to import, which the
+    # single-view commands (and every batch driver) would otherwise pay for nothing.
     from scipy.optimize import least_squares
 
     sol = least_squares(fun, x0, jac_sparsity=_sparsity(lay, prob), method="trf", loss=loss,

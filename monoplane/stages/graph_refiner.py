@@ -28,19 +28,22 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.sparse import coo_matrix, csr_matrix
-from scipy.sparse.csgraph import connected_components
 
 from monoplane.datamodel import Reconstruction, orient_towards_camera
 from monoplane.errors import ConfigError
 from monoplane.geometry.cloud import PlaneCloud
+from monoplane.geometry.components import graph_components
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.geometry.planes import fit_planes_per_label
 from monoplane.graphcut import normal_costs, proximity_weights
 from monoplane.hookspecs import hookimpl
 from monoplane.stages.base import ProximityAffinities, Refiner, Stage, param
+
+if TYPE_CHECKING:
+    from scipy.sparse import csr_matrix
 
 
 @dataclass
@@ -90,6 +93,8 @@ class GraphCrfConfig(ProximityAffinities):
 
 def _adjacency(graph: NeighbourGraph, weights: np.ndarray) -> csr_matrix:
     """Symmetric (N, N) sparse matrix of edge weights."""
+    from scipy.sparse import coo_matrix  # only this refiner needs SciPy's sparse matrices
+
     i, j = graph.edges[:, 0], graph.edges[:, 1]
     n = graph.num_nodes
     return coo_matrix((np.r_[weights, weights], (np.r_[i, j], np.r_[j, i])),
@@ -217,8 +222,7 @@ class GraphCrfRefiner(Refiner):
         i, j = graph.edges[:, 0], graph.edges[:, 1]
         same = (labels[i] == labels[j]) & (labels[i] > 0)
         n = labels.size
-        adj = coo_matrix((np.ones(int(same.sum())), (i[same], j[same])), shape=(n, n))
-        _, comp = connected_components(adj, directed=False)
+        comp = graph_components(n, np.stack([i[same], j[same]], axis=1))
         comp = np.where(labels > 0, comp + 1, 0)
         sizes = np.bincount(comp)
         sizes[0] = 0

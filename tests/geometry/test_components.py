@@ -5,7 +5,7 @@ import pytest
 from scipy import ndimage
 
 from monoplane.errors import InvalidInput
-from monoplane.geometry.components import label_regions
+from monoplane.geometry.components import graph_components, label_regions
 
 
 def blocky(rng, h, w, labels):
@@ -57,3 +57,25 @@ def test_diagonal_touch_joins_only_with_eight_connectivity():
 def test_bad_input_is_rejected(labels, connectivity, match):
     with pytest.raises(InvalidInput, match=match):
         label_regions(labels, connectivity)
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_graph_components_are_numbered_as_scipy_does(seed):
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 80))
+    edges = rng.integers(0, n, size=(int(rng.integers(0, n)), 2))
+    _, expected = connected_components(
+        coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n)),
+        directed=False)
+    comp = graph_components(n, edges)
+    np.testing.assert_array_equal(comp, expected)
+    assert comp.dtype == np.int64
+
+
+def test_graph_components_reject_edges_outside_the_graph():
+    assert graph_components(3, np.zeros((0, 2))).tolist() == [0, 1, 2]
+    with pytest.raises(InvalidInput, match="0..2"):
+        graph_components(3, [[0, 3]])
