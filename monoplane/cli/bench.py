@@ -16,13 +16,21 @@ timings), the traced memory of each stage, throughput, the first call of a fresh
 process), and every registered baseline timed on the same frames in the same process: its own
 call (without converting the cloud into the library's data structure), its whole call, and
 the ratio of the preset's total to the baseline's call. See monoplane/bench.py for the
-method."""
+method.
+
+With --batch it times the 'monoplane batch' command instead, on a folder of synthetic frames of
+one size (default 640x480, 20 frames), for each --workers count and --engine in alternation:
+the whole command's wall time, the batch's own time (summary.json's seconds: the command less
+the interpreter's start, imports and exit), frames per second and the speed-up over the first
+worker count. See monoplane/batch/throughput.py."""
 
 EPILOG = """examples:
   monoplane bench
   monoplane bench --preset monoplane-nocrf --sizes 256x192,640x480 --frames 5 --repeat 3
   monoplane bench --baseline open3d-ransac --json bench.json
-  monoplane bench --from-json bench.json --markdown     # re-render a saved run for the docs"""
+  monoplane bench --from-json bench.json --markdown     # re-render a saved run for the docs
+  monoplane bench --batch --workers 1,2 --repeat 5      # batch throughput, 20 frames 640x480
+  monoplane bench --batch --engine local --engine ray --json batch.json"""
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -33,10 +41,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="preset to benchmark (default: monoplane)")
     p.add_argument("--set", dest="overrides", action="append", default=[],
                    metavar="TABLE.KEY=VALUE", help="override one parameter (repeatable)")
-    p.add_argument("--sizes", default="256x192,640x480", metavar="WxH[,WxH...]",
-                   help="comma-separated image sizes (default: 256x192,640x480)")
-    p.add_argument("--frames", type=int, default=5,
-                   help="synthetic frames per size, seeds SEED.. (default: 5)")
+    p.add_argument("--sizes", metavar="WxH[,WxH...]",
+                   help="comma-separated image sizes (default: 256x192,640x480; with --batch "
+                        "one size, default 640x480)")
+    p.add_argument("--frames", type=int,
+                   help="synthetic frames per size, seeds SEED.. (default: 5; with --batch "
+                        "20)")
     p.add_argument("--repeat", type=int, default=3,
                    help="timed runs per frame; medians are shown (default: 3)")
     p.add_argument("--seed", type=int, default=0, help="seed of the first frame (default: 0)")
@@ -51,35 +61,90 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="print the table of a saved --json run instead of running")
     p.add_argument("--markdown", action="store_true", help="print the table as Markdown")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    batch = p.add_argument_group("batch throughput (--batch)")
+    batch.add_argument("--batch", action="store_true",
+                       help="time the 'monoplane batch' command instead of single frames")
+    batch.add_argument("--workers", default=None, metavar="N[,N...]",
+                       help="worker counts to compare, the first being the reference "
+                            "(default: 1 and the number of cores)")
+    batch.add_argument("--engine", dest="engines", action="append", default=None,
+                       choices=("local", "ray"),
+                       help="engine to time (repeatable; default: local)")
     p.set_defaults(func=run)
 
 
+def _worker_counts(text: str | None) -> list[int]:
+    from monoplane.batch import default_workers
+
+    if text is None:
+        return list(dict.fromkeys([1, default_workers()]))
+    try:
+        counts = [int(v) for v in text.split(",")]
+    except ValueError:
+        counts = []
+    if not counts or min(counts) < 1:
+        raise InvalidInput(f"--workers must be comma-separated counts of at least 1, e.g. 1,2; "
+                           f"got {text!r}")
+    return counts
+
+
+def _write_json(path: str, doc: dict) -> None:
+    target = Path(path)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    tmp = target.with_name(target.name + ".tmp")
+    tmp.write_text(json.dumps(doc, indent=2) + "\n")
+    tmp.replace(target)
+    print(f"numbers written to {target}", file=sys.stderr)
+
+
+def _from_json(path: str, markdown: bool) -> str:
+    from monoplane.batch.throughput import BatchBenchResult, format_batch_bench
+    from monoplane.bench import BenchResult, format_bench
+
+    try:
+        data = json.loads(Path(path).read_text())
+        if data.get("kind") == "batch":
+            return format_batch_bench(BatchBenchResult.from_dict(data["result"]), markdown)
+        return format_bench([BenchResult.from_dict(r) for r in data["results"]], markdown)
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
+        raise InvalidInput(f"{path}: not a 'monoplane bench --json' file ({exc})") from exc
+
+
 def run(args: argparse.Namespace) -> int:
-    from monoplane.bench import BenchResult, bench, format_bench, parse_sizes
+    from monoplane.bench import bench, format_bench, parse_sizes
 
     if args.from_json:
-        try:
-            data = json.loads(Path(args.from_json).read_text())
-            results = [BenchResult.from_dict(r) for r in data["results"]]
-        except (OSError, ValueError, KeyError, TypeError) as exc:
-            raise InvalidInput(f"{args.from_json}: not a 'monoplane bench --json' file "
-                               f"({exc})") from exc
-        print(format_bench(results, markdown=args.markdown))
+        print(_from_json(args.from_json, args.markdown))
         return 0
-    sizes = parse_sizes(args.sizes)
-    results = bench(args.preset, sizes, repeat=args.repeat, seed=args.seed, level=args.level,
+    settings = {"preset": args.preset, "sizes": args.sizes, "frames": args.frames,
+                "repeat": args.repeat, "seed": args.seed, "level": args.level,
+                "overrides": args.overrides}
+    if args.batch:
+        from monoplane.batch.throughput import bench_batch, format_batch_bench
+
+        sizes = parse_sizes(args.sizes or "640x480")
+        if len(sizes) != 1:
+            raise InvalidInput(f"--batch takes one size in --sizes, got {args.sizes!r}")
+        frames = 20 if args.frames is None else args.frames
+        result = bench_batch(args.preset, sizes[0], frames=frames,
+                             workers=_worker_counts(args.workers),
+                             engines=args.engines or ["local"], repeat=args.repeat,
+                             seed=args.seed, level=args.level, overrides=args.overrides,
+                             progress=not args.no_progress)
+        print(format_batch_bench(result, markdown=args.markdown))
+        if args.json:
+            _write_json(args.json, {"kind": "batch", "settings": settings,
+                                    "result": result.to_dict()})
+        return 0
+    if args.workers is not None or args.engines is not None:
+        raise InvalidInput("--workers and --engine apply to --batch only")
+    results = bench(args.preset, parse_sizes(args.sizes or "256x192,640x480"),
+                    repeat=args.repeat, seed=args.seed, level=args.level,
                     overrides=args.overrides, progress=not args.no_progress,
-                    frames=args.frames, baselines=[] if args.no_baselines else args.baselines)
+                    frames=5 if args.frames is None else args.frames,
+                    baselines=[] if args.no_baselines else args.baselines)
     print(format_bench(results, markdown=args.markdown))
     if args.json:
-        target = Path(args.json)
-        target.parent.mkdir(parents=True, exist_ok=True)
-        settings = {"preset": args.preset, "sizes": args.sizes, "frames": args.frames,
-                    "repeat": args.repeat, "seed": args.seed, "level": args.level,
-                    "overrides": args.overrides}
-        tmp = target.with_name(target.name + ".tmp")
-        tmp.write_text(json.dumps({"settings": settings,
-                                   "results": [r.to_dict() for r in results]}, indent=2) + "\n")
-        tmp.replace(target)
-        print(f"numbers written to {target}", file=sys.stderr)
+        _write_json(args.json, {"settings": settings,
+                                "results": [r.to_dict() for r in results]})
     return 0
