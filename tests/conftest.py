@@ -1,5 +1,5 @@
 """Shared fixtures: tests never autoload third-party plugins, so results do not depend on what
-else is installed."""
+else is installed; every ``plane-ba`` run in any test is checked not to raise its objective."""
 
 from __future__ import annotations
 
@@ -16,6 +16,28 @@ from monoplane.testing import CORNER_PLANES, box_frame
 @pytest.fixture(autouse=True)
 def _no_autoload(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv(AUTOLOAD_ENV, "1")
+
+
+@pytest.fixture(autouse=True)
+def _plane_ba_lowers_or_keeps_its_objective(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Wherever a test runs the ``plane-ba`` adjuster (driver, CLI, eval), its robust cost must
+    not end above where it started, and a rejected solve must hand back the scene as given.
+    A wrapper here rather than an assert in each test: it also covers tests written later."""
+    from monoplane.datamodel import Scene, SfmResult
+    from monoplane.stages.adjusters import PlaneBundleAdjuster
+
+    solve = PlaneBundleAdjuster.adjust
+
+    def checked(self: PlaneBundleAdjuster, scene: Scene, sfm: SfmResult
+                ) -> tuple[Scene, SfmResult, dict]:
+        out_scene, out_sfm, report = solve(self, scene, sfm)
+        if report:
+            assert report["after"]["cost"] <= report["before"]["cost"], report
+            if not report["accepted"]:
+                assert out_scene is scene and out_sfm is sfm
+        return out_scene, out_sfm, report
+
+    monkeypatch.setattr(PlaneBundleAdjuster, "adjust", checked)
 
 
 @pytest.fixture

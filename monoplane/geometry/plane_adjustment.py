@@ -15,12 +15,22 @@ residuals, each divided by its expected noise so that they are unitless and comp
   subsample of each view's plane pixels, where ``x_vi`` is the pixel lifted with the view's
   (scale-aligned) depth ``z_vi`` in camera ``v``, ``s_v`` the view's depth scale and ``g`` the
   global plane its local plane is linked to. Dividing by the depth makes the term a relative
-  depth error, as monocular depth errors grow with depth.
+  depth error, as monocular depth errors grow with depth;
+* **normals**: ``(R_vᵀ m_vl − n_g) / σ_normal`` for every view plane ``l`` (camera-frame unit
+  normal ``m_vl``) linked to a refined global plane;
+* **pose prior**: each view's rotation change over ``prior_rot_deg`` and translation change
+  over ``prior_t``.
+
+These are the :data:`TERMS` whose robust costs the before/after summaries break down.
 
 It is solved with :func:`scipy.optimize.least_squares` (trust-region reflective, robust
 ``soft_l1`` loss) and the problem's sparse Jacobian structure (``jac_sparsity``): a residual
 depends on one camera, one scale and one plane, or on one camera and one point, so finite
 differences need only a dozen function evaluations per Jacobian whatever the problem size.
+
+Acceptance: the solution is kept only if its robust cost, evaluated with the very residual
+function the solver minimised, is not above the cost of the initial state; otherwise
+:func:`adjust` returns the initial state unchanged with ``accepted = False`` and the reason.
 
 Parametrisation: ``R_v = exp([ω_v]×) R_v⁰``; ``t_v`` directly; ``s_v = exp(λ_v)``; a plane is
 ``n = normalise(n⁰ + B α)`` with ``B`` a (3, 2) basis of the tangent plane of ``n⁰``, and ``d``.
@@ -146,11 +156,20 @@ class AdjustmentResult:
     points : numpy.ndarray
         (M, 3) refined points.
     before, after : dict
-        Residual summaries (see :func:`residual_summary`).
+        Summaries of the initial and of the returned state (see :func:`residual_summary`),
+        each with ``cost``, the solver's robust objective, and ``cost_terms``, its share per
+        residual kind. ``after`` equals ``before`` when the solution was rejected.
     success : bool
         The solver's own convergence flag.
     message : str
         The solver's message.
+    accepted : bool
+        False when the solver's solution raised the objective (or made it non-finite) and
+        the initial state was returned instead.
+    reason : str
+        Why the solution was rejected; empty when accepted.
+    rejected : dict
+        Summary of the rejected solution (same keys as ``after``); empty when accepted.
     """
 
     R: np.ndarray
@@ -162,6 +181,9 @@ class AdjustmentResult:
     after: dict = field(default_factory=dict)
     success: bool = True
     message: str = ""
+    accepted: bool = True
+    reason: str = ""
+    rejected: dict = field(default_factory=dict)
 
 
 class _Layout:
@@ -244,10 +266,37 @@ def _residuals(x: np.ndarray, lay: _Layout, prob: AdjustmentProblem, bases: np.n
     return reproj, plane, normal, onplane
 
 
+#: The residual kinds, in the order of the residual vector (and of the Jacobian's rows).
+TERMS = ("reprojection", "plane_samples", "normals", "sfm_points_on_planes", "pose_prior")
+
+
+def _terms(x: np.ndarray, lay: _Layout, prob: AdjustmentProblem, bases: np.ndarray
+           ) -> list[np.ndarray]:
+    """The residual blocks of :data:`TERMS`, in σ units: (O, 2), (S,), (L, 3), (Q,), (V - 1, 6)
+    (the last empty without a pose prior)."""
+    return [*_residuals(x, lay, prob, bases), _prior(x, lay, prob)]
+
+
 def residual_summary(reproj: np.ndarray, plane: np.ndarray, normal: np.ndarray,
                      onplane: np.ndarray, prob: AdjustmentProblem) -> dict[str, float]:
     """RMS reprojection error (pixels), RMS / median relative point-to-plane distance, RMS
-    view-to-global normal angle (degrees) and median relative SfM point-to-plane distance."""
+    view-to-global normal angle (degrees) and median relative SfM point-to-plane distance.
+
+    Parameters
+    ----------
+    reproj, plane, normal, onplane : numpy.ndarray
+        (O, 2), (S,), (L, 3), (Q,) residuals in σ units, as the solver sees them.
+    prob : AdjustmentProblem
+        The problem (its sigmas turn the residuals back into pixels, depth ratios, degrees).
+
+    Returns
+    -------
+    dict
+        ``reprojection_rms_px``, ``reprojection_median_px``, ``plane_rms_rel``,
+        ``plane_median_rel`` (point-to-plane distance over the sample's depth),
+        ``normal_rms_deg``, ``sfm_point_plane_median_rel`` (over the point's depth), and the
+        counts ``sfm_points_on_planes``, ``observations``, ``plane_samples``.
+    """
     ang = np.linalg.norm(normal, axis=1) * prob.sigma_normal_deg
     px = np.linalg.norm(reproj, axis=1) * prob.sigma_px if len(reproj) else np.zeros(0)
     rel = np.abs(plane) * prob.sigma_rel
@@ -330,6 +379,20 @@ def _robust_cost(f: np.ndarray, loss: str) -> float:
     return float(0.5 * np.sum(_LOSSES[loss](f * f)))
 
 
+def _summary(x: np.ndarray, lay: _Layout, prob: AdjustmentProblem, bases: np.ndarray,
+             loss: str) -> dict:
+    """:func:`residual_summary` of state ``x``, plus ``cost`` (the solver's objective, on the
+    whole residual vector) and ``cost_terms`` (its part from each of :data:`TERMS`)."""
+    terms = _terms(x, lay, prob, bases)
+    reproj, plane, normal, onplane, _ = terms
+    out: dict = residual_summary(reproj, plane, normal, onplane, prob)
+    flat = [b.reshape(-1) for b in terms]
+    out["cost"] = _robust_cost(np.concatenate(flat), loss)
+    out["cost_terms"] = {name: _robust_cost(b, loss) for name, b in zip(TERMS, flat,
+                                                                         strict=True)}
+    return out
+
+
 def adjust(prob: AdjustmentProblem, max_evaluations: int = 100, loss: str = "soft_l1",
            refine_points: bool = True) -> AdjustmentResult:
     """Solve the joint plane–camera refinement.
@@ -350,6 +413,8 @@ def adjust(prob: AdjustmentProblem, max_evaluations: int = 100, loss: str = "sof
     Returns
     -------
     AdjustmentResult
+        The solution if its robust cost is not above the initial one, else the initial state
+        with ``accepted = False``.
     """
     if loss not in _LOSSES:
         raise InvalidInput(f"unknown loss {loss!r}; choose one of {', '.join(_LOSSES)}")
@@ -364,12 +429,9 @@ def adjust(prob: AdjustmentProblem, max_evaluations: int = 100, loss: str = "sof
         x0[lay.point:] = prob.points.reshape(-1)
 
     def fun(x: np.ndarray) -> np.ndarray:
-        reproj, plane, normal, onplane = _residuals(x, lay, prob, bases)
-        return np.concatenate([reproj.reshape(-1), plane, normal.reshape(-1), onplane,
-                               _prior(x, lay, prob).reshape(-1)])
+        return np.concatenate([b.reshape(-1) for b in _terms(x, lay, prob, bases)])
 
-    before = residual_summary(*_residuals(x0, lay, prob, bases), prob)
-    before["cost"] = _robust_cost(fun(x0), loss)
+    before = _summary(x0, lay, prob, bases, loss)
     if lay.size == 0 or (len(prob.obs_view) + len(prob.samp_view)) == 0:
         return AdjustmentResult(prob.R.copy(), prob.t.copy(), np.ones(lay.v),
                                 prob.planes.copy(), prob.points.copy(), before, before,
@@ -380,8 +442,18 @@ def adjust(prob: AdjustmentProblem, max_evaluations: int = 100, loss: str = "sof
 
     sol = least_squares(fun, x0, jac_sparsity=_sparsity(lay, prob), method="trf", loss=loss,
                         f_scale=1.0, x_scale="jac", max_nfev=max_evaluations)
+    after = _summary(sol.x, lay, prob, bases, loss)
+    # Both costs come from the same residual function and loss, so they compare exactly.
+    # The trust-region solver only takes steps that lower it; this guards against anything
+    # that breaks that (non-finite residuals, another solver) instead of trusting it. Written
+    # as "not <=" so that a NaN cost is rejected too.
+    if not after["cost"] <= before["cost"]:
+        return AdjustmentResult(
+            prob.R.copy(), prob.t.copy(), np.ones(lay.v), prob.planes.copy(),
+            prob.points.copy(), before, before, bool(sol.success), str(sol.message),
+            accepted=False, rejected=after,
+            reason=f"the solution raised the robust cost from {before['cost']:.6g} to "
+                   f"{after['cost']:.6g}; the initial state is kept")
     R, t, scales, planes, points = _unpack(sol.x, lay, prob, bases)
-    after = residual_summary(*_residuals(sol.x, lay, prob, bases), prob)
-    after["cost"] = _robust_cost(fun(sol.x), loss)
     return AdjustmentResult(R, t, scales, planes, points, before, after,
                             bool(sol.success), str(sol.message))

@@ -2,7 +2,8 @@
 
 ``plane-ba`` refines camera poses, per-view depth scales, global planes and the sparse SfM
 points together (:mod:`monoplane.geometry.plane_adjustment`): SfM reprojection errors plus the
-point-to-plane distances of a subsample of each view's plane pixels to their global plane.
+point-to-plane distances of a subsample of each view's plane pixels to their global plane. A
+solve that raises its own objective (robust cost) is rejected and leaves the scene as fused.
 ``none`` leaves the scene as fused (the paper stops there).
 """
 
@@ -69,7 +70,12 @@ class PlaneBundleAdjuster(Adjuster):
     Config = PlaneBundleConfig
 
     def adjust(self, scene: Scene, sfm: SfmResult) -> tuple[Scene, SfmResult, dict[str, Any]]:
-        """Refine ``scene``; see :meth:`monoplane.stages.base.Adjuster.adjust`."""
+        """Refine ``scene``; see :meth:`monoplane.stages.base.Adjuster.adjust`.
+
+        The report holds ``accepted``: when the solution's robust cost is above the initial
+        one, ``scene`` and ``sfm`` are returned as given, with ``accepted = False``, ``reason``
+        and the rejected solution's summary under ``rejected``.
+        """
         cfg = self.config
         n_views = len(scene.cameras)
         if n_views < 2 or scene.planes.shape[0] == 0:
@@ -136,6 +142,15 @@ class PlaneBundleAdjuster(Adjuster):
             prior_t=self._prior_t(samp_view, samp_x, n_views),
         )
         res = adjust(prob, max_evaluations=cfg.max_evaluations, refine_points=cfg.refine_points)
+        report = {"accepted": res.accepted, "before": res.before, "after": res.after,
+                  "converged": res.success, "message": res.message,
+                  "planes_refined": len(refined),
+                  "depth_scale_factors": [float(s) for s in res.scales]}
+        if not res.accepted:
+            # The solve raised its own objective: the scene, cameras, scales and points stay
+            # exactly as fused; the report keeps what the solver reached, for diagnosis.
+            report.update(reason=res.reason, rejected=res.rejected)
+            return scene, sfm, report
 
         cameras = [replace(c, R=res.R[v], t=res.t[v]) for v, c in enumerate(scene.cameras)]
         views = []
@@ -165,9 +180,6 @@ class PlaneBundleAdjuster(Adjuster):
         new_sfm = replace(sfm, cameras=[replace(c, R=res.R[v], t=res.t[v])
                                         for v, c in enumerate(sfm.cameras)],
                           points=res.points)
-        report = {"before": res.before, "after": res.after, "converged": res.success,
-                  "message": res.message, "planes_refined": len(refined),
-                  "depth_scale_factors": [float(s) for s in res.scales]}
         return new_scene, new_sfm, report
 
 

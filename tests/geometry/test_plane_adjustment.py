@@ -3,12 +3,26 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from scipy.spatial.transform import Rotation
 
 from monoplane.datamodel import intrinsics_matrix
 from monoplane.geometry.camera import look_at
-from monoplane.geometry.plane_adjustment import AdjustmentProblem, adjust
+from monoplane.geometry.plane_adjustment import (
+    TERMS,
+    AdjustmentProblem,
+    AdjustmentResult,
+    adjust,
+)
 from monoplane.synth.scene import WORLD_UP
+
+
+def _check_objective(res: AdjustmentResult) -> None:
+    """Every solve: the objective does not rise, and its terms add up to it."""
+    assert res.after["cost"] <= res.before["cost"]
+    for summary in (res.before, res.after):
+        assert set(summary["cost_terms"]) == set(TERMS)
+        assert sum(summary["cost_terms"].values()) == pytest.approx(summary["cost"], rel=1e-9)
 
 
 def _problem(rng: np.random.Generator, n_views: int = 4):
@@ -68,6 +82,9 @@ def test_recovers_perturbed_poses_scales_and_planes() -> None:
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     bad["planes"] = np.concatenate([normals, truth["planes"][:, 3:] + 0.05], axis=1)
     res = adjust(AdjustmentProblem(**bad), max_evaluations=200, loss="linear")
+    _check_objective(res)
+    assert res.accepted and res.reason == "" and res.rejected == {}
+    assert res.after["cost"] < 1e-6 * res.before["cost"]
     assert res.after["reprojection_rms_px"] < 1e-3 < res.before["reprojection_rms_px"]
     assert res.after["plane_rms_rel"] < 1e-4 < res.before["plane_rms_rel"]
     np.testing.assert_allclose(res.scales, true_scale, rtol=1e-4)
@@ -81,6 +98,8 @@ def test_recovers_perturbed_poses_scales_and_planes() -> None:
 def test_exact_problem_stays_put_and_view_zero_is_fixed() -> None:
     truth = _problem(np.random.default_rng(1), n_views=2)
     res = adjust(AdjustmentProblem(**truth))
+    _check_objective(res)
+    assert res.accepted
     assert res.before["reprojection_rms_px"] < 1e-9
     np.testing.assert_allclose(res.R[0], truth["R"][0])
     np.testing.assert_allclose(res.t[0], truth["t"][0])
@@ -123,9 +142,59 @@ def test_sfm_points_on_planes_undo_a_monocular_depth_warp() -> None:
                      pp_plane=np.repeat(np.arange(3), 40),
                      pp_depth=np.ones(len(truth["points"])) * 3.0, sigma_point=0.03)
     res = adjust(AdjustmentProblem(**on_planes))
+    for solve in (plain, res):
+        _check_objective(solve)
+        assert solve.accepted
     after = _plane_errors(res.planes, truth["planes"])
     assert before[0] > 1.0 and before[1] > 0.02  # the warp is visible in the fused planes
     assert after[0] < 0.5 * before[0] and after[1] < 0.2 * before[1]
     # Without the SfM points the free depth scales follow the warp and the offsets get worse
     # than fused: what the refinement did before it used the SfM points.
     assert _plane_errors(plain.planes, truth["planes"])[1] > before[1]
+
+
+def _perturbed(seed: int) -> AdjustmentProblem:
+    """The exact two-view problem with view 1's pose and the planes' offsets moved a little."""
+    truth = _problem(np.random.default_rng(seed), n_views=2)
+    bad = dict(truth)
+    bad["t"] = truth["t"] + np.array([np.zeros(3), [0.02, -0.01, 0.01]])
+    bad["planes"] = truth["planes"] + np.array([0.0, 0.0, 0.0, 0.03])
+    return AdjustmentProblem(**bad)
+
+
+@pytest.mark.parametrize("moved", ["away", "nan"])
+def test_a_solution_that_raises_the_cost_is_rejected(moved: str, monkeypatch) -> None:
+    """A solver answer worse than its start (here: a solver that steps away from the optimum,
+    or one that returns non-finite parameters) leaves every unknown as it was."""
+    import scipy.optimize
+
+    prob = _perturbed(3)
+
+    def bad_solver(fun, x0, **kwargs):
+        x = x0 + 0.05 if moved == "away" else np.full_like(x0, np.nan)
+        return scipy.optimize.OptimizeResult(x=x, success=True, message="stepped off")
+
+    monkeypatch.setattr(scipy.optimize, "least_squares", bad_solver)
+    res = adjust(prob, max_evaluations=5)
+    assert not res.accepted
+    assert "raised the robust cost" in res.reason
+    assert not res.rejected["cost"] <= res.before["cost"]  # higher, or NaN
+    assert res.after == res.before  # the report describes the state returned: the initial one
+    _check_objective(res)
+    np.testing.assert_array_equal(res.R, prob.R)
+    np.testing.assert_array_equal(res.t, prob.t)
+    np.testing.assert_array_equal(res.scales, np.ones(2))
+    np.testing.assert_array_equal(res.planes, prob.planes)
+    np.testing.assert_array_equal(res.points, prob.points)
+
+
+def test_a_solution_that_lowers_the_cost_is_accepted() -> None:
+    prob = _perturbed(3)
+    res = adjust(prob, max_evaluations=20)
+    assert res.accepted and res.reason == ""
+    assert res.after["cost"] < 0.01 * res.before["cost"]
+    _check_objective(res)
+    # Same residual sets before and after: the figures compare like for like.
+    for key in ("observations", "plane_samples", "sfm_points_on_planes"):
+        assert res.after[key] == res.before[key]
+    assert not np.allclose(res.t, prob.t)  # the solution, not the start, is returned
