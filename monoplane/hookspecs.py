@@ -80,6 +80,14 @@ def monoplane_register_matchers() -> list[type[Stage]]:
 
 
 @hookspec
+def monoplane_register_registrars() -> list[type[Stage]]:
+    """Registrars placing the views the matcher left out (from planes, normals, depth, matches).
+
+    Config table ``[registrar]``. Contract: :class:`monoplane.stages.base.Registrar`.
+    """
+
+
+@hookspec
 def monoplane_register_fusers() -> list[type[Stage]]:
     """Fusers of per-view planes into a global planar :class:`~monoplane.datamodel.Scene`.
 

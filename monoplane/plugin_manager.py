@@ -32,6 +32,7 @@ DEFAULT_PLUGINS: tuple[str, ...] = (
     "monoplane.stages.refiners",
     "monoplane.stages.graph_refiner",
     "monoplane.stages.matchers",
+    "monoplane.stages.registrars",
     "monoplane.stages.fusers",
     "monoplane.stages.adjusters",
     "monoplane.evaluation.baselines",
@@ -48,6 +49,7 @@ REGISTRATION_HOOKS: dict[str, str] = {
     "labeler": "monoplane_register_labelers",
     "refiner": "monoplane_register_refiners",
     "matcher": "monoplane_register_matchers",
+    "registrar": "monoplane_register_registrars",
     "fuser": "monoplane_register_fusers",
     "adjuster": "monoplane_register_adjusters",
 }

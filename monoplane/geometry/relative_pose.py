@@ -1,11 +1,13 @@
-"""Fallback relative pose of two views that structure from motion could not connect.
+"""Feature-based relative pose of two views that structure from motion could not connect.
 
-SIFT keypoints (OpenCV) matched with Lowe's ratio test and a mutual check, then an essential
-matrix with OpenCV's USAC MAGSAC++ and the cheirality check (``recoverPose``) give the rotation
-and the translation direction. The translation's length, which two views alone cannot give,
-comes from the monocular depth: the inliers lifted with the reference view's scale-aligned
-depth must reproject onto their matches, which fixes the length per point (median over the
-inliers); the second view's own depth scale follows from the same points seen from it.
+SIFT keypoints (OpenCV, :func:`sift_features`) matched with Lowe's ratio test and a mutual
+check (:func:`match_features`). An essential matrix with OpenCV's USAC MAGSAC++ and the
+cheirality check (``recoverPose``) gives the rotation and the translation direction
+(:func:`essential_pose`); :func:`pnp_pose` is its counterpart for short baselines. The
+translation's length, which two views alone cannot give, comes from the monocular depth: the
+inliers lifted with the reference view's scale-aligned depth must reproject onto their
+matches, which fixes the length per point (median over the inliers); the second view's own
+depth scale follows from the same points seen from it.
 
 Frames: ``x_j = R x_i + t`` with OpenCV camera axes; pixel centres at integer coordinates.
 """
@@ -22,7 +24,7 @@ from monoplane.geometry.alignment import sample_depth
 
 @dataclass(frozen=True)
 class FallbackPose:
-    """Result of :func:`fallback_relative_pose`.
+    """Result of :func:`essential_pose` or :func:`pnp_pose`.
 
     Attributes
     ----------
@@ -51,69 +53,46 @@ def _gray(rgb: np.ndarray) -> np.ndarray:
     return cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2GRAY)
 
 
-def match_sift(rgb_i: np.ndarray, rgb_j: np.ndarray, ratio: float = 0.8,
-               max_features: int = 4000) -> tuple[np.ndarray, np.ndarray]:
-    """Mutual ratio-test SIFT matches between two images.
+@dataclass(frozen=True)
+class Features:
+    """SIFT keypoints of one image: (n, 2) float64 ``(u, v)`` pixels and (n, 128) float32
+    descriptors."""
+
+    pixels: np.ndarray
+    descriptors: np.ndarray
+
+
+def sift_features(rgb: np.ndarray, max_features: int = 4000) -> Features:
+    """OpenCV SIFT keypoints and descriptors of an (H, W, 3) uint8 image."""
+    kp, des = cv2.SIFT_create(nfeatures=max_features).detectAndCompute(_gray(rgb), None)
+    if des is None or len(kp) < 2:
+        return Features(np.zeros((0, 2)), np.zeros((0, 128), np.float32))
+    return Features(np.array([k.pt for k in kp], dtype=np.float64), des)
+
+
+def match_features(fi: Features, fj: Features, ratio: float = 0.8
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Mutual ratio-test matches of two images' SIFT features.
 
     Returns
     -------
     (numpy.ndarray, numpy.ndarray)
         (m, 2) float64 pixel coordinates ``(u, v)`` in view ``i`` and in view ``j``.
     """
-    sift = cv2.SIFT_create(nfeatures=max_features)
-    kp_i, des_i = sift.detectAndCompute(_gray(rgb_i), None)
-    kp_j, des_j = sift.detectAndCompute(_gray(rgb_j), None)
-    if des_i is None or des_j is None or len(kp_i) < 2 or len(kp_j) < 2:
+    if len(fi.pixels) < 2 or len(fj.pixels) < 2:
         return np.zeros((0, 2)), np.zeros((0, 2))
     bf = cv2.BFMatcher(cv2.NORM_L2)
-    fwd = bf.knnMatch(des_i, des_j, k=2)
-    back = {m.queryIdx: m.trainIdx for m in bf.match(des_j, des_i)}
+    fwd = bf.knnMatch(fi.descriptors, fj.descriptors, k=2)
+    back = {m.queryIdx: m.trainIdx for m in bf.match(fj.descriptors, fi.descriptors)}
     pairs = [(m.queryIdx, m.trainIdx) for m, n in (p for p in fwd if len(p) == 2)
              if m.distance < ratio * n.distance and back.get(m.trainIdx) == m.queryIdx]
     if not pairs:
         return np.zeros((0, 2)), np.zeros((0, 2))
     idx = np.array(pairs)
-    pi = np.array([kp_i[k].pt for k in idx[:, 0]], dtype=np.float64)
-    pj = np.array([kp_j[k].pt for k in idx[:, 1]], dtype=np.float64)
-    return pi, pj
+    return fi.pixels[idx[:, 0]], fj.pixels[idx[:, 1]]
 
 
-def fallback_relative_pose(rgb_i: np.ndarray, K_i: np.ndarray, depth_i: np.ndarray,
-                           rgb_j: np.ndarray, K_j: np.ndarray, depth_j: np.ndarray,
-                           min_inliers: int = 15) -> FallbackPose | None:
-    """Relative pose of view ``j`` to view ``i`` from an essential matrix and monocular depth.
-
-    Parameters
-    ----------
-    rgb_i, rgb_j : numpy.ndarray
-        (H, W, 3) uint8 images.
-    K_i, K_j : numpy.ndarray
-        (3, 3) intrinsics.
-    depth_i : numpy.ndarray
-        (H_i, W_i) z-depth of view ``i`` in the target units (0 = invalid).
-    depth_j : numpy.ndarray
-        (H_j, W_j) z-depth of view ``j`` in any scale (0 = invalid).
-    min_inliers : int
-        Fewest essential-matrix inliers (with valid depth in both views) accepted.
-
-    Returns
-    -------
-    FallbackPose or None
-        None when the views share too few consistent matches.
-    """
-    pi, pj = match_sift(rgb_i, rgb_j)
-    if len(pi) < max(min_inliers, 5):
-        return None
-    found = _essential_pose(pi, pj, K_i, depth_i, K_j, depth_j, min_inliers)
-    if found is None:
-        # A very short baseline makes the essential matrix degenerate; with view i's depth
-        # the matches are 2D-3D correspondences, and PnP needs no parallax. (PnP is not the
-        # first choice: keypoints sit on edges, where a depth lookup is often off.)
-        found = _pnp_pose(pi, pj, K_i, depth_i, K_j, depth_j, min_inliers)
-    return found
-
-
-def _pnp_pose(pi: np.ndarray, pj: np.ndarray, K_i: np.ndarray, depth_i: np.ndarray,
+def pnp_pose(pi: np.ndarray, pj: np.ndarray, K_i: np.ndarray, depth_i: np.ndarray,
               K_j: np.ndarray, depth_j: np.ndarray, min_inliers: int) -> FallbackPose | None:
     """Pose of j from view i's depth-lifted keypoints and their matches in j (PnP RANSAC)."""
     d_i = sample_depth(depth_i, pi)
@@ -139,7 +118,7 @@ def _pnp_pose(pi: np.ndarray, pj: np.ndarray, K_i: np.ndarray, depth_i: np.ndarr
                         inliers=int(len(idx)), matches=int(len(pi)), estimator="pnp")
 
 
-def _essential_pose(pi: np.ndarray, pj: np.ndarray, K_i: np.ndarray, depth_i: np.ndarray,
+def essential_pose(pi: np.ndarray, pj: np.ndarray, K_i: np.ndarray, depth_i: np.ndarray,
                     K_j: np.ndarray, depth_j: np.ndarray, min_inliers: int
                     ) -> FallbackPose | None:
     """Essential matrix (USAC MAGSAC++) rotation and direction, baseline from the depth."""

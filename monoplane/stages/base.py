@@ -24,12 +24,14 @@ import numpy as np
 
 if TYPE_CHECKING:
     from monoplane.datamodel import Frame, Reconstruction, Scene, SfmResult
+    from monoplane.geometry.alignment import ScaleAlignment
     from monoplane.geometry.cloud import PlaneCloud
     from monoplane.geometry.graph import NeighbourGraph
 
 #: Stage kinds, in pipeline order; each is also the name of its config table.
 STAGE_KINDS: tuple[str, ...] = (
-    "cues", "sampler", "scorer", "labeler", "refiner", "matcher", "fuser", "adjuster",
+    "cues", "sampler", "scorer", "labeler", "refiner", "matcher", "registrar", "fuser",
+    "adjuster",
 )
 
 
@@ -327,6 +329,40 @@ class Matcher(Stage):
         ``config`` with that option set, leaving ``config`` itself unchanged.
         """
         return None
+
+
+class Registrar(Stage):
+    """Places the views the matcher left unregistered, from what every view already has."""
+
+    kind = "registrar"
+
+    def register(self, views: list[Reconstruction], sfm: SfmResult,
+                 alignments: list[ScaleAlignment | None]
+                 ) -> tuple[SfmResult, list[ScaleAlignment | None]]:
+        """Give a pose and a depth scale to every view it can place.
+
+        Parameters
+        ----------
+        views : list of Reconstruction
+            Every input view, segmented: ``rec.frame`` holds its image, its depth in its own
+            (unaligned) units, its normals and ``K``; labels and planes are in that frame.
+        sfm : SfmResult
+            The matcher's model. ``sfm.registration[v]["method"]`` is ``"none"`` for a view
+            to place; the others' cameras are world-to-camera poses in the model's frame.
+            ``sfm.matches`` may hold keypoint matches between any two views, placed or not
+            (a learned matcher puts its correspondences there).
+        alignments : list of ScaleAlignment or None
+            Per view, the factor bringing its depth into the model's units; None for the
+            views to place.
+
+        Returns
+        -------
+        (SfmResult, list of ScaleAlignment or None)
+            The model with the placed views' cameras and their ``registration`` entries
+            (``method`` naming how, plus its evidence), and their alignments. A view that
+            cannot be placed keeps ``{"method": "none", "reason": ...}``.
+        """
+        raise NotImplementedError
 
 
 class Fuser(Stage):

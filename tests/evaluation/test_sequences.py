@@ -1,4 +1,4 @@
-"""N-view metrics on exact predictions, and the fallback relative pose on a known pair."""
+"""N-view metrics on exact predictions."""
 
 from __future__ import annotations
 
@@ -7,14 +7,8 @@ from scipy.spatial.transform import Rotation
 
 from monoplane.datamodel import Reconstruction
 from monoplane.evaluation.sequences import consistency, plane_errors, similarity_to_truth
-from monoplane.evaluation.twoview import (
-    ground_truth_sfm,
-    rotation_error_deg,
-    translation_angle_deg,
-)
-from monoplane.geometry.relative_pose import fallback_relative_pose
+from monoplane.evaluation.twoview import ground_truth_sfm
 from monoplane.stages.fusers import AverageFuser
-from monoplane.synth import generate
 from monoplane.synth.sequence import generate_sequence
 
 
@@ -44,18 +38,3 @@ def test_exact_scene_is_consistent_with_zero_plane_error() -> None:
     normal, offset = plane_errors(scene, synth.views, synth.gt_planes_world,
                                   synth.view_to_global)
     assert np.median(normal) < 0.5 and np.median(offset) < 0.01
-
-
-def test_fallback_pose_of_a_known_pair() -> None:
-    synth = generate(6, level="clean", width=320, height=240, n_views=2)
-    v0, v1 = synth.views
-    fb = fallback_relative_pose(v0.frame.rgb, v0.frame.K, v0.gt_depth, v1.frame.rgb,
-                                v1.frame.K, 0.5 * v1.gt_depth)
-    assert fb is not None and fb.inliers >= 15
-    R_true = v1.R @ v0.R.T
-    t_true = v1.t - R_true @ v0.t
-    assert rotation_error_deg(fb.R, R_true) < 1.0
-    # Metric baseline from view 0's depth; view 1's depth was halved, so its scale is 2.
-    assert translation_angle_deg(fb.t, t_true) < 5.0
-    assert abs(np.linalg.norm(fb.t) / np.linalg.norm(t_true) - 1.0) < 0.1
-    assert abs(fb.depth_scale_j - 2.0) < 0.1

@@ -9,10 +9,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from monoplane.batch.views import ViewPool
 from monoplane.evaluation.twoview import ground_truth_sfm
 from monoplane.hookspecs import hookimpl
 from monoplane.multiview import (
-    ViewPool,
     matcher_keeps_intrinsics,
     reconstruct_multiview,
     rescale_reconstruction,

@@ -1,0 +1,305 @@
+"""Built-in registrars: place the views structure from motion left out (see docs/multiview.md).
+
+``plane-aware`` places each left-over view against the already placed view it agrees with best.
+For every such pair it gathers pose hypotheses from every source it is allowed
+(``registrar.methods``), checks each one densely against both views' depth and normals, refines
+the best by ICP and accepts it only if the verified overlap is large enough and the views do not
+contradict each other (:mod:`monoplane.geometry.view_registration`). Views are placed greedily,
+best-verified pair first, so a view placed early can serve as the reference of the next.
+
+``none`` leaves them out (the views SfM registered are reconstructed alone).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from monoplane.datamodel import Reconstruction, SfmResult
+from monoplane.errors import ConfigError
+from monoplane.geometry.alignment import ScaleAlignment
+from monoplane.geometry.relative_pose import (
+    Features,
+    essential_pose,
+    match_features,
+    pnp_pose,
+    sift_features,
+)
+from monoplane.geometry.view_registration import (
+    Agreement,
+    Hypothesis,
+    ViewGeometry,
+    agreement,
+    feature_hypotheses,
+    fpfh_hypothesis,
+    refine_epipolar,
+    refine_icp,
+    rotation_hypotheses,
+    translation_from_matches,
+    translation_from_planes,
+    view_geometry,
+)
+from monoplane.hookspecs import hookimpl
+from monoplane.stages.base import Registrar, Stage, param
+
+#: Hypothesis sources, in the order they are tried; what ``cameras.json`` names them.
+METHODS: dict[str, str] = {
+    "features": "3D feature matches (keypoints lifted with both depths), rigid or similarity "
+                "RANSAC",
+    "essential": "essential matrix of the keypoint matches (OpenCV USAC MAGSAC++), baseline "
+                 "and scale from the depth; PnP on short baselines",
+    "planes": "rotation from pairs of non-parallel planes (dominant directions); translation "
+              "and scale from feature matches or, without them, from the plane offsets",
+    "fpfh": "Open3D FPFH features + RANSAC global registration (metric depth only)",
+}
+
+
+@dataclass
+class _Candidate:
+    """The best verified hypothesis of one (reference, view) pair."""
+
+    hyp: Hypothesis
+    check: Agreement
+    matches: int
+    refined: bool
+    accepted: bool
+
+
+class PlaneAwareRegistrar(Registrar):
+    """Places left-over views from planes, normals, depth and the feature matches there are."""
+
+    name = "plane-aware"
+
+    @dataclass
+    class Config:
+        methods: list[str] = param(
+            ["features", "essential", "planes", "fpfh"],
+            f"hypothesis sources to try: {', '.join(METHODS)} (docs/multiview.md)")
+        min_overlap: float = param(
+            0.08, "smallest verified overlap accepted: the share of both views' sampled points "
+                  "that land on the other view's surface under the pose")
+        min_colour: float = param(
+            0.4, "smallest correlation of the grey levels of the two views at the agreeing "
+                 "points (a place of the same shape elsewhere, or another room, correlates "
+                 "near 0)")
+        max_violation: float = param(
+            0.25, "largest share of free-space violations (points landing in front of the "
+                  "surface the other view sees) per agreeing point")
+        tolerance_metric: float = param(
+            0.04, "relative depth tolerance of the dense check when both depths are metric")
+        tolerance_relative: float = param(
+            0.10, "relative depth tolerance of the dense check on relative (monocular) depth, "
+                  "which warps")
+        match_tolerance: float = param(
+            0.06, "relative 3D tolerance of a feature match inlier (metric depth; twice this "
+                  "on relative depth)")
+        rotations: int = param(12, "plane-pair rotations tried per view pair (heaviest first)")
+        icp: bool = param(True, "refine the best hypothesis by ICP (Open3D) when both depths "
+                                "are metric")
+        grid: int = param(96, "sample points across the image width for the dense check")
+        seed: int = param(0, "random seed of the RANSAC samplers")
+
+        def __post_init__(self) -> None:
+            unknown = [m for m in self.methods if m not in METHODS]
+            if unknown or not self.methods:
+                raise ConfigError(f"[registrar] methods: unknown {', '.join(unknown) or '(none)'}"
+                                  f"; valid choices: {', '.join(METHODS)}")
+
+    def register(self, views: list[Reconstruction], sfm: SfmResult,
+                 alignments: list[ScaleAlignment | None]
+                 ) -> tuple[SfmResult, list[ScaleAlignment | None]]:
+        registration = [dict(r) for r in sfm.registration] or [{"method": "sfm"} for _ in views]
+        cameras = list(sfm.cameras)
+        aligns = list(alignments)
+        placed = [v for v, r in enumerate(registration) if r["method"] != "none"]
+        todo = [v for v, r in enumerate(registration) if r["method"] == "none"]
+        features: dict[int, Features] = {}
+        raw = {v: self._geometry(views[v], 1.0) for v in range(len(views))}
+        scaled: dict[int, ViewGeometry] = {}
+        best: dict[tuple[int, int], _Candidate | None] = {}
+        while todo:
+            for v in todo:
+                for r in placed:
+                    if (r, v) in best:
+                        continue
+                    if r not in scaled:
+                        scaled[r] = self._geometry(views[r], aligns[r].scale)
+                    best[(r, v)] = self._pair(views, sfm, features, scaled[r], raw[v], r, v,
+                                              aligns[r].scale)
+            options = [(c.check.score, r, v) for (r, v), c in best.items()
+                       if c is not None and c.accepted and v in todo and r in placed]
+            if not options:
+                break
+            _, r, v = max(options)
+            c = best[(r, v)]
+            cam_r, hyp = cameras[r], c.hyp
+            # s X_v = R X_r + t and X_r = R_r X_w + t_r  =>  X_v' = R R_r X_w + (R t_r + t),
+            # X_v' in world units; the view's depth times its scale is in world units too.
+            cameras[v] = replace(cameras[v], R=hyp.R @ cam_r.R, t=hyp.R @ cam_r.t + hyp.t)
+            aligns[v] = ScaleAlignment(scale=hyp.s, num_points=c.check.visible,
+                                       num_inliers=c.check.agree, residual=float("nan"),
+                                       relative_residual=float("nan"))
+            registration[v] = {
+                "method": hyp.source, "description": METHODS[hyp.source.split("+")[0]],
+                "reference": views[r].frame.name, "matches": c.matches,
+                "support": hyp.support, "icp": c.refined,
+                "verified_overlap": round(c.check.overlap, 4),
+                "agreeing_points": c.check.agree, "violations": c.check.violate,
+                "colour_correlation": round(c.check.colour, 4),
+                "depth_scale": hyp.s,
+            }
+            todo.remove(v)
+            placed.append(v)
+        for v in todo:
+            tried = [c for (r, u), c in best.items() if u == v and c is not None]
+            registration[v] = {"method": "none", "reason": self._why(tried)}
+        return replace(sfm, cameras=cameras, registration=registration), aligns
+
+    # ------------------------------------------------------------------------------------------
+
+    def _geometry(self, rec: Reconstruction, scale: float) -> ViewGeometry:
+        f = rec.frame
+        return view_geometry(f.K, f.depth * scale, f.normals, f.rgb, rec.params,
+                             rec.area_px, f.depth_kind == "metric", self.config.grid)
+
+    def _why(self, tried: list[_Candidate]) -> str:
+        if not tried:
+            return "no pose hypothesis from any method (no feature matches, too few planes)"
+        c = max(tried, key=lambda c: c.check.score)
+        cfg = self.config
+        return (f"best pose verified on {c.check.overlap:.1%} of the points, colour "
+                f"correlation {c.check.colour:.2f}, {c.check.violation:.0%} free-space "
+                f"violations (needs {cfg.min_overlap:.0%}, {cfg.min_colour:.2f} and at most "
+                f"{cfg.max_violation:.0%})")
+
+    def _matches(self, views: list[Reconstruction], sfm: SfmResult,
+                 features: dict[int, Features], r: int, v: int
+                 ) -> tuple[np.ndarray, np.ndarray]:
+        """Keypoint matches of the pair: the matcher's own (a learned matcher's land here),
+        else SIFT's."""
+        key, flip = ((r, v), False) if r < v else ((v, r), True)
+        given = sfm.matches.get(key)
+        if given is not None and len(given):
+            a, b = (1, 0) if flip else (0, 1)
+            return (sfm.keypoints[r][given[:, a]], sfm.keypoints[v][given[:, b]])
+        for u in (r, v):
+            if u not in features:
+                features[u] = sift_features(views[u].frame.rgb)
+        return match_features(features[r], features[v])
+
+    def _pair(self, views: list[Reconstruction], sfm: SfmResult, features: dict[int, Features],
+              ref: ViewGeometry, other: ViewGeometry, r: int, v: int, scale_r: float
+              ) -> _Candidate | None:
+        cfg = self.config
+        metric = ref.metric and other.metric and (views[r].frame.depth_units
+                                                  == views[v].frame.depth_units)
+        fixed = scale_r if metric else None
+        tol = cfg.tolerance_metric if metric else cfg.tolerance_relative
+        match_tol = cfg.match_tolerance * (1.0 if metric else 2.0)
+        pr, pv = self._matches(views, sfm, features, r, v)
+        xr, xv = _lift(pr, ref), _lift(pv, other)
+        ok = (xr[:, 2] > 0) & (xv[:, 2] > 0)
+        xr, xv = xr[ok], xv[ok]
+        hyps: list[Hypothesis] = []
+        if "features" in cfg.methods:
+            hyps += feature_hypotheses(xr, xv, fixed, match_tol, seed=cfg.seed)
+        if "essential" in cfg.methods and len(pr) >= 8:
+            hyps += _essential(pr, pv, ref, other, fixed)
+        if "planes" in cfg.methods:
+            for R, _ in rotation_hypotheses(ref, other)[:cfg.rotations]:
+                found = translation_from_matches(R, xr, xv, fixed, match_tol)
+                if found is not None:
+                    hyps.append(Hypothesis(R, found[0], found[1], "planes+features", found[2]))
+                for t, s, n in translation_from_planes(R, ref, other, fixed, keep=3):
+                    hyps.append(Hypothesis(R, t, s, "planes", n))
+        if "fpfh" in cfg.methods and metric:
+            found = fpfh_hypothesis(ref, other, scale_r, seed=cfg.seed)
+            if found is not None:
+                hyps.append(found)
+        if not hyps:
+            return None
+        checked = sorted(((agreement(ref, other, h, tol), h) for h in hyps),
+                         key=lambda e: -e[0].score)
+        check, hyp = checked[0]
+        refined = False
+        if metric and cfg.icp:
+            # Metric depth: ICP on the dense clouds from the two best distinct starts (a wrong
+            # top hypothesis often sits next to a right second one). ICP minimises its own
+            # point-to-plane cost, not the agreement count, so its result is kept unless it
+            # loses more than a little of the verified overlap.
+            for _, hyp0 in checked[:2]:
+                better = refine_icp(ref, other, hyp0, metric)
+                after = agreement(ref, other, better, tol)
+                if after.agree >= 0.98 * check.agree and (not refined or after.score > check.score):
+                    check, hyp, refined = after, better, True
+        elif len(pr) >= 8:
+            # Relative depth warps, and a pose fitted on lifted points inherits the warp (ICP
+            # made it worse, docs/multiview.md); the matches' epipolar geometry does not. Of the
+            # hypotheses the dense check cannot tell apart (within 10 % of the best agreement),
+            # take the one most matches agree with epipolarly, and refine it on them.
+            close = [(c, h) for c, h in checked if c.agree >= 0.9 * check.agree]
+            refined_all = [(refine_epipolar(h, pr, pv, ref.K, other.K), c, h) for c, h in close]
+            scored = [(found[1], found[0]) for found, _, _ in refined_all if found is not None]
+            if scored:
+                _, best = max(scored, key=lambda e: e[0])
+                after = agreement(ref, other, best, tol)
+                if after.agree >= 0.9 * check.agree:
+                    check, hyp, refined = after, best, True
+        accepted = (check.overlap >= cfg.min_overlap and check.violation <= cfg.max_violation
+                    and check.colour >= cfg.min_colour)
+        return _Candidate(hyp, check, len(pr), refined, accepted)
+
+
+def _lift(pixels: np.ndarray, g: ViewGeometry) -> np.ndarray:
+    """(m, 3) points of keypoints lifted with the view's depth; z = 0 where the depth is
+    invalid or the keypoint sits on a depth edge (its 3×3 neighbourhood spans more than 5 %)."""
+    h, w = g.shape
+    out = np.zeros((len(pixels), 3))
+    if not len(pixels):
+        return out
+    ui = np.clip(np.rint(pixels[:, 0]).astype(np.int64), 1, w - 2)
+    vi = np.clip(np.rint(pixels[:, 1]).astype(np.int64), 1, h - 2)
+    win = np.stack([g.depth[vi + dv, ui + du] for dv in (-1, 0, 1) for du in (-1, 0, 1)])
+    lo, hi = win.min(axis=0), win.max(axis=0)
+    z = g.depth[vi, ui].astype(np.float64)
+    good = (lo > 0) & (hi < 1.05 * lo)
+    rays = np.linalg.solve(g.K, np.c_[pixels, np.ones(len(pixels))].T).T
+    out[good] = rays[good] * z[good, None]
+    return out
+
+
+def _essential(pr: np.ndarray, pv: np.ndarray, ref: ViewGeometry, other: ViewGeometry,
+               fixed: float | None) -> list[Hypothesis]:
+    found = essential_pose(pr, pv, ref.K, ref.depth, other.K, other.depth, 8)
+    if found is None:
+        found = pnp_pose(pr, pv, ref.K, ref.depth, other.K, other.depth, 8)
+    if found is None:
+        return []
+    return [Hypothesis(found.R, found.t, fixed if fixed is not None else found.depth_scale_j,
+                       "essential", found.inliers)]
+
+
+class NoRegistrar(Registrar):
+    """Leaves the views the matcher could not register out of the scene."""
+
+    name = "none"
+
+    @dataclass
+    class Config:
+        pass
+
+    def register(self, views: list[Reconstruction], sfm: SfmResult,
+                 alignments: list[ScaleAlignment | None]
+                 ) -> tuple[SfmResult, list[ScaleAlignment | None]]:
+        registration = [dict(r) if r["method"] != "none" else
+                        {**r, "reason": r.get("reason", "the matcher could not register it and "
+                                                        "[registrar] plugin is 'none'")}
+                        for r in sfm.registration]
+        return replace(sfm, registration=registration), list(alignments)
+
+
+@hookimpl
+def monoplane_register_registrars() -> list[type[Stage]]:
+    """Register the built-in registrars."""
+    return [PlaneAwareRegistrar, NoRegistrar]
