@@ -68,6 +68,8 @@ class MultiviewResult:
         is the world frame and the others were placed by fallback poses).
     unregistered : list of str
         Names of the input frames left out (no pose).
+    unregistered_reasons : dict
+        Why each of them was left out (the registrar's last word), by name.
     adjustment : dict
         The adjuster's report (``before``/``after`` residuals), empty when none ran.
     fused : Scene or None
@@ -84,6 +86,7 @@ class MultiviewResult:
     frame_indices: list[int] = field(default_factory=list)
     registration: list[dict[str, Any]] = field(default_factory=list)
     unregistered: list[str] = field(default_factory=list)
+    unregistered_reasons: dict[str, str] = field(default_factory=dict)
     adjustment: dict[str, Any] = field(default_factory=dict)
     fused: Scene | None = None
 
@@ -157,6 +160,10 @@ def reconstruct_multiview(frames: list[Frame], pipe: Pipeline, progress: bool = 
         elif sfm.num_views != len(frames):
             raise InvalidInput(f"{len(frames)} frames but the SfM result has {sfm.num_views} views")
         registration = [dict(r) for r in sfm.registration] or [{"method": "sfm"} for _ in frames]
+        for v, r in enumerate(registration):
+            if r["method"] == "sfm":
+                # Evidence of an SfM placement: the view's keypoints that observe model points.
+                r.setdefault("observations", int((sfm.point_ids[v] >= 0).sum()))
         if progress:
             print(f"monoplane: SfM registered {sum(r['method'] != 'none' for r in registration)} "
                   f"of {len(frames)} views", file=sys.stderr)
@@ -200,6 +207,9 @@ def reconstruct_multiview(frames: list[Frame], pipe: Pipeline, progress: bool = 
                                    lambda: registrar.register(segmented, sfm, found),
                                    "multiview", timings)
             registration = [dict(r) for r in sfm.registration]
+            if progress:
+                placed = sum(r["method"] not in ("none", "sfm", "origin") for r in registration)
+                print(f"monoplane: the registrar placed {placed} more view(s)", file=sys.stderr)
         t0 = time.perf_counter()
         keep = [v for v, r in enumerate(registration) if r["method"] != "none"]
         unregistered = [frames[v].name for v, r in enumerate(registration) if r["method"] == "none"]
@@ -212,9 +222,12 @@ def reconstruct_multiview(frames: list[Frame], pipe: Pipeline, progress: bool = 
             why = f"; {sfm_failure}" if sfm_failure else ""
             raise InvalidInput(f"only {len(keep)} of {len(frames)} images could be registered "
                                f"({', '.join(unregistered)} could not){why}; a scene needs two")
+        reasons = {frames[v].name: registration[v].get("reason", "not placed")
+                   for v, r in enumerate(registration) if r["method"] == "none"}
         if unregistered:
             print(f"monoplane: warning: {len(unregistered)} of {len(frames)} images could not be "
-                  f"registered and are left out: {', '.join(unregistered)}", file=sys.stderr)
+                  f"registered and are left out: "
+                  f"{'; '.join(f'{n} ({why})' for n, why in reasons.items())}", file=sys.stderr)
         sfm = subset_sfm(sfm, keep)
         prepared = [prepared[v] for v in keep]
         aligns = [found[v] for v in keep]
@@ -247,4 +260,5 @@ def reconstruct_multiview(frames: list[Frame], pipe: Pipeline, progress: bool = 
                            plane_matches=plane_matches, units=units, timings=timings,
                            config=config, frame_indices=keep,
                            registration=[registration[v] for v in keep],
-                           unregistered=unregistered, adjustment=adjustment, fused=fused)
+                           unregistered=unregistered, unregistered_reasons=reasons,
+                           adjustment=adjustment, fused=fused)

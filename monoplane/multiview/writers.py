@@ -24,8 +24,11 @@ def cameras_document(cameras: list[Camera], registration: list[dict] | None = No
     "registration"}], "unregistered": [...]}``.
 
     Poses are world-to-camera, ``x_cam = R x_world + t``, OpenCV axes. ``registration`` says
-    how each pose was found: ``{"method": "sfm"}`` or ``{"method": "fallback", "reference",
-    "inliers", ...}``.
+    how each pose was found, with its evidence: ``{"method": "sfm", "observations"}``,
+    ``{"method": "origin"}`` (SfM built no model; this camera is the world frame) or what the
+    registrar placed it by (``"features"``, ``"essential"``, ``"planes"``,
+    ``"planes+features"``, ``"fpfh"``; with ``reference``, ``matches``, ``support``,
+    ``verified_overlap``, ``colour_correlation``, ``violations``, ``icp``, ``depth_scale``).
     """
     doc = {
         "cameras": [{
@@ -121,6 +124,7 @@ def scene_document(result: MultiviewResult) -> dict:
                       "x_cam = R x_world + t with OpenCV camera axes; local_id is the view's "
                       "labels.png value",
         "unregistered": list(result.unregistered),
+        "unregistered_reasons": dict(result.unregistered_reasons),
         "adjustment": result.adjustment,
         "notes": list(result.sfm.notes),
         "timings_s": {k: round(float(v), 4) for k, v in result.timings.items()},
