@@ -4,7 +4,9 @@
 compiled the first time it is called, not when its module is imported (importing numba alone
 takes a noticeable fraction of a second, which commands that never run RANSAC should not pay),
 and the machine code is cached on disk (``cache=True``): the first run on a machine compiles
-every kernel once (see ``monoplane bench`` for the warm-up time), later processes load them.
+every kernel once (15-30 s in all), later processes load them. ``setup.sh`` pays that cost
+at installation: it runs :mod:`monoplane.warmup`, which calls every kernel once. Each kernel
+wrapper is listed in :func:`kernels`, so the warm-up can check that it reached all of them.
 
 numba looks for a writable cache directory next to the module (``__pycache__``), then in the
 user's cache (``~/.cache/numba`` or ``NUMBA_CACHE_DIR``); when there is none it refuses to
@@ -26,6 +28,7 @@ from __future__ import annotations
 
 import functools
 import os
+import threading
 import types
 import warnings
 from collections.abc import Callable, Sequence
@@ -86,6 +89,16 @@ def _compile(fn: Callable[..., Any]) -> Callable[..., Any]:
         return numba.njit(cache=False, nogil=True)(fn)
 
 
+#: Every :func:`kernel` wrapper created so far (modules register theirs when imported).
+_KERNELS: list[Callable[..., Any]] = []
+
+
+def kernels() -> list[Callable[..., Any]]:
+    """The :func:`kernel` wrappers of every module imported so far; ``k.is_compiled()`` says
+    whether ``k`` has been compiled (or loaded from the disk cache) in this process."""
+    return list(_KERNELS)
+
+
 def kernel(fn: F) -> F:
     """Compile ``fn`` with numba (nopython, cached on disk) on its first call.
 
@@ -102,15 +115,21 @@ def kernel(fn: F) -> F:
         A wrapper with the same signature; ``wrapper.py_func`` is ``fn`` itself.
     """
     compiled: Callable[..., Any] | None = None
+    lock = threading.Lock()  # threads calling it first together compile it once
 
     @functools.wraps(fn)
     def call(*args: Any) -> Any:
         nonlocal compiled
         if compiled is None:
-            compiled = _compile(fn)
+            with lock:
+                if compiled is None:
+                    compiled = _compile(fn)
         return compiled(*args)
 
     call.py_func = fn  # type: ignore[attr-defined]
+    call.is_compiled = lambda: (  # type: ignore[attr-defined]
+        compiled is not None and bool(getattr(compiled, "signatures", True)))
+    _KERNELS.append(call)
     return call  # type: ignore[return-value]
 
 

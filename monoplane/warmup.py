@@ -1,0 +1,213 @@
+"""Compile every numba kernel once, so that the first real run loads them from the disk cache.
+
+monoplane's kernels (:mod:`monoplane.jit`, :mod:`monoplane.lattice_kernels`) compile on their
+first call and cache the machine code on disk. Without a warm-up, the first ``monoplane run``
+on a machine spends 15-30 s compiling; ``setup.sh`` runs this module instead, so the user's
+first run costs what every later run does::
+
+    python3 -m monoplane.warmup
+
+It runs every shipped preset on one small synthetic frame (with and without normals and
+colour), saves one reconstruction with its report into a temporary folder and detects the
+planes of a point cloud with and without normals: together these call every kernel with the
+dtypes the library uses (the report's 3D renders also fill the OpenGL driver's shader cache).
+It then checks that every kernel of the package was reached and names those that were not
+(they would compile on their first use). Running it again only loads the caches.
+
+numba keeps the caches next to the sources (``__pycache__``), or in ``NUMBA_CACHE_DIR`` or
+``~/.cache/numba`` when those are read-only; a kernel whose source file changes compiles again
+on its next call.
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import importlib
+import sys
+import tempfile
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from importlib import resources
+from typing import Any
+
+
+@dataclass
+class WarmupResult:
+    """What :func:`warm` did."""
+
+    seconds: float
+    #: Fully qualified names of the package's cached kernels reached by the workloads.
+    compiled: list[str] = field(default_factory=list)
+    #: Kernels no workload called (they compile on their first use).
+    missed: list[str] = field(default_factory=list)
+    #: Workloads that raised, with their error.
+    failed: list[str] = field(default_factory=list)
+
+
+def kernel_modules() -> list[str]:
+    """Modules of the package that define numba kernels (found in their source text)."""
+    root = resources.files("monoplane")
+    found = []
+
+    def walk(folder: Any, prefix: str) -> None:
+        for entry in folder.iterdir():
+            if entry.is_dir() and entry.name != "__pycache__":
+                walk(entry, f"{prefix}{entry.name}.")
+            elif entry.name.endswith(".py"):
+                text = entry.read_text(encoding="utf-8")
+                if "@kernel" in text or "@numba.njit(" in text:
+                    found.append(prefix + entry.name[:-3])
+
+    walk(root, "monoplane.")
+    return sorted(found)
+
+
+def _has_signatures(dispatcher: Any) -> bool:
+    return bool(dispatcher.signatures)
+
+
+def package_kernels() -> dict[str, Callable[[], bool]]:
+    """Every kernel of the package: qualified name -> "has it been compiled in this process".
+
+    Imports the modules of :func:`kernel_modules`. Covers :func:`monoplane.jit.kernel`
+    wrappers and plain ``numba.njit(cache=True)`` dispatchers.
+    """
+    from numba.core.registry import CPUDispatcher
+
+    from monoplane import jit
+
+    found: dict[str, Callable[[], bool]] = {}
+    for name in kernel_modules():
+        module = importlib.import_module(name)
+        own = {key: value for key, value in vars(module).items()
+               if isinstance(value, CPUDispatcher) and value.py_func.__module__ == name}
+        # A dispatcher that other kernels of its module call is compiled into them (and not
+        # on its own when they are loaded from the cache): only the callers count.
+        called = {n for d in own.values() for n in d.py_func.__code__.co_names}
+        for key, value in own.items():
+            if key not in called:
+                found[f"{name}.{value.py_func.__qualname__}"] = functools.partial(
+                    _has_signatures, value)
+    for k in jit.kernels():
+        fn = k.py_func  # type: ignore[attr-defined]
+        if fn.__module__.startswith("monoplane."):
+            found[f"{fn.__module__}.{fn.__qualname__}"] = k.is_compiled  # type: ignore[attr-defined]
+    return found
+
+
+def _run_preset(preset: str, frame: Any) -> Any:
+    from monoplane.pipeline import Pipeline
+
+    return Pipeline.from_preset(preset).run(frame)
+
+
+def _workloads(report: bool = True) -> Iterator[tuple[str, Callable[[], Any]]]:
+    """Labelled calls that together reach every kernel.
+
+    The frame is 256x192, so that it has more valid pixels than the RANSAC working cloud's
+    ``max_points`` (the labels are then propagated to the pixels left out, by kernels of their
+    own).
+    """
+    import numpy as np
+
+    from monoplane import config
+    from monoplane.detect import detect_planes
+    from monoplane.fileio import save_reconstruction
+    from monoplane.pipeline import Pipeline
+    from monoplane.synth import generate
+
+    frame = generate(0, "mild", width=256, height=192, n_views=1).views[0].frame
+    for preset in config.list_presets():
+        yield f"preset {preset}", functools.partial(_run_preset, preset, frame)
+    yield "depth only", lambda: Pipeline.from_preset("monoplane").run(frame.with_(normals=None))
+    yield "range image", lambda: Pipeline.from_preset("range").run(
+        frame.with_(rgb=None, normals=None))
+
+    def save() -> None:
+        rec = Pipeline.from_preset("monoplane").run(frame)
+        with tempfile.TemporaryDirectory() as tmp:
+            # The report also fills the OpenGL driver's shader cache (Mesa keeps one per user),
+            # which the first report's 3D renders would otherwise build.
+            save_reconstruction(rec, f"{tmp}/out", report=report, progress=False)
+
+    yield "outputs" + (" and report" if report else ""), save
+    depth, normals, rgb, K = frame.depth, frame.normals, frame.rgb, frame.K
+    assert depth is not None and normals is not None and rgb is not None
+    valid = depth > 0
+    v, u = np.nonzero(valid)
+    z = depth[valid].astype(np.float64)
+    points = np.stack([(u - K[0, 2]) * z / K[0, 0], (v - K[1, 2]) * z / K[1, 1], z], axis=1)
+    yield "point cloud", lambda: detect_planes(points)
+
+    def cloud_with_normals() -> None:
+        import open3d as o3d
+
+        pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+        pcd.normals = o3d.utility.Vector3dVector(normals[valid].astype(np.float64))
+        pcd.colors = o3d.utility.Vector3dVector(rgb[valid] / 255.0)
+        detect_planes(pcd)
+
+    yield "point cloud with normals", cloud_with_normals
+
+
+def warm(progress: bool = True, report: bool = True) -> WarmupResult:
+    """Call every kernel of the package once (compiling it, or loading it from the cache).
+
+    Parameters
+    ----------
+    progress : bool
+        Print one line per workload.
+    report : bool
+        Also write one HTML report (3D renders), which warms the OpenGL shader cache.
+
+    Returns
+    -------
+    WarmupResult
+        A workload that fails is recorded in ``failed`` and the others go on.
+    """
+    start = time.perf_counter()
+    kernels = package_kernels()
+    failed = []
+    for label, call in _workloads(report):
+        t = time.perf_counter()
+        try:
+            call()
+        except Exception as exc:  # a warm-up must not stop an installation
+            failed.append(f"{label}: {type(exc).__name__}: {exc}")
+            continue
+        if progress:
+            print(f"  {label}: {time.perf_counter() - t:.1f} s", flush=True)
+    compiled = sorted(name for name, done in kernels.items() if done())
+    missed = sorted(name for name, done in kernels.items() if not done())
+    return WarmupResult(time.perf_counter() - start, compiled, missed, failed)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python3 -m monoplane.warmup [--quiet] [--no-report]``; exit status 1 when a workload
+    failed."""
+    parser = argparse.ArgumentParser(
+        prog="python3 -m monoplane.warmup",
+        description="Compile monoplane's numba kernels once (cached on disk), so that the "
+                    "first run does not pay for it.")
+    parser.add_argument("--quiet", action="store_true",
+                        help="no line per workload, only the first and last lines")
+    parser.add_argument("--no-report", action="store_true",
+                        help="skip the HTML report (and its 3D renders)")
+    args = parser.parse_args(argv)
+    print("monoplane: compiling the numba kernels once, cached on disk (15-40 s) ...",
+          flush=True)
+    result = warm(progress=not args.quiet, report=not args.no_report)
+    total = len(result.compiled) + len(result.missed)
+    print(f"monoplane: {len(result.compiled)} of {total} kernels compiled or loaded in "
+          f"{result.seconds:.1f} s")
+    if result.missed:
+        print(f"monoplane: not reached (they compile on first use): {', '.join(result.missed)}")
+    for failure in result.failed:
+        print(f"monoplane: warm-up step failed: {failure}", file=sys.stderr)
+    return 1 if result.failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
