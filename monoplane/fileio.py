@@ -203,6 +203,82 @@ def read_intrinsics(spec: str | Path) -> np.ndarray:
     return intrinsics_matrix(fx, fy, cx, cy)
 
 
+def read_redwood_log(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
+    """Read a camera trajectory in the Redwood ``.log`` format.
+
+    Each entry is a header line of three integers, the first being the frame id (``"i i i+1"``
+    in a trajectory), then four lines of a 4x4 camera-to-world matrix. Blank lines are
+    ignored.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.log`` file.
+
+    Returns
+    -------
+    ids : numpy.ndarray
+        (N,) int64 frame ids, in file order.
+    poses : numpy.ndarray
+        (N, 4, 4) float64 camera-to-world matrices (``x_world = M @ [x_cam, 1]``), in the
+        file's units (metres for Redwood and ICL-NUIM) and camera axes (OpenCV for both).
+
+    Raises
+    ------
+    InvalidInput
+        One line naming the file and line: a malformed header or row, a bottom row other than
+        ``0 0 0 1``, a rotation block that is not a rotation, duplicate ids, or no entry.
+    """
+    p = _require_file(path, "trajectory")
+    try:
+        text = p.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InvalidInput(f"cannot read trajectory {p}: {exc}") from None
+    lines = [(k + 1, line.split()) for k, line in enumerate(text.splitlines()) if line.strip()]
+    if not lines:
+        raise InvalidInput(f"trajectory {p} has no entry")
+    if len(lines) % 5:
+        raise InvalidInput(f"trajectory {p}: {len(lines)} non-blank lines is not a whole number "
+                           "of entries (a header line and 4 matrix rows each)")
+    ids, poses = [], []
+    for k in range(0, len(lines), 5):
+        number, header = lines[k]
+        try:
+            numbers = [int(v) for v in header]
+        except ValueError:
+            numbers = []
+        if len(numbers) != 3:
+            raise InvalidInput(f"trajectory {p}, line {number}: expected a header of three "
+                               f"integers, got {' '.join(header)!r}")
+        ids.append(numbers[0])
+        rows = []
+        for number, row in lines[k + 1:k + 5]:
+            try:
+                values = [float(v) for v in row]
+            except ValueError:
+                values = []
+            if len(values) != 4 or not np.all(np.isfinite(values)):
+                raise InvalidInput(f"trajectory {p}, line {number}: expected 4 finite numbers, "
+                                   f"got {' '.join(row)!r}")
+            rows.append(values)
+        M = np.array(rows)
+        if not np.allclose(M[3], [0, 0, 0, 1], atol=1e-6):
+            raise InvalidInput(f"trajectory {p}, line {number}: the bottom row of frame "
+                               f"{ids[-1]}'s matrix must be 0 0 0 1")
+        R = M[:3, :3]
+        # Redwood logs print 8 decimals: a rotation there is orthonormal to about 1e-7 only.
+        if not np.allclose(R @ R.T, np.eye(3), atol=1e-4) or np.linalg.det(R) < 0:
+            raise InvalidInput(f"trajectory {p}, line {lines[k + 1][0]}: frame {ids[-1]}'s "
+                               "matrix has no rotation in its upper-left 3x3 block")
+        poses.append(M)
+    unique, counts = np.unique(ids, return_counts=True)
+    if (counts > 1).any():
+        dup = unique[counts > 1]
+        raise InvalidInput(f"trajectory {p}: frame ids appear twice: "
+                           f"{', '.join(map(str, dup[:5]))}")
+    return np.array(ids, dtype=np.int64), np.array(poses)
+
+
 def load_frame(image: str | Path | None = None, depth: str | Path | None = None,
                normals: str | Path | None = None, intrinsics: str | Path | None = None,
                depth_scale: float | None = None, nan_as_invalid: bool = False,

@@ -15,7 +15,9 @@ DESCRIPTION = """Score pipeline presets and external baselines on N seeded synth
 scenes with exact plane ground truth (monoplane.synth), using the paper's single-view protocol:
 VOI (nats), RI and SC over ground-truth planar pixels, and plane recall at 0.05/0.1/0.6 m after
 median-scale alignment. Every method sees the same corrupted depth and normals. With
---multiview, score two-view pairs instead (relative pose error and plane AP)."""
+--multiview, score two-view pairs instead (relative pose error and plane AP); with --multiview
+--data DIR, score sparse-view registration on a posed RGB-D sequence (pairs or a set of views
+chosen from its ground-truth poses)."""
 
 EPILOG = """examples:
   monoplane eval --all --level mild --n 50
@@ -27,6 +29,10 @@ EPILOG = """examples:
       --baseline-set cgal.min_support=0.001 --baseline-set cgal.normal_deg=35
   monoplane eval --data abw-dev/ --as-cloud --preset cloud
   monoplane eval --multiview --views 5 --path walk --n 10
+  monoplane eval --multiview --data livingroom/ --intrinsics 525,525,319.5,239.5 \
+      --n 10 --split tune --mode both
+  monoplane eval --multiview --data livingroom/ --views 5 --mode rgbd --json views5.json
+  monoplane eval --multiview --data livingroom/ --pairs 0-32,53-102 --mode mono
 
 Scene i uses seed SEED+i, so equal arguments give equal tables (timings aside). Baselines come
 registered through the 'monoplane_register_baselines' plugin hook: open3d-ransac is built in,
@@ -58,8 +64,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     data = p.add_argument_group("data")
     data.add_argument("--level", default="mild", choices=("clean", "mild", "strong"),
                       help="cue corruption: exact cues, or monocular-like errors (default: mild)")
-    data.add_argument("--n", type=int, default=50, help="number of scenes or pairs (default: 50)")
-    data.add_argument("--seed", type=int, default=0, help="seed of the first scene (default: 0)")
+    data.add_argument("--n", type=int,
+                      help="number of scenes or pairs (default: 50; 10 with --multiview --data)")
+    data.add_argument("--seed", type=int, default=0,
+                      help="seed of the first scene, or of the mono depth of --multiview --data "
+                           "(default: 0)")
     data.add_argument("--size", default="256x192", metavar="WxH",
                       help="image size (default: 256x192, the paper's)")
     data.add_argument("--multiview", action="store_true",
@@ -67,7 +76,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                            "--views N > 2, N-view synthetic sequences")
     data.add_argument("--data", metavar="DIR",
                       help="score real frames instead: a folder of frame folders with "
-                           "gt_labels.png and depth (VOI, RI, SC and SegComp counts)")
+                           "gt_labels.png and depth (VOI, RI, SC and SegComp counts); with "
+                           "--multiview, a posed RGB-D sequence (image/, depth/, "
+                           "trajectory.log)")
     data.add_argument("--as-cloud", action="store_true",
                       help="with --data: run presets through detect_planes on the frames' "
                            "shuffled 3D points")
@@ -75,9 +86,35 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                       help="with --data: SegComp overlap tolerance T (default: 0.8)")
     data.add_argument("--views", type=int, default=2, metavar="N",
                       help="with --multiview: views per sequence (default: 2, the pair "
-                           "protocol)")
+                           "protocol); with --data, N >= 3 scores one set of N frames spread "
+                           "over the sequence")
     data.add_argument("--path", default="walk", choices=("walk", "star"),
                       help="with --multiview --views N > 2: camera path (default: walk)")
+    posed = p.add_argument_group("posed RGB-D sequences (--multiview --data DIR)")
+    posed.add_argument("--intrinsics", metavar="fx,fy,cx,cy|K.json",
+                       help="pinhole intrinsics of the sequence (default: DIR/intrinsics.json)")
+    posed.add_argument("--depth-scale", type=float, default=1000.0, metavar="S",
+                       help="divide the depth files' values by S (default: 1000, millimetres)")
+    posed.add_argument("--mode", default="both", choices=("rgbd", "mono", "both"),
+                       help="views get their metric depth (rgbd), a scaled and warped relative "
+                            "depth (mono), or one run of each (default: both)")
+    posed.add_argument("--split", default="all", choices=("tune", "report", "all"),
+                       help="frames the view sets may use: tune = the first half of the "
+                            "trajectory, report = the second half (default: all)")
+    posed.add_argument("--pairs", metavar="I-J,K-L",
+                       help="evaluate these frame-id pairs instead of choosing pairs")
+    posed.add_argument("--min-angle", type=float, default=20.0, metavar="DEG",
+                       help="smallest true rotation of a chosen pair (default: 20)")
+    posed.add_argument("--max-angle", type=float, default=40.0, metavar="DEG",
+                       help="largest true rotation of a chosen pair (default: 40)")
+    posed.add_argument("--min-overlap", type=float, default=0.4, metavar="F",
+                       help="smallest overlap of a chosen pair, and of the links of a --views "
+                            "set (default: 0.4)")
+    posed.add_argument("--rotation-threshold", type=float, default=5.0, metavar="DEG",
+                       help="a correct pair's rotation error is below this (default: 5)")
+    posed.add_argument("--translation-threshold", type=float, default=10.0, metavar="DEG",
+                       help="a correct pair's translation-direction error is below this "
+                            "(default: 10)")
     out = p.add_argument_group("outputs")
     out.add_argument("--json", metavar="FILE", help="also write every score as JSON")
     out.add_argument("--report", metavar="DIR", help="also write an HTML report into DIR")
@@ -140,6 +177,35 @@ def _run_multiview(args: argparse.Namespace, size: tuple[int, int]) -> int:
     return 0
 
 
+def _run_posed_sequence(args: argparse.Namespace) -> int:
+    from monoplane.evaluation.posed_sequences import (
+        evaluate_posed_sequence,
+        format_posed_sequence,
+    )
+
+    if (args.baselines or args.baseline_sets or args.all_methods or len(args.presets) > 1
+            or args.report or args.as_cloud):
+        raise InvalidInput("--multiview --data scores one preset; drop --baseline/--baseline-set/"
+                           "--all/--report/--as-cloud and give at most one --preset")
+    if args.views < 2:
+        raise InvalidInput(f"--views must be at least 2, got {args.views}")
+    if args.pairs and args.views > 2:
+        raise InvalidInput("give --pairs or --views, not both")
+    results = evaluate_posed_sequence(
+        args.data, args.intrinsics, mode=args.mode, split=args.split,
+        n=10 if args.n is None else args.n, views=args.views if args.views > 2 else None,
+        pairs=args.pairs, preset=args.presets[0] if args.presets else "monoplane",
+        overrides=args.overrides, depth_scale=args.depth_scale, min_angle=args.min_angle,
+        max_angle=args.max_angle, min_overlap=args.min_overlap,
+        rotation_threshold=args.rotation_threshold,
+        translation_threshold=args.translation_threshold, seed=args.seed,
+        progress=not args.no_progress)
+    print(format_posed_sequence(results))
+    if args.json:
+        _write_json(args.json, results)
+    return 0
+
+
 def _write_report(results: Any, methods: list[Any], out_dir: str, progress: bool) -> None:
     try:
         from monoplane.report import write_eval_report
@@ -181,12 +247,19 @@ def _run_dataset(args: argparse.Namespace) -> int:
 def run(args: argparse.Namespace) -> int:
     from monoplane.evaluation.runner import evaluate, format_table, parse_size, resolve_methods
 
+    if args.data and args.multiview:
+        return _run_posed_sequence(args)
+    if args.pairs or args.intrinsics:
+        raise InvalidInput("--pairs and --intrinsics are for posed sequences: add --multiview "
+                           "--data DIR")
     if args.data:
         return _run_dataset(args)
     if args.as_cloud:
         raise InvalidInput("--as-cloud needs --data DIR")
 
     size = parse_size(args.size)
+    if args.n is None:
+        args.n = 50
     if args.n < 1:
         raise InvalidInput(f"--n must be at least 1, got {args.n}")
     if args.multiview:
