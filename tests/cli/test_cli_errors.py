@@ -87,6 +87,22 @@ def test_bad_config(capsys, sample_dir, extra, match):
     assert match in err
 
 
+def test_photo_without_depth_or_model_names_the_next_step(capsys, sample_dir):
+    err = one_line_error(capsys, ["run", str(sample_dir / "rgb.png"), "--out",
+                                  str(sample_dir / "o")])
+    assert "rgb.png has no depth" in err
+    assert "--cues NAME --fetch" in err and "monoplane models list" in err
+    assert not (sample_dir / "o").exists()
+
+
+def test_output_folder_exists_names_overwrite(capsys, sample_dir):
+    (sample_dir / "o").mkdir()
+    (sample_dir / "o" / "labels.png").write_text("x")
+    err = one_line_error(capsys, ["run", str(sample_dir / "rgb.png"), "--depth",
+                                  str(sample_dir / "depth.npy"), "--out", str(sample_dir / "o")])
+    assert "exists and is not empty; pass --overwrite" in err
+
+
 def test_output_path_is_a_file(capsys, sample_dir):
     (sample_dir / "taken").write_text("x")
     err = one_line_error(capsys, ["run", str(sample_dir / "rgb.png"), "--depth",
