@@ -7,16 +7,18 @@ cd "$(dirname "$0")"
 # libgl1 libegl1 libx11-6 libgomp1 libusb-1.0-0: needed by `import open3d` (libusb is missing on
 #   fresh machines and the import then fails).
 # libegl-mesa0 libgl1-mesa-dri: Mesa llvmpipe for Open3D's headless (EGL surfaceless) renderer.
+# chromium: the test that opens a report's interactive 3D view in a real (headless) browser.
 # Every Python dependency ships manylinux wheels, so no compiler is needed.
-APT_PACKAGES="libgl1 libegl1 libx11-6 libgomp1 libusb-1.0-0 libegl-mesa0 libgl1-mesa-dri"
+APT_PACKAGES="libgl1 libegl1 libx11-6 libgomp1 libusb-1.0-0 libegl-mesa0 libgl1-mesa-dri chromium"
 SUDO=""
 if [ "$(id -u)" != 0 ]; then SUDO="sudo"; fi
 $SUDO apt-get update -qq
 DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends $APT_PACKAGES >/dev/null
 
 PYTHON="${PYTHON:-python3}"
-# The ray extra is installed too, so that the tests exercise `monoplane batch --engine ray`.
-"$PYTHON" -m pip install --quiet -e ".[dev,ray]"
+# The ray and rerun extras are installed too, so that the tests exercise
+# `monoplane batch --engine ray` and the --rerun recordings.
+"$PYTHON" -m pip install --quiet -e ".[dev,ray,rerun]"
 for plugin in plugins/*/; do
   if [ -f "$plugin/pyproject.toml" ]; then
     "$PYTHON" -m pip install --quiet -e "$plugin"
