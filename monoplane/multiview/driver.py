@@ -201,15 +201,15 @@ def reconstruct_multiview(frames: list[Frame], pipe: Pipeline, progress: bool = 
             raise InvalidInput("no view could be registered and scale-aligned")
         timings["alignment"] = time.perf_counter() - t0
         sfm = replace(sfm, registration=registration)
-        if any(r["method"] == "none" for r in registration):
-            registrar = pipe.stage("registrar", Registrar)
-            sfm, found = pipe.call("registrar", registrar.name,
-                                   lambda: registrar.register(segmented, sfm, found),
-                                   "multiview", timings)
-            registration = [dict(r) for r in sfm.registration]
-            if progress:
-                placed = sum(r["method"] not in ("none", "sfm", "origin") for r in registration)
-                print(f"monoplane: the registrar placed {placed} more view(s)", file=sys.stderr)
+        # The registrar places the views SfM left out, and checks the weakly supported ones.
+        registrar = pipe.stage("registrar", Registrar)
+        sfm, found = pipe.call("registrar", registrar.name,
+                               lambda: registrar.register(segmented, sfm, found), "multiview",
+                               timings)
+        registration = [dict(r) for r in sfm.registration]
+        if progress:
+            placed = sum(r["method"] not in ("none", "sfm", "origin") for r in registration)
+            print(f"monoplane: the registrar placed {placed} view(s)", file=sys.stderr)
         t0 = time.perf_counter()
         keep = [v for v, r in enumerate(registration) if r["method"] != "none"]
         unregistered = [frames[v].name for v, r in enumerate(registration) if r["method"] == "none"]

@@ -49,6 +49,11 @@ class PlaneBundleConfig:
         True, "refine only global planes seen in two or more views (others follow their view)")
     refine_points: bool = param(
         True, "refine the SfM points too (False: hold them as COLMAP adjusted them)")
+    min_sfm_points: int = param(
+        50, "fewest SfM points inside planes to refine at all (when sigma_point > 0): they "
+            "are the only multi-view evidence on the planes; without them the plane terms "
+            "follow the monocular depth's warps and move the poses the wrong way "
+            "(docs/multiview.md)")
     max_evaluations: int = param(20, "cap on the solver's residual evaluations")
     seed: int = param(0, "seed of the plane-pixel subsampling")
 
@@ -122,6 +127,12 @@ class PlaneBundleAdjuster(Adjuster):
         pp_point, pp_plane, pp_depth = (self._points_on_planes(scene, sfm, row)
                                         if cfg.sigma_point > 0 else
                                         (np.zeros(0, np.int64),) * 2 + (np.zeros(0),))
+        if cfg.sigma_point > 0 and len(pp_point) < cfg.min_sfm_points:
+            return scene, sfm, {
+                "accepted": False,
+                "reason": f"{len(pp_point)} SfM points inside planes, fewer than "
+                          f"adjuster.min_sfm_points = {cfg.min_sfm_points}: nothing anchors the "
+                          "planes but the monocular depth"}
         prob = AdjustmentProblem(
             K=np.stack([c.K for c in scene.cameras]), R=np.stack([c.R for c in scene.cameras]),
             t=np.stack([c.t for c in scene.cameras]), points=sfm.points.copy(),

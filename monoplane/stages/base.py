@@ -332,7 +332,10 @@ class Matcher(Stage):
 
 
 class Registrar(Stage):
-    """Places the views the matcher left unregistered, from what every view already has."""
+    """Places the views the matcher left unregistered, from what every view already has.
+
+    The host calls it on every multi-view run, also when the matcher placed every view, so a
+    registrar may check (and replace) weakly supported placements too."""
 
     kind = "registrar"
 
@@ -360,7 +363,8 @@ class Registrar(Stage):
         (SfmResult, list of ScaleAlignment or None)
             The model with the placed views' cameras and their ``registration`` entries
             (``method`` naming how, plus its evidence), and their alignments. A view that
-            cannot be placed keeps ``{"method": "none", "reason": ...}``.
+            cannot be placed keeps ``{"method": "none", "reason": ...}``. A view whose SfM
+            pose it replaced says so (``"replaced": "sfm"``) and observes no model point.
         """
         raise NotImplementedError
 

@@ -12,16 +12,18 @@ best-verified pair first, so a view placed early can serve as the reference of t
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
 
-from monoplane.datamodel import Reconstruction, SfmResult
+from monoplane.datamodel import Camera, Reconstruction, SfmResult
 from monoplane.errors import ConfigError
 from monoplane.geometry.alignment import ScaleAlignment
 from monoplane.geometry.relative_pose import (
     Features,
     essential_pose,
+    guided_matches,
     match_features,
     pnp_pose,
     sift_features,
@@ -30,10 +32,10 @@ from monoplane.geometry.view_registration import (
     Agreement,
     Hypothesis,
     ViewGeometry,
+    _rotation_deg,
     agreement,
     feature_hypotheses,
     fpfh_hypothesis,
-    refine_epipolar,
     refine_icp,
     rotation_hypotheses,
     translation_from_matches,
@@ -94,6 +96,16 @@ class PlaneAwareRegistrar(Registrar):
         match_tolerance: float = param(
             0.06, "relative 3D tolerance of a feature match inlier (metric depth; twice this "
                   "on relative depth)")
+        verify_sfm_below: int = param(
+            200, "check an SfM placement densely when its view observes fewer model points "
+                 "than this, and replace it when a hypothesis of the registrar's verifies "
+                 "better (a two-view model on a few dozen points can be degrees off)")
+        guided_radius: float = param(
+            0.03, "relative depth: search radius of guided matching, a share of the image "
+                  "width")
+        guided_max_change_deg: float = param(
+            10.0, "relative depth: largest rotation change the guided essential matrix may "
+                  "make to the hypothesis it started from")
         rotations: int = param(12, "plane-pair rotations tried per view pair (heaviest first)")
         icp: bool = param(True, "refine the best hypothesis by ICP (Open3D) when both depths "
                                 "are metric")
@@ -118,21 +130,13 @@ class PlaneAwareRegistrar(Registrar):
         raw = {v: self._geometry(views[v], 1.0) for v in range(len(views))}
         scaled: dict[int, ViewGeometry] = {}
         best: dict[tuple[int, int], _Candidate | None] = {}
-        while todo:
-            for v in todo:
-                for r in placed:
-                    if (r, v) in best:
-                        continue
-                    if r not in scaled:
-                        scaled[r] = self._geometry(views[r], aligns[r].scale)
-                    best[(r, v)] = self._pair(views, sfm, features, scaled[r], raw[v], r, v,
-                                              aligns[r].scale)
-            options = [(c.check.score, r, v) for (r, v), c in best.items()
-                       if c is not None and c.accepted and v in todo and r in placed]
-            if not options:
-                break
-            _, r, v = max(options)
-            c = best[(r, v)]
+
+        def scaled_view(r: int) -> ViewGeometry:
+            if r not in scaled:
+                scaled[r] = self._geometry(views[r], aligns[r].scale)
+            return scaled[r]
+
+        def place(v: int, r: int, c: _Candidate) -> None:
             cam_r, hyp = cameras[r], c.hyp
             # s X_v = R X_r + t and X_r = R_r X_w + t_r  =>  X_v' = R R_r X_w + (R t_r + t),
             # X_v' in world units; the view's depth times its scale is in world units too.
@@ -141,7 +145,9 @@ class PlaneAwareRegistrar(Registrar):
                                        num_inliers=c.check.agree, residual=float("nan"),
                                        relative_residual=float("nan"))
             registration[v] = {
-                "method": hyp.source, "description": METHODS[hyp.source.split("+")[0]],
+                "method": hyp.source.removesuffix("+guided"),
+                "description": METHODS[hyp.source.split("+")[0]],
+                "guided": hyp.source.endswith("+guided"),
                 "reference": views[r].frame.name, "matches": c.matches,
                 "support": hyp.support, "icp": c.refined,
                 "verified_overlap": round(c.check.overlap, 4),
@@ -149,14 +155,76 @@ class PlaneAwareRegistrar(Registrar):
                 "colour_correlation": round(c.check.colour, 4),
                 "depth_scale": hyp.s,
             }
+
+        self._verify_sfm(views, sfm, features, raw, scaled_view, cameras, aligns,
+                         registration, place)
+        while todo:
+            for v in todo:
+                for r in placed:
+                    if (r, v) not in best:
+                        best[(r, v)] = self._pair(views, sfm, features, scaled_view(r), raw[v],
+                                                  r, v, aligns[r].scale)
+            options = [(c.check.score, r, v) for (r, v), c in best.items()
+                       if c is not None and c.accepted and v in todo and r in placed]
+            if not options:
+                break
+            _, r, v = max(options)
+            place(v, r, best[(r, v)])
             todo.remove(v)
             placed.append(v)
         for v in todo:
             tried = [c for (r, u), c in best.items() if u == v and c is not None]
             registration[v] = {"method": "none", "reason": self._why(tried)}
-        return replace(sfm, cameras=cameras, registration=registration), aligns
+        # A replaced SfM pose's keypoints no longer observe the model's points (which were
+        # triangulated with the pose the dense check rejected).
+        point_ids = [np.full_like(ids, -1) if registration[v].get("replaced") == "sfm" else ids
+                     for v, ids in enumerate(sfm.point_ids)]
+        return replace(sfm, cameras=cameras, registration=registration,
+                       point_ids=point_ids), aligns
 
     # ------------------------------------------------------------------------------------------
+
+    def _verify_sfm(self, views: list[Reconstruction], sfm: SfmResult,
+                    features: dict[int, Features], raw: dict[int, ViewGeometry],
+                    scaled_view: Callable[[int], ViewGeometry], cameras: list[Camera],
+                    aligns: list[ScaleAlignment | None], registration: list[dict],
+                    place: Callable[[int, int, _Candidate], None]) -> None:
+        """Check the weakly supported SfM placements densely; replace those a hypothesis of the
+        registrar's verifies better.
+
+        The reference is the SfM view observing the most model points; every other SfM view
+        observing fewer than ``verify_sfm_below`` points has its SfM pose relative to it scored
+        by :func:`agreement` and compared with the registrar's best hypothesis for the pair.
+        """
+        cfg = self.config
+        in_sfm = [v for v, r in enumerate(registration) if r["method"] == "sfm"]
+        if len(in_sfm) < 2:
+            return
+        r = max(in_sfm, key=lambda v: registration[v].get("observations", 0))
+        for v in in_sfm:
+            if v == r or registration[v].get("observations", 0) >= cfg.verify_sfm_below:
+                continue
+            metric = self._metric(views, r, v)
+            tol = cfg.tolerance_metric if metric else cfg.tolerance_relative
+            R = cameras[v].R @ cameras[r].R.T
+            own = Hypothesis(R, cameras[v].t - R @ cameras[r].t, aligns[v].scale, "sfm")
+            check = agreement(scaled_view(r), raw[v], own, tol)
+            found = self._pair(views, sfm, features, scaled_view(r), raw[v], r, v,
+                               aligns[r].scale)
+            if found is not None and found.accepted and found.check.score > check.score:
+                observations = registration[v].get("observations", 0)
+                place(v, r, found)
+                registration[v].update(replaced="sfm", sfm_observations=observations,
+                                       sfm_verified_overlap=round(check.overlap, 4))
+            else:
+                registration[v]["verified_overlap"] = round(check.overlap, 4)
+
+    @staticmethod
+    def _metric(views: list[Reconstruction], r: int, v: int) -> bool:
+        """Whether both views' depths are metric in the same units (then they share a scale)."""
+        fr, fv = views[r].frame, views[v].frame
+        return (fr.depth_kind == "metric" and fv.depth_kind == "metric"
+                and fr.depth_units == fv.depth_units)
 
     def _geometry(self, rec: Reconstruction, scale: float) -> ViewGeometry:
         f = rec.frame
@@ -188,12 +256,35 @@ class PlaneAwareRegistrar(Registrar):
                 features[u] = sift_features(views[u].frame.rgb)
         return match_features(features[r], features[v])
 
+    def _guided(self, views: list[Reconstruction], features: dict[int, Features],
+                ref: ViewGeometry, other: ViewGeometry, r: int, v: int, hyp: Hypothesis,
+                fixed: float | None) -> Hypothesis | None:
+        """Essential-matrix pose of the matches found near where ``hyp`` predicts them."""
+        for u in (r, v):
+            if u not in features:
+                features[u] = sift_features(views[u].frame.rgb)
+        fr, fv = features[r], features[v]
+        x = _lift(fr.pixels, ref)
+        q = x @ hyp.R.T + hyp.t
+        with np.errstate(divide="ignore", invalid="ignore"):
+            pred = np.c_[other.K[0, 0] * q[:, 0] / q[:, 2] + other.K[0, 2],
+                         other.K[1, 1] * q[:, 1] / q[:, 2] + other.K[1, 2]]
+        pred[(x[:, 2] <= 0) | (q[:, 2] <= 0)] = np.nan
+        radius = self.config.guided_radius * other.shape[1]
+        pr, pv = guided_matches(fr, fv, pred, radius)
+        if len(pr) < 15:
+            return None
+        found = essential_pose(pr, pv, ref.K, ref.depth, other.K, other.depth, 15)
+        if found is None:
+            return None
+        return Hypothesis(found.R, found.t, fixed if fixed is not None else found.depth_scale_j,
+                          hyp.source + "+guided", found.inliers)
+
     def _pair(self, views: list[Reconstruction], sfm: SfmResult, features: dict[int, Features],
               ref: ViewGeometry, other: ViewGeometry, r: int, v: int, scale_r: float
               ) -> _Candidate | None:
         cfg = self.config
-        metric = ref.metric and other.metric and (views[r].frame.depth_units
-                                                  == views[v].frame.depth_units)
+        metric = self._metric(views, r, v)
         fixed = scale_r if metric else None
         tol = cfg.tolerance_metric if metric else cfg.tolerance_relative
         match_tol = cfg.match_tolerance * (1.0 if metric else 2.0)
@@ -233,19 +324,18 @@ class PlaneAwareRegistrar(Registrar):
                 after = agreement(ref, other, better, tol)
                 if after.agree >= 0.98 * check.agree and (not refined or after.score > check.score):
                     check, hyp, refined = after, better, True
-        elif len(pr) >= 8:
-            # Relative depth warps, and a pose fitted on lifted points inherits the warp (ICP
-            # made it worse, docs/multiview.md); the matches' epipolar geometry does not. Of the
-            # hypotheses the dense check cannot tell apart (within 10 % of the best agreement),
-            # take the one most matches agree with epipolarly, and refine it on them.
-            close = [(c, h) for c, h in checked if c.agree >= 0.9 * check.agree]
-            refined_all = [(refine_epipolar(h, pr, pv, ref.K, other.K), c, h) for c, h in close]
-            scored = [(found[1], found[0]) for found, _, _ in refined_all if found is not None]
-            if scored:
-                _, best = max(scored, key=lambda e: e[0])
-                after = agreement(ref, other, best, tol)
-                if after.agree >= 0.9 * check.agree:
-                    check, hyp, refined = after, best, True
+        elif "essential" in cfg.methods:
+            # Relative depth warps (several percent), so every pose fitted on lifted points or
+            # on normals inherits degrees of error (ICP made it worse, docs/multiview.md). The
+            # image does not warp: the best pose predicts where each keypoint of the
+            # reference lands in the other view, matching near there finds many more
+            # correct matches, and their essential matrix gives the rotation and direction.
+            found = self._guided(views, features, ref, other, r, v, hyp, fixed)
+            if found is not None:
+                after = agreement(ref, other, found, tol)
+                if (_rotation_deg(found.R, hyp.R) < cfg.guided_max_change_deg
+                        and after.agree >= 0.8 * check.agree):
+                    check, hyp, refined = after, found, True
         accepted = (check.overlap >= cfg.min_overlap and check.violation <= cfg.max_violation
                     and check.colour >= cfg.min_colour)
         return _Candidate(hyp, check, len(pr), refined, accepted)

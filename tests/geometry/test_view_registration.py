@@ -8,7 +8,12 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from monoplane.evaluation.twoview import rotation_error_deg, translation_angle_deg
-from monoplane.geometry.relative_pose import essential_pose, match_features, sift_features
+from monoplane.geometry.relative_pose import (
+    essential_pose,
+    guided_matches,
+    match_features,
+    sift_features,
+)
 from monoplane.geometry.view_registration import (
     Hypothesis,
     agreement,
@@ -151,3 +156,24 @@ def test_essential_pose_of_a_known_pair() -> None:
     assert translation_angle_deg(fb.t, t) < 5.0
     assert abs(np.linalg.norm(fb.t) / np.linalg.norm(t) - 1.0) < 0.1
     assert abs(fb.depth_scale_j - 2.0) < 0.1
+
+
+def test_guided_matching_finds_more_correct_matches_than_the_ratio_test() -> None:
+    v0, v1, R, t = _synth_pair()
+    f0, f1 = sift_features(v0.frame.rgb), sift_features(v1.frame.rgb)
+    plain, _ = match_features(f0, f1)
+    # Predict every keypoint of view 0 in view 1 with the true pose and view 0's depth.
+    d = v0.gt_depth[np.clip(np.rint(f0.pixels[:, 1]).astype(int), 0, 239),
+                    np.clip(np.rint(f0.pixels[:, 0]).astype(int), 0, 319)]
+    x = np.linalg.solve(v0.frame.K, np.c_[f0.pixels, np.ones(len(f0.pixels))].T).T * d[:, None]
+    q = x @ R.T + t
+    pred = (q @ v1.frame.K.T)[:, :2] / q[:, 2:]
+    pred[d <= 0] = np.nan
+    pi, pj = guided_matches(f0, f1, pred, radius=8.0)
+    ui = np.rint(pi).astype(int)
+    z = v0.gt_depth[ui[:, 1], ui[:, 0]]
+    xi = np.linalg.solve(v0.frame.K, np.c_[pi, np.ones(len(pi))].T).T * z[:, None]
+    qi = xi @ R.T + t
+    err = np.linalg.norm((qi @ v1.frame.K.T)[:, :2] / qi[:, 2:] - pj, axis=1)
+    # More correct guided matches than unguided matches of any kind.
+    assert np.sum(err < 3.0) > 1.2 * len(plain)

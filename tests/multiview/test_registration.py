@@ -124,18 +124,53 @@ def test_the_none_registrar_leaves_views_out(star) -> None:
     assert out.frame_indices == [0, 1]
 
 
-def test_no_global_plane_holds_two_planes_of_one_view(star) -> None:
+def test_planes_of_one_view_share_a_global_plane_only_when_coplanar(star) -> None:
+    from monoplane.datamodel import plane_to_world
+
     pipe = Pipeline.from_preset("monoplane", overrides=OVERRIDES)
     out = reconstruct_multiview([v.frame for v in star.views], pipe,
                                 sfm=ground_truth_sfm(star), workers=1)
-    members: dict[int, list[int]] = {}
-    for v, table in enumerate(out.scene.links):
-        for glob in table.values():
-            members.setdefault(glob, []).append(v)
-    assert all(len(vs) == len(set(vs)) for vs in members.values())
-    assert any(len(vs) == 3 for vs in members.values())  # some plane is seen in all views
+    scene = out.fused
+    members: dict[int, list[tuple[int, int]]] = {}
+    for v, table in enumerate(scene.links):
+        for local, glob in table.items():
+            members.setdefault(glob, []).append((v, local))
+    max_angle = pipe.config.to_dict()["fuser"]["merge_max_angle_deg"]
+    for glob, nodes in members.items():
+        normal = scene.planes[glob, :3]
+        for v, local in nodes:
+            cam = scene.cameras[v]
+            n = plane_to_world(scene.views[v].params[local - 1:local], cam.R, cam.t)[0, :3]
+            assert np.degrees(np.arccos(min(1.0, abs(n @ normal)))) <= max_angle
+    assert any(len({v for v, _ in nodes}) == 3 for nodes in members.values())  # seen by all
     adj = out.adjustment
     assert adj["after"]["cost"] <= adj["before"]["cost"]
     # Exact SfM points: the ones seen inside planes end on their planes.
     assert adj["before"]["sfm_points_on_planes"] > 50
     assert adj["after"]["sfm_point_plane_median_rel"] < 0.005
+
+
+def test_a_weak_sfm_pose_that_the_dense_check_rejects_is_replaced(star) -> None:
+    from scipy.spatial.transform import Rotation
+
+    pipe = Pipeline.from_preset("monoplane", overrides=OVERRIDES)
+    sfm = ground_truth_sfm(star)
+    # View 2 observes only a few model points, and its pose is 6 degrees off (as a two-view
+    # model on a few dozen points can be).
+    turn = Rotation.from_euler("y", 6, degrees=True).as_matrix()
+    cams = list(sfm.cameras)
+    cams[2] = replace(cams[2], R=turn @ cams[2].R, t=turn @ cams[2].t)
+    ids = list(sfm.point_ids)
+    seen = np.flatnonzero(ids[2] >= 0)
+    ids[2] = ids[2].copy()
+    ids[2][seen[40:]] = -1
+    sfm = replace(sfm, cameras=cams, point_ids=ids,
+                  registration=[{"method": "sfm"} for _ in cams])
+    out = reconstruct_multiview([v.frame for v in star.views], pipe, sfm=sfm, workers=1)
+    reg = out.registration[2]
+    assert reg["replaced"] == "sfm" and reg["sfm_observations"] == 40
+    assert reg["verified_overlap"] > reg["sfm_verified_overlap"]
+    rot, _ = _placed_error(out, star, 2)
+    assert rot < 0.5
+    # The well-supported views keep their SfM poses.
+    assert out.registration[1]["method"] == "sfm"

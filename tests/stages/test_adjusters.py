@@ -50,3 +50,14 @@ def test_a_solve_that_lowers_the_cost_is_kept() -> None:
     assert not np.allclose(out_scene.cameras[1].t, scene.cameras[1].t)
     np.testing.assert_array_equal(out_sfm.cameras[1].t, out_scene.cameras[1].t)
     json.dumps(report)
+
+
+def test_without_sfm_points_on_planes_nothing_is_refined() -> None:
+    # No SfM point: the plane terms alone would follow the monocular depth (docs/multiview.md).
+    scene, sfm = _fused_room(0.01)
+    sfm = replace(sfm, points=np.zeros((0, 3)),
+                  point_ids=[np.full_like(ids, -1) for ids in sfm.point_ids])
+    out_scene, out_sfm, report = PlaneBundleAdjuster().adjust(scene, sfm)
+    assert out_scene is scene and out_sfm is sfm
+    assert report["accepted"] is False
+    assert "0 SfM points inside planes" in report["reason"]
