@@ -198,7 +198,14 @@ def reconstruct_multiview(frames: list[Frame], pipe: Pipeline, progress: bool = 
         t0 = time.perf_counter()
         found = align_to_sfm(prepared, sfm, registration, strict)
         if not any(r["method"] != "none" for r in registration):
-            raise InvalidInput("no view could be registered and scale-aligned")
+            # SfM placed views but none could be scale-aligned (too few model points on valid
+            # depth): as if it had built no model, view 0 sets the world and the registrar
+            # places the rest.
+            reasons = "; ".join(r.get("reason", "") for r in registration if r.get("reason"))
+            sfm_failure = f"no registered view could be scale-aligned ({reasons})"
+            sfm = origin_sfm(prepared, sfm_failure)
+            registration = [dict(r) for r in sfm.registration]
+            found = align_to_sfm(prepared, sfm, registration, strict)
         timings["alignment"] = time.perf_counter() - t0
         sfm = replace(sfm, registration=registration)
         # The registrar places the views SfM left out, and checks the weakly supported ones.

@@ -174,3 +174,19 @@ def test_a_weak_sfm_pose_that_the_dense_check_rejects_is_replaced(star) -> None:
     assert rot < 0.5
     # The well-supported views keep their SfM poses.
     assert out.registration[1]["method"] == "sfm"
+
+
+def test_sfm_views_that_cannot_be_scale_aligned_are_placed_by_the_registrar(star) -> None:
+    # A model whose points none of the views' depth can be aligned to (here: no points).
+    pipe = Pipeline.from_preset("monoplane", overrides=OVERRIDES)
+    sfm = ground_truth_sfm(star)
+    sfm = replace(sfm, points=np.zeros((0, 3)), colors=None,
+                  point_ids=[np.full_like(ids, -1) for ids in sfm.point_ids],
+                  registration=[{"method": "sfm"} for _ in sfm.cameras])
+    out = reconstruct_multiview([v.frame for v in star.views], pipe, sfm=sfm, workers=1)
+    assert out.frame_indices == [0, 1, 2]
+    assert out.registration[0]["method"] == "origin"
+    assert all(r["method"] in METHODS for r in out.registration[1:])
+    for v in (1, 2):
+        rot, trans = _placed_error(out, star, v)
+        assert rot < 0.5 and trans < 3.0
