@@ -559,9 +559,10 @@ class SfmResult:
         Provenance remarks (e.g. whether intrinsics were fixed or estimated).
     registration : list of dict
         How each camera's pose was obtained, one dict per camera with at least ``"method"``:
-        ``"sfm"`` (the matcher's model), ``"fallback"`` (a two-view estimate; then also
-        ``"reference"``, the view it was estimated against, and ``"inliers"``) or ``"none"``
-        (not registered: the camera is a placeholder and must not be used). Empty means every
+        ``"sfm"`` (the matcher's model), ``"origin"`` (the world frame of a run whose matcher
+        built no model), a registrar's method (``"features"``, ``"planes"``, ...; then also
+        ``"reference"``, the view it was placed against, and its evidence) or ``"none"`` (not
+        registered: the camera is a placeholder and must not be used). Empty means every
         camera came from the matcher's model.
     """
 

@@ -46,7 +46,7 @@ class MultiviewResult:
         The matcher's output restricted to the registered views, in the scene's units.
     alignments : list of ScaleAlignment
         Per registered view, the scale alignment of its monocular depth (for a view placed by
-        the fallback pose, the scale comes from the fallback's triangulated points).
+        the registrar, the scale of its pose hypothesis and the dense check's counts).
     plane_matches : list
         Plane correspondences the fuser kept (objects with ``view_i``, ``plane_i``,
         ``view_j``, ``plane_j``, ``criterion``), view indices into ``scene.views``.
@@ -63,9 +63,9 @@ class MultiviewResult:
     frame_indices : list of int
         Input index of each scene view.
     registration : list of dict
-        Per scene view, how its pose was found: ``method`` ``"sfm"``, ``"fallback"`` (with
-        ``reference`` and ``inliers``) or ``"origin"`` (SfM built no model; this view's camera
-        is the world frame and the others were placed by fallback poses).
+        Per scene view, how its pose was found and the evidence: ``method`` ``"sfm"``,
+        ``"origin"`` (SfM built no model; this view's camera is the world frame) or the
+        registrar's (see :func:`~monoplane.multiview.writers.cameras_document`).
     unregistered : list of str
         Names of the input frames left out (no pose).
     unregistered_reasons : dict

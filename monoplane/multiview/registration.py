@@ -46,8 +46,8 @@ def subset_sfm(sfm: SfmResult, views: list[int]) -> SfmResult:
 def origin_sfm(frames: list[Frame], reason: str) -> SfmResult:
     """A point-less SfM result whose world frame is view 0's camera; other views unplaced.
 
-    Used when the matcher builds no model at all, so that the fallback pose can still place
-    the views (each frame's ``K`` is taken as is).
+    Used when the matcher builds no model at all, so that the registrar can still place the
+    views (each frame's ``K`` is taken as is).
     """
     n = len(frames)
     cameras = [Camera(K=f.K, R=np.eye(3), t=np.zeros(3), width=f.width, height=f.height,

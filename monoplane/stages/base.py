@@ -315,8 +315,8 @@ class Matcher(Stage):
         """Cameras, sparse points and pairwise keypoint matches for ``frames``.
 
         A matcher that cannot register every frame may mark those frames ``{"method": "none"}``
-        in the result's ``registration`` (their cameras are then placeholders); the driver
-        tries its fallback pose on them or reconstructs the registered views only.
+        in the result's ``registration`` (their cameras are then placeholders); the registrar
+        stage then tries to place them.
         """
         raise NotImplementedError
 
