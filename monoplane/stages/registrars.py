@@ -127,9 +127,14 @@ class PlaneAwareRegistrar(Registrar):
         placed = [v for v, r in enumerate(registration) if r["method"] != "none"]
         todo = [v for v, r in enumerate(registration) if r["method"] == "none"]
         features: dict[int, Features] = {}
-        raw = {v: self._geometry(views[v], 1.0) for v in range(len(views))}
+        raw_cache: dict[int, ViewGeometry] = {}
         scaled: dict[int, ViewGeometry] = {}
         best: dict[tuple[int, int], _Candidate | None] = {}
+
+        def raw(v: int) -> ViewGeometry:
+            if v not in raw_cache:
+                raw_cache[v] = self._geometry(views[v], 1.0)
+            return raw_cache[v]
 
         def scaled_view(r: int) -> ViewGeometry:
             if r not in scaled:
@@ -162,7 +167,7 @@ class PlaneAwareRegistrar(Registrar):
             for v in todo:
                 for r in placed:
                     if (r, v) not in best:
-                        best[(r, v)] = self._pair(views, sfm, features, scaled_view(r), raw[v],
+                        best[(r, v)] = self._pair(views, sfm, features, scaled_view(r), raw(v),
                                                   r, v, aligns[r].scale)
             options = [(c.check.score, r, v) for (r, v), c in best.items()
                        if c is not None and c.accepted and v in todo and r in placed]
@@ -185,7 +190,7 @@ class PlaneAwareRegistrar(Registrar):
     # ------------------------------------------------------------------------------------------
 
     def _verify_sfm(self, views: list[Reconstruction], sfm: SfmResult,
-                    features: dict[int, Features], raw: dict[int, ViewGeometry],
+                    features: dict[int, Features], raw: Callable[[int], ViewGeometry],
                     scaled_view: Callable[[int], ViewGeometry], cameras: list[Camera],
                     aligns: list[ScaleAlignment | None], registration: list[dict],
                     place: Callable[[int, int, _Candidate], None]) -> None:
@@ -208,8 +213,8 @@ class PlaneAwareRegistrar(Registrar):
             tol = cfg.tolerance_metric if metric else cfg.tolerance_relative
             R = cameras[v].R @ cameras[r].R.T
             own = Hypothesis(R, cameras[v].t - R @ cameras[r].t, aligns[v].scale, "sfm")
-            check = agreement(scaled_view(r), raw[v], own, tol)
-            found = self._pair(views, sfm, features, scaled_view(r), raw[v], r, v,
+            check = agreement(scaled_view(r), raw(v), own, tol)
+            found = self._pair(views, sfm, features, scaled_view(r), raw(v), r, v,
                                aligns[r].scale)
             if found is not None and found.accepted and found.check.score > check.score:
                 observations = registration[v].get("observations", 0)
