@@ -14,6 +14,7 @@ __version__ = "0.2.0"
 #: Module -> the public names it defines.
 _MODULES: dict[str, tuple[str, ...]] = {
     "monoplane.detect": ("detect_planes",),
+    "monoplane.export.rerun_log": ("log_rerun",),
     "monoplane.errors": ("ConfigError", "InvalidInput", "MonoplaneError", "StageError"),
     "monoplane.hookspecs": ("hookimpl",),
     "monoplane.fileio": ("load_frame", "save_reconstruction"),
@@ -25,13 +26,14 @@ _LAZY = {name: module for module, names in _MODULES.items() for name in names}
 __all__ = [
     "Camera", "ConfigError", "Frame", "InvalidInput", "MonoplaneError", "Pipeline",
     "Reconstruction", "Scene", "StageError", "detect_planes", "hookimpl", "load_frame",
-    "save_reconstruction", "__version__",
+    "log_rerun", "save_reconstruction", "__version__",
 ]
 
 if TYPE_CHECKING:
     from monoplane.datamodel import Camera, Frame, Reconstruction, Scene
     from monoplane.detect import detect_planes
     from monoplane.errors import ConfigError, InvalidInput, MonoplaneError, StageError
+    from monoplane.export.rerun_log import log_rerun
     from monoplane.fileio import load_frame, save_reconstruction
     from monoplane.hookspecs import hookimpl
     from monoplane.pipeline import Pipeline

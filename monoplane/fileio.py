@@ -13,7 +13,8 @@ Outputs (one folder, written atomically: a temporary sibling folder renamed into
 -------------------------------------------------------------------------------------------
 ``labels.png`` (uint16, 0 = non-planar), ``planes.json``, ``planes.ply`` (every plane region
 triangulated on its plane with its holes left open, each face carrying its ``plane_id``; see
-:func:`write_plane_mesh_ply`), ``depth_planar.npy`` and ``config.toml``.
+:func:`write_plane_mesh_ply`), ``planes.glb`` (the same triangles, one glTF mesh node per plane;
+see :mod:`monoplane.export.gltf`), ``depth_planar.npy`` and ``config.toml``.
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ import numpy as np
 from monoplane.cues.intrinsics import assume_intrinsics
 from monoplane.datamodel import Frame, Reconstruction, intrinsics_matrix
 from monoplane.errors import InvalidInput
+from monoplane.export.gltf import reconstruction_glb
 from monoplane.geometry.polygons import PlaneMesh, reconstruction_mesh
 
 
@@ -463,7 +465,9 @@ def write_reconstruction_files(rec: Reconstruction, folder: Path) -> None:
     doc = planes_document(rec)
     doc["monoplane_version"] = __version__
     (folder / "planes.json").write_text(json.dumps(doc, indent=2) + "\n")
-    write_plane_mesh_ply(folder / "planes.ply", reconstruction_mesh(rec), rec.colors)
+    mesh = reconstruction_mesh(rec)
+    write_plane_mesh_ply(folder / "planes.ply", mesh, rec.colors)
+    (folder / "planes.glb").write_bytes(reconstruction_glb(rec, mesh))
     np.save(folder / "depth_planar.npy", rec.planar_depth())
     (folder / "config.toml").write_text(
         "# Resolved monoplane config; rerun with: monoplane run ... --config config.toml\n"
@@ -471,7 +475,8 @@ def write_reconstruction_files(rec: Reconstruction, folder: Path) -> None:
 
 
 def save_reconstruction(rec: Reconstruction, out_dir: str | Path, overwrite: bool = False,
-                        report: bool = False, progress: bool = False) -> Path:
+                        report: bool = False, progress: bool = False,
+                        report_viewer: str | None = None) -> Path:
     """Write a reconstruction's outputs atomically into ``out_dir``.
 
     Parameters
@@ -486,6 +491,9 @@ def save_reconstruction(rec: Reconstruction, out_dir: str | Path, overwrite: boo
         Also write ``report.html`` with its figures (see :mod:`monoplane.report`).
     progress : bool
         Show a progress bar while the report renders.
+    report_viewer : str, optional
+        Relative URL, from ``out_dir``, of a 3D viewer script that several reports share (the
+        batch command's); by default the report gets its own copy.
 
     Returns
     -------
@@ -496,5 +504,5 @@ def save_reconstruction(rec: Reconstruction, out_dir: str | Path, overwrite: boo
         write_reconstruction_files(rec, tmp)
         if report:
             from monoplane.report import write_frame_report
-            write_frame_report(rec, tmp, progress=progress)
+            write_frame_report(rec, tmp, progress=progress, viewer=report_viewer)
     return Path(out_dir)

@@ -26,7 +26,8 @@ from monoplane.batch.specs import FrameSpec
 from monoplane.errors import MonoplaneError
 
 #: Files ``monoplane run`` writes for every frame.
-OUTPUT_FILES = ("labels.png", "planes.json", "planes.ply", "depth_planar.npy", "config.toml")
+OUTPUT_FILES = ("labels.png", "planes.json", "planes.ply", "planes.glb", "depth_planar.npy",
+                "config.toml")
 REPORT_FILE = "report.html"
 
 
@@ -141,8 +142,15 @@ def process_frame(job: BatchJob, spec: FrameSpec) -> FrameResult:
                            intrinsics=spec.intrinsics, depth_scale=spec.depth_scale,
                            nan_as_invalid=spec.nan_as_invalid, depth_kind=spec.depth_kind)
         rec = pipe.run(frame.with_(name=spec.name))
+        viewer = None
+        if job.report:  # one copy of the 3D viewer (1 MB) for all frame reports
+            from monoplane.batch.index import ASSETS
+            from monoplane.report.viewer import install_viewer
+
+            viewer = f"../{ASSETS}/{install_viewer(Path(job.out) / ASSETS)}"
         # overwrite=True: the caller already decided this frame must be (re)computed.
-        save_reconstruction(rec, Path(job.out) / spec.name, overwrite=True, report=job.report)
+        save_reconstruction(rec, Path(job.out) / spec.name, overwrite=True, report=job.report,
+                            report_viewer=viewer)
     except Exception as exc:
         return FrameResult(spec.name, "failed", seconds=time.perf_counter() - start,
                            error=one_line(exc))

@@ -1,5 +1,5 @@
-"""``index.html`` of a batch: a label-overlay thumbnail per frame, links to the frame reports,
-and the distributions of frame time and plane count.
+"""``index.html`` of a batch: a label-overlay thumbnail per frame, links to the frame reports
+and their interactive 3D views, and the distributions of frame time and plane count.
 
 The plots are inline SVG histograms: they need no plotting library, stay sharp at any zoom and
 keep the page self-contained. Thumbnails are PNGs in ``index_files/``, made from each frame's
@@ -21,6 +21,7 @@ from monoplane.batch.frame import REPORT_FILE
 from monoplane.batch.specs import FrameSpec
 from monoplane.report import figures as fig
 from monoplane.report import html
+from monoplane.report.viewer import SECTION_ID
 
 if TYPE_CHECKING:
     from monoplane.batch.runner import BatchSummary
@@ -127,9 +128,12 @@ def write_index(summary: BatchSummary, specs: Sequence[FrameSpec], out: Path) ->
                    if made else "")
             caption = f"{name}: {res.planes} planes" + (
                 f", {res.seconds:.2f} s" if res.seconds is not None else ", done before")
+            view3d = ""
+            if target.endswith(REPORT_FILE):
+                view3d = f' · <a href="{html.esc(target)}#{SECTION_ID}">3D view</a>'
             cells.append(f'<figure><a href="{html.esc(target)}">{img}</a>'
-                         f'<figcaption><a href="{html.esc(target)}">{caption}</a></figcaption>'
-                         '</figure>')
+                         f'<figcaption><a href="{html.esc(target)}">{caption}</a>{view3d}'
+                         '</figcaption></figure>')
         else:
             cells.append(f'<figure><figcaption><b>{name}: failed</b><br>'
                          f'{html.esc(res.error or "")}</figcaption></figure>')
@@ -150,7 +154,8 @@ def write_index(summary: BatchSummary, specs: Sequence[FrameSpec], out: Path) ->
                                                                      failed_rows)))
     subtitle = (f"{len(summary.frames)} frames: {counts['ok']} done, {counts['failed']} failed, "
                 f"{counts['skipped']} skipped (done by an earlier run); engine {summary.engine}, "
-                f"{summary.seconds:.1f} s. Click a thumbnail for the frame's report.")
+                f"{summary.seconds:.1f} s. Click a thumbnail for the frame's report, or "
+                "'3D view' to turn its planes in 3D.")
     fd, tmp = tempfile.mkstemp(prefix=".index.", suffix=".tmp", dir=out)
     os.close(fd)
     try:

@@ -4,11 +4,20 @@ from __future__ import annotations
 
 import argparse
 
-from monoplane.cli.common import add_depth_value_args, add_pipeline_args, depth_reading
+from monoplane.cli.common import (
+    add_depth_value_args,
+    add_pipeline_args,
+    add_rerun_arg,
+    check_rerun_arg,
+    depth_reading,
+)
 
 DESCRIPTION = """Recover the planes of every frame of INPUT into DIR/<name>/ (the files of
 'monoplane run'), then write DIR/summary.json (status, planes, seconds and error of every frame,
 and the config) and, with --report, DIR/index.html.
+
+With --rerun FILE.rrd, every finished frame is also logged into one Rerun recording, frame i
+of INPUT at step i of the timeline 'frame'.
 
 INPUT is a folder of frame folders (rgb.png or rgb.jpg, optional depth.npy or depth.png,
 normals.npy, intrinsics.json; the layout of data_samples/room_000) or a .jsonl/.csv manifest
@@ -40,6 +49,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                      help="recompute every frame (default: skip frames already complete)")
     out.add_argument("--report", action="store_true",
                      help="write each frame's report.html and DIR/index.html")
+    add_rerun_arg(out)
     run = p.add_argument_group("execution")
     run.add_argument("--engine", choices=("local", "ray"), default="local",
                      help="local: a process pool on this machine (default); ray: Ray actors "
@@ -57,6 +67,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run_cmd(args: argparse.Namespace) -> int:
     from monoplane.batch import run_batch
 
+    check_rerun_arg(args)
     summary = run_batch(
         args.input, args.out, config=args.config, preset=args.preset, overrides=args.overrides,
         workers=args.workers, engine=args.engine, ray_address=args.ray_address,
@@ -67,6 +78,16 @@ def run_cmd(args: argparse.Namespace) -> int:
             print(f"note: {note}")
         for f in summary.failed:
             print(f"failed: {f.name}: {f.error}")
+    if args.rerun:
+        from monoplane.batch import read_frames
+        from monoplane.batch.recording import write_batch_recording
+
+        specs = read_frames(args.input, **depth_reading(args))
+        missing = write_batch_recording(args.rerun, args.out, specs, summary.frames)
+        if not args.quiet:
+            for reason in missing:
+                print(f"note: not in {args.rerun}: {reason}")
+    if not args.quiet:
         ok, failed, skipped = (summary.count(s) for s in ("ok", "failed", "skipped"))
         print(f"{ok} done, {failed} failed, {skipped} skipped in {summary.seconds:.1f} s "
               f"-> {args.out}/summary.json")

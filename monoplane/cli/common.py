@@ -75,4 +75,31 @@ def add_output_args(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--overwrite", action="store_true",
                        help="replace DIR if it exists")
     group.add_argument("--report", action="store_true",
-                       help="also write report.html with 2D figures and off-screen 3D renders")
+                       help="also write report.html with 2D figures, an interactive 3D view "
+                            "and off-screen 3D renders")
+    add_rerun_arg(group)
+
+
+def add_rerun_arg(group: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
+    """``--rerun FILE.rrd``: also write a Rerun recording (optional extra ``rerun``)."""
+    group.add_argument("--rerun", metavar="FILE.rrd",
+                       help="also write a Rerun recording of the result (image, depth, label "
+                            "map, points, plane meshes, camera; open it with 'rerun "
+                            "FILE.rrd'); needs pip install 'monoplane[rerun]'")
+
+
+def check_rerun_arg(args: argparse.Namespace) -> None:
+    """Fail before any work when ``--rerun`` cannot be written (bad name, no Rerun SDK)."""
+    if args.rerun:
+        from monoplane.export.rerun_log import check_recording_path
+
+        check_recording_path(args.rerun)
+
+
+def write_rerun_arg(args: argparse.Namespace, result: Any) -> None:
+    """Write the ``--rerun`` recording of ``result``, if asked for (see
+    :func:`monoplane.log_rerun`)."""
+    if args.rerun:
+        from monoplane.export.rerun_log import log_rerun
+
+        log_rerun(result, args.rerun)

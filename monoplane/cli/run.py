@@ -8,8 +8,10 @@ from monoplane.cli.common import (
     add_input_args,
     add_output_args,
     add_pipeline_args,
+    check_rerun_arg,
     depth_reading,
     pipeline_from_args,
+    write_rerun_arg,
 )
 from monoplane.cli.models import prepare_cue_model
 from monoplane.cues import CueNetwork
@@ -20,7 +22,7 @@ from monoplane.stages.base import CueProvider
 
 DESCRIPTION = """Recover the planes of one image and write labels.png (uint16, 0 = non-planar),
 planes.json (normal . X + offset = 0 in the camera frame and the depth's units), planes.ply,
-depth_planar.npy and config.toml into --out.
+planes.glb (glTF, one mesh node per plane), depth_planar.npy and config.toml into --out.
 
 Depth and normals come from --depth/--normals (RGB-D, precomputed network outputs), from a
 catalogue model (--cues NAME, see 'monoplane models list'; --fetch downloads it once) or from
@@ -49,6 +51,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     check_output_dir(args.out, args.overwrite)  # fail before any work
+    check_rerun_arg(args)
     if args.cues:
         args.overrides = [f"cues.model={args.cues}", *args.overrides]
     pipe = pipeline_from_args(args)
@@ -61,6 +64,7 @@ def run(args: argparse.Namespace) -> int:
     rec = pipe.run(frame)
     out = save_reconstruction(rec, args.out, overwrite=args.overwrite, report=args.report,
                               progress=not args.quiet)
+    write_rerun_arg(args, rec)
     if not args.quiet:
         for note in rec.frame.notes:
             print(f"note: {note}")

@@ -1,5 +1,5 @@
-"""What a multi-view run writes: ``cameras.json``, ``points.ply``, ``scene.json``, ``scene.ply``
-and each view's folder, always atomically (a failed write leaves no folder behind).
+"""What a multi-view run writes: ``cameras.json``, ``points.ply``, ``scene.json``, ``scene.ply``,
+``scene.glb`` and each view's folder, always atomically (a failed write leaves no folder behind).
 """
 
 from __future__ import annotations
@@ -12,6 +12,7 @@ import cv2
 import numpy as np
 
 from monoplane.datamodel import Camera, SfmResult
+from monoplane.export.gltf import scene_glb
 from monoplane.multiview.fusion import global_label_map, scene_mesh, scene_plane_colors
 
 if TYPE_CHECKING:
@@ -144,8 +145,9 @@ def save_scene(result: MultiviewResult, out_dir: str | Path, overwrite: bool = F
     Layout: ``view_000/`` ... (the single-view outputs of each registered view, plus
     ``labels_global.png``: global plane id + 1 per pixel, 16-bit), ``scene.json``,
     ``scene.ply`` (each global plane's coloured surface, triangulated with holes open),
-    ``cameras.json`` and ``points.ply`` (sparse SfM points); with ``report``, ``report.html``
-    and its figures.
+    ``scene.glb`` (the same surfaces, one glTF mesh node per global plane, and the cameras; see
+    :mod:`monoplane.export.gltf`), ``cameras.json`` and ``points.ply`` (sparse SfM points);
+    with ``report``, ``report.html`` and its figures.
     """
     from monoplane.fileio import atomic_output_dir, write_plane_mesh_ply, write_reconstruction_files
 
@@ -158,7 +160,9 @@ def save_scene(result: MultiviewResult, out_dir: str | Path, overwrite: bool = F
             write_global_labels(folder / "labels_global.png", rec.labels, scene.links[v])
         (tmp / "scene.json").write_text(json.dumps(scene_document(result), indent=2) + "\n")
         colors = scene_plane_colors(scene)
-        write_plane_mesh_ply(tmp / "scene.ply", scene_mesh(scene), colors, first_id=0)
+        mesh = scene_mesh(scene)
+        write_plane_mesh_ply(tmp / "scene.ply", mesh, colors, first_id=0)
+        (tmp / "scene.glb").write_bytes(scene_glb(scene, mesh))
         cams = cameras_document(scene.cameras, result.registration, result.unregistered)
         (tmp / "cameras.json").write_text(json.dumps(cams, indent=2) + "\n")
         write_points_ply(tmp / "points.ply", result.sfm.points, result.sfm.colors)

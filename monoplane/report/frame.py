@@ -12,11 +12,13 @@ import numpy as np
 from tqdm import tqdm
 
 from monoplane.datamodel import Reconstruction
+from monoplane.export.gltf import reconstruction_glb
 from monoplane.geometry.mesh import planar_mesh
 from monoplane.report import figures as fig
 from monoplane.report import html
 from monoplane.report.colors import colorize_normals, plane_palette, shade
 from monoplane.report.render3d import DEFAULT_TIMEOUT, Mesh, RenderResult, Shot, render
+from monoplane.report.viewer import install_viewer, viewer_section
 from monoplane.report.viewpoints import facing_triangles, orbit_viewpoints, zoom_to_fit
 
 #: Width of the 3D renders in pixels (height follows the image's aspect ratio).
@@ -152,6 +154,24 @@ def open_report(out_dir: Path, steps: int, desc: str, progress: bool) -> tuple[P
     return out, tqdm(total=steps, desc=desc, unit="step", disable=not progress)
 
 
+def summary_section(contents: str) -> str:
+    """The section showing ``summary.png``, the report's main figures in one picture, which
+    can be shared on its own (markup); ``contents`` says what it gathers."""
+    return html.section("Summary", html.figure_grid(
+        [html.Figure("summary.png", f"summary.png: {contents}, in one picture")], 1))
+
+
+def glb_for_report(out: Path, name: str, build: Callable[[], bytes]) -> bytes:
+    """The bytes of the ``.glb`` file ``name`` in the report folder ``out``; ``build()`` makes
+    it, and it is written, when the folder does not hold it yet (a report written on its own)."""
+    path = out / name
+    if path.is_file():
+        return path.read_bytes()
+    data = build()
+    path.write_bytes(data)
+    return data
+
+
 def finish_report(out: Path, bar: tqdm, title: str, subtitle: str, sections: list[str]) -> Path:
     """Write ``report.html`` into ``out``, take the progress bar's last step and close it."""
     path = html.write_page(out / "report.html", title, subtitle, sections)
@@ -161,8 +181,12 @@ def finish_report(out: Path, bar: tqdm, title: str, subtitle: str, sections: lis
 
 
 def write_frame_report(rec: Reconstruction, out_dir: Path, render_3d: bool = True,
-                       progress: bool = False, timeout: float = DEFAULT_TIMEOUT) -> Path:
-    """Write ``report.html`` and its PNG figures for one reconstruction.
+                       progress: bool = False, timeout: float = DEFAULT_TIMEOUT,
+                       viewer: str | None = None) -> Path:
+    """Write ``report.html``, its PNG figures and ``summary.png`` for one reconstruction.
+
+    The page also shows ``planes.glb`` in an interactive 3D view; ``planes.glb`` is written
+    into ``out_dir`` when it is not there yet.
 
     Parameters
     ----------
@@ -177,6 +201,10 @@ def write_frame_report(rec: Reconstruction, out_dir: Path, render_3d: bool = Tru
         Show a progress bar on stderr.
     timeout : float
         Seconds the 3D renderer may take.
+    viewer : str, optional
+        Relative URL, from ``out_dir``, of a copy of the 3D viewer script that several reports
+        share (see :func:`~monoplane.report.viewer.install_viewer`); by default the report
+        gets its own copy in ``viewer/``.
 
     Returns
     -------
@@ -237,11 +265,14 @@ def write_frame_report(rec: Reconstruction, out_dir: Path, render_3d: bool = Tru
     total_px = frame.height * frame.width
     coverage = 100.0 * float((rec.labels > 0).sum()) / total_px
     sections = [
-        html.paragraph("summary.png beside this page gathers the main figures in one "
-                       "picture."),
+        summary_section("input, planes, depth and the rendered 3D views"),
         html.section("Inputs", html.figure_grid(inputs, 3)),
         html.section("Planes", html.figure_grid(planes_figs, 2)
                      + html.figure_grid(depth_figs, 1)),
+        viewer_section(glb_for_report(out, "planes.glb", lambda: reconstruction_glb(rec)),
+                       "planes.glb", viewer or install_viewer(out),
+                       f"The {rec.num_planes} planes in 3D, coloured by plane id as in the "
+                       "label map, seen at first from about where the camera stood."),
     ]
     sections.append(html.section("3D planar model", views_3d_body(
         views, rendered.reason, "The 2D figures above are complete.")))

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from monoplane.datamodel import Reconstruction, Scene, plane_to_camera, plane_to_world
+from monoplane.export.gltf import scene_glb
 from monoplane.geometry.mesh import planar_mesh
 from monoplane.report import figures as fig
 from monoplane.report import html
@@ -16,13 +17,16 @@ from monoplane.report.colors import LIGHT_DIRECTION, plane_palette, shade
 from monoplane.report.frame import (
     estimate_up,
     finish_report,
+    glb_for_report,
     mesh_step,
     open_report,
     render_size,
     rendered_views,
+    summary_section,
     views_3d_body,
 )
 from monoplane.report.render3d import DEFAULT_TIMEOUT, Lines, Mesh, RenderResult, Shot, render
+from monoplane.report.viewer import install_viewer, viewer_section
 from monoplane.report.viewpoints import facing_triangles, orbit_viewpoints, zoom_to_fit
 
 #: Colour of planes that no global plane claims, in 3D views and label maps.
@@ -172,7 +176,10 @@ def scene_views(scene: Scene, out_dir: Path, timeout: float = DEFAULT_TIMEOUT
 
 def write_scene_report(scene: Scene, out_dir: Path, render_3d: bool = True,
                        progress: bool = False, timeout: float = DEFAULT_TIMEOUT) -> Path:
-    """Write ``report.html`` and its PNG figures for a multi-view scene.
+    """Write ``report.html``, its PNG figures and ``summary.png`` for a multi-view scene.
+
+    The page also shows ``scene.glb`` (fused planes and cameras) in an interactive 3D view;
+    ``scene.glb`` is written into ``out_dir`` when it is not there yet.
 
     Parameters
     ----------
@@ -242,6 +249,10 @@ def write_scene_report(scene: Scene, out_dir: Path, render_3d: bool = True,
         cam_rows.append([f"{v + 1}", cam.name or rec.frame.name,
                          "(" + ", ".join(f"{x:+.3f}" for x in cam.center) + ")", scale,
                          f"{rec.num_planes}", f"{len(links)}"])
+    panels = [(fig.load_png(out / f.src), f.caption.split(":")[0]) for f in per_view[1::2][:3]]
+    panels += [(fig.load_png(out / f.src), f.caption.split(",")[0]) for f in views3d
+               if f.src.endswith("_planes.png")]
+    fig.save_png(out / "summary.png", fig.contact_sheet(panels, columns=3))
     body3d = views_3d_body(views3d, rendered.reason, "The per-view figures below are complete.")
     notes = list(dict.fromkeys(n for rec in scene.views for n in rec.frame.notes))
     if render_3d and rendered.reason:
@@ -249,6 +260,11 @@ def write_scene_report(scene: Scene, out_dir: Path, render_3d: bool = True,
     timing = [["3D rendering (report)", f"{rendered.seconds:.3f}"],
               ["report total", f"{time.perf_counter() - start:.3f}"]]
     sections = [
+        summary_section("the first views' planes by global id and the rendered 3D views"),
+        viewer_section(glb_for_report(out, "scene.glb", lambda: scene_glb(scene)), "scene.glb",
+                       install_viewer(out),
+                       f"The {G} fused planes in the world frame, coloured by global id as in "
+                       "the views below, and the cameras as pyramids (view 1 red)."),
         html.section("Cameras and fused planes in 3D", body3d),
         html.section("Views", html.figure_grid(per_view, 2)),
         html.section("Global planes",

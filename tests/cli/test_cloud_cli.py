@@ -42,7 +42,21 @@ def test_cloud_writes_every_output(tmp_path: Path, suffix: str,
         assert np.percentile(np.abs(resid), 95) < 1e-3 and np.abs(resid).max() < 0.05
     assert len(o3d.io.read_point_cloud(str(out / "labelled.ply")).points) == len(points)
     assert len(o3d.io.read_triangle_mesh(str(out / "planes.ply")).triangles) > 0
-    assert (out / "config.toml").is_file()
+    assert (out / "planes.glb").is_file() and (out / "config.toml").is_file()
+    assert not (out / "report.html").exists()
+
+
+def test_cloud_report_is_an_html_page(tmp_path: Path) -> None:
+    write_cloud(tmp_path / "box.ply")
+    out = tmp_path / "out"
+    assert main(["cloud", str(tmp_path / "box.ply"), "--out", str(out), "--report",
+                 "--quiet"]) == 0
+    text = (out / "report.html").read_text()
+    assert "Interactive 3D view" in text and "viewer/model-viewer-umd.min.js" in text
+    assert text.count('class="swatch"') == 3  # the plane table
+    if "3D views are missing" not in text:  # rendered: the summary sheet and its figures
+        assert 'src="summary.png"' in text and (out / "summary.png").is_file()
+        assert (out / "cloud3d_birdseye.png").is_file()
 
 
 def test_cloud_errors_are_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -1,59 +1,11 @@
-"""Fixtures for report tests: a hand-made room (floor, ceiling, three walls and a box) with exact
-planes.
-
-The camera looks into the room, pitched 6° down; pixels are ray-cast analytically against
-bounded rectangles, so labels, depth, normals and plane parameters are all exact.
-"""
+"""Fixtures for report and export tests (the scenes are built in report_fixtures.py)."""
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
+from report_fixtures import make_room
 
-from monoplane.datamodel import Reconstruction, default_intrinsics
-from monoplane.testing import plane_scene
-
-# (normal, d, lower bound, upper bound) in the room frame (x right, y down, z forward).
-_RECTS = [
-    ((0, -1, 0), 1.3, (-2.2, 1.3, 0.0), (2.0, 1.3, 5.0)),  # floor
-    ((0, 1, 0), 1.4, (-2.2, -1.4, 0.0), (2.0, -1.4, 5.0)),  # ceiling
-    ((0, 0, -1), 5.0, (-2.2, -1.4, 5.0), (2.0, 1.3, 5.0)),  # back wall
-    ((1, 0, 0), 2.2, (-2.2, -1.4, 0.0), (-2.2, 1.3, 5.0)),  # left wall
-    ((-1, 0, 0), 2.0, (2.0, -1.4, 0.0), (2.0, 1.3, 5.0)),  # right wall
-    ((0, -1, 0), 0.6, (-0.3, 0.6, 2.8), (1.0, 0.6, 3.8)),  # box top
-    ((0, 0, -1), 2.8, (-0.3, 0.6, 2.8), (1.0, 1.3, 2.8)),  # box front
-]
-_BASE = np.array([[150, 120, 90], [235, 235, 230], [200, 190, 170], [170, 185, 200],
-                  [185, 200, 170], [120, 70, 50], [140, 85, 60]], dtype=np.float64)
-
-
-def make_room(width: int = 160, height: int = 120, pitch_deg: float = 6.0) -> Reconstruction:
-    """Ground-truth reconstruction of the room seen by a camera at the origin.
-
-    Returns
-    -------
-    Reconstruction
-        7 planes, labels with a small non-planar blob on the back wall, exact depth and normals.
-    """
-    a = np.deg2rad(pitch_deg)
-    R = np.array([[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])
-    K = default_intrinsics(width, height, 70.0)
-    planes = np.array([[*n, d] for n, d, _, _ in _RECTS], dtype=np.float64)
-    bounds = np.array([[lo, hi] for _, _, lo, hi in _RECTS], dtype=np.float64)
-    scene = plane_scene(planes, K, width, height, R=R, bounds=bounds)
-    labels = scene.labels.copy()
-
-    v, u = np.mgrid[0:height, 0:width]
-    rng = np.random.default_rng(0)
-    checker = ((u // 8 + v // 8) % 2)[..., None] * 18.0
-    rgb = _BASE[labels - 1] + checker + rng.normal(0, 4, (height, width, 3))
-    blob = (u - 0.42 * width) ** 2 + (v - 0.35 * height) ** 2 < (0.06 * width) ** 2
-    rgb[blob] = (40, 140, 60)
-    labels[blob] = 0
-    rgb = np.clip(rgb, 0, 255).astype(np.uint8)
-    frame = scene.frame.with_(rgb=rgb, name="room", notes=["synthetic test room"])
-    return Reconstruction(frame=frame, labels=labels, params=scene.planes,
-                          rmse=np.full(len(planes), 0.004), timings={"total": 1.25})
+from monoplane.datamodel import Reconstruction
 
 
 @pytest.fixture

@@ -7,8 +7,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from report_fixtures import make_scene
 
-from monoplane.datamodel import Camera, Reconstruction, Scene
+from monoplane.datamodel import Reconstruction
 from monoplane.report import write_eval_report, write_frame_report, write_scene_report
 
 
@@ -17,6 +18,8 @@ def _assert_links_resolve(page: Path) -> str:
     srcs = re.findall(r'src="([^"]+)"', text)
     assert srcs, "report has no figures"
     for src in srcs:
+        if src.startswith("data:"):  # the 3D view's embedded .glb
+            continue
         assert (page.parent / src).is_file(), src
     return text
 
@@ -29,6 +32,8 @@ def test_frame_report_without_3d(room, tmp_path: Path) -> None:
                  "depth_compare.png", "summary.png"):
         assert (page.parent / name).is_file()
     assert "3D views were not requested" in text
+    assert 'src="summary.png"' in text  # shown, not only mentioned
+    assert (page.parent / "planes.glb").is_file() and 'id="view3d"' in text
     assert "synthetic test room" in text  # frame notes
     assert text.count("class=\"swatch\"") == room.num_planes
     # Floor normal (0, -cos 6°, -sin 6°) in the plane table.
@@ -54,27 +59,12 @@ def test_frame_report_with_3d(room, tmp_path: Path) -> None:
     assert "missing or incomplete" not in text
 
 
-def _gt_scene(n_views: int) -> Scene:
-    from monoplane.synth import generate
-
-    sc = generate(3, "clean", 96, 72, n_views)
-    cams, views = [], []
-    for i, v in enumerate(sc.views):
-        f = v.frame.with_(depth=v.gt_depth, normals=v.gt_normals, depth_kind="metric",
-                          name=f"view{i}")
-        views.append(Reconstruction(frame=f, labels=v.gt_labels, params=v.gt_params))
-        cams.append(Camera(K=f.K, R=v.R, t=v.t, width=f.width, height=f.height, name=f"v{i}"))
-    links = [dict(d) for d in sc.view_to_global]
-    del links[1][min(links[1])]  # one plane that only view 2 has
-    return Scene(cameras=cams, views=views, planes=sc.gt_planes_world, links=links,
-                 scales=[1.0] * n_views)
-
-
 def test_scene_report_without_3d(tmp_path: Path) -> None:
-    scene = _gt_scene(2)
+    scene = make_scene(2)
     page = write_scene_report(scene, tmp_path, render_3d=False)
     text = _assert_links_resolve(page)
     assert "view2_labels.png" in text
+    assert 'src="summary.png"' in text and (tmp_path / "scene.glb").is_file()
     assert text.count("class=\"swatch\"") == scene.planes.shape[0]
     assert "3D views were not requested" in text
 
@@ -82,7 +72,7 @@ def test_scene_report_without_3d(tmp_path: Path) -> None:
 def test_scene_label_maps_use_global_ids() -> None:
     from monoplane.report.scene import global_label_maps
 
-    scene = _gt_scene(2)
+    scene = make_scene(2)
     maps = global_label_maps(scene)
     G = scene.planes.shape[0]
     for rec, links, lab in zip(scene.views, scene.links, maps, strict=True):
@@ -96,7 +86,7 @@ def test_scene_label_maps_use_global_ids() -> None:
 @pytest.mark.slow
 @pytest.mark.render
 def test_scene_report_with_3d(tmp_path: Path) -> None:
-    page = write_scene_report(_gt_scene(3), tmp_path)
+    page = write_scene_report(make_scene(3), tmp_path)
     text = _assert_links_resolve(page)
     if "OpenGL/EGL is unavailable" in text:
         pytest.skip("no headless OpenGL here")
@@ -133,3 +123,23 @@ def test_frame_report_without_planes_or_colour(room, tmp_path: Path) -> None:
     text = _assert_links_resolve(write_frame_report(empty, tmp_path))
     assert "no planar surface to render in 3D" in text
     assert "0 planes" in text
+
+
+def test_batch_reports_share_one_viewer_and_the_index_links_the_3d_views(
+        sample_dir: Path, tmp_path: Path) -> None:
+    import shutil
+
+    from monoplane.batch import run_batch
+    from monoplane.report.viewer import VIEWER_SCRIPT
+
+    frames = tmp_path / "frames"
+    shutil.copytree(sample_dir, frames / "a", ignore=shutil.ignore_patterns("frames"))
+    out = tmp_path / "out"
+    run_batch(frames, out, workers=1, report=True, progress=False)
+    page = (out / "a" / "report.html").read_text()
+    src = re.search(r'<script src="([^"]+)"', page).group(1)
+    assert src == f"../index_files/viewer/{VIEWER_SCRIPT}"
+    assert (out / "a" / src).resolve().is_file() and not (out / "a" / "viewer").exists()
+    index = (out / "index.html").read_text()
+    assert 'href="a/report.html#view3d"' in index
+    assert (out / "a" / "planes.glb").is_file()
