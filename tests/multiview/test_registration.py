@@ -190,3 +190,28 @@ def test_sfm_views_that_cannot_be_scale_aligned_are_placed_by_the_registrar(star
     for v in (1, 2):
         rot, trans = _placed_error(out, star, v)
         assert rot < 0.5 and trans < 3.0
+
+
+def test_a_matchers_correspondences_reach_the_registrar(star) -> None:
+    """A learned matcher (LoFTR, LightGlue) puts its matches in SfmResult.matches, also for a
+    view it could not register; the registrar lifts those before it tries SIFT of its own."""
+    import cv2
+
+    pipe = Pipeline.from_preset("monoplane",
+                                overrides=[*OVERRIDES, "registrar.methods=['features']"])
+    frames = [v.frame for v in star.views]
+    # Blurred: SIFT alone finds next to nothing in view 2.
+    frames[2] = frames[2].with_(rgb=cv2.GaussianBlur(frames[2].rgb, (0, 0), 6))
+    full = ground_truth_sfm(star)
+    sfm = _sfm_without(star, 2)
+    keypoints, ids = list(sfm.keypoints), list(sfm.point_ids)
+    keypoints[2] = full.keypoints[2]  # the matcher's keypoints, observing no model point
+    ids[2] = np.full(len(keypoints[2]), -1, np.int64)
+    sfm = replace(sfm, keypoints=keypoints, point_ids=ids,
+                  matches={**sfm.matches, (0, 2): full.matches[(0, 2)]})
+    out = reconstruct_multiview(frames, pipe, sfm=sfm, workers=1)
+    reg = out.registration[2]
+    assert reg["method"] == "features"
+    assert reg["reference"] == frames[0].name and reg["matches"] == len(full.matches[(0, 2)])
+    rot, trans = _placed_error(out, star, 2)
+    assert rot < 0.5 and trans < 3.0
