@@ -153,13 +153,17 @@ class ColmapMatcher(Matcher):
         db = pycolmap.Database.open(database)
         try:
             ids = {img.name: img.image_id for img in db.read_all_images()}
-            for name, f in zip(names, frames, strict=True):
-                k = db.num_keypoints_for_image(ids[name])
-                if k < cfg.min_num_features:
-                    raise SfmError(
-                        f"{f.name}: only {k} SIFT features found (need {cfg.min_num_features}); "
-                        "the image is too small, blurred or textureless"
-                    )
+            # A textureless image cannot join the model, but need not stop the others: it is
+            # left unregistered (the registrar may still place it from its depth and planes).
+            poor = [(f.name, db.num_keypoints_for_image(ids[name]))
+                    for name, f in zip(names, frames, strict=True)
+                    if db.num_keypoints_for_image(ids[name]) < cfg.min_num_features]
+            if len(frames) - len(poor) < 2:
+                name, k = poor[0]
+                raise SfmError(
+                    f"{name}: only {k} SIFT features found (need {cfg.min_num_features}); "
+                    "the image is too small, blurred or textureless"
+                )
         finally:
             db.close()
 
@@ -184,6 +188,9 @@ class ColmapMatcher(Matcher):
                 "further apart"
             )
         result = self._to_result(model, frames, names, matches)
+        for name, k in poor:
+            result.notes.append(f"{name}: only {k} SIFT features (need {cfg.min_num_features}); "
+                                "left out of the model")
         result.notes.append(
             "intrinsics fixed to the given K" if cfg.fixed_intrinsics
             else "focal length estimated by bundle adjustment"

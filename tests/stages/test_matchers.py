@@ -117,6 +117,14 @@ def test_textureless_image_fails_with_reason(pair) -> None:
         ColmapMatcher().match([frames[0], flat])
 
 
+def test_a_textureless_image_among_others_is_left_out(pair) -> None:
+    frames, _ = pair
+    flat = Frame(rgb=np.full((H, W, 3), 127, np.uint8), K=K, name="flat")
+    sfm = ColmapMatcher().match([frames[0], flat, frames[1]])
+    assert sfm.registered == [True, False, True]
+    assert any("flat: only 0 SIFT features" in n for n in sfm.notes)
+
+
 def test_needs_two_images(pair) -> None:
     with pytest.raises(InvalidInput, match="at least 2 images"):
         ColmapMatcher().match(pair[0][:1])
