@@ -5,6 +5,14 @@ Frames
     ``monoplane.synth.generate(seed, level, width, height)``, view 0), each ``repeat`` times.
     Medians are over all those runs.
 
+Scene complexity
+    With ``objects`` ranges (e.g. :data:`COMPLEXITY_LEVELS`: 1-2, 4-6 and 8-12 objects), every
+    size runs once per range on its own frames: frame ``i`` of range ``(lo, hi)`` is
+    ``generate(seed + i, level, width, height, objects=lo + i % (hi - lo + 1))``, the same room
+    and camera as the usual scene of that seed, furnished with that many objects in view. Each
+    (size, range) is one result with the mean ground-truth and found plane counts beside its
+    times, and per-frame medians in :attr:`BenchResult.per_frame`: time against plane count.
+
 Time
     Every entry of ``Reconstruction.timings``: the stage kinds the pipeline times (``cues``,
     ``ransac``, ``refiner``), their sub-steps (``ransac.graph``, ``refiner.crf``, ...) and the
@@ -52,6 +60,8 @@ from monoplane.hookspecs import hookimpl
 
 #: Sizes benchmarked by default: the paper's working resolution and VGA.
 DEFAULT_SIZES: tuple[tuple[int, int], ...] = ((256, 192), (640, 480))
+#: Scene-complexity levels of ``monoplane bench --complexity``: objects per scene, (min, max).
+COMPLEXITY_LEVELS: tuple[tuple[int, int], ...] = ((1, 2), (4, 6), (8, 12))
 #: Stage kinds in pipeline order, for sorting the table.
 _STAGE_ORDER = ("cues", "ransac", "refiner")
 
@@ -119,8 +129,36 @@ class BaselineBench:
 
 
 @dataclass
+class FrameBench:
+    """One frame of a result: its scene and its median times over the ``repeat`` runs.
+
+    Attributes
+    ----------
+    seed : int
+        Seed of the synthetic scene.
+    objects : int or None
+        Objects in the scene; ``None`` for the usual furnishing.
+    gt_planes : int
+        Ground-truth planes in view.
+    planes : float
+        Planes the preset found (mean over the runs; runs of one frame agree).
+    total_s : float
+        Median seconds of the preset's whole call.
+    baseline_call_s : dict of str to float
+        Median seconds of each baseline's core call on this frame.
+    """
+
+    seed: int
+    objects: int | None
+    gt_planes: int
+    planes: float
+    total_s: float
+    baseline_call_s: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass
 class BenchResult:
-    """Benchmark of one preset at one image size."""
+    """Benchmark of one preset at one image size (and one scene-complexity range)."""
 
     preset: str
     width: int
@@ -132,6 +170,18 @@ class BenchResult:
     frames: int = 1
     first_call_s: float = 0.0
     baselines: list[BaselineBench] = field(default_factory=list)
+    objects: tuple[int, int] | None = None
+    gt_planes: float = float("nan")
+    per_frame: list[FrameBench] = field(default_factory=list)
+
+    @property
+    def column(self) -> str:
+        """Column title of this result: the size, and the objects range if any."""
+        size = f"{self.width}x{self.height}"
+        if self.objects is None:
+            return size
+        lo, hi = self.objects
+        return f"{size} {lo}-{hi} obj" if hi != lo else f"{size} {lo} obj"
 
     @property
     def total_s(self) -> float:
@@ -150,20 +200,29 @@ class BenchResult:
     def to_dict(self) -> dict[str, Any]:
         """Plain-data form for JSON (with the derived throughput and ratios)."""
         return {"preset": self.preset, "width": self.width, "height": self.height,
+                "objects": None if self.objects is None else list(self.objects),
                 "repeat": self.repeat, "frames": self.frames, "planes": self.planes,
+                "gt_planes": None if np.isnan(self.gt_planes) else self.gt_planes,
                 "max_rss_mib": self.max_rss_mib, "first_call_s": self.first_call_s,
                 "fps": self.fps,
                 "stages": [asdict(s) for s in self.stages],
-                "baselines": [{**asdict(b), "ratio": self.ratio(b)} for b in self.baselines]}
+                "baselines": [{**asdict(b), "ratio": self.ratio(b)} for b in self.baselines],
+                "per_frame": [asdict(f) for f in self.per_frame]}
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> BenchResult:
-        """Inverse of :meth:`to_dict` (derived fields are recomputed)."""
+        """Inverse of :meth:`to_dict` (derived fields are recomputed; files written before
+        the complexity axis have no ``objects``, ``gt_planes`` or ``per_frame``)."""
+        objects = data.get("objects")
+        gt_planes = data.get("gt_planes")
         return cls(data["preset"], data["width"], data["height"], data["repeat"],
                    [StageBench(**s) for s in data["stages"]], data["planes"],
                    data["max_rss_mib"], data.get("frames", 1), data.get("first_call_s", 0.0),
                    [BaselineBench(b["name"], b["call_s"], b["total_s"])
-                    for b in data.get("baselines", [])])
+                    for b in data.get("baselines", [])],
+                   None if objects is None else (int(objects[0]), int(objects[1])),
+                   float("nan") if gt_planes is None else float(gt_planes),
+                   [FrameBench(**f) for f in data.get("per_frame", [])])
 
 
 def _order(key: str) -> tuple[int, str, int]:
@@ -193,7 +252,8 @@ def bench(preset: str = "monoplane", sizes: Sequence[tuple[int, int]] = DEFAULT_
           repeat: int = 3, seed: int = 0, level: str = "mild",
           overrides: list[str] | None = None, progress: bool = True, frames: int = 5,
           baselines: Sequence[str] | None = None, plugins: Sequence[str] = (),
-          isolate: bool = True) -> list[BenchResult]:
+          isolate: bool = True, objects: Sequence[tuple[int, int]] | None = None
+          ) -> list[BenchResult]:
     """Time and profile a preset, and the baselines on the same frames, at several sizes.
 
     Parameters
@@ -219,12 +279,17 @@ def bench(preset: str = "monoplane", sizes: Sequence[tuple[int, int]] = DEFAULT_
     plugins : sequence of str
         Extra plugin modules to register (by import name), e.g. a baseline not installed.
     isolate : bool
-        Run each size in a fresh child process (its own peak RSS; see the module docstring).
+        Run each size (and range) in a fresh child process (its own peak RSS; see the module
+        docstring).
+    objects : sequence of (int, int), optional
+        Scene-complexity ranges ``(min, max)`` of objects per scene (e.g.
+        :data:`COMPLEXITY_LEVELS`); ``None``: the usual scenes. See the module docstring.
 
     Returns
     -------
     list of BenchResult
-        One per size, in the given order.
+        One per size, in the given order; with ``objects``, one per size and range, ranges
+        varying fastest.
     """
     from tqdm import tqdm
 
@@ -234,6 +299,14 @@ def bench(preset: str = "monoplane", sizes: Sequence[tuple[int, int]] = DEFAULT_
         raise InvalidInput(f"--frames must be at least 1, got {frames}")
     if not sizes:
         raise InvalidInput("no image size to benchmark")
+    ranges: list[tuple[int, int] | None] = [None]
+    if objects is not None:
+        ranges = [(int(lo), int(hi)) for lo, hi in objects]
+        if not ranges:
+            raise InvalidInput("no objects range to benchmark")
+        bad = next((r for r in ranges if not 0 <= r[0] <= r[1]), None)
+        if bad is not None:
+            raise InvalidInput(f"objects range {bad[0]}-{bad[1]}: need 0 <= min <= max")
     # Resolve names now, in this process, so that bad input fails before any child starts.
     from monoplane.evaluation.baselines import baseline_names
     from monoplane.pipeline import Pipeline
@@ -246,9 +319,9 @@ def bench(preset: str = "monoplane", sizes: Sequence[tuple[int, int]] = DEFAULT_
         raise InvalidInput(f"unknown baseline '{unknown[0]}'; valid choices: "
                            f"{', '.join(names) or '(none)'}")
     args = [(preset, list(overrides or []), size, seed, frames, level, repeat, chosen,
-             list(plugins)) for size in sizes]
+             list(plugins), span) for size in sizes for span in ranges]
     results = []
-    for arg in tqdm(args, disable=not progress, unit="size", desc="bench"):
+    for arg in tqdm(args, disable=not progress, unit="run", desc="bench"):
         if isolate:
             ctx = multiprocessing.get_context("spawn")
             with ProcessPoolExecutor(max_workers=1, mp_context=ctx) as pool:
@@ -270,8 +343,8 @@ def _plugin_manager(plugins: Sequence[str], *extra: object) -> Any:
 
 def _bench_size(preset: str, overrides: list[str], size: tuple[int, int], seed: int,
                 frames: int, level: str, repeat: int, baselines: list[str],
-                plugins: list[str]) -> BenchResult:
-    """One size of :func:`bench` (in a child process when isolated)."""
+                plugins: list[str], objects: tuple[int, int] | None = None) -> BenchResult:
+    """One size (and objects range) of :func:`bench` (in a child process when isolated)."""
     from monoplane.evaluation.baselines import CALL_TIMING, get_baseline
     from monoplane.pipeline import Pipeline
     from monoplane.synth import generate
@@ -280,8 +353,11 @@ def _bench_size(preset: str, overrides: list[str], size: tuple[int, int], seed: 
     pm = _plugin_manager(plugins, tracker)
     pipe = Pipeline.from_preset(preset, overrides=overrides, pm=pm)
     width, height = size
-    views = [generate(seed + i, level, width=width, height=height, n_views=1).views[0].frame
-             for i in range(frames)]
+    counts = [None if objects is None else objects[0] + i % (objects[1] - objects[0] + 1)
+              for i in range(frames)]
+    synth = [generate(seed + i, level, width=width, height=height, n_views=1,
+                      objects=counts[i]).views[0] for i in range(frames)]
+    views = [v.frame for v in synth]
     start = time.perf_counter()
     pipe.run(views[0])
     first_call = time.perf_counter() - start
@@ -319,8 +395,16 @@ def _bench_size(preset: str, overrides: list[str], size: tuple[int, int], seed: 
                          peaks[k] / 2**20 if k in peaks else None) for k in keys]
     timed = [BaselineBench(name, float(np.median(c)), float(np.median(t)))
              for name, c, t in zip(baselines, calls, totals, strict=True)]
+    per_frame = []
+    for i in range(frames):
+        rows = slice(i * repeat, (i + 1) * repeat)  # runs are in frame order, repeat each
+        per_frame.append(FrameBench(
+            seed + i, counts[i], int(len(synth[i].gt_params)), float(np.mean(planes[rows])),
+            float(np.median([r["total"] for r in runs[rows]])),
+            {name: float(np.median(c[rows])) for name, c in zip(baselines, calls, strict=True)}))
     return BenchResult(preset, width, height, repeat, stages, float(np.mean(planes)), rss,
-                       frames, first_call, timed)
+                       frames, first_call, timed, objects,
+                       float(np.mean([f.gt_planes for f in per_frame])), per_frame)
 
 
 def parse_sizes(text: str) -> list[tuple[int, int]]:
@@ -334,15 +418,17 @@ def parse_sizes(text: str) -> list[tuple[int, int]]:
 
 
 def format_bench(results: Sequence[BenchResult], markdown: bool = False) -> str:
-    """One table: a column pair (median ms, traced MiB) per size; a row per stage and sub-step,
-    then throughput, first call, peak RSS and, per baseline, its call, its whole call and the
-    ratio of the preset's total to the baseline's call."""
+    """One table: a column pair (median ms, traced MiB) per size (and objects range); a row per
+    stage and sub-step, then throughput, first call, peak RSS, the mean found and ground-truth
+    plane counts and, per baseline, its call, its whole call and the ratio of the preset's total
+    to the baseline's call. With objects ranges a second table follows: time against plane
+    count, one row per size and range (:func:`format_complexity`)."""
     if not results:
         return ""
     keys = _ordered([s.name for r in results for s in r.stages])
     header = ["stage"]
     for r in results:
-        header += [f"{r.width}x{r.height} ms", "MiB"]
+        header += [f"{r.column} ms", "MiB"]
     rows = []
     for k in keys:
         # Sub-steps are indented in text; Markdown cells drop leading spaces, so keep the key.
@@ -357,8 +443,10 @@ def format_bench(results: Sequence[BenchResult], markdown: bool = False) -> str:
     rows.append(["first call (fresh process)",
                  *[c for r in results for c in (f"{1000 * r.first_call_s:.1f}", "")]])
     rows.append(["peak RSS (MiB)", *[c for r in results for c in ("", f"{r.max_rss_mib:.0f}")]])
-    names = list(dict.fromkeys(b.name for r in results for b in r.baselines))
-    for name in names:
+    rows.append(["planes found (mean)", *[c for r in results for c in (f"{r.planes:.1f}", "")]])
+    rows.append(["ground-truth planes (mean)",
+                 *[c for r in results for c in (_number(r.gt_planes), "")]])
+    for name in _baseline_names(results):
         found = [next((b for b in r.baselines if b.name == name), None) for r in results]
         rows.append([f"{name}: call", *[c for b in found for c in
                                         (f"{1000 * b.call_s:.1f}" if b else "-", "")]])
@@ -368,17 +456,66 @@ def format_bench(results: Sequence[BenchResult], markdown: bool = False) -> str:
                      *[c for r, b in zip(results, found, strict=True)
                        for c in (f"{r.ratio(b):.2f}x" if b else "-", "")]])
     r0 = results[0]
-    title = (f"preset {r0.preset}: median over {r0.frames} frames x {r0.repeat} runs per size; "
+    title = (f"preset {r0.preset}: median over {r0.frames} frames x {r0.repeat} runs per column; "
              f"MiB = traced peak above the stage's start (tracemalloc); mean planes "
              + ", ".join(f"{r.planes:.1f}" for r in results))
+    text = "\n".join([title, *([""] if markdown else []), _render(header, rows, markdown)])
+    if any(r.objects is not None for r in results):
+        text += "\n\n" + format_complexity(results, markdown)
+    return text
+
+
+def format_complexity(results: Sequence[BenchResult], markdown: bool = False) -> str:
+    """Time against plane count: a row per result (size and objects range) with its objects,
+    mean ground-truth and found planes, median total and, per baseline, the median call and
+    the ratio of the two; then each frame's planes and times (per-frame medians)."""
+    names = _baseline_names(results)
+    header = ["size", "objects", "GT planes", "planes found", "total ms"]
+    for name in names:
+        header += [f"{name} call ms", f"ratio / {name}"]
+    rows = []
+    for r in results:
+        span = "usual" if r.objects is None else f"{r.objects[0]}-{r.objects[1]}"
+        row = [f"{r.width}x{r.height}", span, _number(r.gt_planes), f"{r.planes:.1f}",
+               f"{1000 * r.total_s:.1f}"]
+        for name in names:
+            b = next((b for b in r.baselines if b.name == name), None)
+            row += [f"{1000 * b.call_s:.1f}", f"{r.ratio(b):.2f}x"] if b else ["-", "-"]
+        rows.append(row)
+    frame_header = ["size", "seed", "objects", "GT planes", "planes found", "total ms",
+                    *[f"{name} call ms" for name in names]]
+    frame_rows = [[f"{r.width}x{r.height}", str(f.seed), "-" if f.objects is None
+                   else str(f.objects), str(f.gt_planes), f"{f.planes:.1f}",
+                   f"{1000 * f.total_s:.1f}",
+                   *[f"{1000 * f.baseline_call_s[n]:.1f}" if n in f.baseline_call_s else "-"
+                     for n in names]]
+                  for r in results for f in r.per_frame]
+    parts = [f"time against plane count (preset {results[0].preset}; medians; ratio = total / "
+             "baseline call)", *([""] if markdown else []), _render(header, rows, markdown)]
+    if frame_rows:
+        parts += ["", "per frame (medians over its runs)", *([""] if markdown else []),
+                  _render(frame_header, frame_rows, markdown)]
+    return "\n".join(parts)
+
+
+def _number(value: float) -> str:
+    return "-" if np.isnan(value) else f"{value:.1f}"
+
+
+def _baseline_names(results: Sequence[BenchResult]) -> list[str]:
+    return list(dict.fromkeys(b.name for r in results for b in r.baselines))
+
+
+def _render(header: list[str], rows: list[list[str]], markdown: bool) -> str:
+    """A table as Markdown, or as aligned text (first column left, the others right)."""
     if markdown:
         lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
         lines += ["| " + " | ".join(c.strip() or " " for c in row) + " |" for row in rows]
-        return "\n".join([title, "", *lines])
+        return "\n".join(lines)
     widths = [max(len(row[c]) for row in [header, *rows]) for c in range(len(header))]
 
     def line(cells: list[str]) -> str:
         return "  ".join([cells[0].ljust(widths[0]),
                           *[c.rjust(w) for c, w in zip(cells[1:], widths[1:], strict=True)]])
 
-    return "\n".join([title, line(header), "-" * len(line(header)), *[line(r) for r in rows]])
+    return "\n".join([line(header), "-" * len(line(header)), *[line(r) for r in rows]])

@@ -18,6 +18,12 @@ call (without converting the cloud into the library's data structure), its whole
 the ratio of the preset's total to the baseline's call. See monoplane/bench.py for the
 method.
 
+--complexity (or --objects with ranges of your own) adds a scene-complexity axis: each size runs
+once per range of objects per scene (default 1-2, 4-6 and 8-12), on scenes of the same rooms and
+cameras furnished with that many objects in view, and a second table gives time against plane
+count: the ground-truth and found planes, the preset's time, each baseline's call and the
+ratio, per range and per frame.
+
 With --batch it times the 'monoplane batch' command instead, on a folder of synthetic frames of
 one size (default 640x480, 20 frames), for each --workers count and --engine in alternation:
 the whole command's wall time, the batch's own time (summary.json's seconds: the command less
@@ -29,6 +35,8 @@ EPILOG = """examples:
   monoplane bench --preset monoplane-nocrf --sizes 256x192,640x480 --frames 5 --repeat 3
   monoplane bench --baseline open3d-ransac --json bench.json
   monoplane bench --from-json bench.json --markdown     # re-render a saved run for the docs
+  monoplane bench --preset monoplane-nocrf --baseline cgal --complexity   # time vs. planes
+  monoplane bench --objects 1-2,8-12 --sizes 256x192 --json levels.json
   monoplane bench --batch --workers 1,2 --repeat 5      # batch throughput, 20 frames 640x480
   monoplane bench --batch --engine local --engine ray --json batch.json"""
 
@@ -52,6 +60,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of the first frame (default: 0)")
     p.add_argument("--level", default="mild", choices=("clean", "mild", "strong"),
                    help="cue corruption level of the synthetic frames (default: mild)")
+    p.add_argument("--objects", metavar="LO-HI[,LO-HI...]",
+                   help="scene-complexity axis: objects per scene, one range per level, e.g. "
+                        "1-2,4-6,8-12 (default: the usual scenes, about 7-16 objects)")
+    p.add_argument("--complexity", action="store_true",
+                   help="the scene-complexity axis at its default levels: --objects "
+                        "1-2,4-6,8-12")
     p.add_argument("--baseline", dest="baselines", action="append", default=None,
                    metavar="NAME", help="baseline to time on the same frames (repeatable; "
                    "default: every registered one)")
@@ -88,6 +102,28 @@ def _worker_counts(text: str | None) -> list[int]:
     return counts
 
 
+def _object_ranges(text: str | None, complexity: bool) -> list[tuple[int, int]] | None:
+    """``--objects``/``--complexity`` as (min, max) ranges; ``None`` for the usual scenes."""
+    from monoplane.bench import COMPLEXITY_LEVELS
+
+    if text is None:
+        return list(COMPLEXITY_LEVELS) if complexity else None
+    if complexity:
+        raise InvalidInput("give either --complexity or --objects, not both")
+    ranges = []
+    for part in text.split(","):
+        lo, _, hi = part.strip().partition("-")
+        try:
+            span = (int(lo), int(hi or lo))
+        except ValueError:
+            span = (-1, -1)
+        if not 0 <= span[0] <= span[1]:
+            raise InvalidInput(f"--objects takes ranges like 1-2,4-6,8-12 (min <= max, both "
+                               f">= 0); got {part.strip()!r}")
+        ranges.append(span)
+    return ranges
+
+
 def _write_json(path: str, doc: dict) -> None:
     target = Path(path)
     target.parent.mkdir(parents=True, exist_ok=True)
@@ -116,10 +152,15 @@ def run(args: argparse.Namespace) -> int:
     if args.from_json:
         print(_from_json(args.from_json, args.markdown))
         return 0
+    objects = _object_ranges(args.objects, args.complexity)
     settings = {"preset": args.preset, "sizes": args.sizes, "frames": args.frames,
                 "repeat": args.repeat, "seed": args.seed, "level": args.level,
-                "overrides": args.overrides}
+                "overrides": args.overrides,
+                "objects": None if objects is None else [list(r) for r in objects]}
     if args.batch:
+        if objects is not None:
+            raise InvalidInput("--objects and --complexity apply to the frame bench, not "
+                               "--batch")
         from monoplane.batch.throughput import bench_batch, format_batch_bench
 
         sizes = parse_sizes(args.sizes or "640x480")
@@ -142,7 +183,7 @@ def run(args: argparse.Namespace) -> int:
                     repeat=args.repeat, seed=args.seed, level=args.level,
                     overrides=args.overrides, progress=not args.no_progress,
                     frames=5 if args.frames is None else args.frames,
-                    baselines=[] if args.no_baselines else args.baselines)
+                    baselines=[] if args.no_baselines else args.baselines, objects=objects)
     print(format_bench(results, markdown=args.markdown))
     if args.json:
         _write_json(args.json, {"settings": settings,

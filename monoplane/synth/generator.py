@@ -100,7 +100,7 @@ class SynthScene:
 
 
 def generate(seed: int, level: str = "mild", width: int = 256, height: int = 192,
-             n_views: int = 1) -> SynthScene:
+             n_views: int = 1, objects: int | None = None) -> SynthScene:
     """Generate a synthetic indoor scene with exact plane ground truth.
 
     Parameters
@@ -114,6 +114,10 @@ def generate(seed: int, level: str = "mild", width: int = 256, height: int = 192
     n_views : int
         Number of views. Views after the first move 0.3-0.8 m from view 0 and turn 10-30
         degrees relative to it, looking at the same part of the room.
+    objects : int, optional
+        ``None``: the usual furnishing (about 7-16 objects). A number: exactly that many
+        objects, all in view 0's field of view, in the same room seen from the same camera
+        (see :func:`monoplane.synth.scene.build_layout`); a scene-complexity knob.
 
     Returns
     -------
@@ -125,9 +129,12 @@ def generate(seed: int, level: str = "mild", width: int = 256, height: int = 192
         On an unknown level or out-of-range argument.
     """
     check_arguments(seed, level, width, height, n_views)
+    if objects is not None and (int(objects) != objects or objects < 0):
+        raise InvalidInput(f"objects must be a non-negative integer, got {objects!r}")
     seed = int(seed)
 
-    layout = build_layout(np.random.default_rng([seed, _STREAM_LAYOUT]))
+    layout = build_layout(np.random.default_rng([seed, _STREAM_LAYOUT]),
+                          None if objects is None else int(objects))
     poses = [look_at(layout.camera_center, layout.camera_target, WORLD_UP)]
     cam_rng = np.random.default_rng([seed, _STREAM_CAMERAS])
     poses += [extra_camera(layout, cam_rng) for _ in range(n_views - 1)]

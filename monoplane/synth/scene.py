@@ -279,17 +279,30 @@ def _free(xy: np.ndarray, r: float, discs: list[np.ndarray], size: np.ndarray,
     return all(np.hypot(*(xy - d[:2])) > r + d[2] for d in discs)
 
 
-def build_layout(rng: np.random.Generator) -> Layout:
+def build_layout(rng: np.random.Generator, objects: int | None = None) -> Layout:
     """Draw a random furnished room and the first camera.
 
     Parameters
     ----------
     rng : numpy.random.Generator
         Source of all randomness (the layout is a pure function of its state).
+    objects : int, optional
+        ``None``: the usual furnishing, 2-4 cabinets and shelves, 0-2 free-standing boxes,
+        1-2 tables with 1-2 things on each, 2-4 curved objects and 2-4 wall panels or doors
+        (about 7-16 objects, most of them in view). A number: exactly that many objects, each
+        of a kind drawn uniformly from those five, placed in view 0's horizontal field of view
+        (a table counts as one object with what stands on it); a scene-complexity knob for
+        benchmarks. The room and the camera are the same either way, the objects are not.
 
     Returns
     -------
     Layout
+
+    Raises
+    ------
+    RuntimeError
+        When ``objects`` pieces cannot all be placed (the room is full; not reached below about
+        a dozen).
     """
     size = np.array([rng.uniform(4.0, 6.5), rng.uniform(4.5, 7.0), rng.uniform(2.5, 3.1)])
     lx, ly, lz = size
@@ -318,14 +331,20 @@ def build_layout(rng: np.random.Generator) -> Layout:
     discs: list[np.ndarray] = [np.array([cam[0], cam[1], CAMERA_CLEARANCE])]
     footprints: list[np.ndarray] = []
     wall_used: list[list[tuple[float, float]]] = [[] for _ in walls]
+    gaze = (target - cam)[:2] / np.linalg.norm((target - cam)[:2])
 
-    def wall_coord(k: int, xy: np.ndarray) -> float:
-        return float(xy[1] if k < 2 else xy[0])
+    def in_view(xy: np.ndarray) -> bool:
+        """Whether a placement counts: always for the usual furnishing; with a set number of
+        objects, only within 25 degrees of view 0's gaze (every field of view is >= 55)."""
+        if objects is None:
+            return True
+        ray = xy - cam[:2]
+        return bool(ray @ gaze > np.cos(np.radians(25.0)) * np.linalg.norm(ray))
 
     def floor_spot(r: float) -> np.ndarray | None:
         """A uniformly drawn floor point (x, y) whose disc of radius r is free, else None."""
         xy = rng.uniform([r, r], [lx - r, ly - r])
-        return xy if _free(xy, r, discs, size) else None
+        return xy if _free(xy, r, discs, size) and in_view(xy) else None
 
     def floor_object(width: tuple[float, float], depth: tuple[float, float],
                      height: tuple[float, float]
@@ -346,8 +365,10 @@ def build_layout(rng: np.random.Generator) -> Layout:
         discs.append(disc)
         footprints.append(disc)
 
-    # Cabinets and shelves against walls.
-    for _ in range(int(rng.integers(2, 5))):
+    # Each placer tries to add one object of its kind and says whether it did.
+
+    def cabinet() -> bool:
+        """A cabinet or shelf against a wall."""
         for _try in range(30):
             k = int(rng.integers(4))
             p, n, a, length = walls[k]
@@ -357,30 +378,32 @@ def build_layout(rng: np.random.Generator) -> Layout:
             center[2] = h / 2
             center += (s - length / 2) * a + (dpt / 2 + 0.01) * n
             r = float(np.hypot(w, dpt) / 2)
-            if not _free(center[:2], r, discs, size, margin=None):
+            if not _free(center[:2], r, discs, size, margin=None) or not in_view(center[:2]):
                 continue
             yaw = float(np.arctan2(a[1], a[0]))
             b.box(center, np.array([w / 2, dpt / 2, h / 2]), yaw, "box",
                   random_material(rng, "object"))
             occupy(center, r)
             wall_used[k].append((s - w / 2, s + w / 2))
-            break
+            return True
+        return False
 
-    # Free-standing boxes with random yaw.
-    for _ in range(int(rng.integers(0, 3))):
+    def free_box() -> bool:
+        """A free-standing box with random yaw."""
         placed = floor_object((0.3, 0.8), (0.3, 0.8), (0.3, 1.0))
         if placed is None:
-            continue
+            return False
         w, dpt, h, r, xy = placed
         b.box(np.array([xy[0], xy[1], h / 2]), np.array([w / 2, dpt / 2, h / 2]),
               float(rng.uniform(0, np.pi)), "box", random_material(rng, "object"))
         occupy(xy, r)
+        return True
 
-    # Tables: slab top, tube legs, and something on top.
-    for _ in range(int(rng.integers(1, 3))):
+    def table() -> bool:
+        """A table: slab top, tube legs, and one or two things on top."""
         placed = floor_object((0.8, 1.6), (0.6, 1.0), (0.68, 0.8))
         if placed is None:
-            continue
+            return False
         w, dpt, h, r, xy = placed
         yaw = float(rng.uniform(0, np.pi))
         th = 0.04
@@ -411,9 +434,10 @@ def build_layout(rng: np.random.Generator) -> Layout:
                 _torus(b, np.array([oxy[0], oxy[1], h + rr]), rng.uniform(0.1, 0.18), rr,
                        mat)
         occupy(xy, r)
+        return True
 
-    # Curved objects on the floor.
-    for _ in range(int(rng.integers(2, 5))):
+    def curved() -> bool:
+        """A sphere, domed cylinder or torus on the floor."""
         for _try in range(30):
             kind = int(rng.integers(3))
             mat = random_material(rng, "object")
@@ -438,10 +462,11 @@ def build_layout(rng: np.random.Generator) -> Layout:
                     continue
                 _torus(b, np.array([xy[0], xy[1], small]), big, small, mat)
             occupy(xy, rad)
-            break
+            return True
+        return False
 
-    # Wall panels (pictures, boards) and doors: thin boxes whose back face lies on the wall.
-    for _ in range(int(rng.integers(2, 5))):
+    def panel() -> bool:
+        """A wall panel (picture, board) or door: a thin box whose back face lies on the wall."""
         for _try in range(30):
             k = int(rng.integers(4))
             p, n, a, length = walls[k]
@@ -459,6 +484,8 @@ def build_layout(rng: np.random.Generator) -> Layout:
             center = p.copy()
             center[2] = z0 + h / 2
             center += (s - length / 2) * a + (th / 2) * n
+            if not in_view(center[:2]):
+                continue
             yaw = float(np.arctan2(a[1], a[0]))
             # Local +y of the box is the wall normal for yaw along a; skip the face on the wall.
             back = 3 if np.allclose(np.cross(a, ez), -n) else 2
@@ -466,7 +493,24 @@ def build_layout(rng: np.random.Generator) -> Layout:
             b.box(center, np.array([w / 2, th / 2, h / 2]), yaw, "panel",
                   random_material(rng, "panel"), skip_bottom=door, skip=(back,))
             wall_used[k].append((lo, hi))
-            break
+            return True
+        return False
+
+    if objects is None:
+        # The counts are drawn kind by kind, each right before its placements.
+        for place, (low, high) in ((cabinet, (2, 5)), (free_box, (0, 3)), (table, (1, 3)),
+                                   (curved, (2, 5)), (panel, (2, 5))):
+            for _ in range(int(rng.integers(low, high))):
+                place()
+    else:
+        placers = (cabinet, free_box, table, curved, panel)
+        placed = 0
+        for _try in range(50 * max(objects, 1)):
+            if placed == objects:
+                break
+            placed += placers[int(rng.integers(len(placers)))]()
+        if placed < objects:
+            raise RuntimeError(f"could place only {placed} of {objects} objects in view")
 
     light = np.array([rng.uniform(0.3, 0.7) * lx, rng.uniform(0.3, 0.7) * ly, lz - 0.25])
     hfov = float(rng.uniform(55.0, 68.0))

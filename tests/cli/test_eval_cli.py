@@ -45,6 +45,10 @@ def test_eval_preset_row(capsys: pytest.CaptureFixture[str]) -> None:
      "'cgal' is not a baseline of this run"),
     (["bench", "--sizes", "x", "--no-progress"], "WIDTHxHEIGHT"),
     (["bench", "--repeat", "0", "--no-progress"], "--repeat"),
+    (["bench", "--objects", "3-1", "--no-progress"], "--objects takes ranges"),
+    (["bench", "--objects", "few", "--no-progress"], "--objects takes ranges"),
+    (["bench", "--objects", "1-2", "--complexity", "--no-progress"], "not both"),
+    (["bench", "--batch", "--complexity", "--no-progress"], "not --batch"),
 ])
 def test_user_errors_are_one_line(argv: list[str], message: str,
                                   capsys: pytest.CaptureFixture[str]) -> None:
@@ -78,6 +82,33 @@ def test_bench_prints_stage_rows(tmp_path: Path, capsys: pytest.CaptureFixture[s
     # The saved run re-renders to the same table (how docs/evaluation.md is regenerated).
     assert main(["bench", "--from-json", str(out)]) == 0
     assert capsys.readouterr().out == text
+
+
+def test_bench_complexity_levels_in_table_and_json(tmp_path: Path,
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "levels.json"
+    assert main(["bench", "--preset", "seq-ransac", "--sizes", "96x72", "--repeat", "1",
+                 "--frames", "1", "--objects", "1,4-6", "--no-baselines", "--no-progress",
+                 "--json", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "96x72 1 obj ms" in text and "96x72 4-6 obj ms" in text
+    assert "time against plane count" in text
+    data = json.loads(out.read_text())
+    assert data["settings"]["objects"] == [[1, 1], [4, 6]]
+    assert [r["objects"] for r in data["results"]] == [[1, 1], [4, 6]]
+    assert data["results"][1]["per_frame"][0]["objects"] == 4
+    assert data["results"][1]["gt_planes"] > 0
+    assert main(["bench", "--from-json", str(out)]) == 0
+    assert capsys.readouterr().out == text
+
+
+def test_bench_complexity_is_the_default_objects_ranges() -> None:
+    from monoplane.bench import COMPLEXITY_LEVELS
+    from monoplane.cli.bench import _object_ranges
+
+    assert _object_ranges(None, True) == list(COMPLEXITY_LEVELS) == [(1, 2), (4, 6), (8, 12)]
+    assert _object_ranges(None, False) is None
+    assert _object_ranges("0, 3-5", False) == [(0, 0), (3, 5)]
 
 
 def test_eval_report_writes_html(tmp_path: Path) -> None:

@@ -87,3 +87,40 @@ def test_bench_rejects_bad_requests() -> None:
         bench("seq-ransac", [(96, 72)], baselines=["no-such"], progress=False)
     with pytest.raises(InvalidInput, match="--frames"):
         bench("seq-ransac", [(96, 72)], frames=0, progress=False)
+
+
+def test_bench_complexity_axis_times_each_objects_range() -> None:
+    results = bench("seq-ransac", [(96, 72)], repeat=2, frames=3, progress=False,
+                    baselines=["open3d-ransac"], isolate=False, objects=[(1, 2), (8, 9)])
+    assert [r.objects for r in results] == [(1, 2), (8, 9)]
+    for r, counts in zip(results, ([1, 2, 1], [8, 9, 8]), strict=True):
+        # Frame i of range (lo, hi) has lo + i % (hi - lo + 1) objects, seeds 0, 1, 2.
+        assert [(f.seed, f.objects) for f in r.per_frame] == list(zip(range(3), counts,
+                                                                      strict=True))
+        assert r.gt_planes == pytest.approx(np.mean([f.gt_planes for f in r.per_frame]))
+        assert r.planes == pytest.approx(np.mean([f.planes for f in r.per_frame]))
+        for f in r.per_frame:
+            assert f.total_s > 0 and 0 < f.baseline_call_s["open3d-ransac"]
+    # More objects in view, more ground-truth planes.
+    assert results[1].gt_planes > results[0].gt_planes
+    text = format_bench(results)
+    assert "96x72 1-2 obj ms" in text and "96x72 8-9 obj ms" in text
+    assert "time against plane count" in text and "ground-truth planes (mean)" in text
+    again = [BenchResult.from_dict(r.to_dict()) for r in results]
+    assert format_bench(again) == text
+    assert "| 96x72 | 8-9 |" in format_bench(results, markdown=True)
+
+
+def test_bench_json_before_the_complexity_axis_still_reads() -> None:
+    result = BenchResult("monoplane", 256, 192, 3, [StageBench("total", 0.1, 1.0)], 8.0, 400.0)
+    old = {k: v for k, v in result.to_dict().items()
+           if k not in ("objects", "gt_planes", "per_frame")}
+    again = BenchResult.from_dict(old)
+    assert again.objects is None and np.isnan(again.gt_planes) and again.per_frame == []
+    assert "time against plane count" not in format_bench([again])
+
+
+@pytest.mark.parametrize("objects", [[(3, 2)], [(-1, 2)], []])
+def test_bench_rejects_bad_objects_ranges(objects: list[tuple[int, int]]) -> None:
+    with pytest.raises(InvalidInput, match="objects range"):
+        bench("seq-ransac", [(96, 72)], objects=objects, progress=False)

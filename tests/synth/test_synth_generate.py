@@ -173,3 +173,22 @@ def test_invalid_arguments(kwargs: dict, match: str) -> None:
     args = {"seed": 0, "level": "mild", "width": 64, "height": 48, "n_views": 1} | kwargs
     with pytest.raises(InvalidInput, match=match):
         generate(**args)
+
+
+def test_objects_sets_the_furnishing_of_the_same_room() -> None:
+    usual = build_layout(np.random.default_rng([7, _STREAM_LAYOUT]))
+    empty = build_layout(np.random.default_rng([7, _STREAM_LAYOUT]), objects=0)
+    # The room and the camera are drawn first, so they do not depend on the furnishing.
+    for a, b in ((usual.size, empty.size), (usual.camera_center, empty.camera_center),
+                 (usual.camera_target, empty.camera_target)):
+        assert np.array_equal(a, b)
+    assert [s.kind for s in empty.surfaces] == ["floor", "ceiling", "wall", "wall", "wall",
+                                                "wall"]
+    planes = [len(generate(s, "clean", 64, 48, objects=n).views[0].gt_params)
+              for n in (1, 10) for s in range(4)]
+    assert np.mean(planes[4:]) > np.mean(planes[:4]) + 3
+    a = generate(3, "mild", 32, 24, objects=5)
+    b = generate(3, "mild", 32, 24, objects=5)
+    assert a.views[0].frame.rgb.tobytes() == b.views[0].frame.rgb.tobytes()
+    with pytest.raises(InvalidInput, match="objects"):
+        generate(0, objects=-1)
