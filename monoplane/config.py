@@ -1,8 +1,9 @@
 """Pipeline configuration: TOML files, shipped presets, ``--set`` overrides, strict validation.
 
-A config is TOML with one table per stage kind (``[cues]``, ``[sampler]``, ``[scorer]``,
-``[labeler]``, ``[refiner]``, ``[matcher]``, ``[fuser]``), each holding ``plugin = "name"`` and
-that plugin's parameters, plus the host's ``[ransac]`` table for the sequential driver. A config
+A config is TOML with one table per stage kind (:data:`~monoplane.stages.base.STAGE_KINDS`:
+``[cues]``, ``[sampler]``, ...), each holding ``plugin = "name"`` and that plugin's parameters,
+plus the host's tables (:data:`HOST_TABLES`: ``[ransac]`` for the sequential driver,
+``[cloud]`` for point clouds). A config
 may start from a preset with a top-level ``preset = "name"``; without one it starts from the
 default preset :data:`DEFAULT_PRESET`. Overrides are ``table.key=value`` strings (values in TOML
 syntax; bare words are taken as strings).

@@ -9,21 +9,22 @@ match the specs below. Built-in stages register through exactly these hooks (see
     my_stages = "my_package.stages"
 
 Registration hooks return a list of stage classes (subclasses of
-:class:`monoplane.stages.base.Stage`). Observation hooks are called while a pipeline runs and
-must not change the data they see.
+:class:`monoplane.stages.base.Stage`); there is one per stage kind, generated from
+:data:`monoplane.stages.base.KINDS` (``monoplane_register_samplers``, ...). Observation hooks
+are called while a pipeline runs and must not change the data they see.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import pluggy
 
-if TYPE_CHECKING:
-    from collections.abc import Callable
+from monoplane.stages.base import KINDS, Stage, StageKind
 
+if TYPE_CHECKING:
     from monoplane.datamodel import Reconstruction
-    from monoplane.stages.base import Stage
 
 PROJECT_NAME = "monoplane"
 
@@ -31,76 +32,24 @@ hookspec = pluggy.HookspecMarker(PROJECT_NAME)
 hookimpl = pluggy.HookimplMarker(PROJECT_NAME)
 
 
-@hookspec
-def monoplane_register_cue_providers() -> list[type[Stage]]:
-    """Cue providers: fill a :class:`~monoplane.datamodel.Frame`'s depth, normals and intrinsics.
+def _registration_spec(kind: StageKind) -> Callable[[], list[type[Stage]]]:
+    """The registration hookspec of one stage kind, named ``kind.hook``."""
 
-    Config table ``[cues]``. Contract: :class:`monoplane.stages.base.CueProvider`.
-    """
+    def register() -> list[type[Stage]]:
+        raise NotImplementedError  # a hookspec is never called; pluggy calls the impls
 
-
-@hookspec
-def monoplane_register_samplers() -> list[type[Stage]]:
-    """Minimal-sample generators for plane RANSAC (3 point indices per sample).
-
-    Config table ``[sampler]``. Contract: :class:`monoplane.stages.base.Sampler`.
-    """
+    register.__name__ = register.__qualname__ = kind.hook
+    register.__module__ = __name__
+    register.__doc__ = (f"{kind.summary}\n\nConfig table ``[{kind.name}]``. Contract: "
+                        f":class:`{kind.base.__module__}.{kind.base.__qualname__}`.")
+    return hookspec(register)
 
 
-@hookspec
-def monoplane_register_scorers() -> list[type[Stage]]:
-    """Hypothesis scorers (lower cost is better), vectorised over many planes.
-
-    Config table ``[scorer]``. Contract: :class:`monoplane.stages.base.Scorer`.
-    """
-
-
-@hookspec
-def monoplane_register_labelers() -> list[type[Stage]]:
-    """Binary inlier labelers for one plane hypothesis (threshold, graph cuts).
-
-    Config table ``[labeler]``. Contract: :class:`monoplane.stages.base.Labeler`.
-    """
-
-
-@hookspec
-def monoplane_register_refiners() -> list[type[Stage]]:
-    """Image-level refiners of the multi-plane label map (e.g. dense CRF).
-
-    Config table ``[refiner]``. Contract: :class:`monoplane.stages.base.Refiner`.
-    """
-
-
-@hookspec
-def monoplane_register_matchers() -> list[type[Stage]]:
-    """Multi-view matchers giving cameras, sparse points and keypoint matches (SfM).
-
-    Config table ``[matcher]``. Contract: :class:`monoplane.stages.base.Matcher`.
-    """
-
-
-@hookspec
-def monoplane_register_registrars() -> list[type[Stage]]:
-    """Registrars placing the views the matcher left out (from planes, normals, depth, matches).
-
-    Config table ``[registrar]``. Contract: :class:`monoplane.stages.base.Registrar`.
-    """
-
-
-@hookspec
-def monoplane_register_fusers() -> list[type[Stage]]:
-    """Fusers of per-view planes into a global planar :class:`~monoplane.datamodel.Scene`.
-
-    Config table ``[fuser]``. Contract: :class:`monoplane.stages.base.Fuser`.
-    """
-
-
-@hookspec
-def monoplane_register_adjusters() -> list[type[Stage]]:
-    """Joint refiners of a fused scene's cameras, per-view depth scales and global planes.
-
-    Config table ``[adjuster]``. Contract: :class:`monoplane.stages.base.Adjuster`.
-    """
+# One registration hook per stage kind, generated from the kinds list so that a new kind needs
+# no spec of its own here (pluggy finds hookspecs by scanning this module's attributes).
+for _kind in KINDS.values():
+    globals()[_kind.hook] = _registration_spec(_kind)
+del _kind
 
 
 @hookspec

@@ -21,7 +21,7 @@ import pluggy
 
 from monoplane import hookspecs
 from monoplane.errors import ConfigError, PluginError
-from monoplane.stages.base import STAGE_KINDS, Stage
+from monoplane.stages.base import KINDS, STAGE_KINDS, Stage
 
 #: The built-in stage modules, registered in this order. The one place that names them.
 DEFAULT_PLUGINS: tuple[str, ...] = (
@@ -40,20 +40,6 @@ DEFAULT_PLUGINS: tuple[str, ...] = (
 
 #: Set this environment variable to disable entry-point autoloading of third-party plugins.
 AUTOLOAD_ENV = "MONOPLANE_DISABLE_PLUGIN_AUTOLOAD"
-
-#: Registration hook of each stage kind.
-REGISTRATION_HOOKS: dict[str, str] = {
-    "cues": "monoplane_register_cue_providers",
-    "sampler": "monoplane_register_samplers",
-    "scorer": "monoplane_register_scorers",
-    "labeler": "monoplane_register_labelers",
-    "refiner": "monoplane_register_refiners",
-    "matcher": "monoplane_register_matchers",
-    "registrar": "monoplane_register_registrars",
-    "fuser": "monoplane_register_fusers",
-    "adjuster": "monoplane_register_adjusters",
-}
-
 
 def autoload_enabled() -> bool:
     """False when :data:`AUTOLOAD_ENV` is set to a non-empty value."""
@@ -122,9 +108,8 @@ class Registry:
         dists = {id(plugin): dist for plugin, dist in pm.list_plugin_distinfo()}
         builtin = set(DEFAULT_PLUGINS)
         self._stages: dict[str, dict[str, StageInfo]] = {kind: {} for kind in STAGE_KINDS}
-        for kind, hook_name in REGISTRATION_HOOKS.items():
-            hook = getattr(pm.hook, hook_name)
-            for impl in hook.get_hookimpls():
+        for kind, spec in KINDS.items():
+            for impl in getattr(pm.hook, spec.hook).get_hookimpls():
                 provider, version = self._provider(impl.plugin, impl.plugin_name, dists, builtin)
                 for cls in impl.function() or []:
                     self._add(StageInfo(kind, getattr(cls, "name", ""), cls, provider, version),
@@ -144,10 +129,10 @@ class Registry:
     def _add(self, info: StageInfo, plugin_name: str) -> None:
         cls = info.cls
         where = f"plugin '{plugin_name}'"
-        base = {"cues": "CueProvider"}.get(info.kind, info.kind.capitalize())
-        if not isinstance(cls, type) or not issubclass(cls, Stage) or cls.kind != info.kind:
+        base = KINDS[info.kind].base
+        if not isinstance(cls, type) or not issubclass(cls, base) or cls.kind != info.kind:
             raise PluginError(f"{where} registered {cls!r} as a {info.kind}, but it does not "
-                              f"subclass monoplane.stages.base.{base}")
+                              f"subclass monoplane.stages.base.{base.__name__}")
         if not info.name:
             raise PluginError(f"{where}: {info.kind} class {cls.__name__} has no name")
         if not dataclasses.is_dataclass(cls.Config):

@@ -288,10 +288,12 @@ def plugin_manager() -> pluggy.PluginManager:
 
 
 def _check_config(cls: type[Stage]) -> Any:
-    from monoplane.stages.base import STAGE_KINDS, Stage  # noqa: F811 (runtime import)
+    from monoplane.stages.base import KINDS, Stage  # noqa: F811 (runtime import)
 
     assert isinstance(cls, type) and issubclass(cls, Stage), f"{cls} is not a Stage"
-    assert cls.kind in STAGE_KINDS, f"{cls.__name__}.kind {cls.kind!r} not in {STAGE_KINDS}"
+    assert cls.kind in KINDS, f"{cls.__name__}.kind {cls.kind!r} not in {tuple(KINDS)}"
+    assert issubclass(cls, KINDS[cls.kind].base), \
+        f"{cls.__name__} must subclass {KINDS[cls.kind].base.__name__}"
     assert cls.name and cls.name == cls.name.strip(), f"{cls.__name__} needs a name"
     assert dataclasses.is_dataclass(cls.Config), f"{cls.__name__}.Config must be a dataclass"
     for f in dataclasses.fields(cls.Config):

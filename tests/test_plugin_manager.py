@@ -5,8 +5,8 @@ import pytest
 
 from monoplane.errors import PluginError
 from monoplane.hookspecs import hookimpl
-from monoplane.plugin_manager import REGISTRATION_HOOKS, get_plugin_manager, get_registry
-from monoplane.stages.base import STAGE_KINDS, Sampler, param
+from monoplane.plugin_manager import get_plugin_manager, get_registry
+from monoplane.stages.base import KINDS, STAGE_KINDS, Sampler, param
 from monoplane.testing import check_stage_contract
 
 DOCS = Path(__file__).resolve().parents[1] / "docs" / "plugins.md"
@@ -69,6 +69,41 @@ def test_plugin_guide_documents_every_hook():
     import monoplane.hookspecs as hs
 
     hooks = [n for n in dir(hs) if n.startswith("monoplane_")]
-    assert set(REGISTRATION_HOOKS.values()) <= set(hooks)
+    assert {k.hook for k in KINDS.values()} <= set(hooks)
     missing = [h for h in hooks if h not in text]
     assert not missing, f"docs/plugins.md does not document: {missing}"
+
+
+def test_the_kinds_list_is_the_one_source():
+    """Hookspecs, registry, config tables and the plugin guide's two tables all follow
+    ``KINDS``: one registration hook per kind, one row per kind in each table, in order."""
+    import monoplane.hookspecs as hs
+
+    specs = {n for n in dir(hs) if n.startswith("monoplane_register_")}
+    assert specs == {k.hook for k in KINDS.values()} | {"monoplane_register_baselines"}
+    assert STAGE_KINDS == tuple(k.base.kind for k in KINDS.values())
+    lines = DOCS.read_text().splitlines()
+    contract_rows = [ln for ln in lines if ln.startswith("| `") and "` | `" in ln
+                     and ln.split("|")[1].strip().strip("`") in KINDS]
+    assert [r.split("|")[1].strip().strip("`") for r in contract_rows] == list(KINDS)
+    for row, kind in zip(contract_rows, KINDS.values()):
+        assert row.split("|")[2].strip() == f"`{kind.base.__name__}`", row
+    hook_rows = [ln for ln in lines if ln.startswith("| `monoplane_register_")
+                 and "baselines" not in ln]
+    assert [r.split("`")[1].removesuffix("()") for r in hook_rows] == \
+        [k.hook for k in KINDS.values()]
+    for row, kind in zip(hook_rows, KINDS.values()):
+        assert f"`list[type[{kind.base.__name__}]]`" in row, row
+
+
+def test_wrong_base_names_the_base_class():
+    class NotAScorer(_Every3rd):
+        name = "not-a-scorer"
+
+    class Bad:
+        @hookimpl
+        def monoplane_register_cue_providers(self):
+            return [NotAScorer]
+
+    with pytest.raises(PluginError, match="subclass monoplane.stages.base.CueProvider"):
+        get_registry(get_plugin_manager(autoload=False, extra_plugins=(Bad(),)))

@@ -2,7 +2,8 @@
 
 A stage is a class with
 
-* ``kind``: which slot of the pipeline it fills (one of :data:`STAGE_KINDS`);
+* ``kind``: which slot of the pipeline it fills (one of :data:`STAGE_KINDS`), set by the base
+  class of its kind;
 * ``name``: the plugin name users write in configs (``plugin = "msac-normal"``);
 * ``Config``: a dataclass of its parameters, each with a default and a ``doc`` in its field
   metadata (use :func:`param`);
@@ -12,6 +13,10 @@ Stages never import one another; they only see the objects the driver hands them
 stages (sampler, scorer, labeler) work on a :class:`~monoplane.geometry.cloud.PlaneCloud`, an
 oriented point cloud normalised into the unit sphere, so thresholds are in unit-sphere units as
 in the paper.
+
+:data:`KINDS` is the one list of stage kinds: the registration hooks
+(:mod:`monoplane.hookspecs`), the registry, the config tables and the plugin guide's tables all
+derive from it, so a new kind is one base class and one entry there.
 """
 
 from __future__ import annotations
@@ -27,13 +32,6 @@ if TYPE_CHECKING:
     from monoplane.geometry.alignment import ScaleAlignment
     from monoplane.geometry.cloud import PlaneCloud
     from monoplane.geometry.graph import NeighbourGraph
-
-#: Stage kinds, in pipeline order; each is also the name of its config table.
-STAGE_KINDS: tuple[str, ...] = (
-    "cues", "sampler", "scorer", "labeler", "refiner", "matcher", "registrar", "fuser",
-    "adjuster",
-)
-
 
 def param(default: Any, doc: str, **kwargs: Any) -> Any:
     """A config field with a default and a one-line description shown by ``monoplane plugins``.
@@ -415,3 +413,56 @@ class Adjuster(Stage):
             residual summaries; empty when nothing was done).
         """
         raise NotImplementedError
+
+
+@dataclass(frozen=True)
+class StageKind:
+    """One stage kind: its base class and the pluggy hook that registers its stages.
+
+    Attributes
+    ----------
+    base : type
+        The contract every stage of the kind subclasses; its ``kind`` attribute is the kind's
+        name and config table.
+    hook : str
+        Name of the registration hook (a generated spec in :mod:`monoplane.hookspecs`).
+    summary : str
+        What the hook registers, one sentence (the hook's docstring and the plugin guide).
+    """
+
+    base: type[Stage]
+    hook: str
+    summary: str
+
+    @property
+    def name(self) -> str:
+        """The kind's name, which is also its config table (``"sampler"``)."""
+        return self.base.kind
+
+
+#: Every stage kind in pipeline order, by name: the single source of the kinds.
+KINDS: dict[str, StageKind] = {k.name: k for k in (
+    StageKind(CueProvider, "monoplane_register_cue_providers",
+              "Cue providers: fill a frame's depth, normals and intrinsics."),
+    StageKind(Sampler, "monoplane_register_samplers",
+              "Minimal-sample generators for plane RANSAC (3 point indices per sample)."),
+    StageKind(Scorer, "monoplane_register_scorers",
+              "Hypothesis scorers (lower cost is better), vectorised over many planes."),
+    StageKind(Labeler, "monoplane_register_labelers",
+              "Binary inlier labelers for one plane hypothesis (threshold, graph cuts)."),
+    StageKind(Refiner, "monoplane_register_refiners",
+              "Refiners of the multi-plane labelling (dense CRF on images, graph CRF)."),
+    StageKind(Matcher, "monoplane_register_matchers",
+              "Multi-view matchers giving cameras, sparse points and keypoint matches (SfM)."),
+    StageKind(Registrar, "monoplane_register_registrars",
+              "Registrars placing the views the matcher left out (from planes, normals, depth, "
+              "matches)."),
+    StageKind(Fuser, "monoplane_register_fusers",
+              "Fusers of per-view planes into a global planar scene."),
+    StageKind(Adjuster, "monoplane_register_adjusters",
+              "Joint refiners of a fused scene's cameras, per-view depth scales and global "
+              "planes."),
+)}
+
+#: Stage kind names, in pipeline order; each is also the name of its config table.
+STAGE_KINDS: tuple[str, ...] = tuple(KINDS)
