@@ -29,6 +29,7 @@ from monoplane.geometry.cloud import PROPAGATION_NEIGHBOURS, PROPAGATION_RADIUS_
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.geometry.planes import fit_planes_per_label
 from monoplane.geometry.polygons import PlaneMesh, points_plane_mesh
+from monoplane.io_checks import MAX_MAGNITUDE
 from monoplane.stages.base import Labeler, Refiner, Sampler, Scorer, param
 
 
@@ -324,13 +325,21 @@ def detect_planes(cloud: Any, preset: str = "cloud",
         if arr is not None and arr.shape != points.shape:
             raise InvalidInput(f"{what} must have shape {points.shape}, got {arr.shape}")
     finite = np.isfinite(points).all(axis=1)
+    huge = finite & (np.abs(points) > MAX_MAGNITUDE).any(axis=1)
+    if huge.any():
+        first = int(np.argmax(huge))
+        raise InvalidInput(f"{int(huge.sum())} point(s) have coordinates beyond "
+                           f"±{MAX_MAGNITUDE:.3g} (the first is point {first})")
     if normals is not None:
-        ok_n = np.isfinite(normals).all(axis=1) & (np.linalg.norm(normals, axis=1) > 1e-12)
+        # Judged by the largest component: squaring one near 1e300 would overflow.
+        size = np.abs(normals).max(axis=1)
+        ok_n = np.isfinite(normals).all(axis=1) & (size > 1e-12) & (size <= MAX_MAGNITUDE)
         if not ok_n[finite].all():
-            notes.append("some given normals are zero or non-finite: all normals re-estimated")
+            notes.append("some given normals are zero, non-finite or absurdly long: all "
+                         "normals re-estimated")
             normals = None
-    if colors is not None and not np.isfinite(colors[finite]).all():
-        notes.append("non-finite colours: colour term dropped")
+    if colors is not None and not ((colors[finite] >= 0) & (colors[finite] <= 1)).all():
+        notes.append("colours outside [0, 1] or not finite: colour term dropped")
         colors = None
     if not finite.all():
         notes.append(f"{int((~finite).sum())} NaN/inf points left unlabelled")
@@ -347,6 +356,13 @@ def detect_planes(cloud: Any, preset: str = "cloud",
     u_colors = colors[finite_idx[first]] if colors is not None else None
 
     center = unique.mean(axis=0)
+    extent = float(np.abs(unique - center).max())
+    # Points closer together than float64 resolves at their magnitude, or so close that their
+    # squared distances underflow, cannot be put into the unit sphere.
+    if not extent > max(1e-150, 1e-12 * float(np.abs(center).max())):
+        raise InvalidInput(f"the cloud's {len(unique)} distinct points lie within {extent:.3g} "
+                           f"of their centre {center.tolist()}: too close together to fit "
+                           "planes to")
     scale = float(np.sqrt(((unique - center) ** 2).sum(axis=1).max()))
     norm_pts = (unique - center) / scale
     rng = np.random.default_rng(rcfg.seed)

@@ -35,6 +35,13 @@ from monoplane.datamodel import Frame, Reconstruction, intrinsics_matrix
 from monoplane.errors import InvalidInput
 from monoplane.export.gltf import reconstruction_glb
 from monoplane.geometry.polygons import PlaneMesh, reconstruction_mesh
+from monoplane.io_checks import MAX_MAGNITUDE, load_npy, read_png
+
+#: Accepted pinhole intrinsics, in pixels. A focal length below 0.1 px is a field of view of
+#: nearly 180 degrees on any image; no sensor is near 1e8 px wide. Beyond these bounds a value
+#: is a damaged file or a unit mistake, and ray directions would over- or underflow.
+FOCAL_RANGE_PX = (0.1, 1e8)
+MAX_PRINCIPAL_POINT_PX = 1e8
 
 
 def _require_file(path: str | Path, what: str) -> Path:
@@ -55,7 +62,7 @@ def read_image(path: str | Path) -> np.ndarray:
         (H, W, 3) uint8 RGB. 16-bit images are scaled to 8 bits; grey images are replicated.
     """
     p = _require_file(path, "image")
-    img = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
+    img = _read_raster(p, "image")
     if img is None or img.size == 0:
         raise InvalidInput(f"cannot read image {p}: not an image format OpenCV understands")
     if img.dtype == np.uint16:
@@ -71,17 +78,12 @@ def read_image(path: str | Path) -> np.ndarray:
     return np.ascontiguousarray(img)
 
 
-def _load_npy(p: Path, what: str) -> np.ndarray:
-    try:
-        arr = np.load(p, allow_pickle=False)
-    except Exception as exc:  # a damaged header surfaces as ValueError, SyntaxError, TokenError…
-        first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
-        raise InvalidInput(f"cannot read {what} {p} as .npy: {first}") from None
-    if not isinstance(arr, np.ndarray) or not (np.issubdtype(arr.dtype, np.integer)
-                                               or np.issubdtype(arr.dtype, np.floating)):
-        kind = arr.dtype if isinstance(arr, np.ndarray) else type(arr).__name__
-        raise InvalidInput(f"{what} {p} must hold a real-valued numeric array, got {kind}")
-    return arr
+def _read_raster(p: Path, what: str) -> np.ndarray | None:
+    """A PNG checked before decoding (:func:`monoplane.io_checks.read_png`), any other format
+    through OpenCV as it is; None when OpenCV cannot read it."""
+    if p.suffix.lower() == ".png":
+        return read_png(p, what)
+    return cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
 
 
 def read_depth(path: str | Path, depth_scale: float | None = None,
@@ -105,9 +107,9 @@ def read_depth(path: str | Path, depth_scale: float | None = None,
     """
     p = _require_file(path, "depth")
     if p.suffix.lower() == ".npy":
-        depth = _load_npy(p, "depth").astype(np.float64)
+        depth = load_npy(p, "depth").astype(np.float64)
     else:
-        raw = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
+        raw = _read_raster(p, "depth PNG")
         if raw is None:
             raise InvalidInput(f"cannot read depth {p}: use .npy or a 16-bit PNG")
         if raw.dtype != np.uint16 or raw.ndim != 2:
@@ -116,10 +118,8 @@ def read_depth(path: str | Path, depth_scale: float | None = None,
         if depth_scale is None:
             raise InvalidInput(f"depth PNG {p} needs --depth-scale (1000 for mm, 5000 for TUM)")
         depth = raw.astype(np.float64)
-    if depth_scale is not None:
-        if not depth_scale > 0:
-            raise InvalidInput(f"--depth-scale must be positive, got {depth_scale}")
-        depth = depth / depth_scale
+    if depth_scale is not None and not 0 < depth_scale < np.inf:
+        raise InvalidInput(f"--depth-scale must be a positive finite number, got {depth_scale}")
     if depth.ndim == 3 and depth.shape[2] == 1:
         depth = depth[..., 0]
     if depth.ndim != 2:
@@ -132,9 +132,14 @@ def read_depth(path: str | Path, depth_scale: float | None = None,
         depth[bad] = 0.0
     if np.any(depth < 0):
         raise InvalidInput(f"depth {p} has negative values")
-    if depth.max(initial=0.0) > np.finfo(np.float32).max:
-        raise InvalidInput(f"depth {p} has values beyond {np.finfo(np.float32).max:.3g}; "
-                           "store it in a larger unit (e.g. metres)")
+    # Checked before dividing by the scale, so that the division itself cannot overflow.
+    largest = float(depth.max(initial=0.0))
+    if largest > MAX_MAGNITUDE * (depth_scale or 1.0):
+        scaled = f" (with --depth-scale {depth_scale:g})" if depth_scale is not None else ""
+        raise InvalidInput(f"depth {p} has values beyond {MAX_MAGNITUDE:.3g}{scaled} (up to "
+                           f"{largest:.3g}); store it in a larger unit (e.g. metres)")
+    if depth_scale is not None:
+        depth = depth / depth_scale
     depth = depth.astype(np.float32)  # values below float32's range become 0 (invalid)
     if np.any(depth > 0):
         return depth
@@ -151,20 +156,23 @@ def read_normals(path: str | Path) -> np.ndarray:
     """
     p = _require_file(path, "normals")
     if p.suffix.lower() == ".npy":
-        n = _load_npy(p, "normals").astype(np.float64)
+        n = load_npy(p, "normals").astype(np.float64)
         if n.ndim != 3 or n.shape[2] != 3:
             raise InvalidInput(f"normals {p} must have shape (H, W, 3), got {n.shape}")
         if not np.all(np.isfinite(n)):
             raise InvalidInput(f"normals {p} contain NaN or inf")
     else:
-        raw = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
+        raw = _read_raster(p, "normals PNG")
         if raw is None or raw.ndim != 3 or raw.shape[2] < 3 or raw.dtype != np.uint8:
             raise InvalidInput(f"normals PNG {p} must be 8-bit RGB storing (n+1)/2*255")
         rgb = cv2.cvtColor(raw[..., :3], cv2.COLOR_BGR2RGB).astype(np.float64)
         n = rgb / 255.0 * 2.0 - 1.0
         n[np.all(raw[..., :3] == 0, axis=-1)] = 0.0
-    norm = np.linalg.norm(n, axis=-1, keepdims=True)
-    out = np.where(norm > 1e-6, n / np.maximum(norm, 1e-12), 0.0)
+    # Divided by the largest component first: squaring a component near 1e300 would overflow.
+    big = np.abs(n).max(axis=-1, keepdims=True)
+    n = n / np.where(big > 0, big, 1.0)
+    norm = np.linalg.norm(n, axis=-1, keepdims=True)  # 1..sqrt(3), or 0 for a zero vector
+    out = np.where(big * norm > 1e-6, n / np.where(norm > 0, norm, 1.0), 0.0)
     return out.astype(np.float32)
 
 
@@ -180,9 +188,10 @@ def read_intrinsics(spec: str | Path) -> np.ndarray:
     if text.lower().endswith(".json") or Path(text).is_file():
         p = _require_file(text, "intrinsics")
         try:
-            data = json.loads(p.read_text())
-        except json.JSONDecodeError as exc:
-            raise InvalidInput(f"intrinsics {p} is not valid JSON: {exc}") from None
+            data = json.loads(p.read_bytes())
+        except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as exc:
+            reason = "is empty" if not p.stat().st_size else f"is not valid JSON: {exc}"
+            raise InvalidInput(f"intrinsics {p} {reason}") from None
         keys = ("fx", "fy", "cx", "cy")
         missing = [k for k in keys if not isinstance(data, dict) or k not in data]
         if missing:
@@ -198,10 +207,15 @@ def read_intrinsics(spec: str | Path) -> np.ndarray:
         values = parts
     try:
         fx, fy, cx, cy = (float(v) for v in values)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise InvalidInput(f"{where}: fx, fy, cx, cy must be numbers") from None
-    if not all(np.isfinite([fx, fy, cx, cy])) or fx <= 0 or fy <= 0:
-        raise InvalidInput(f"{where}: focal lengths must be positive and all values finite")
+    low, high = FOCAL_RANGE_PX
+    if not (low <= fx <= high and low <= fy <= high):
+        raise InvalidInput(f"{where}: focal lengths must be positive, {low:g} to {high:g} "
+                           f"pixels, got fx={fx:g}, fy={fy:g}")
+    if not (abs(cx) <= MAX_PRINCIPAL_POINT_PX and abs(cy) <= MAX_PRINCIPAL_POINT_PX):
+        raise InvalidInput(f"{where}: the principal point must be within "
+                           f"±{MAX_PRINCIPAL_POINT_PX:g} pixels, got cx={cx:g}, cy={cy:g}")
     return intrinsics_matrix(fx, fy, cx, cy)
 
 
