@@ -53,7 +53,8 @@ def test_outputs_follow_the_on_disk_contract(clean_view, tmp_path):
     save_reconstruction(rec, tmp_path / "out")
     out = tmp_path / "out"
     assert sorted(p.name for p in out.iterdir()) == [
-        "config.toml", "depth_planar.npy", "labels.png", "planes.json", "planes.ply"]
+        "config.toml", "depth_planar.npy", "labels.png", "planes.glb", "planes.json",
+        "planes.ply"]
     labels = cv2.imread(str(out / "labels.png"), cv2.IMREAD_UNCHANGED)
     assert labels.dtype == np.uint16 and np.array_equal(labels, rec.labels)
     doc = json.loads((out / "planes.json").read_text())

@@ -14,6 +14,7 @@ missing, model not loaded, script error). The browser test reads that marker.
 from __future__ import annotations
 
 import base64
+import json
 import os
 import shutil
 import tempfile
@@ -43,7 +44,7 @@ _STATUS_SCRIPT = """
     set("error", "3D view failed: " + (e.reason && e.reason.message || e.reason));
   });
   if (!window.customElements || !customElements.get("model-viewer")) {
-    set("error", "The 3D viewer (%(script)s) did not load; open %(glb)s in any glTF viewer.");
+    set("error", %(missing)s);
     return;
   }
   viewer.addEventListener("error", function (e) {
@@ -108,8 +109,12 @@ def viewer_section(glb: bytes, glb_name: str, script_src: str, what: str) -> str
         One sentence on what the scene shows, for the caption.
     """
     uri = "data:model/gltf-binary;base64," + base64.b64encode(glb).decode("ascii")
-    script = _STATUS_SCRIPT % {"status": STATUS_ID, "script": html.esc(script_src),
-                               "glb": html.esc(glb_name)}
+    missing = (f"The 3D viewer ({script_src}) did not load; open {glb_name} in any glTF "
+               "viewer.")
+    # A JSON string is a JavaScript string literal; "</" is escaped so that it cannot end
+    # the script element.
+    script = _STATUS_SCRIPT % {"status": STATUS_ID,
+                               "missing": json.dumps(missing).replace("</", "<\\/")}
     body = (
         f'<model-viewer id="monoplane-3d" src="{uri}" alt="{html.esc(what)}" camera-controls '
         # eager: load at once, not when scrolled into view, so the status is known early
