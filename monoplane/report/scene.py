@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from monoplane.datamodel import Reconstruction, Scene, plane_to_camera, plane_to_world
-from monoplane.export.gltf import scene_glb
+from monoplane.export.gltf import SOURCE_TO_GLTF, scene_glb
 from monoplane.geometry.mesh import planar_mesh
 from monoplane.report import figures as fig
 from monoplane.report import html
@@ -174,6 +174,29 @@ def scene_views(scene: Scene, out_dir: Path, timeout: float = DEFAULT_TIMEOUT
     return [f for f in figures if f.src[:-4] in result.paths], result
 
 
+def first_camera_orbit(scene: Scene, raise_deg: float = 15.0) -> tuple[float, float]:
+    """Start the interactive view from the first camera's side of the scene.
+
+    The direction is from the middle of what view 0 sees (the median of its depth's points) to
+    its camera, in ``scene.glb``'s glTF frame, raised by ``raise_deg`` (as a single view's
+    report starts 15° above its camera) so that the planes are seen a little from above.
+
+    Returns
+    -------
+    (float, float)
+        model-viewer's ``camera-orbit`` angles in radians: azimuth about +y from +z, and polar
+        angle from +y.
+    """
+    cam, frame = scene.cameras[0], scene.views[0].frame
+    valid = frame.depth > 0 if frame.depth is not None else None
+    middle = (np.median(frame.points()[valid], axis=0) if valid is not None and valid.any()
+              else np.array([0.0, 0.0, 1.0]))
+    d = SOURCE_TO_GLTF @ (cam.center - (middle - cam.t) @ cam.R)
+    azimuth = float(np.arctan2(d[0], d[2]))
+    polar = float(np.arccos(np.clip(d[1] / max(np.linalg.norm(d), 1e-12), -1.0, 1.0)))
+    return azimuth, float(np.clip(polar - np.deg2rad(raise_deg), 0.05, np.pi - 0.05))
+
+
 def write_scene_report(scene: Scene, out_dir: Path, render_3d: bool = True,
                        progress: bool = False, timeout: float = DEFAULT_TIMEOUT) -> Path:
     """Write ``report.html``, its PNG figures and ``summary.png`` for a multi-view scene.
@@ -264,7 +287,8 @@ def write_scene_report(scene: Scene, out_dir: Path, render_3d: bool = True,
         viewer_section(glb_for_report(out, "scene.glb", lambda: scene_glb(scene)), "scene.glb",
                        install_viewer(out),
                        f"The {G} fused planes in the world frame, coloured by global id as in "
-                       "the views below, and the cameras as pyramids (view 1 red)."),
+                       "the views below, and the cameras as pyramids (view 1 red), seen at "
+                       "first from view 1's side.", orbit=first_camera_orbit(scene)),
         html.section("Cameras and fused planes in 3D", body3d),
         html.section("Views", html.figure_grid(per_view, 2)),
         html.section("Global planes",

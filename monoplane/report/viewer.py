@@ -94,7 +94,8 @@ def install_viewer(folder: Path) -> str:
     return f"{VIEWER_DIR}/{VIEWER_SCRIPT}"
 
 
-def viewer_section(glb: bytes, glb_name: str, script_src: str, what: str) -> str:
+def viewer_section(glb: bytes, glb_name: str, script_src: str, what: str,
+                   orbit: tuple[float, float] | None = None) -> str:
     """The report section with the interactive 3D view (markup).
 
     Parameters
@@ -107,8 +108,14 @@ def viewer_section(glb: bytes, glb_name: str, script_src: str, what: str) -> str
         Relative URL of the viewer script (from :func:`install_viewer`).
     what : str
         One sentence on what the scene shows, for the caption.
+    orbit : (float, float), optional
+        Where the view starts: azimuth about glTF's y axis from +z and polar angle from +y,
+        radians (model-viewer's ``camera-orbit``); default: model-viewer's, from +z and 15°
+        above the horizon, which for a single view is about where the camera stood.
     """
     uri = "data:model/gltf-binary;base64," + base64.b64encode(glb).decode("ascii")
+    start = "" if orbit is None else f'camera-orbit="{orbit[0]:.4f}rad {orbit[1]:.4f}rad auto" '
+
     missing = (f"The 3D viewer ({script_src}) did not load; open {glb_name} in any glTF "
                "viewer.")
     # A JSON string is a JavaScript string literal; "</" is escaped so that it cannot end
@@ -116,7 +123,8 @@ def viewer_section(glb: bytes, glb_name: str, script_src: str, what: str) -> str
     script = _STATUS_SCRIPT % {"status": STATUS_ID,
                                "missing": json.dumps(missing).replace("</", "<\\/")}
     body = (
-        f'<model-viewer id="monoplane-3d" src="{uri}" alt="{html.esc(what)}" camera-controls '
+        f'<model-viewer id="monoplane-3d" src="{uri}" alt="{html.esc(what)}" {start}'
+        'camera-controls '
         # eager: load at once, not when scrolled into view, so the status is known early
         'loading="eager" interaction-prompt="none" shadow-intensity="0" '
         'style="width: 100%; height: 560px; background: #f4f4f4; border: 1px solid #ddd">'
