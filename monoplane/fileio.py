@@ -198,7 +198,7 @@ def read_intrinsics(spec: str | Path) -> np.ndarray:
             raise InvalidInput(f"intrinsics {p} lacks {', '.join(missing)}; expected "
                                '{"fx": …, "fy": …, "cx": …, "cy": …}')
         values = [data[k] for k in ("fx", "fy", "cx", "cy")]
-        where = str(p)
+        where = f"intrinsics {p}"
     else:
         parts = text.split(",")
         where = f"--intrinsics {text!r}"

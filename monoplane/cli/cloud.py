@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -35,8 +33,6 @@ EPILOG = """examples:
   monoplane cloud room.pcd --out out/room --set cloud.orient=consistent --report
   monoplane cloud lidar.xyz --out out/lidar --set ransac.epsilon=0.01"""
 
-SUFFIXES = (".ply", ".pcd", ".xyz", ".xyzn", ".xyzrgb", ".pts")
-
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("cloud", help="detect planes in a point cloud file",
@@ -57,34 +53,22 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def read_cloud(path: str | Path) -> Any:
-    """Read a point cloud file with Open3D; one-line errors for missing or empty files."""
-    import open3d as o3d
-
-    p = Path(path)
-    if not p.is_file():
-        raise InvalidInput(f"point cloud {p} not found")
-    if p.suffix.lower() not in SUFFIXES:
-        raise InvalidInput(f"point cloud {p}: unsupported format '{p.suffix}'; use "
-                           f"{', '.join(SUFFIXES)}")
-    fmt = "xyz" if p.suffix.lower() == ".xyz" else "auto"
-    pcd = o3d.io.read_point_cloud(str(p), format=fmt)
-    if len(pcd.points) == 0:
-        raise InvalidInput(f"point cloud {p} holds no point or cannot be read")
-    return pcd
-
-
 def run(args: argparse.Namespace) -> int:
     import open3d as o3d
 
+    from monoplane.cloud_files import read_point_cloud
     from monoplane.config import dumps_toml
     from monoplane.detect import detect_planes
     from monoplane.report.cloud import cloud_glb, write_cloud_report
 
     check_output_dir(args.out, args.overwrite)  # fail before any work
     check_rerun_arg(args)
-    pcd = read_cloud(args.cloud)
-    result = detect_planes(pcd, preset=args.preset, overrides=args.overrides or None)
+    cloud = read_point_cloud(args.cloud)
+    try:
+        result = detect_planes(cloud.to_open3d(), preset=args.preset,
+                               overrides=args.overrides or None)
+    except InvalidInput as exc:  # what is wrong with the points: name the file
+        raise InvalidInput(f"point cloud {args.cloud}: {exc}") from None
     with atomic_output_dir(args.out, args.overwrite) as tmp:
         np.save(tmp / "labels.npy", result.labels)
         doc = {"source": str(args.cloud), **result.planes_document()}
