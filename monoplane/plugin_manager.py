@@ -132,7 +132,7 @@ class Registry:
         base = KINDS[info.kind].base
         if not isinstance(cls, type) or not issubclass(cls, base) or cls.kind != info.kind:
             raise PluginError(f"{where} registered {cls!r} as a {info.kind}, but it does not "
-                              f"subclass monoplane.stages.base.{base.__name__}")
+                              f"subclass monoplane.plugin.{base.__name__}")
         if not info.name:
             raise PluginError(f"{where}: {info.kind} class {cls.__name__} has no name")
         if not dataclasses.is_dataclass(cls.Config):

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import importlib
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
@@ -36,6 +37,23 @@ if TYPE_CHECKING:
     from monoplane.geometry.cloud import PlaneCloud
     from monoplane.stages.base import Stage
     from monoplane.synth import SynthView
+
+
+#: Helpers defined elsewhere that a plugin's tests need, so that they import only this module
+#: and :mod:`monoplane.plugin`: the segmentation metrics (to assert accuracy) and tiny ONNX
+#: stand-in networks (to run a cue provider end to end). Loaded on first use, because every
+#: pytest session that has monoplane installed loads this module.
+_ELSEWHERE: dict[str, str] = {
+    "segmentation_scores": "monoplane.evaluation.segmentation",
+    "tiny_depth_model": "monoplane.cues.tiny_models",
+}
+
+
+def __getattr__(name: str) -> Any:
+    module = _ELSEWHERE.get(name)
+    if module is None:
+        raise AttributeError(f"module 'monoplane.testing' has no attribute {name!r}")
+    return getattr(importlib.import_module(module), name)
 
 
 #: Inside a box, camera frame (OpenCV axes), metres: back wall 4 m ahead, floor 1 m below,

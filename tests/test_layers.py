@@ -93,3 +93,31 @@ def test_nothing_imports_a_plugin_package() -> None:
     assert "monoplane_cgal_baseline" in packages
     bad = {m: n for m, names in MODULES.items() for n in names if n.split(".")[0] in packages}
     assert bad == {}
+
+
+def _plugin_package_files(part: str) -> list[Path]:
+    return sorted((PACKAGE.parent / "plugins").glob(f"*/{part}/**/*.py"))
+
+
+@pytest.mark.parametrize("part, allowed", [
+    ("src", {"monoplane.plugin"}),
+    # A plugin's tests may also use the pytest plugin's helpers and fixtures.
+    ("tests", {"monoplane.plugin", "monoplane.testing"}),
+])
+def test_plugin_packages_import_only_the_public_plugin_api(part: str,
+                                                           allowed: set[str]) -> None:
+    files = _plugin_package_files(part)
+    assert len({f.relative_to(PACKAGE.parent).parts[1] for f in files}) >= 2
+    bad = {str(f.relative_to(PACKAGE.parent)): sorted(_ours(_imports(f)) - allowed)
+           for f in files if _ours(_imports(f)) - allowed}
+    assert bad == {}
+
+
+def test_the_public_plugin_api_is_imported_by_nothing_inside() -> None:
+    assert {m for m, names in MODULES.items() if "monoplane.plugin" in names} == set()
+
+
+def test_the_public_plugin_api_defines_all_it_lists() -> None:
+    import monoplane.plugin
+
+    assert [n for n in monoplane.plugin.__all__ if not hasattr(monoplane.plugin, n)] == []

@@ -86,13 +86,13 @@ def test_the_kinds_list_is_the_one_source():
     contract_rows = [ln for ln in lines if ln.startswith("| `") and "` | `" in ln
                      and ln.split("|")[1].strip().strip("`") in KINDS]
     assert [r.split("|")[1].strip().strip("`") for r in contract_rows] == list(KINDS)
-    for row, kind in zip(contract_rows, KINDS.values()):
+    for row, kind in zip(contract_rows, KINDS.values(), strict=True):
         assert row.split("|")[2].strip() == f"`{kind.base.__name__}`", row
     hook_rows = [ln for ln in lines if ln.startswith("| `monoplane_register_")
                  and "baselines" not in ln]
     assert [r.split("`")[1].removesuffix("()") for r in hook_rows] == \
         [k.hook for k in KINDS.values()]
-    for row, kind in zip(hook_rows, KINDS.values()):
+    for row, kind in zip(hook_rows, KINDS.values(), strict=True):
         assert f"`list[type[{kind.base.__name__}]]`" in row, row
 
 
@@ -105,5 +105,5 @@ def test_wrong_base_names_the_base_class():
         def monoplane_register_cue_providers(self):
             return [NotAScorer]
 
-    with pytest.raises(PluginError, match="subclass monoplane.stages.base.CueProvider"):
+    with pytest.raises(PluginError, match="subclass monoplane.plugin.CueProvider"):
         get_registry(get_plugin_manager(autoload=False, extra_plugins=(Bad(),)))

@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import numpy as np
 
 if TYPE_CHECKING:
+    from monoplane.cues.network import CueNetwork
     from monoplane.datamodel import Frame, Reconstruction, Scene, SfmResult
     from monoplane.geometry.alignment import ScaleAlignment
     from monoplane.geometry.cloud import PlaneCloud
@@ -174,6 +175,29 @@ class CueProvider(Stage):
             (given by the user).
         """
         raise NotImplementedError
+
+
+class NetworkCues(CueProvider):
+    """Base of cue providers that run a :class:`~monoplane.cues.CueNetwork`.
+
+    A subclass says how to build its network from its config (:meth:`build_network`, called
+    once, at construction); :meth:`provide` runs it on each frame. Third-party cue plugins that
+    wrap an ONNX profile subclass this too. It lives with the contracts, not with the built-in
+    cue providers, because plugins subclass it and no module outside ``stages`` may import a
+    concrete stage module.
+    """
+
+    def __init__(self, config: Any | None = None) -> None:
+        super().__init__(config)
+        self.network = self.build_network(self.config)
+
+    def build_network(self, config: Any) -> CueNetwork:
+        """The network this provider runs, from its config (an instance of ``Config``)."""
+        raise NotImplementedError
+
+    def provide(self, frame: Frame) -> Frame:
+        """Predict the frame's missing depth and normals (see :meth:`CueNetwork.provide`)."""
+        return self.network.provide(frame)
 
 
 class Sampler(Stage):

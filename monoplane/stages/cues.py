@@ -26,7 +26,6 @@ did in ``frame.notes`` (written to ``planes.json``).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
@@ -38,7 +37,7 @@ from monoplane.errors import ConfigError, InvalidInput
 from monoplane.geometry.normals import normals_from_depth
 from monoplane.hookspecs import hookimpl
 from monoplane.models import get_model, require_model
-from monoplane.stages.base import CueProvider, Stage, param
+from monoplane.stages.base import CueProvider, NetworkCues, Stage, param
 
 
 @dataclass
@@ -171,27 +170,6 @@ class OnnxCuesConfig(NormalsFromDepthOptions):
         return get_profile(name).with_overrides(
             size=size, mean=triple(self.mean), std=triple(self.std),
             normal_axes=self.normal_axes or None)
-
-
-class NetworkCues(CueProvider):
-    """Base of cue providers that run a :class:`~monoplane.cues.CueNetwork`.
-
-    A subclass says how to build its network from its config (:meth:`build_network`, called
-    once, at construction); :meth:`provide` runs it on each frame. Third-party cue plugins that
-    wrap an ONNX profile subclass this too.
-    """
-
-    def __init__(self, config: Any | None = None) -> None:
-        super().__init__(config)
-        self.network = self.build_network(self.config)
-
-    def build_network(self, config: Any) -> CueNetwork:
-        """The network this provider runs, from its config (an instance of ``Config``)."""
-        raise NotImplementedError
-
-    def provide(self, frame: Frame) -> Frame:
-        """Predict the frame's missing depth and normals (see :meth:`CueNetwork.provide`)."""
-        return self.network.provide(frame)
 
 
 class OnnxCues(NetworkCues):

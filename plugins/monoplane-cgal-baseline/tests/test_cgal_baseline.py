@@ -11,9 +11,13 @@ pytest.importorskip("CGAL.CGAL_Shape_detection", reason="the GPL 'cgal' package 
 
 from monoplane_cgal_baseline import CgalRansacConfig, cgal_efficient_ransac  # noqa: E402
 
-from monoplane.errors import ConfigError  # noqa: E402
-from monoplane.evaluation.segmentation import segmentation_scores  # noqa: E402
-from monoplane.testing import BOX_PLANES, box_frame, check_baseline_contract  # noqa: E402
+from monoplane.plugin import ConfigError  # noqa: E402
+from monoplane.testing import (  # noqa: E402
+    BOX_PLANES,
+    box_frame,
+    check_baseline_contract,
+    segmentation_scores,
+)
 
 
 def test_finds_the_three_planes_of_an_exact_box() -> None:
@@ -91,8 +95,7 @@ def test_reports_the_efficient_ransac_call_time() -> None:
 def test_registered_through_the_baseline_hook() -> None:
     import monoplane_cgal_baseline
 
-    from monoplane.evaluation.baselines import baseline_names, get_baseline
-    from monoplane.plugin_manager import get_plugin_manager
+    from monoplane.plugin import baseline_names, get_baseline, get_plugin_manager
 
     pm = get_plugin_manager(autoload=False, extra_plugins=(monoplane_cgal_baseline,))
     assert "cgal" in baseline_names(pm)
@@ -100,8 +103,8 @@ def test_registered_through_the_baseline_hook() -> None:
 
 
 def test_shares_the_pipeline_ransac_defaults() -> None:
-    from monoplane.ransac import RansacConfig
+    from monoplane.plugin import RansacBaselineSettings, RansacParams
 
-    cfg, ransac = CgalRansacConfig(), RansacConfig()
+    cfg, shared, ransac = CgalRansacConfig(), RansacBaselineSettings(), RansacParams()
     assert (cfg.epsilon, cfg.normal_deg, cfg.min_support, cfg.min_support_points) == (
-        ransac.epsilon, ransac.epsilon_n_deg, ransac.min_support, ransac.min_support_points)
+        ransac.epsilon, ransac.epsilon_n_deg, shared.min_support, shared.min_support_points)

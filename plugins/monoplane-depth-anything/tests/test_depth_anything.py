@@ -18,13 +18,17 @@ from monoplane_depth_anything.stages import (  # noqa: E402
     DepthAnythingCues,
 )
 
-from monoplane.cues import plan_letterbox  # noqa: E402
-from monoplane.cues.tiny_models import tiny_depth_model  # noqa: E402
-from monoplane.datamodel import Frame, default_intrinsics  # noqa: E402
-from monoplane.errors import ConfigError, InvalidInput  # noqa: E402
-from monoplane.plugin_manager import get_plugin_manager, get_registry  # noqa: E402
-from monoplane.stages.base import param  # noqa: E402
-from monoplane.testing import check_stage_contract  # noqa: E402
+from monoplane.plugin import (  # noqa: E402
+    ConfigError,
+    Frame,
+    InvalidInput,
+    default_intrinsics,
+    get_plugin_manager,
+    get_registry,
+    param,
+    plan_letterbox,
+)
+from monoplane.testing import check_stage_contract, tiny_depth_model  # noqa: E402
 
 
 def ramp_frame(h: int = 50, w: int = 70) -> tuple[Frame, np.ndarray]:

@@ -20,17 +20,21 @@ from typing import Any
 
 import numpy as np
 
-from monoplane import hookimpl
-from monoplane.datamodel import Frame, Reconstruction
-from monoplane.evaluation.baselines import RansacBaselineSettings, baseline_config
-from monoplane.geometry.cloud import PlaneCloud
-from monoplane.geometry.planes import fit_plane
-from monoplane.ransac import RansacConfig
+from monoplane.plugin import (
+    Frame,
+    PlaneCloud,
+    RansacBaselineSettings,
+    RansacParams,
+    Reconstruction,
+    baseline_config,
+    fit_plane,
+    hookimpl,
+)
 
 __version__ = "0.1.0"
 
-#: Values shared with the pipeline's RANSAC are read from its defaults, not copied.
-_RANSAC = RansacConfig()
+#: The pipeline's shared thresholds; their defaults are read, not copied.
+_RANSAC = RansacParams()
 
 
 @dataclass(frozen=True)

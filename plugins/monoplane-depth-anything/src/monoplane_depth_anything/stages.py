@@ -3,7 +3,8 @@ export, normals estimated from that depth.
 
 Everything model-specific is the :data:`PROFILE` below; loading, letterboxing, onnxruntime
 inference, disparity-to-depth conversion and normal estimation are monoplane's public cue
-machinery (:mod:`monoplane.cues`). Use it in a config as::
+machinery, imported from :mod:`monoplane.plugin` like everything else here. Use it in a
+config as::
 
     [cues]
     plugin = "depth-anything"
@@ -14,11 +15,18 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from monoplane import hookimpl
-from monoplane.cues import IMAGENET_MEAN, IMAGENET_STD, CueNetwork, ModelSpec, OnnxProfile
-from monoplane.errors import ConfigError
-from monoplane.stages.base import Stage, param
-from monoplane.stages.cues import NetworkCues
+from monoplane.plugin import (
+    IMAGENET_MEAN,
+    IMAGENET_STD,
+    ConfigError,
+    CueNetwork,
+    ModelSpec,
+    NetworkCues,
+    OnnxProfile,
+    Stage,
+    hookimpl,
+    param,
+)
 
 #: Depth Anything (v1 and v2) predicts affine-invariant inverse depth from ImageNet-normalised
 #: RGB; its DINOv2 ViT-14 backbone needs input sides that are multiples of 14 (518 in training).
