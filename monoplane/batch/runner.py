@@ -177,7 +177,8 @@ def run_batch(source: str | Path | Sequence[FrameSpec], out: str | Path,
         CPUs (ray).
     engine : {"local", "ray"}
     ray_address : str, optional
-        ``"auto"`` or ``"ray://host:port"``; default: a local Ray instance.
+        ``"auto"``, ``"HOST:PORT"`` (a running cluster's GCS address) or ``"ray://HOST:PORT"``
+        (Ray Client); default: a local Ray instance.
     overwrite : bool
         Recompute every frame; by default complete frame folders are skipped.
     report : bool
@@ -240,7 +241,7 @@ def run_batch(source: str | Path | Sequence[FrameSpec], out: str | Path,
         run_start = time.perf_counter()
         ran = 0
         try:
-            for res in run_engine(engine, job, todo, workers, ray_address):
+            for res in run_engine(engine, job, todo, workers, ray_address, notes):
                 results[res.name] = res
                 counts[res.status] += 1
                 ran += 1

@@ -2,7 +2,8 @@
 
 Frames
     ``frames`` synthetic single-view frames of one size, written once into a temporary folder
-    in the layout of ``data_samples/room_000`` (:func:`monoplane.synth.batchset.write_frame_folder`).
+    in the layout of ``data_samples/room_000``
+    (:func:`monoplane.synth.batchset.write_frame_folder`).
 
 Runs
     Each run is the ``monoplane batch`` command a user types (``--overwrite --quiet``, a fresh
@@ -18,15 +19,36 @@ Figures, medians over the rounds
     the imports and its exit, which are the same whatever the number of workers.
     ``frames/s`` is ``frames / batch``. The speed-up of a setting is the median of the
     per-round ratios of the same engine's first worker count to it.
+
+Memory and drift, per setting (medians over the rounds)
+    While each command runs, the memory of its whole process tree (the driver, its workers and
+    whatever they start) is sampled from ``/proc`` every ``interval`` seconds, with the
+    number of frames done: the sum of the processes' RSS (shared pages counted once per
+    process, as ``top`` shows them) and of their PSS (shared pages divided among the
+    processes that share them). ``peak RSS`` and ``peak PSS`` are the largest sums;
+    ``RSS first / last`` the median RSS while the first ``window`` frames ran (from the moment
+    every worker had finished a frame, i.e. was warm) and while the last ``window`` ran.
+    ``frame ms first / last`` are the median times, in their workers, of the first ``window``
+    frames and of the last (input order, the order frames are handed out; from
+    ``summary.json``). Over a long batch (``--frames 1000``) these show whether memory grows
+    and frames slow down as the batch goes on.
+
+Long batches
+    Only the first ``distinct`` (50) frames are written; a batch of more frames is a manifest
+    cycling over them, so that a 1000-frame batch does not spend minutes writing its input,
+    and every stretch of it sees the same mix of scenes.
 """
 
 from __future__ import annotations
 
+import csv
 import json
+import os
 import statistics
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
@@ -50,6 +72,14 @@ class BatchSetting:
         Per round: wall seconds of the whole command, and the batch's own seconds.
     command_speedup, batch_speedup : list of float
         Per round: the engine's first setting's seconds over this one's (1 for that one).
+    peak_rss, peak_pss : list of float or None
+        Per round: the largest RSS and PSS of the command's process tree, MiB.
+    rss_first, rss_last : list of float or None
+        Per round: median RSS of the tree while the first and the last ``window`` frames ran
+        (None when no sample fell in that stretch: a batch of a few seconds).
+    frame_first, frame_last : list of float or None
+        Per round: median seconds of the first and the last ``window`` frames in their
+        workers.
     """
 
     engine: str
@@ -58,11 +88,21 @@ class BatchSetting:
     batch_s: list[float] = field(default_factory=list)
     command_speedup: list[float] = field(default_factory=list)
     batch_speedup: list[float] = field(default_factory=list)
+    peak_rss: list[float | None] = field(default_factory=list)
+    peak_pss: list[float | None] = field(default_factory=list)
+    rss_first: list[float | None] = field(default_factory=list)
+    rss_last: list[float | None] = field(default_factory=list)
+    frame_first: list[float | None] = field(default_factory=list)
+    frame_last: list[float | None] = field(default_factory=list)
 
 
 @dataclass
 class BatchBenchResult:
-    """All settings of one ``monoplane bench --batch`` run."""
+    """All settings of one ``monoplane bench --batch`` run.
+
+    ``distinct`` frames were written (the batch cycles over them); ``window`` frames at each
+    end are compared (0 in runs saved before memory and drift were measured).
+    """
 
     preset: str
     width: int
@@ -70,6 +110,8 @@ class BatchBenchResult:
     frames: int
     level: str
     settings: list[BatchSetting]
+    distinct: int = 0
+    window: int = 0
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready form (``kind: "batch"``)."""
@@ -79,33 +121,134 @@ class BatchBenchResult:
     def from_dict(cls, data: dict[str, Any]) -> BatchBenchResult:
         """Inverse of :meth:`to_dict`."""
         return cls(data["preset"], data["width"], data["height"], data["frames"],
-                   data["level"], [BatchSetting(**s) for s in data["settings"]])
+                   data["level"], [BatchSetting(**s) for s in data["settings"]],
+                   data.get("distinct", data["frames"]), data.get("window", 0))
 
 
 def _median(values: Sequence[float]) -> float:
     return statistics.median(values) if values else float("nan")
 
 
-def _run_command(args: list[str], out: Path, frames: int) -> tuple[float, float]:
-    """Run one ``monoplane batch`` command; its wall seconds and its summary's seconds."""
+def _process_tree(root: int) -> list[int]:
+    """``root`` and every process descended from it, from ``/proc``."""
+    children: dict[int, list[int]] = {}
+    for entry in os.scandir("/proc"):
+        if not entry.name.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry.name}/stat") as fh:
+                ppid = int(fh.read().rsplit(")", 1)[1].split()[1])
+        except (OSError, IndexError, ValueError):
+            continue  # ended while we looked
+        children.setdefault(ppid, []).append(int(entry.name))
+    tree, todo = [], [root]
+    while todo:
+        pid = todo.pop()
+        tree.append(pid)
+        todo.extend(children.get(pid, []))
+    return tree
+
+
+def tree_memory(root: int) -> tuple[float, float]:
+    """RSS and PSS of a process and all its descendants, in MiB (Linux ``/proc``)."""
+    rss = pss = 0
+    for pid in _process_tree(root):
+        try:
+            with open(f"/proc/{pid}/smaps_rollup") as fh:
+                for line in fh:
+                    if line.startswith("Rss:"):
+                        rss += int(line.split()[1])
+                    elif line.startswith("Pss:"):
+                        pss += int(line.split()[1])
+        except (OSError, ValueError):
+            continue  # ended while we looked
+    return rss / 1024.0, pss / 1024.0
+
+
+@dataclass
+class _Run:
+    """One command: wall and batch seconds, each frame's seconds (input order), and memory
+    samples (seconds since the start, frames done, RSS MiB, PSS MiB)."""
+
+    wall: float
+    batch: float
+    frame_s: list[float]
+    memory: list[tuple[float, int, float, float]]
+
+
+def _run_command(args: list[str], out: Path, frames: int, interval: float) -> _Run:
+    """Run one ``monoplane batch`` command, sampling its process tree's memory."""
+    memory: list[tuple[float, int, float, float]] = []
     start = time.perf_counter()
-    proc = subprocess.run(args, capture_output=True, text=True)
+    proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+    def sample() -> None:
+        while proc.poll() is None:
+            rss, pss = tree_memory(proc.pid)
+            done = (sum(e.is_dir() and not e.name.startswith(".") for e in os.scandir(out))
+                    if out.is_dir() else 0)
+            if rss:
+                memory.append((time.perf_counter() - start, done, rss, pss))
+            time.sleep(interval)
+
+    sampler = threading.Thread(target=sample, daemon=True)
+    sampler.start()
+    _, err = proc.communicate()
     wall = time.perf_counter() - start
+    sampler.join()
     if proc.returncode != 0:
-        last = (proc.stderr.strip().splitlines() or ["no output"])[-1]
+        last = (err.strip().splitlines() or ["no output"])[-1]
         raise InvalidInput(f"'{' '.join(args[3:])}' exited with {proc.returncode}: {last}")
     summary = json.loads((out / "summary.json").read_text())
     if summary["counts"]["ok"] != frames:
         raise InvalidInput(f"the batch in {out} did {summary['counts']['ok']} of {frames} "
                            f"frames: {summary['counts']}")
-    return wall, float(summary["seconds"])
+    return _Run(wall, float(summary["seconds"]), [float(f["seconds"]) for f in
+                                                  summary["frames"]], memory)
+
+
+def _record(s: BatchSetting, run: _Run, frames: int, window: int) -> None:
+    """Add one round's figures to a setting (see the module docstring)."""
+    s.command_s.append(run.wall)
+    s.batch_s.append(run.batch)
+    def median(values: list[float]) -> float | None:  # None: no sample (a short batch)
+        return round(statistics.median(values), 4) if values else None
+
+    s.peak_rss.append(max((round(m[2], 1) for m in run.memory), default=None))
+    s.peak_pss.append(max((round(m[3], 1) for m in run.memory), default=None))
+    s.rss_first.append(median([m[2] for m in run.memory if s.workers <= m[1] < window]))
+    s.rss_last.append(median([m[2] for m in run.memory if m[1] >= frames - window]))
+    s.frame_first.append(median(run.frame_s[:window]))
+    s.frame_last.append(median(run.frame_s[-window:]))
+
+
+def _write_input(root: Path, frames: int, distinct: int, size: tuple[int, int], level: str,
+                 seed: int) -> Path:
+    """The batch input: a folder of ``frames`` frames, or a manifest cycling over
+    ``distinct`` of them when there are more."""
+    from monoplane.synth.batchset import write_frame_folder
+
+    folders = write_frame_folder(root / "frames", min(frames, distinct), size[0], size[1],
+                                 level, seed)
+    if frames <= distinct:
+        return root / "frames"
+    manifest = root / "frames.csv"
+    with open(manifest, "w", newline="") as fh:
+        out = csv.writer(fh)
+        out.writerow(["name", "image", "depth", "normals", "intrinsics"])
+        for i in range(frames):
+            f = f"frames/{folders[i % distinct].name}"
+            out.writerow([f"frame_{i:06d}", f"{f}/rgb.png", f"{f}/depth.npy",
+                          f"{f}/normals.npy", f"{f}/intrinsics.json"])
+    return manifest
 
 
 def bench_batch(preset: str = "monoplane", size: tuple[int, int] = (640, 480),
                 frames: int = 20, workers: Sequence[int] = (1, 2),
                 engines: Sequence[str] = ("local",), repeat: int = 3, seed: int = 0,
                 level: str = "mild", overrides: Sequence[str] = (),
-                progress: bool = True) -> BatchBenchResult:
+                progress: bool = True, distinct: int = 50, window: int = 200,
+                interval: float = 0.25) -> BatchBenchResult:
     """Time ``monoplane batch`` on a synthetic folder for each engine and worker count.
 
     Parameters
@@ -130,14 +273,22 @@ def bench_batch(preset: str = "monoplane", size: tuple[int, int] = (640, 480),
         ``TABLE.KEY=VALUE`` parameter overrides passed on with ``--set``.
     progress : bool
         Print one line per command to stderr.
+    distinct : int
+        Frames written; a longer batch cycles over them.
+    window : int
+        Frames compared at each end of the batch (at most half of them).
+    interval : float
+        Seconds between memory samples.
 
     Returns
     -------
     BatchBenchResult
     """
     from monoplane.batch.engines import check_engine
-    from monoplane.synth.batchset import write_frame_folder
 
+    if not Path("/proc/self/smaps_rollup").exists():
+        raise InvalidInput("the batch bench reads process memory from /proc/<pid>/smaps_rollup, "
+                           "which this system does not have (Linux 4.14 or later)")
     if frames < 1 or repeat < 1:
         raise InvalidInput(f"--frames and --repeat must be at least 1, got {frames} and "
                            f"{repeat}")
@@ -145,33 +296,37 @@ def bench_batch(preset: str = "monoplane", size: tuple[int, int] = (640, 480),
         raise InvalidInput(f"--workers must list counts of at least 1, got {list(workers)}")
     for engine in engines:
         check_engine(engine)
+    distinct = max(1, distinct)
+    window = max(1, min(window, frames // 2))
     settings = [BatchSetting(e, w) for e in dict.fromkeys(engines) for w in workers]
     with tempfile.TemporaryDirectory(prefix="monoplane-bench-batch-") as tmp:
         root = Path(tmp)
-        write_frame_folder(root / "frames", frames, size[0], size[1], level, seed)
+        source = _write_input(root, frames, distinct, size, level, seed)
         for rnd in range(repeat):
             for s in settings:
                 out = root / f"out-{s.engine}-{s.workers}"
-                args = [sys.executable, "-m", "monoplane.cli", "batch", str(root / "frames"),
+                args = [sys.executable, "-m", "monoplane.cli", "batch", str(source),
                         "--out", str(out), "--preset", preset, "--engine", s.engine,
                         "--workers", str(s.workers), "--overwrite", "--quiet"]
                 for item in overrides:
                     args += ["--set", item]
-                wall, own = _run_command(args, out, frames)
-                s.command_s.append(wall)
-                s.batch_s.append(own)
+                run = _run_command(args, out, frames, interval)
+                _record(s, run, frames, window)
                 if progress:
                     print(f"round {rnd + 1}/{repeat}: {s.engine} --workers {s.workers}: "
-                          f"{wall:.2f} s ({own:.2f} s in the batch)", file=sys.stderr)
+                          f"{run.wall:.2f} s ({run.batch:.2f} s in the batch, peak RSS "
+                          f"{s.peak_rss[-1]:.0f} MiB)", file=sys.stderr)
             for s in settings:
                 ref = next(r for r in settings if r.engine == s.engine)
                 s.command_speedup.append(ref.command_s[-1] / s.command_s[-1])
                 s.batch_speedup.append(ref.batch_s[-1] / s.batch_s[-1])
-    return BatchBenchResult(preset, size[0], size[1], frames, level, settings)
+    return BatchBenchResult(preset, size[0], size[1], frames, level, settings,
+                            min(frames, distinct), window)
 
 
 def format_batch_bench(result: BatchBenchResult, markdown: bool = False) -> str:
-    """One row per setting: medians of command and batch seconds, frames/s and speed-ups."""
+    """One row per setting: medians of command and batch seconds, frames/s and speed-ups; then,
+    when measured, a second table of memory and drift (:func:`format_memory`)."""
     head = ["engine", "workers", "command s", "batch s", "frames/s", "speed-up (command)",
             "speed-up (batch)"]
     rows = []
@@ -183,6 +338,34 @@ def format_batch_bench(result: BatchBenchResult, markdown: bool = False) -> str:
     rounds = len(result.settings[0].batch_s) if result.settings else 0
     title = (f"batch bench: preset {result.preset}, {result.frames} frames "
              f"{result.width}x{result.height} ({result.level}), medians of {rounds} rounds")
+    text = _table(title, head, rows, markdown)
+    if result.window and any(s.peak_rss for s in result.settings):
+        text += "\n\n" + format_memory(result, markdown)
+    return text
+
+
+def format_memory(result: BatchBenchResult, markdown: bool = False) -> str:
+    """One row per setting: medians over the rounds of the process tree's peak RSS and PSS,
+    its RSS while the first and the last ``window`` frames ran, and the median frame time of
+    those frames."""
+    head = ["engine", "workers", "peak RSS MiB", "peak PSS MiB", "RSS first / last MiB",
+            "frame ms first / last"]
+    rows = []
+    def mid(values: list[float | None], scale: float = 1.0, digits: int = 0) -> str:
+        known = [v for v in values if v is not None]
+        return f"{statistics.median(known) * scale:.{digits}f}" if known else "-"
+
+    for s in result.settings:
+        first, last = mid(s.frame_first, 1000, 1), mid(s.frame_last, 1000, 1)
+        ratio = f" (x{float(last) / float(first):.2f})" if "-" not in (first, last) else ""
+        rows.append([s.engine, str(s.workers), mid(s.peak_rss), mid(s.peak_pss),
+                     f"{mid(s.rss_first)} / {mid(s.rss_last)}", f"{first} / {last}{ratio}"])
+    title = (f"memory of the command's process tree, and time per frame in the workers, first / "
+             f"last {result.window} frames ({result.distinct} distinct frames)")
+    return _table(title, head, rows, markdown)
+
+
+def _table(title: str, head: list[str], rows: list[list[str]], markdown: bool) -> str:
     if markdown:
         lines = [f"| {' | '.join(head)} |", f"|{'---|' * len(head)}"]
         lines += [f"| {' | '.join(r)} |" for r in rows]

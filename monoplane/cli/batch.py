@@ -31,7 +31,8 @@ go on; the exit status is 1 when any frame failed."""
 EXAMPLES = """examples:
   monoplane batch data_samples --out out/batch --workers 2 --report
   monoplane batch frames.jsonl --out out/scannet --depth-scale 1000 --engine ray
-  monoplane batch frames.csv --out /shared/out --engine ray --ray-address auto"""
+  monoplane batch frames.csv --out /shared/out --engine ray --ray-address auto
+  monoplane batch frames.csv --out /shared/out --engine ray --ray-address 10.0.0.5:6379"""
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -52,14 +53,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_rerun_arg(out)
     run = p.add_argument_group("execution")
     run.add_argument("--engine", choices=("local", "ray"), default="local",
-                     help="local: a process pool on this machine (default); ray: Ray actors "
-                          "(pip install 'monoplane[ray]')")
+                     help="local: a process pool on this machine (default); ray: Ray tasks, "
+                          "a frame lost with its worker or node runs again (pip install "
+                          "'monoplane[ray]')")
     run.add_argument("--workers", type=int, metavar="N",
-                     help="worker processes (local) or actors (ray); default: all cores "
-                          "(local) or all cluster CPUs (ray)")
+                     help="worker processes (local) or frames in flight (ray); default: all "
+                          "cores (local) or all cluster CPUs (ray)")
     run.add_argument("--ray-address", metavar="ADDR",
-                     help="join a Ray cluster: 'auto' or 'ray://host:port' (default: start a "
-                          "local Ray instance)")
+                     help="join a Ray cluster: 'auto', HOST:PORT (its GCS address) or "
+                          "'ray://HOST:PORT' (Ray Client); default: start a local Ray instance")
     run.add_argument("--quiet", action="store_true", help="no progress bar, no final line")
     p.set_defaults(func=run_cmd)
 

@@ -28,7 +28,11 @@ With --batch it times the 'monoplane batch' command instead, on a folder of synt
 one size (default 640x480, 20 frames), for each --workers count and --engine in alternation:
 the whole command's wall time, the batch's own time (summary.json's seconds: the command less
 the interpreter's start, imports and exit), frames per second and the speed-up over the first
-worker count. See monoplane/batch/throughput.py."""
+worker count; and, from samples of /proc taken while each command runs, the peak memory (RSS
+and PSS) of its whole process tree, its RSS while the first and the last 200 frames ran (at
+most half of them each), and the median time per frame of those frames (--frames 1000 makes
+it a soak: does memory grow, do frames slow down?). Beyond 50 frames the batch cycles over 50
+distinct frames. See monoplane/batch/throughput.py."""
 
 EPILOG = """examples:
   monoplane bench
@@ -38,7 +42,8 @@ EPILOG = """examples:
   monoplane bench --preset monoplane-nocrf --baseline cgal --complexity   # time vs. planes
   monoplane bench --objects 1-2,8-12 --sizes 256x192 --json levels.json
   monoplane bench --batch --workers 1,2 --repeat 5      # batch throughput, 20 frames 640x480
-  monoplane bench --batch --engine local --engine ray --json batch.json"""
+  monoplane bench --batch --engine local --engine ray --json batch.json
+  monoplane bench --batch --frames 1000 --sizes 128x96 --workers 2 --repeat 1   # soak"""
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
