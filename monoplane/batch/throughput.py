@@ -30,8 +30,11 @@ Memory and drift, per setting (medians over the rounds)
     every worker had finished a frame, i.e. was warm) and while the last ``window`` ran.
     ``frame ms first / last`` are the median times, in their workers, of the first ``window``
     frames and of the last (input order, the order frames are handed out; from
-    ``summary.json``). Over a long batch (``--frames 1000``) these show whether memory grows
-    and frames slow down as the batch goes on.
+    ``summary.json``). Those are wall times, so on a machine that other work shares they
+    follow its load as much as the batch. ``CPU ms/frame first / last`` does not: the CPU
+    time (user + system) the whole tree spent while those frames ran, from the samples, over
+    the number of frames done meanwhile. Over a long batch (``--frames 1000``) these show
+    whether memory grows and frames slow down as the batch goes on.
 
 Long batches
     Only the first ``distinct`` (50) frames are written; a batch of more frames is a manifest
@@ -80,6 +83,9 @@ class BatchSetting:
     frame_first, frame_last : list of float or None
         Per round: median seconds of the first and the last ``window`` frames in their
         workers.
+    cpu_first, cpu_last : list of float or None
+        Per round: CPU seconds of the process tree per frame while the first (once the
+        workers were warm) and the last ``window`` frames ran.
     """
 
     engine: str
@@ -94,6 +100,8 @@ class BatchSetting:
     rss_last: list[float | None] = field(default_factory=list)
     frame_first: list[float | None] = field(default_factory=list)
     frame_last: list[float | None] = field(default_factory=list)
+    cpu_first: list[float | None] = field(default_factory=list)
+    cpu_last: list[float | None] = field(default_factory=list)
 
 
 @dataclass
@@ -149,46 +157,59 @@ def _process_tree(root: int) -> list[int]:
     return tree
 
 
-def tree_memory(root: int) -> tuple[float, float]:
-    """RSS and PSS of a process and all its descendants, in MiB (Linux ``/proc``)."""
+#: Clock ticks per second of /proc's CPU times (the module still imports where there is none).
+_TICK = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
+
+
+def tree_usage(root: int) -> tuple[float, float, dict[int, float]]:
+    """RSS and PSS (MiB) of a process and all its living descendants, and the CPU time each of
+    them has used so far (user + system, seconds, by pid) (Linux ``/proc``)."""
     rss = pss = 0
+    cpu: dict[int, float] = {}
     for pid in _process_tree(root):
         try:
+            with open(f"/proc/{pid}/stat") as fh:
+                fields = fh.read().rsplit(")", 1)[1].split()
             with open(f"/proc/{pid}/smaps_rollup") as fh:
                 for line in fh:
                     if line.startswith("Rss:"):
                         rss += int(line.split()[1])
                     elif line.startswith("Pss:"):
                         pss += int(line.split()[1])
-        except (OSError, ValueError):
+            cpu[pid] = (int(fields[11]) + int(fields[12])) / _TICK  # utime, stime
+        except (OSError, IndexError, ValueError):
             continue  # ended while we looked
-    return rss / 1024.0, pss / 1024.0
+    return rss / 1024.0, pss / 1024.0, cpu
 
 
 @dataclass
 class _Run:
-    """One command: wall and batch seconds, each frame's seconds (input order), and memory
-    samples (seconds since the start, frames done, RSS MiB, PSS MiB)."""
+    """One command: wall and batch seconds, each frame's seconds (input order), and samples of
+    its process tree (seconds since the start, frames done, RSS MiB, PSS MiB, CPU seconds)."""
 
     wall: float
     batch: float
     frame_s: list[float]
-    memory: list[tuple[float, int, float, float]]
+    memory: list[tuple[float, int, float, float, float]]
 
 
 def _run_command(args: list[str], out: Path, frames: int, interval: float) -> _Run:
     """Run one ``monoplane batch`` command, sampling its process tree's memory."""
-    memory: list[tuple[float, int, float, float]] = []
+    memory: list[tuple[float, int, float, float, float]] = []
     start = time.perf_counter()
     proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
+    used: dict[int, float] = {}  # CPU seconds by pid, kept after a process has ended
+
     def sample() -> None:
         while proc.poll() is None:
-            rss, pss = tree_memory(proc.pid)
+            rss, pss, cpu = tree_usage(proc.pid)
+            used.update(cpu)
             done = (sum(e.is_dir() and not e.name.startswith(".") for e in os.scandir(out))
                     if out.is_dir() else 0)
             if rss:
-                memory.append((time.perf_counter() - start, done, rss, pss))
+                memory.append((time.perf_counter() - start, done, rss, pss,
+                               sum(used.values())))
             time.sleep(interval)
 
     sampler = threading.Thread(target=sample, daemon=True)
@@ -220,6 +241,14 @@ def _record(s: BatchSetting, run: _Run, frames: int, window: int) -> None:
     s.rss_last.append(median([m[2] for m in run.memory if m[1] >= frames - window]))
     s.frame_first.append(median(run.frame_s[:window]))
     s.frame_last.append(median(run.frame_s[-window:]))
+
+    def cpu_per_frame(samples: list[tuple[float, int, float, float, float]]) -> float | None:
+        if len(samples) < 2 or samples[-1][1] == samples[0][1]:
+            return None
+        return round((samples[-1][4] - samples[0][4]) / (samples[-1][1] - samples[0][1]), 5)
+
+    s.cpu_first.append(cpu_per_frame([m for m in run.memory if s.workers <= m[1] <= window]))
+    s.cpu_last.append(cpu_per_frame([m for m in run.memory if m[1] >= frames - window]))
 
 
 def _write_input(root: Path, frames: int, distinct: int, size: tuple[int, int], level: str,
@@ -349,17 +378,21 @@ def format_memory(result: BatchBenchResult, markdown: bool = False) -> str:
     its RSS while the first and the last ``window`` frames ran, and the median frame time of
     those frames."""
     head = ["engine", "workers", "peak RSS MiB", "peak PSS MiB", "RSS first / last MiB",
-            "frame ms first / last"]
+            "frame ms first / last", "CPU ms/frame first / last"]
     rows = []
     def mid(values: list[float | None], scale: float = 1.0, digits: int = 0) -> str:
         known = [v for v in values if v is not None]
         return f"{statistics.median(known) * scale:.{digits}f}" if known else "-"
 
-    for s in result.settings:
-        first, last = mid(s.frame_first, 1000, 1), mid(s.frame_last, 1000, 1)
+    def pair(a: list[float | None], b: list[float | None]) -> str:
+        first, last = mid(a, 1000, 1), mid(b, 1000, 1)
         ratio = f" (x{float(last) / float(first):.2f})" if "-" not in (first, last) else ""
+        return f"{first} / {last}{ratio}"
+
+    for s in result.settings:
         rows.append([s.engine, str(s.workers), mid(s.peak_rss), mid(s.peak_pss),
-                     f"{mid(s.rss_first)} / {mid(s.rss_last)}", f"{first} / {last}{ratio}"])
+                     f"{mid(s.rss_first)} / {mid(s.rss_last)}",
+                     pair(s.frame_first, s.frame_last), pair(s.cpu_first, s.cpu_last)])
     title = (f"memory of the command's process tree, and time per frame in the workers, first / "
              f"last {result.window} frames ({result.distinct} distinct frames)")
     return _table(title, head, rows, markdown)

@@ -156,47 +156,70 @@ def test_unreachable_ray_address_fails_in_seconds(manifest: Path, tmp_path: Path
     assert time.monotonic() - start < 30  # Ray alone retries for minutes
 
 
-def test_retries_are_bounded(monkeypatch: pytest.MonkeyPatch) -> None:
-    """A frame whose worker dies on every attempt fails after RAY_ATTEMPTS; one that loses its
-    worker once runs again and succeeds. Ray is replaced by a stand-in that crashes on cue."""
+def _fake_ray(monkeypatch: pytest.MonkeyPatch, get, wait, cpus: float = 2.0) -> None:
+    """Replace Ray by a stand-in: a task's object ref is its frame spec."""
     import types
 
-    from monoplane.batch import engines
-    from monoplane.batch.frame import BatchJob, FrameResult
-    from monoplane.batch.specs import FrameSpec
-
-    class WorkerCrashedError(Exception):
-        pass
-
-    crashes = {"always": 99, "once": 1}
     rx = types.SimpleNamespace(
-        RayError=Exception, WorkerCrashedError=WorkerCrashedError, NodeDiedError=OSError,
+        RayError=Exception, WorkerCrashedError=_WorkerCrashed, NodeDiedError=OSError,
         LocalRayletDiedError=OSError, ObjectLostError=OSError, OutOfMemoryError=OSError)
 
     def remote(**_):
-        def wrap(fn):
-            return types.SimpleNamespace(remote=lambda job, spec: spec)
-        return wrap
+        return lambda fn: types.SimpleNamespace(remote=lambda job, spec: spec)
+
+    fake = types.SimpleNamespace(
+        is_initialized=lambda: True, cluster_resources=lambda: {"CPU": cpus}, remote=remote,
+        put=lambda x: x, wait=wait, get=get, cancel=lambda ref, force: None, exceptions=rx)
+    monkeypatch.setitem(sys.modules, "ray", fake)
+    monkeypatch.setitem(sys.modules, "ray.exceptions", rx)
+
+
+class _WorkerCrashed(Exception):
+    pass
+
+
+def _specs(*names: str) -> list:
+    from monoplane.batch.specs import FrameSpec
+
+    return [FrameSpec(name=n, depth="d.npy") for n in names]
+
+
+def test_retries_are_bounded(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A frame whose worker dies on every attempt fails after RAY_ATTEMPTS; one that loses its
+    worker once runs again and succeeds."""
+    from monoplane.batch import engines
+    from monoplane.batch.frame import BatchJob, FrameResult
+
+    crashes = {"always": 99, "once": 1}
 
     def get(spec):
         if crashes.get(spec.name, 0):
             crashes[spec.name] -= 1
-            raise WorkerCrashedError("the worker died")
+            raise _WorkerCrashed("the worker died")
         return FrameResult(spec.name, "ok", planes=1)
 
-    fake = types.SimpleNamespace(
-        is_initialized=lambda: True, cluster_resources=lambda: {"CPU": 2}, remote=remote,
-        put=lambda x: x, wait=lambda refs, num_returns, timeout: (refs[:1], refs[1:]),
-        get=get, cancel=lambda ref, force: None, exceptions=rx)
-    monkeypatch.setitem(sys.modules, "ray", fake)
-    monkeypatch.setitem(sys.modules, "ray.exceptions", rx)
-    specs = [FrameSpec(name=n, depth="d.npy") for n in ("always", "once", "fine")]
+    _fake_ray(monkeypatch, get, lambda refs, num_returns, timeout: (refs[:1], refs[1:]))
     notes: list[str] = []
-    results = {r.name: r for r in engines.run_ray(BatchJob({}, "out"), specs, 2, notes=notes)}
+    results = {r.name: r for r in engines.run_ray(BatchJob({}, "out"),
+                                                  _specs("always", "once", "fine"), 2,
+                                                  notes=notes)}
     assert results["once"].status == results["fine"].status == "ok"
     assert results["always"].status == "failed"
     assert f"lost on all {engines.RAY_ATTEMPTS} attempts" in results["always"].error
     assert sum("always" in n for n in notes) == engines.RAY_ATTEMPTS - 1
     assert [n for n in notes if n.startswith("once")] == [
-        f"once: ran again after its Ray worker was lost (WorkerCrashedError, attempt 1 of "
+        f"once: ran again after its Ray worker was lost (_WorkerCrashed, attempt 1 of "
         f"{engines.RAY_ATTEMPTS})"]
+
+
+def test_a_cluster_without_cpus_fails_the_rest(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every node with a CPU lost: after RAY_NO_CPU_SECONDS the frames fail, the batch ends."""
+    from monoplane.batch import engines
+    from monoplane.batch.frame import BatchJob
+
+    monkeypatch.setattr(engines, "RAY_NO_CPU_SECONDS", 0.0)
+    _fake_ray(monkeypatch, get=None, wait=lambda refs, num_returns, timeout: ([], refs),
+              cpus=0.0)
+    results = list(engines.run_ray(BatchJob({}, "out"), _specs("a", "b", "c"), 2))
+    assert sorted(r.name for r in results) == ["a", "b", "c"]
+    assert all(r.status == "failed" and "no CPU" in r.error for r in results)

@@ -18,19 +18,20 @@ from monoplane.batch.throughput import (
     BatchSetting,
     bench_batch,
     format_batch_bench,
-    tree_memory,
+    tree_usage,
 )
 
 
-def test_tree_memory_counts_the_children() -> None:
-    alone, _ = tree_memory(os.getpid())
+def test_tree_usage_counts_the_children() -> None:
+    alone, _, cpu = tree_usage(os.getpid())
+    assert cpu[os.getpid()] > 0
     # A child holding 64 MiB of touched memory, which says when it holds it.
     child = subprocess.Popen(
         [sys.executable, "-c", "import sys, time; x = bytearray(64 << 20); print(1, flush=True);"
                                " time.sleep(60)"], stdout=subprocess.PIPE, text=True)
     try:
         assert child.stdout is not None and child.stdout.readline().strip() == "1"
-        rss, pss = tree_memory(os.getpid())
+        rss, pss, _ = tree_usage(os.getpid())
         assert rss > alone + 60 and pss > 60
     finally:
         child.kill()
@@ -45,6 +46,7 @@ def test_long_batch_cycles_over_distinct_frames_and_reports_memory() -> None:
     assert len(s.peak_rss) == len(s.frame_first) == len(s.frame_last) == 1
     assert 100 < s.peak_rss[0] < 4096 and 0 < s.peak_pss[0] <= s.peak_rss[0]
     assert s.frame_first[0] > 0 and s.frame_last[0] > 0
+    assert len(s.cpu_first) == len(s.cpu_last) == 1
     text = format_batch_bench(result)
     assert "process tree" in text and "first / last 3 frames (3 distinct frames)" in text
     assert BatchBenchResult.from_dict(json.loads(json.dumps(result.to_dict()))) == result
@@ -53,10 +55,10 @@ def test_long_batch_cycles_over_distinct_frames_and_reports_memory() -> None:
 def test_memory_table_medians() -> None:
     result = BatchBenchResult("monoplane", 128, 96, 1000, "mild", [
         BatchSetting("local", 2, [40.0], [38.0], [1.0], [1.0], [470.0], [300.0], [460.0],
-                     [462.0], [0.070], [0.0714])], distinct=50, window=200)
+                     [462.0], [0.070], [0.0714], [0.055], [None])], distinct=50, window=200)
     lines = format_batch_bench(result).splitlines()
     assert lines[-1].split() == ["local", "2", "470", "300", "460", "/", "462", "70.0", "/",
-                                 "71.4", "(x1.02)"]
+                                 "71.4", "(x1.02)", "55.0", "/", "-"]
     saved = {k: v for k, v in result.to_dict().items() if k not in ("distinct", "window")}
     assert "process tree" not in format_batch_bench(BatchBenchResult.from_dict(saved))
 
@@ -69,4 +71,5 @@ def test_soak_1000_frames_two_workers() -> None:
     (s,) = result.settings
     assert s.peak_rss[0] < 1024, s  # MiB, the driver and both workers together
     assert s.rss_last[0] <= 1.1 * s.rss_first[0] + 20, s  # no growth beyond noise
-    assert s.frame_last[0] <= 1.25 * s.frame_first[0], s
+    # CPU per frame, not wall time: on a shared machine the wall time follows the load.
+    assert s.cpu_last[0] <= 1.15 * s.cpu_first[0], s
