@@ -6,7 +6,11 @@ For each sequence (:func:`monoplane.synth.sequence.generate_sequence`) it report
 * **pose error over all pairs** of registered views: rotation angle of ``R_pred R_gtᵀ`` and
   translation-direction angle, degrees (:func:`~monoplane.evaluation.twoview.
   relative_pose_error`);
-* **global planes** with any pixel, against the distinct ground-truth planes the views see;
+* **global planes** with any pixel, against the distinct true planes of the sequence and the
+  distinct true planes *seen*: those covering at least ``ransac.min_support`` of the pixels
+  (the area rule below) in at least one registered view (:func:`true_planes_seen`); and the
+  **curved global planes**, those whose pixels lie mostly on non-planar ground truth
+  (curved objects, label 0; :func:`curved_global_planes`);
 * **cross-view consistency**: over the ground-truth planes seen in two or more registered
   views, the share whose views all give it the same global id. A view's id for a true plane is
   the global id covering most of its true mask. A view *sees* a true plane when the plane
@@ -97,6 +101,60 @@ def plane_errors(scene: Scene, views: list[Any], gt_planes: np.ndarray,
     return normal_err, offset_err
 
 
+def true_planes_seen(views: list[Any], gt_links: list[dict[int, int]],
+                     min_area: float = 0.0) -> set[int]:
+    """Distinct true planes (rows of ``gt_planes_world``) that some view sees.
+
+    Parameters
+    ----------
+    views : list
+        The registered views, with ``gt_labels`` (H, W) (0 = non-planar).
+    gt_links : list of dict
+        ``gt_links[v][local] = global`` true plane of each view label.
+    min_area : float
+        Smallest area, as a share of a view's pixels, at which a view sees a true plane.
+
+    Returns
+    -------
+    set of int
+    """
+    seen: set[int] = set()
+    for view, table in zip(views, gt_links, strict=True):
+        counts = np.bincount(view.gt_labels.ravel(), minlength=max(table, default=0) + 1)
+        seen |= {glob for local, glob in table.items()
+                 if counts[local] > 0 and counts[local] >= min_area * view.gt_labels.size}
+    return seen
+
+
+def curved_global_planes(scene: Scene, views: list[Any]) -> int:
+    """Global planes whose pixels, over all their views, lie mostly on non-planar truth.
+
+    Parameters
+    ----------
+    scene : Scene
+        Predicted scene (its views in the order of ``views``).
+    views : list
+        The registered views, with ``gt_labels`` (H, W) (0 = non-planar: curved objects and
+        planar faces too small to count).
+
+    Returns
+    -------
+    int
+        Global planes with more than half of their linked pixels on label 0.
+    """
+    area = np.zeros(scene.planes.shape[0])
+    off = np.zeros(scene.planes.shape[0])
+    for v, (rec, view) in enumerate(zip(scene.views, views, strict=True)):
+        lut = np.full(int(rec.labels.max()) + 1, -1)
+        for local, glob in scene.links[v].items():
+            lut[local] = glob
+        glob = lut[rec.labels].ravel()
+        linked = glob >= 0
+        area += np.bincount(glob[linked], minlength=len(area))
+        off += np.bincount(glob[linked & (view.gt_labels.ravel() == 0)], minlength=len(area))
+    return int(np.sum((area > 0) & (off > 0.5 * area)))
+
+
 def consistency(scene: Scene, views: list[Any], gt_links: list[dict[int, int]],
                 min_area: float = 0.0) -> tuple[int, int]:
     """(consistent, total) true planes seen in two or more views (module docstring).
@@ -138,7 +196,10 @@ def evaluate_sequences(n: int = 10, views: int = 5, path: str = "walk", level: s
         ``sequences``, ``views``, ``path``, ``registered_views`` / ``total_views``,
         ``all_registered`` (sequences with every view registered), ``rotation_error_deg`` and
         ``translation_error_deg`` (median/mean over all registered pairs),
-        ``global_planes`` / ``gt_planes`` (sums), ``plane_count_ratio``, ``consistency`` (and
+        ``global_planes``, ``gt_planes`` (every true plane) and ``gt_planes_seen`` (those a
+        registered view sees, :func:`true_planes_seen`), sums; ``plane_count_ratio`` (global
+        over all true planes) and ``plane_count_ratio_seen`` (over the seen ones);
+        ``curved_global_planes`` (:func:`curved_global_planes`, sum); ``consistency`` (and
         ``consistency_all``, counting planes of any area, with their counts),
         ``normal_error_deg`` / ``offset_error_m`` (medians, ``fused`` and ``refined``),
         ``time_s`` (mean per sequence), ``step_time_s`` (mean seconds per pipeline step) and
@@ -159,7 +220,8 @@ def evaluate_sequences(n: int = 10, views: int = 5, path: str = "walk", level: s
     min_area = float(pipe.config.to_dict()["ransac"]["min_support"])
     rot, trans, times, failures = [], [], [], []
     steps: dict[str, list[float]] = {}
-    reg_views = all_reg = g_pred = g_true = good = multi = good_all = multi_all = 0
+    reg_views = all_reg = g_pred = g_true = g_seen = curved = 0
+    good = multi = good_all = multi_all = 0
     errors: dict[str, dict[str, list[float]]] = {"fused": {"n": [], "d": []},
                                                  "refined": {"n": [], "d": []}}
     for k in tqdm(range(n), desc=f"{path} sequences", disable=not progress):
@@ -179,6 +241,7 @@ def evaluate_sequences(n: int = 10, views: int = 5, path: str = "walk", level: s
         all_reg += len(keep) == views
         true_views = [synth.views[v] for v in keep]
         links = [synth.view_to_global[v] for v in keep]
+        g_seen += len(true_planes_seen(true_views, links, min_area))
         cams = out.scene.cameras
         for a in range(len(keep)):
             for b in range(a + 1, len(keep)):
@@ -191,6 +254,7 @@ def evaluate_sequences(n: int = 10, views: int = 5, path: str = "walk", level: s
             for local, glob in out.scene.links[v].items():
                 areas[glob] += rec.area_px[local - 1]
         g_pred += int((areas > 0).sum())
+        curved += curved_global_planes(out.scene, true_views)
         c_good, c_all = consistency(out.scene, true_views, links, min_area)
         good += c_good
         multi += c_all
@@ -211,8 +275,9 @@ def evaluate_sequences(n: int = 10, views: int = 5, path: str = "walk", level: s
         "sequences": n, "views": views, "path": path, "level": level,
         "registered_views": reg_views, "total_views": n * views, "all_registered": all_reg,
         "rotation_error_deg": stats(rot), "translation_error_deg": stats(trans),
-        "global_planes": g_pred, "gt_planes": g_true,
+        "global_planes": g_pred, "gt_planes": g_true, "gt_planes_seen": g_seen,
         "plane_count_ratio": g_pred / max(g_true, 1),
+        "plane_count_ratio_seen": g_pred / max(g_seen, 1), "curved_global_planes": curved,
         "consistency": good / multi if multi else float("nan"),
         "consistent_planes": good, "multi_view_planes": multi,
         "consistency_all": good_all / multi_all if multi_all else float("nan"),
@@ -235,8 +300,10 @@ def format_sequences(r: dict[str, Any]) -> str:
         "{:.2f}° median / {:.2f}° mean".format(
             r["rotation_error_deg"]["median"], r["rotation_error_deg"]["mean"],
             r["translation_error_deg"]["median"], r["translation_error_deg"]["mean"]),
-        f"global planes: {r['global_planes']} for {r['gt_planes']} distinct true planes "
-        f"(ratio {r['plane_count_ratio']:.2f})",
+        f"global planes: {r['global_planes']} for {r['gt_planes_seen']} distinct true planes "
+        f"seen (ratio {r['plane_count_ratio_seen']:.2f}; {r['gt_planes']} in all, ratio "
+        f"{r['plane_count_ratio']:.2f}); {r['curved_global_planes']} lie mostly on "
+        "non-planar truth",
         f"cross-view consistency: {r['consistency']:.3f} ({r['consistent_planes']} of "
         f"{r['multi_view_planes']} true planes seen in 2+ views); counting planes of any "
         f"area: {r['consistency_all']:.3f} ({r['consistent_planes_all']} of "

@@ -19,6 +19,8 @@ integer ``(u, v)``; poses are world-to-camera ``x_cam = R x_world + t``.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from monoplane.errors import InvalidInput
@@ -108,7 +110,8 @@ def relative_pose(R_i: np.ndarray, t_i: np.ndarray, R_j: np.ndarray,
 
 def reprojection_iou(labels_i: np.ndarray, params_i: np.ndarray, K_i: np.ndarray,
                      labels_j: np.ndarray, K_j: np.ndarray, R_ji: np.ndarray,
-                     t_ji: np.ndarray, step: int = 1) -> np.ndarray:
+                     t_ji: np.ndarray, step: int = 1,
+                     num_planes_j: int | None = None) -> np.ndarray:
     """IoU of every plane of view ``i`` warped into view ``j`` with every plane of view ``j``.
 
     For each plane ``p`` of view ``i``, every (sub-sampled) pixel of view ``j`` is back-projected
@@ -131,6 +134,8 @@ def reprojection_iou(labels_i: np.ndarray, params_i: np.ndarray, K_i: np.ndarray
         Relative pose ``x_j = R_ji x_i + t_ji``.
     step : int
         Evaluate every ``step``-th row and column of view ``j`` (speed at native resolution).
+    num_planes_j : int, optional
+        P_j, when view ``j`` has planes without pixels (default: ``labels_j.max()``).
 
     Returns
     -------
@@ -138,7 +143,8 @@ def reprojection_iou(labels_i: np.ndarray, params_i: np.ndarray, K_i: np.ndarray
         (P_i, P_j) float64 IoUs in [0, 1].
     """
     params_i = np.asarray(params_i, dtype=np.float64).reshape(-1, 4)
-    p_i, p_j = params_i.shape[0], int(labels_j.max())
+    p_i = params_i.shape[0]
+    p_j = int(labels_j.max()) if num_planes_j is None else int(num_planes_j)
     out = np.zeros((p_i, p_j))
     if p_i == 0 or p_j == 0:
         return out
@@ -257,14 +263,18 @@ def fuse_planes(planes: np.ndarray) -> np.ndarray:
     return np.concatenate([fused, [float(np.mean(signs * d))]])
 
 
-def consistent_groups(node_views: np.ndarray, edges: np.ndarray,
-                      strengths: np.ndarray) -> list[list[int]]:
-    """Group matched view planes into global planes, never two planes of one view together.
+def consistent_groups(node_views: np.ndarray, edges: np.ndarray, strengths: np.ndarray,
+                      share_view: Callable[[list[int], list[int]], bool] | None = None
+                      ) -> list[list[int]]:
+    """Group matched view planes into global planes, guarding against wrong transitive merges.
 
-    Edges are merged greedily, strongest first (Kruskal-style); an edge whose two groups
-    already hold planes of a common view is skipped, so every group has at most one plane per
-    view. A weak wrong match therefore cannot chain two planes of one view into one global
-    plane, which a plain transitive closure would do.
+    Edges are merged greedily, strongest first (Kruskal-style). Two groups that already hold
+    planes of a common view are merged only if ``share_view(group_a, group_b)`` accepts their
+    union (e.g. a coplanarity check: two pieces of one wall that an occluder splits in one
+    view are one surface); without ``share_view`` such an edge is always skipped, so every
+    group has at most one plane per view. Either way a weak wrong match cannot chain two
+    different planes of one view into one global plane, which a plain transitive closure
+    would do.
 
     Parameters
     ----------
@@ -274,6 +284,9 @@ def consistent_groups(node_views: np.ndarray, edges: np.ndarray,
         (E, 2) int node index pairs (accepted plane matches).
     strengths : numpy.ndarray
         (E,) float match strength, larger is more certain.
+    share_view : callable, optional
+        ``share_view(nodes_a, nodes_b) -> bool`` on the node indices of two groups that share
+        a view.
 
     Returns
     -------
@@ -291,7 +304,10 @@ def consistent_groups(node_views: np.ndarray, edges: np.ndarray,
     views: dict[int, set[int]] = {k: {int(v)} for k, v in enumerate(node_views)}
     for e in np.argsort(-strengths, kind="stable"):
         a, b = int(sets[int(edges[e, 0])]), int(sets[int(edges[e, 1])])
-        if a == b or views[a] & views[b]:
+        if a == b:
+            continue
+        if views[a] & views[b] and (share_view is None or not share_view(
+                sorted(int(k) for k in sets.subset(a)), sorted(int(k) for k in sets.subset(b)))):
             continue
         sets.merge(a, b)
         root = int(sets[a])

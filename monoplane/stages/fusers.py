@@ -3,7 +3,11 @@
 ``average`` implements the paper's sparse-view fusion (§III-C and appendix): plane matches come
 from SfM keypoint matches with a mutual check, completed by a plane-reprojection IoU check;
 matched planes (over any number of views) are fused by the principal eigenvector of
-``Σ n_i n_iᵀ`` and the mean offset, in the SfM world frame.
+``Σ n_i n_iᵀ`` and the mean offset, in the SfM world frame. Around that, rules that keep the
+fusion from over-splitting (docs/multiview.md, "Fusion that does not over-split"): view planes
+on curved surfaces are left out, coplanar pieces of one surface are merged (also two planes of
+one view), and a plane that one view alone segments is checked against the other views that
+see it.
 """
 
 from __future__ import annotations
@@ -23,6 +27,9 @@ from monoplane.datamodel import (
     ray_plane_depth,
 )
 from monoplane.errors import InvalidInput
+from monoplane.geometry.coplanar import coplanarity_residual, footprint_gap
+from monoplane.geometry.normals import normals_from_depth
+from monoplane.geometry.planarity import noise_floor_deg, normal_spread_deg
 from monoplane.geometry.plane_matching import (
     consistent_groups,
     fuse_planes,
@@ -71,6 +78,40 @@ class AverageConfig:
         0.1, "a recovered pixel's depth lies within this share of itself from the global plane")
     recover_min_area: float = param(
         0.001, "smallest recovered region, as a share of the view's pixels")
+    reject_curved: bool = param(
+        True, "leave out of fusion the view planes whose normal cue spreads like a curved "
+        "surface's (see docs/multiview.md)")
+    max_extra_spread_deg: float = param(
+        4.0, "a view plane is curved when its normals spread more than this beyond the scene's "
+        "noise floor (median angle to their dominant direction, degrees)")
+    merge_coplanar: bool = param(
+        True, "merge global planes that are coplanar and touch, and let one global plane hold "
+        "several planes of a view when they are coplanar (see docs/multiview.md)")
+    merge_max_angle_deg: float = param(
+        15.0, "normals of merged planes differ by at most this (degrees)")
+    merge_max_distance: float = param(
+        0.02, "one merged group's view planes lie within this share of their depth of the "
+        "other group's plane (median over each plane's pixels)")
+    merge_max_gap: float = param(
+        0.05, "merged footprints on the common plane come within this share of their depth")
+    merge_max_see_through: float = param(
+        0.05, "coplanar planes of one view farther apart than merge_max_gap still merge when at "
+        "most this share of the pixels between them sees through the plane (see docs)")
+    merge_samples: int = param(
+        1500, "pixels sampled per view plane for the coplanarity and contact tests")
+    see_through_distance: float = param(
+        0.1, "a view's depth within this share of itself from the plane agrees with it; "
+        "nearer is an occluder, farther sees through the plane")
+    check_single_view: bool = param(
+        True, "test each global plane seen by one view against the other views that see its "
+        "footprint: drop, absorb or recover it (see docs/multiview.md)")
+    single_min_visible: float = param(
+        0.25, "a view takes part in the test when it sees this share of the plane's samples")
+    single_max_contradiction: float = param(
+        0.5, "share of the seen samples contradicting the plane that drops it")
+    single_min_support: float = param(
+        0.5, "share of the seen samples on one global plane that absorbs it there, or on no "
+        "plane that lets it be recovered there")
 
 
 @dataclass
@@ -118,7 +159,22 @@ class AverageFuser(Fuser):
 
     def fuse_with_matches(self, views: list[Reconstruction],
                           sfm: SfmResult) -> tuple[Scene, list[PlaneMatch]]:
-        """:meth:`fuse`, also returning the accepted plane correspondences."""
+        """:meth:`fuse`, also returning the accepted plane correspondences.
+
+        The steps, each configurable (docs/multiview.md, "Fusion that does not over-split"):
+
+        1. view planes on curved surfaces are left out (:meth:`flat_planes`);
+        2. plane matches between every pair of views (:meth:`match_planes`) are grouped
+           strongest first; two groups holding planes of one view join only when their union
+           is coplanar (``merge_*``);
+        3. groups that are coplanar and touch, or whose gap one view explains by an occluder,
+           are merged (``merge_*``);
+        4. a group seen by one view only is checked against the other views that see it:
+           dropped, absorbed into another group, or marked for recovery
+           (:meth:`check_single_view`);
+        5. each group is fused (:func:`~monoplane.geometry.plane_matching.fuse_planes`) and
+           planes merged away in some view are recovered there (:meth:`recover_planes`).
+        """
         if len(views) != sfm.num_views:
             raise InvalidInput(f"{len(views)} views but {sfm.num_views} SfM cameras")
         for v, (rec, cam) in enumerate(zip(views, sfm.cameras, strict=True)):
@@ -127,25 +183,41 @@ class AverageFuser(Fuser):
                     f"view {v}: labels are {rec.frame.width}x{rec.frame.height} but the camera "
                     f"is {cam.width}x{cam.height}"
                 )
-        matches = self.match_planes(views, sfm)
+        cfg = self.config
+        flat = self.flat_planes(views)
+        # Rejected planes are non-planar for every later step: matching, fusion, recovery.
+        screened = [_drop_planes(rec, ~ok) for rec, ok in zip(views, flat, strict=True)]
+        matches = self.match_planes(screened, sfm)
         nodes = [(v, local) for v, rec in enumerate(views)
-                 for local in range(1, rec.num_planes + 1)]
+                 for local in range(1, rec.num_planes + 1) if flat[v][local - 1]]
         index = {node: k for k, node in enumerate(nodes)}
         edges = np.array([(index[(m.view_i, m.plane_i)], index[(m.view_j, m.plane_j)])
                           for m in matches], dtype=np.int64).reshape(-1, 2)
-        groups = consistent_groups(np.array([v for v, _ in nodes], dtype=np.int64), edges,
-                                   np.array([m.strength for m in matches]))
-        # Report only the matches the consistent grouping kept.
-        group_of = {nodes[k]: g for g, members in enumerate(groups) for k in members}
-        matches = [m for m in matches
-                   if group_of[(m.view_i, m.plane_i)] == group_of[(m.view_j, m.plane_j)]]
-
         world = [plane_to_world(rec.params, cam.R, cam.t) if rec.num_planes else
                  np.zeros((0, 4)) for rec, cam in zip(views, sfm.cameras, strict=True)]
+        node_planes = np.array([world[v][local - 1] for v, local in nodes]).reshape(-1, 4)
+        merger = _CoplanarMerger(nodes, node_planes, screened, sfm.cameras,
+                                 [self._step(rec) for rec in screened], cfg)
+        groups = consistent_groups(np.array([v for v, _ in nodes], dtype=np.int64), edges,
+                                   np.array([m.strength for m in matches]),
+                                   merger.coplanar if cfg.merge_coplanar else None)
+        if cfg.merge_coplanar:
+            groups = merger.merge(groups)
+        absorbed: dict[int, int] = {}
+        recoverable: set[int] = set()
+        if cfg.check_single_view:
+            groups, absorbed, recoverable = self.check_single_view(
+                screened, views, sfm, nodes, groups, merger)
+        # Report only the matches the grouping kept.
+        group_of = {nodes[k]: g for g, members in enumerate(groups) for k in members}
+        group_of.update({nodes[k]: g for k, g in absorbed.items()})
+        matches = [m for m in matches if group_of.get((m.view_i, m.plane_i), -1)
+                   == group_of.get((m.view_j, m.plane_j), -2)]
+
         planes, links = [], [dict() for _ in views]
         for group in groups:
             members = [nodes[k] for k in group]
-            fused = fuse_planes(np.array([world[v][local - 1] for v, local in members]))
+            fused = fuse_planes(node_planes[group])
             first = sfm.cameras[members[0][0]]
             if fused[:3] @ first.center + fused[3] < 0:
                 fused = -fused
@@ -153,15 +225,179 @@ class AverageFuser(Fuser):
                 links[v][local] = len(planes)
             planes.append(fused)
         planes_array = np.array(planes).reshape(-1, 4)
-        views = list(views)
-        if self.config.recover_planes:
-            views, links = self.recover_planes(views, sfm, planes_array, links)
-        scene = Scene(cameras=list(sfm.cameras), views=views, planes=planes_array, links=links,
+        for k, g in absorbed.items():
+            # An absorbed plane becomes its global plane in its camera, as a recovered one:
+            # its own fit disagreed with the global plane, the other views' depth did not.
+            v, local = nodes[k]
+            screened[v] = _replace_plane(screened[v], sfm.cameras[v], local, planes_array[g])
+            links[v][local] = g
+        if cfg.recover_planes:
+            screened, links = self.recover_planes(screened, sfm, planes_array, links,
+                                                  recoverable)
+        # A rejected plane keeps its local label (the view's own segmentation, labels.png) but
+        # no link: it is non-planar in the view's global label map.
+        out = [replace(s, labels=np.where((s.labels == 0) & (rec.labels > 0)
+                                          & ~ok[np.maximum(rec.labels, 1) - 1],
+                                          rec.labels, s.labels).astype(np.int32))
+               if not ok.all() else s for rec, s, ok in zip(views, screened, flat, strict=True)]
+        scene = Scene(cameras=list(sfm.cameras), views=out, planes=planes_array, links=links,
                       points=sfm.points)
         return scene, matches
 
+    def flat_planes(self, views: list[Reconstruction]) -> list[np.ndarray]:
+        """Which view planes are flat enough to fuse (the curvature test).
+
+        A plane is rejected as curved when the median angle between its pixels' normals (the
+        view's normal cue, away from its border) and their dominant direction exceeds the
+        scene's noise floor (:func:`~monoplane.geometry.planarity.noise_floor_deg`, pooled
+        over all views: one cue, one noise level) by more than ``max_extra_spread_deg``.
+
+        Parameters
+        ----------
+        views : list of Reconstruction
+            Per-view planes; ``frame.normals`` (camera frame) or, without them, normals
+            estimated from ``frame.depth``.
+
+        Returns
+        -------
+        list of numpy.ndarray
+            (P_v,) bool per view, True for a plane that takes part in fusion.
+        """
+        keep = [np.ones(rec.num_planes, dtype=bool) for rec in views]
+        if not self.config.reject_curved:
+            return keep
+        spreads, weights = [], []
+        for rec in views:
+            width = rec.frame.width
+            normals = rec.frame.normals
+            if normals is None:
+                normals = normals_from_depth(rec.frame.depth, rec.frame.K)
+            # The border band scales with the image: the cue blurs over a fixed share of it.
+            spread, count = normal_spread_deg(normals, rec.labels, rec.num_planes,
+                                              radius=max(1, width // 256),
+                                              step=self._step(rec))
+            spreads.append(spread)
+            weights.append(count)
+        floor = noise_floor_deg(np.concatenate(spreads), np.concatenate(weights))
+        if not np.isfinite(floor):
+            return keep
+        for k, spread in enumerate(spreads):
+            # A plane too small to measure (NaN) is kept: no evidence either way.
+            keep[k] = ~(spread > floor + self.config.max_extra_spread_deg)
+        return keep
+
+    def check_single_view(self, views: list[Reconstruction], originals: list[Reconstruction],
+                          sfm: SfmResult, nodes: list[tuple[int, int]],
+                          groups: list[list[int]], merger: _CoplanarMerger
+                          ) -> tuple[list[list[int]], dict[int, int], set[int]]:
+        """Test each group seen by one view only against the other views that see it.
+
+        A surface that one view alone segments should be one that only that view sees. The
+        group's pixels, lifted onto its fused plane, are projected into every other view; a
+        view *sees* the group where the projection is in front of the camera and inside the
+        image, unless the view's depth there is nearer than the plane by more than
+        ``see_through_distance`` (occluded). Views that see at least ``single_min_visible`` of
+        the group's samples take part; over them, each seen sample is
+
+        * a *contradiction* when the view's depth lies beyond the plane by more than
+          ``see_through_distance`` (the view sees through it) or the view has a curved
+          plane there (:meth:`flat_planes`);
+        * *support* for global plane ``h`` when the depth agrees and the view's plane there
+          belongs to ``h``;
+        * *unsegmented* when the depth agrees and the view has no plane there.
+
+        Then, in this order: with ``single_max_contradiction`` of contradictions the group is
+        dropped (its view planes stay in the view's labels but become non-planar in its global
+        labels); with ``single_min_support`` on one group ``h`` it is absorbed into ``h``
+        (linked to it, and re-expressed as ``h``'s plane, whose parameters it does not change);
+        with ``single_min_support`` unsegmented it may be recovered in those views
+        (:meth:`recover_planes`). Otherwise, and when no view sees it, it stays as it is.
+
+        Parameters
+        ----------
+        views : list of Reconstruction
+            Scale-aligned views without their curved planes (labels 0 there).
+        originals : list of Reconstruction
+            The same views with their curved planes.
+        sfm : SfmResult
+            Their cameras.
+        nodes : list of (int, int)
+            ``(view, local id)`` of each node.
+        groups : list of list of int
+            Node indices of each group.
+        merger : _CoplanarMerger
+            Fuses a group's plane.
+
+        Returns
+        -------
+        (list of list of int, dict, set)
+            The groups kept, ``absorbed[node] = index of its group in that list``, and the
+            indices of the kept single-view groups that may be recovered in other views.
+        """
+        cfg = self.config
+        group_of = np.full(len(nodes), -1)
+        for g, members in enumerate(groups):
+            group_of[members] = g
+        node_index = [np.full(rec.num_planes + 1, -1) for rec in views]
+        for k, (v, local) in enumerate(nodes):
+            node_index[v][local] = k
+        verdicts: dict[int, tuple[str, int]] = {}
+        for g, members in enumerate(groups):
+            view_set = {nodes[k][0] for k in members}
+            if len(view_set) != 1:
+                continue
+            i = view_set.pop()
+            plane = merger.fused(members)
+            x = _footprint(views[i], sfm.cameras[i], [nodes[k][1] for k in members], plane,
+                           self._step(views[i]), cfg.merge_samples)
+            contra, unseg, seen = 0, 0, 0
+            support: dict[int, int] = {}
+            for j, (rec, cam) in enumerate(zip(views, sfm.cameras, strict=True)):
+                if j == i or len(x) == 0:
+                    continue
+                hit = _project(x, rec.frame.depth, cam, cfg.see_through_distance)
+                if hit is None or hit[0].sum() < cfg.single_min_visible * len(x):
+                    continue
+                visible, through, rows, cols = hit
+                labels, original = rec.labels[rows, cols], originals[j].labels[rows, cols]
+                on = visible & ~through
+                # The view's curved planes were removed from ``labels`` only.
+                curved = on & (original > 0) & (labels == 0)
+                contra += int((visible & through).sum() + curved.sum())
+                unseg += int((on & (original == 0)).sum())
+                owners = group_of[node_index[j][labels[on & (labels > 0)]]]
+                for h, c in zip(*np.unique(owners[owners >= 0], return_counts=True), strict=True):
+                    support[int(h)] = support.get(int(h), 0) + int(c)
+                seen += int(visible.sum())
+            if seen == 0:
+                continue
+            best = max(support, key=support.get) if support else -1
+            if contra >= cfg.single_max_contradiction * seen:
+                verdicts[g] = ("drop", -1)
+            elif (best >= 0 and support[best] >= cfg.single_min_support * seen
+                  and merger.residual_to(members, merger.fused(groups[best]))
+                  <= cfg.merge_max_distance):
+                # Its own pixels must lie on ``h`` too: a view that merged this surface into a
+                # neighbour would otherwise vouch for the neighbour.
+                verdicts[g] = ("absorb", best)
+            elif unseg >= cfg.single_min_support * seen:
+                verdicts[g] = ("recover", -1)
+        # An absorption into a group that is itself dropped or absorbed is not carried out.
+        absorb = {g: h for g, (what, h) in verdicts.items()
+                  if what == "absorb" and verdicts.get(h, ("keep",))[0] not in ("drop", "absorb")}
+        gone = {g for g, (what, _) in verdicts.items() if what == "drop"} | set(absorb)
+        new_index = {}
+        kept = []
+        for g, members in enumerate(groups):
+            if g not in gone:
+                new_index[g] = len(kept)
+                kept.append(members)
+        absorbed = {k: new_index[h] for g, h in absorb.items() for k in groups[g]}
+        recoverable = {new_index[g] for g, (what, _) in verdicts.items() if what == "recover"}
+        return kept, absorbed, recoverable
+
     def recover_planes(self, views: list[Reconstruction], sfm: SfmResult, planes: np.ndarray,
-                       links: list[dict[int, int]]
+                       links: list[dict[int, int]], single: set[int] | None = None
                        ) -> tuple[list[Reconstruction], list[dict[int, int]]]:
         """Relabel a view's pixels onto a global plane that other views see and it merged away.
 
@@ -185,6 +421,9 @@ class AverageFuser(Fuser):
             (G, 4) global planes, world frame.
         links : list of dict
             ``links[v][local] = global``.
+        single : set of int, optional
+            Global planes recovered however few views see them (from
+            :meth:`check_single_view`).
 
         Returns
         -------
@@ -200,7 +439,7 @@ class AverageFuser(Fuser):
         rays: dict[int, np.ndarray] = {}  # each view's pixel rays, computed once
         for g in sorted(members):
             seen = {v for v, _ in members[g]}
-            if len(seen) < cfg.recover_min_views:
+            if len(seen) < cfg.recover_min_views and g not in (single or ()):
                 continue
             for i in range(len(views)):
                 if i in seen:
@@ -259,9 +498,9 @@ class AverageFuser(Fuser):
                 if cfg.use_reprojection:
                     R_ji, t_ji = relative_pose(ci.R, ci.t, cj.R, cj.t)
                     iou_ij = reprojection_iou(a.labels, a.params, ci.K, b.labels, cj.K, R_ji,
-                                              t_ji, self._step(b))
+                                              t_ji, self._step(b), b.num_planes)
                     iou_ji = reprojection_iou(b.labels, b.params, cj.K, a.labels, ci.K,
-                                              R_ji.T, -R_ji.T @ t_ji, self._step(a))
+                                              R_ji.T, -R_ji.T @ t_ji, self._step(a), a.num_planes)
                     score = np.maximum(iou_ij, iou_ji.T)
                     for p, q in reprojection_plane_matches(iou_ij, iou_ji,
                                                            cfg.min_reprojection_iou):
@@ -279,6 +518,251 @@ class AverageFuser(Fuser):
 
     def _step(self, rec: Reconstruction) -> int:
         return max(1, rec.frame.width // max(self.config.grid_width, 1))
+
+
+def _plane_samples(rec: Reconstruction, cam: object,
+                   step: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Every ``step``-th pixel of each plane lifted by the view's depth into the world.
+
+    The depth, not the plane: whether a view plane's pixels lie on another plane is a question
+    about the pixels, which a plane fitted to a small or warped region may misstate.
+
+    Returns
+    -------
+    list of (numpy.ndarray, numpy.ndarray)
+        Per plane (local id ``k + 1`` at index ``k``): (N, 3) world points and their (N,)
+        depths in the view's camera; pixels without depth are left out.
+    """
+    labels = rec.labels[::step, ::step].ravel()
+    depth = rec.frame.depth[::step, ::step].ravel().astype(np.float64)
+    rays = pixel_rays(cam.K, cam.height, cam.width)[::step, ::step].reshape(-1, 3)
+    out = []
+    for local in range(1, rec.num_planes + 1):
+        mask = (labels == local) & (depth > 0)
+        x_cam = rays[mask] * depth[mask, None]
+        out.append(((x_cam - cam.t) @ cam.R, depth[mask]))
+    return out
+
+
+class _CoplanarMerger:
+    """Coplanarity and contact tests between groups of view planes (global planes in the
+    making), and the greedy merge of :meth:`AverageFuser.fuse_with_matches`.
+
+    Parameters
+    ----------
+    nodes : list of (int, int)
+        ``(view, local id)`` of each node (view plane).
+    planes : numpy.ndarray
+        (N, 4) world plane of each node.
+    views : list of Reconstruction
+        Scale-aligned views (curved planes removed).
+    cameras : list of Camera
+        Their cameras.
+    steps : list of int
+        Pixel stride of each view's samples.
+    cfg : AverageConfig
+    """
+
+    def __init__(self, nodes: list[tuple[int, int]], planes: np.ndarray,
+                 views: list[Reconstruction], cameras: list, steps: list[int],
+                 cfg: AverageConfig) -> None:
+        self.nodes, self.planes, self.cfg = nodes, planes, cfg
+        self.views, self.cameras, self.steps = views, cameras, steps
+        per_view = [_plane_samples(rec, cam, step)
+                    for rec, cam, step in zip(views, cameras, steps, strict=True)]
+        self.samples = []
+        for v, local in nodes:
+            x, z = per_view[v][local - 1]
+            # Evenly thinned: the tests only need the footprint's shape, not every pixel.
+            keep = max(1, int(np.ceil(len(z) / max(cfg.merge_samples, 1))))
+            self.samples.append((x[::keep], z[::keep]))
+
+    def fused(self, group: list[int]) -> np.ndarray:
+        """(4,) fused world plane of a group of node indices."""
+        return fuse_planes(self.planes[group])
+
+    def coplanar(self, group_a: list[int], group_b: list[int]) -> bool:
+        """Whether two groups are one plane (:meth:`residual`)."""
+        return self.residual(list(group_a), list(group_b)) is not None
+
+    def residual_to(self, group: list[int], plane: np.ndarray) -> float:
+        """Coplanarity residual of a group's samples to a given world plane."""
+        return coplanarity_residual([self.samples[k][0] for k in group],
+                                    [self.samples[k][1] for k in group], plane)
+
+    def residual(self, group_a: list[int], group_b: list[int]) -> float | None:
+        """How far two groups are from one plane, or None when they are not one.
+
+        Every member's normal must lie within ``merge_max_angle_deg`` of their union's fused
+        normal, and one group's samples within ``merge_max_distance`` of their depth of the
+        other group's plane (median per member, the better of the two directions). Measuring
+        against the other group's plane, not the union's, keeps two parallel surfaces apart
+        (a box top on a table top): the union's plane lies halfway between them.
+
+        Returns
+        -------
+        float or None
+            The residual (relative to depth) when coplanar.
+        """
+        cos = np.abs(self.planes[group_a + group_b, :3] @ self.fused(group_a + group_b)[:3])
+        if np.degrees(np.arccos(np.clip(cos.min(), -1.0, 1.0))) > self.cfg.merge_max_angle_deg:
+            return None
+        res = min(self.residual_to(group_a, self.fused(group_b)),
+                  self.residual_to(group_b, self.fused(group_a)))
+        return res if res <= self.cfg.merge_max_distance else None
+
+    def _touch(self, group_a: list[int], group_b: list[int], plane: np.ndarray) -> bool:
+        """Whether two coplanar groups are parts of one surface.
+
+        Their footprints on ``plane`` come within ``merge_max_gap`` of their depth, or every
+        view that holds planes of both explains the gap between them: within the convex
+        hull of their two masks, at most ``merge_max_see_through`` of the other pixels see
+        through the plane (depth beyond it by more than ``see_through_distance``); the rest
+        lie on it or in front of it (an occluder, e.g. a cabinet before a wall).
+        """
+        cfg = self.cfg
+        xa = np.concatenate([self.samples[k][0] for k in group_a])
+        za = np.concatenate([self.samples[k][1] for k in group_a])
+        xb = np.concatenate([self.samples[k][0] for k in group_b])
+        zb = np.concatenate([self.samples[k][1] for k in group_b])
+        if footprint_gap(xa, za, xb, zb, plane) <= cfg.merge_max_gap:
+            return True
+        shared = ({self.nodes[k][0] for k in group_a} & {self.nodes[k][0] for k in group_b})
+        if not shared:
+            return False
+        for v in shared:
+            rec, cam, step = self.views[v], self.cameras[v], self.steps[v]
+            labels = rec.labels[::step, ::step]
+            mask_a = np.isin(labels, [self.nodes[k][1] for k in group_a if self.nodes[k][0] == v])
+            mask_b = np.isin(labels, [self.nodes[k][1] for k in group_b if self.nodes[k][0] == v])
+            hull = np.zeros(labels.shape, dtype=np.uint8)
+            rows, cols = np.nonzero(mask_a | mask_b)
+            cv2.fillConvexPoly(hull, cv2.convexHull(np.stack([cols, rows], 1).astype(np.int32)), 1)
+            gap = hull.astype(bool) & ~mask_a & ~mask_b
+            if not gap.any():
+                continue
+            rays = pixel_rays(cam.K, cam.height, cam.width)[::step, ::step][gap]
+            z = ray_plane_depth(rays, plane_to_camera(plane, cam.R, cam.t)[0])
+            depth = rec.frame.depth[::step, ::step][gap]
+            through = (z <= 0) | (depth > z * (1.0 + cfg.see_through_distance))
+            if through.mean() > cfg.merge_max_see_through:
+                return False
+        return True
+
+    def _score(self, group_a: list[int], group_b: list[int]) -> float | None:
+        """Coplanarity residual of the union, if coplanar and the footprints touch."""
+        res = self.residual(group_a, group_b)
+        if res is None or not self._touch(group_a, group_b, self.fused(group_a + group_b)):
+            return None
+        return res
+
+    def merge(self, groups: list[list[int]]) -> list[list[int]]:
+        """Merge coplanar groups that are parts of one surface, the most coplanar pair first.
+
+        Returns
+        -------
+        list of list of int
+            The merged groups, each sorted, ordered by their first node.
+        """
+        groups = [list(g) for g in groups]
+        normals = [self.fused(g)[:3] for g in groups]
+        cos_max = np.cos(np.radians(self.cfg.merge_max_angle_deg))
+        scores: dict[tuple[int, int], float] = {}
+
+        def consider(a: int, b: int) -> None:
+            # The normal test first: most pairs of global planes are far from parallel.
+            if abs(normals[a] @ normals[b]) >= cos_max:
+                score = self._score(groups[a], groups[b])
+                if score is not None:
+                    scores[(a, b)] = score
+
+        for a in range(len(groups)):
+            for b in range(a + 1, len(groups)):
+                consider(a, b)
+        alive = set(range(len(groups)))
+        while scores:
+            a, b = min(scores, key=scores.get)
+            groups[a] = sorted(groups[a] + groups[b])
+            normals[a] = self.fused(groups[a])[:3]
+            alive.discard(b)
+            scores = {k: v for k, v in scores.items() if a not in k and b not in k}
+            for c in alive - {a}:
+                consider(min(a, c), max(a, c))
+        return sorted((groups[k] for k in alive), key=lambda g: g[0])
+
+
+def _footprint(rec: Reconstruction, cam: object, locals_: list[int], plane_world: np.ndarray,
+               step: int, max_samples: int) -> np.ndarray:
+    """(N, 3) world points: every ``step``-th pixel of the given planes of one view, lifted
+    along its ray onto ``plane_world``, thinned evenly to at most ``max_samples``."""
+    mask = np.isin(rec.labels[::step, ::step], locals_)
+    rays = pixel_rays(cam.K, cam.height, cam.width)[::step, ::step][mask]
+    z = ray_plane_depth(rays, plane_to_camera(plane_world, cam.R, cam.t)[0])
+    ahead = z > 0
+    x = (rays[ahead] * z[ahead, None] - cam.t) @ cam.R
+    return x[::max(1, int(np.ceil(len(x) / max(max_samples, 1))))]
+
+
+def _project(x_world: np.ndarray, depth: np.ndarray, cam: object, tol: float
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """Where world points on a plane land in a view, and how the view's depth compares.
+
+    Parameters
+    ----------
+    x_world : numpy.ndarray
+        (N, 3) world points.
+    depth : numpy.ndarray
+        (H, W) the view's depth, same units.
+    cam : Camera
+        The view's camera.
+    tol : float
+        Relative depth tolerance.
+
+    Returns
+    -------
+    (visible, through, rows, cols) or None
+        Over the points that project in front of the camera and inside the image (None if
+        there are none): ``visible`` (M,) bool, not occluded (the view's depth is valid and
+        not nearer than the point by more than ``tol`` of the point's depth); ``through`` (M,)
+        bool, the depth lies beyond the point by more than ``tol``; their pixels (M,) int.
+    """
+    x = x_world @ cam.R.T + cam.t
+    x = x[x[:, 2] > 0]
+    if len(x) == 0:
+        return None
+    uv = x @ cam.K.T
+    u = np.rint(uv[:, 0] / uv[:, 2])
+    r = np.rint(uv[:, 1] / uv[:, 2])
+    inside = (u >= 0) & (u < cam.width) & (r >= 0) & (r < cam.height)
+    if not np.any(inside):
+        return None
+    u, r, z = u[inside].astype(np.int64), r[inside].astype(np.int64), x[inside, 2]
+    d = depth[r, u]
+    rel = (d - z) / z
+    return (d > 0) & (rel >= -tol), rel > tol, r, u
+
+
+def _replace_plane(rec: Reconstruction, cam: object, local: int,
+                   plane_world: np.ndarray) -> Reconstruction:
+    """``rec`` with plane ``local`` replaced by ``plane_world`` in its camera (RMS error of
+    its pixels' depth to it updated)."""
+    plane = plane_to_camera(plane_world, cam.R, cam.t)[0]
+    mask = rec.labels == local
+    rays = pixel_rays(cam.K, cam.height, cam.width)[mask]
+    points = rays * rec.frame.depth[mask, None]
+    params, rmse = rec.params.copy(), rec.rmse.copy()
+    params[local - 1] = plane
+    rmse[local - 1] = float(np.sqrt(np.mean((points @ plane[:3] + plane[3]) ** 2))) if len(
+        points) else 0.0
+    return replace(rec, params=params, rmse=rmse)
+
+
+def _drop_planes(rec: Reconstruction, drop: np.ndarray) -> Reconstruction:
+    """``rec`` with the pixels of the planes flagged in ``drop`` ((P,) bool) set to 0."""
+    if not drop.any():
+        return rec
+    labels = np.where(drop[np.maximum(rec.labels, 1) - 1], 0, rec.labels)
+    return replace(rec, labels=labels.astype(np.int32))
 
 
 def _world_centroids(rec: Reconstruction, cam: object) -> np.ndarray:

@@ -38,3 +38,32 @@ def test_exact_scene_is_consistent_with_zero_plane_error() -> None:
     normal, offset = plane_errors(scene, synth.views, synth.gt_planes_world,
                                   synth.view_to_global)
     assert np.median(normal) < 0.5 and np.median(offset) < 0.01
+
+
+def test_planes_seen_and_curved_global_planes_on_known_labels() -> None:
+    from types import SimpleNamespace
+
+    from monoplane.datamodel import Camera, Frame, Scene
+    from monoplane.evaluation.sequences import curved_global_planes, true_planes_seen
+
+    gt = [np.zeros((10, 10), np.int32), np.zeros((10, 10), np.int32)]
+    gt[0][:6] = 1           # 60 px of true plane 0
+    gt[0][9, :3] = 2        # 3 px of true plane 1
+    gt[1][:3] = 1           # 30 px of true plane 2
+    views = [SimpleNamespace(gt_labels=g) for g in gt]
+    links = [{1: 0, 2: 1}, {1: 2}]
+    assert true_planes_seen(views, links, min_area=0.05) == {0, 2}
+    assert true_planes_seen(views, links) == {0, 1, 2}
+
+    # Global plane 0 lies on true plane 0; global plane 1 on non-planar truth in both views.
+    K = np.array([[10.0, 0, 4.5], [0, 10.0, 4.5], [0, 0, 1]])
+    recs = []
+    for g in gt:
+        labels = np.where(g > 0, 1, 2).astype(np.int32)
+        labels[9, 3:] = 0
+        recs.append(Reconstruction(frame=Frame(rgb=None, K=K, depth=np.ones((10, 10))),
+                                   labels=labels, params=[[0, 0, -1, 1.0]] * 2))
+    cams = [Camera(K=K, R=np.eye(3), t=np.zeros(3), width=10, height=10) for _ in gt]
+    scene = Scene(cameras=cams, views=recs, planes=[[0, 0, -1, 1.0]] * 2,
+                  links=[{1: 0, 2: 1}, {1: 0, 2: 1}])
+    assert curved_global_planes(scene, views) == 1

@@ -36,3 +36,18 @@ def test_no_edges_gives_singletons_and_bad_lengths_are_rejected() -> None:
     assert consistent_groups(np.array([0, 1]), np.zeros((0, 2)), np.zeros(0)) == [[0], [1]]
     with pytest.raises(InvalidInput):
         consistent_groups(np.array([0, 1]), np.array([[0, 1]]), np.zeros(2))
+
+
+def test_two_planes_of_one_view_join_when_the_check_accepts_their_union() -> None:
+    # Planes 0 and 1 of view 0 (a wall cut by an occluder) both match plane 2 of view 1.
+    views = np.array([0, 0, 1])
+    edges, strengths = np.array([[1, 2], [0, 2]]), np.array([0.6, 1.8])
+    asked = []
+
+    def coplanar(a: list[int], b: list[int]) -> bool:
+        asked.append((a, b))
+        return True
+
+    assert consistent_groups(views, edges, strengths, coplanar) == [[0, 1, 2]]
+    assert asked == [([1], [0, 2])]            # only the union that shares a view is checked
+    assert consistent_groups(views, edges, strengths, lambda a, b: False) == [[0, 2], [1]]

@@ -1,0 +1,60 @@
+"""The curvature test: spread of the normal cue over a plane's pixels, and its noise floor."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from monoplane.geometry.planarity import interior_labels, noise_floor_deg, normal_spread_deg
+
+
+def _unit(x: np.ndarray) -> np.ndarray:
+    return x / np.linalg.norm(x, axis=-1, keepdims=True)
+
+
+def test_interior_labels_drop_a_band_along_every_border() -> None:
+    labels = np.zeros((10, 12), np.int32)
+    labels[:, :6], labels[:, 6:] = 1, 2
+    inner = interior_labels(labels, 2)
+    # Columns 4..7 are within 2 px of the other label; the image border does not count.
+    assert (inner[:, :4] == 1).all() and (inner[:, 4:8] == 0).all() and (inner[:, 8:] == 2).all()
+    np.testing.assert_array_equal(interior_labels(labels, 0), labels)
+
+
+def test_flat_noisy_patch_spreads_by_its_noise_and_a_sphere_by_its_curvature() -> None:
+    rng = np.random.default_rng(0)
+    h, w = 60, 120
+    labels = np.zeros((h, w), np.int32)
+    labels[:, :60], labels[:, 60:] = 1, 2
+    normals = np.zeros((h, w, 3))
+    noise = 0.02
+    normals[:, :60] = _unit(np.array([0.1, -0.2, -1.0]) + rng.normal(0, noise, (h, 60, 3)))
+    # Plane 2 lies on a sphere: normals turn with position, 40 degrees across the patch.
+    u, v = np.meshgrid(np.linspace(-0.35, 0.35, 60), np.linspace(-0.35, 0.35, h))
+    normals[:, 60:] = _unit(np.stack([u, v, -np.ones_like(u)], -1))
+    spread, count = normal_spread_deg(normals, labels, 2, radius=1)
+    # Noise of 0.02 per component: the angle is Rayleigh with sigma 0.02 rad, median 1.35 deg.
+    assert spread[0] == pytest.approx(np.degrees(noise * np.sqrt(2 * np.log(2))), rel=0.1)
+    assert spread[1] > 8.0
+    assert count[0] == h * 59 and count[1] == h * 59          # one border column each
+
+
+def test_the_spread_ignores_a_strip_of_a_neighbouring_surface() -> None:
+    labels = np.ones((40, 40), np.int32)
+    normals = np.zeros((40, 40, 3))
+    normals[:] = [0.0, 0.0, -1.0]
+    normals[:, :8] = _unit(np.array([1.0, 0.0, -1.0]))          # a fifth on another surface
+    spread, _ = normal_spread_deg(normals, labels, 1, radius=0)
+    assert spread[0] < 1e-6
+
+
+def test_too_few_samples_give_nan_and_the_floor_is_the_weighted_median() -> None:
+    labels = np.zeros((20, 20), np.int32)
+    labels[:5, :5] = 1
+    normals = np.tile([0.0, 0.0, -1.0], (20, 20, 1))
+    spread, count = normal_spread_deg(normals, labels, 2, radius=0)
+    assert np.isnan(spread).all() and count.tolist() == [25, 0]
+    assert noise_floor_deg(np.array([1.0, 20.0, 2.0, np.nan]),
+                           np.array([100, 10, 50, 1000])) == 1.0
+    assert noise_floor_deg(np.array([1.0, 2.0]), np.array([10, 30])) == 2.0
+    assert np.isnan(noise_floor_deg(np.array([np.nan]), np.array([5])))
