@@ -5,8 +5,9 @@ A config is TOML with one table per stage kind (:data:`~monoplane.stages.base.ST
 plus the host's tables (:data:`HOST_TABLES`: ``[ransac]`` for the sequential driver,
 ``[cloud]`` for point clouds). A config
 may start from a preset with a top-level ``preset = "name"``; without one it starts from the
-default preset :data:`DEFAULT_PRESET`. Overrides are ``table.key=value`` strings (values in TOML
-syntax; bare words are taken as strings).
+default preset :data:`DEFAULT_PRESET`. A shipped preset may extend another the same way.
+Overrides are ``table.key=value`` strings (values in TOML syntax; bare words are taken as
+strings).
 
 Merging rule: an override that changes a table's ``plugin`` replaces that whole table, because
 the old plugin's parameters mean nothing to the new one.
@@ -51,8 +52,8 @@ def _parse_toml(text: str, where: str) -> dict[str, Any]:
         raise ConfigError(f"{where}: invalid TOML: {exc}") from None
 
 
-def load_preset(name: str) -> dict[str, Any]:
-    """The raw tables of a shipped preset.
+def read_preset(name: str) -> dict[str, Any]:
+    """The tables a shipped preset's own file states, ``preset`` key included (not merged).
 
     Raises
     ------
@@ -64,6 +65,36 @@ def load_preset(name: str) -> dict[str, Any]:
         raise ConfigError(f"unknown preset {name!r}; valid presets: {', '.join(presets)}")
     text = (resources.files("monoplane") / "presets" / f"{name}.toml").read_text()
     return _parse_toml(text, f"preset '{name}'")
+
+
+def load_preset(name: str) -> dict[str, Any]:
+    """The raw tables of a shipped preset, merged onto the preset it extends.
+
+    A preset file may start from another with a top-level ``preset = "base"``, as a config
+    file can, and then states only what differs from it (merged by :func:`merge`).
+
+    Raises
+    ------
+    ConfigError
+        If no preset has that name, or presets extend each other in a loop.
+    """
+    chain = [name]
+    tables = read_preset(name)
+    layers = [tables]
+    while "preset" in tables:
+        base = tables["preset"]
+        if not isinstance(base, str):
+            raise ConfigError(f"preset '{chain[-1]}': 'preset' must name a preset, got {base!r}")
+        if base in chain:
+            loop = " -> ".join([*chain, base])
+            raise ConfigError(f"presets extend each other in a loop: {loop}")
+        chain.append(base)
+        tables = read_preset(base)
+        layers.append(tables)
+    merged: dict[str, Any] = {}
+    for layer in reversed(layers):
+        merged = merge(merged, {k: v for k, v in layer.items() if k != "preset"})
+    return merged
 
 
 def load_config_file(path: str | Path) -> dict[str, Any]:

@@ -396,7 +396,7 @@ def detect_planes(cloud: Any, preset: str = "cloud",
     found = driver.run_cloud(pc, graph, rng)
     timings["ransac"] = time.perf_counter() - t
     t = time.perf_counter()
-    labels, planes = refiner.refine_cloud(pc, graph, found.labels, found.planes)
+    labels, planes = refiner.refine_cloud(pc, graph, found.labels, found.planes, rcfg.params)
     timings["refiner"] = time.perf_counter() - t
 
     t = time.perf_counter()

@@ -130,8 +130,9 @@ class Pipeline:
         label = f"{sampler.name} + {scorer.name} + {labeler.name}"
         rec = self.call("ransac", label, lambda: driver.run(frame), frame.name, timings)
         refiner = self.stage("refiner", Refiner)
-        rec = self.call("refiner", refiner.name, lambda: refiner.refine(rec), frame.name,
-                        timings)
+        params = self.config.host["ransac"].params
+        rec = self.call("refiner", refiner.name, lambda: refiner.refine(rec, params),
+                        frame.name, timings)
         rec.config = self.config.to_dict()
         rec.timings = {**rec.timings, **timings}
         return rec

@@ -70,8 +70,11 @@ class RansacConfig:
     Distances are in unit-sphere units of the normalised cloud (paper §III-A).
     """
 
-    epsilon: float = param(0.02, "inlier distance threshold ε, unit-sphere units")
-    epsilon_n_deg: float = param(10.0, "normal angle threshold ε_n in degrees")
+    # The shared thresholds' defaults are RansacParams's: declared once, for every stage.
+    epsilon: float = param(RansacParams.epsilon, "inlier distance threshold ε, unit-sphere "
+                           "units; every stage that weighs distances uses it")
+    epsilon_n_deg: float = param(RansacParams.epsilon_n_deg, "normal angle threshold ε_n in "
+                                 "degrees; every stage that weighs normal angles uses it")
     confidence: float = param(0.99, "RANSAC confidence for the adaptive number of samples")
     max_iterations: int = param(1000, "most minimal samples drawn per plane")
     min_iterations: int = param(100, "fewest minimal samples drawn per plane")

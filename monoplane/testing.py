@@ -361,7 +361,7 @@ def check_stage_contract(cls: type[Stage], frame: Frame | None = None, seed: int
         from monoplane.geometry.planes import fit_plane
 
         rec = Reconstruction(frame=frame, labels=labels, params=fit_plane(pts)[0][None])
-        out = stage.refine(rec)
+        out = stage.refine(rec, params)
         assert isinstance(out, Reconstruction) and out.labels.shape == frame.shape
         return
     cloud = PlaneCloud.from_frame(frame, max_points=5000, rng=rng)

@@ -78,7 +78,7 @@ def test_failing_stage_is_named_and_leaves_no_output(clean_view, tmp_path):
     class Broken(Refiner):
         name = "broken"
 
-        def refine(self, rec):
+        def refine(self, rec, params):
             raise RuntimeError("out of coffee")
 
     class Plugin:

@@ -78,7 +78,11 @@ class NoConfig:
 
 @dataclass(frozen=True)
 class RansacParams:
-    """Parameters the sequential driver shares with every sampler, scorer and labeler.
+    """Thresholds shared by every stage that uses them (sampler, scorer, labeler, refiner).
+
+    Declared once, here: the host's ``[ransac]`` table takes its ``epsilon`` and
+    ``epsilon_n_deg`` defaults from this class and hands the values to each of those stages,
+    so ``--set ransac.epsilon=...`` moves all of them and no stage declares its own.
 
     Attributes
     ----------
@@ -301,12 +305,17 @@ class Refiner(Stage):
     #: True when the refiner works on the image grid and so cannot refine a bare point cloud.
     needs_pixels: ClassVar[bool] = True
 
-    def refine(self, rec: Reconstruction) -> Reconstruction:
-        """Return a refined reconstruction (labels, and params refit on the final masks)."""
+    def refine(self, rec: Reconstruction, params: RansacParams) -> Reconstruction:
+        """Return a refined reconstruction (labels, and params refit on the final masks).
+
+        ``params`` are the pipeline's shared thresholds (``[ransac]``): a refiner that weighs
+        distances or normal angles against ε or ε_n reads them there, so it always agrees with
+        the RANSAC that produced ``rec``.
+        """
         raise NotImplementedError
 
     def refine_cloud(self, cloud: PlaneCloud, graph: NeighbourGraph, labels: np.ndarray,
-                     planes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                     planes: np.ndarray, params: RansacParams) -> tuple[np.ndarray, np.ndarray]:
         """Refine per-point labels of a normalised cloud (refiners with ``needs_pixels=False``).
 
         Parameters
@@ -319,6 +328,8 @@ class Refiner(Stage):
             (N,) int32 RANSAC labels, 0 = non-planar, ``i`` = ``planes[i - 1]``.
         planes : numpy.ndarray
             (P, 4) unit-normal planes in the normalised frame.
+        params : RansacParams
+            The pipeline's shared thresholds (see :meth:`refine`).
 
         Returns
         -------

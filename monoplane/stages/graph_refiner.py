@@ -11,7 +11,8 @@ by mean-field inference, where
 
 * ``U_i(0) = 1`` (non-planar) and ``U_i(p) = (φ(i, p) / ε)² + g(ρ(i, p))`` for plane ``p``:
   the GC-RANSAC truncated-L2 distance cost, untruncated so that a point beyond ε prefers
-  "non-planar", plus the labeler's normal cost (paper eq. E_n) with threshold ε_n;
+  "non-planar", plus the labeler's normal cost (paper eq. E_n) with threshold ε_n; ε and ε_n
+  are the pipeline's ``[ransac]`` thresholds, handed in as :class:`RansacParams`;
 * ``w_ij = 0.5 + k_p + k_c + k_n`` are the proximity labeler's cut costs (the same position,
   colour and normal affinities and bandwidths; colour is dropped when the cloud has none);
 * ``k̄`` is the graph's mean degree, so β does not depend on ``knn``.
@@ -40,7 +41,7 @@ from monoplane.geometry.graph import NeighbourGraph
 from monoplane.geometry.planes import fit_planes_per_label
 from monoplane.graphcut import normal_costs, proximity_weights
 from monoplane.hookspecs import hookimpl
-from monoplane.stages.base import ProximityAffinities, Refiner, Stage, param
+from monoplane.stages.base import ProximityAffinities, RansacParams, Refiner, Stage, param
 
 if TYPE_CHECKING:
     from scipy.sparse import csr_matrix
@@ -50,11 +51,10 @@ if TYPE_CHECKING:
 class GraphCrfConfig(ProximityAffinities):
     """Parameters of the ``graph-crf`` refiner (distances in unit-sphere units)."""
 
-    epsilon: float = param(0.02, "distance scale ε of the plane cost (like ransac.epsilon)")
     noise_factor: float = param(
-        0.0, "if > 0, ε = noise_factor × σ within [epsilon / 10, epsilon], σ the sensor noise "
-        "estimated from the RANSAC planes' residuals (robust: 1.4826 × median |distance|)")
-    epsilon_n_deg: float = param(10.0, "normal threshold ε_n of the plane cost, degrees")
+        0.0, "if > 0, the plane cost's distance scale is noise_factor × σ within "
+        "[ransac.epsilon / 10, ransac.epsilon], σ the sensor noise estimated from the RANSAC "
+        "planes' residuals (robust: 1.4826 × median |distance|)")
     normal_weight: float = param(
         1.0, "weight of the normal cost in the data term (0: distance only, for range data "
         "whose normals are blurred at creases)")
@@ -72,9 +72,7 @@ class GraphCrfConfig(ProximityAffinities):
 
     def __post_init__(self) -> None:
         checks = [
-            (self.epsilon > 0, "epsilon must be positive"),
             (self.noise_factor >= 0, "noise_factor must be >= 0"),
-            (0 < self.epsilon_n_deg <= 180, "epsilon_n_deg must lie in (0, 180]"),
             (self.beta >= 0, "beta must be >= 0"),
             (self.normal_weight >= 0, "normal_weight must be >= 0"),
             (self.temperature > 0, "temperature must be positive"),
@@ -150,25 +148,29 @@ class GraphCrfRefiner(Refiner):
     Config = GraphCrfConfig
     needs_pixels = False
 
-    def distance_scale(self, cloud: PlaneCloud, labels: np.ndarray, planes: np.ndarray
-                       ) -> float:
-        """ε of the plane cost, normalised units: ``epsilon`` or the noise-based one."""
+    def distance_scale(self, cloud: PlaneCloud, labels: np.ndarray, planes: np.ndarray,
+                       params: RansacParams) -> float:
+        """ε of the plane cost, normalised units: the RANSAC's ε or the noise-based one."""
         c = self.config
         planar = labels > 0
         if c.noise_factor == 0 or planar.sum() < 3:
-            return c.epsilon
+            return params.epsilon
         p = planes[labels[planar] - 1]
         resid = np.abs(np.einsum("ij,ij->i", cloud.points[planar], p[:, :3]) + p[:, 3])
         sigma = 1.4826 * float(np.median(resid))
         # Exact or synthetic data have σ ≈ 0: a tenth of ε keeps the cost finite and above
         # the rounding of the plane fits.
-        return float(np.clip(c.noise_factor * sigma, 0.1 * c.epsilon, c.epsilon))
+        return float(np.clip(c.noise_factor * sigma, 0.1 * params.epsilon, params.epsilon))
 
-    def unary(self, cloud: PlaneCloud, planes: np.ndarray, epsilon: float | None = None
-              ) -> np.ndarray:
-        """(N, P + 1) float32 data costs: column 0 non-planar, column p plane p (module doc)."""
+    def unary(self, cloud: PlaneCloud, planes: np.ndarray, params: RansacParams,
+              epsilon: float | None = None) -> np.ndarray:
+        """(N, P + 1) float32 data costs: column 0 non-planar, column p plane p (module doc).
+
+        The distance scale is ``epsilon`` when given (see :meth:`distance_scale`), else the
+        RANSAC's ε; the normal threshold is the RANSAC's ε_n.
+        """
         c = self.config
-        epsilon = c.epsilon if epsilon is None else epsilon
+        epsilon = params.epsilon if epsilon is None else epsilon
         # float32: the costs only rank labels, and the (N, P + 1) arrays of a 512x512 range
         # image with 40 planes are the refiner's main memory traffic.
         points = cloud.points.astype(np.float32)
@@ -182,7 +184,7 @@ class GraphCrfRefiner(Refiner):
         np.square(cost, out=cost)
         if c.normal_weight > 0:  # the angles are only needed then
             cos = np.clip(cloud.normals.astype(np.float32) @ normals_p.T, -1.0, 1.0)
-            cost += c.normal_weight * normal_costs(np.arccos(cos), math.radians(c.epsilon_n_deg))
+            cost += c.normal_weight * normal_costs(np.arccos(cos), params.epsilon_n)
         return out
 
     def _mean_field(self, unary: np.ndarray, adj: csr_matrix, labels: np.ndarray,
@@ -234,8 +236,9 @@ class GraphCrfRefiner(Refiner):
         return renumber[comp]
 
     def _merge(self, cloud: PlaneCloud, graph: NeighbourGraph, labels: np.ndarray,
-               planes: np.ndarray) -> np.ndarray:
-        """Merge touching regions whose planes agree (union-find over region adjacency)."""
+               planes: np.ndarray, epsilon: float) -> np.ndarray:
+        """Merge touching regions whose planes agree (union-find over region adjacency);
+        distances are compared against ``merge_distance`` × ``epsilon``."""
         c = self.config
         num = planes.shape[0]
         if num < 2 or c.merge_distance == 0:
@@ -246,7 +249,7 @@ class GraphCrfRefiner(Refiner):
         if pairs.size == 0:
             return labels
         cos_max = math.cos(math.radians(c.merge_angle_deg))
-        tol2 = (c.merge_distance * c.epsilon) ** 2
+        tol2 = (c.merge_distance * epsilon) ** 2
         order = np.argsort(labels, kind="stable")
         counts = np.bincount(labels, minlength=num + 1)
         groups = np.split(order, np.cumsum(counts)[:-1])
@@ -274,7 +277,7 @@ class GraphCrfRefiner(Refiner):
         return dense.astype(np.int32)[labels]
 
     def refine_cloud(self, cloud: PlaneCloud, graph: NeighbourGraph, labels: np.ndarray,
-                     planes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                     planes: np.ndarray, params: RansacParams) -> tuple[np.ndarray, np.ndarray]:
         """See :meth:`monoplane.stages.base.Refiner.refine_cloud`."""
         c = self.config
         labels = np.asarray(labels, dtype=np.int32)
@@ -284,21 +287,21 @@ class GraphCrfRefiner(Refiner):
         weights = proximity_weights(cloud.points, graph.edges, cloud.normals, cloud.colors,
                                     *c.affinities())
         adj = _adjacency(graph, weights)
-        epsilon = self.distance_scale(cloud, labels, planes)
-        labels = self._mean_field(self.unary(cloud, planes, epsilon), adj, labels,
+        epsilon = self.distance_scale(cloud, labels, planes, params)
+        labels = self._mean_field(self.unary(cloud, planes, params, epsilon), adj, labels,
                                   graph.mean_degree)
         min_size = max(c.min_support_points, math.ceil(c.min_support * cloud.size))
         for _ in range(2):
             labels = self._components(graph, labels, min_size)
             num = int(labels.max(initial=0))
             planes, _, _ = fit_planes_per_label(cloud.points, labels, num)
-            merged = self._merge(cloud, graph, labels, planes)
+            merged = self._merge(cloud, graph, labels, planes, params.epsilon)
             if int(merged.max(initial=0)) == num:
                 break
             labels = merged
         return labels, planes
 
-    def refine(self, rec: Reconstruction) -> Reconstruction:
+    def refine(self, rec: Reconstruction, params: RansacParams) -> Reconstruction:
         """Refine an image reconstruction on the kNN graph of all its valid pixels.
 
         Parameters
@@ -317,7 +320,7 @@ class GraphCrfRefiner(Refiner):
         graph = pixel_graph(cloud, self.config.max_jump)
         start = rec.labels.ravel()[cloud.pixels]
         planes = cloud.plane_to_normalised(rec.params) if rec.num_planes else np.zeros((0, 4))
-        labels, _ = self.refine_cloud(cloud, graph, start, planes)
+        labels, _ = self.refine_cloud(cloud, graph, start, planes, params)
         image = np.zeros(frame.height * frame.width, dtype=np.int32)
         image[cloud.pixels] = labels
         params, rmse, support = fit_planes_per_label(frame.points().reshape(-1, 3), image,

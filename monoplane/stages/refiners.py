@@ -26,7 +26,7 @@ from monoplane.regions import (
     scaled_min_area,
     scene_radius,
 )
-from monoplane.stages.base import Refiner, Stage, param
+from monoplane.stages.base import RansacParams, Refiner, Stage, param
 
 
 class NoRefiner(Refiner):
@@ -35,12 +35,12 @@ class NoRefiner(Refiner):
     name = "none"
     needs_pixels = False
 
-    def refine(self, rec: Reconstruction) -> Reconstruction:
+    def refine(self, rec: Reconstruction, params: RansacParams) -> Reconstruction:
         """Return ``rec`` itself."""
         return rec
 
     def refine_cloud(self, cloud: PlaneCloud, graph: NeighbourGraph, labels: np.ndarray,
-                     planes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                     planes: np.ndarray, params: RansacParams) -> tuple[np.ndarray, np.ndarray]:
         """Return the cloud labels and planes unchanged."""
         return labels, planes
 
@@ -143,13 +143,16 @@ class DenseCrfRefiner(Refiner):
         except InvalidInput as exc:
             raise ConfigError(f"refiner: {exc}") from exc
 
-    def refine(self, rec: Reconstruction) -> Reconstruction:
+    def refine(self, rec: Reconstruction, params: RansacParams) -> Reconstruction:
         """Refine ``rec``'s labels and refit its planes.
 
         Parameters
         ----------
         rec : Reconstruction
             RANSAC result; its frame must have a depth map (normals and RGB optional).
+        params : RansacParams
+            Not used: the CRF's distances (``fill_distance``, ``merge_distance``) are fractions
+            of the scene radius of their own, tuned on the image benchmark.
 
         Returns
         -------

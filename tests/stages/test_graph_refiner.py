@@ -10,8 +10,12 @@ from monoplane.errors import ConfigError
 from monoplane.evaluation.segcomp import segcomp
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
+from monoplane.stages.base import RansacParams
 from monoplane.stages.graph_refiner import GraphCrfConfig, GraphCrfRefiner
 from monoplane.testing import box_frame
+
+#: The pipeline's shared thresholds at their defaults.
+PARAMS = RansacParams()
 
 
 def crease_cloud() -> tuple[PlaneCloud, np.ndarray]:
@@ -40,7 +44,7 @@ def test_crease_points_go_back_to_their_plane():
     near_wall = (truth == 2) & (cloud.points[:, 2] < 0.03)
     start[near_wall] = 1
     start[(truth == 1) & (cloud.points[:, 0] > 0.4) & (cloud.points[:, 1] < 0.05)] = 0
-    labels, refit = GraphCrfRefiner().refine_cloud(cloud, graph, start, planes)
+    labels, refit = GraphCrfRefiner().refine_cloud(cloud, graph, start, planes, PARAMS)
     assert segcomp(labels, truth).correct == 2
     # Refined labels are renumbered by region size: compare through each region's majority.
     for g in (1, 2):
@@ -59,8 +63,8 @@ def test_separate_coplanar_parts_become_separate_planes():
                        center=cloud.center, scale=1.0, shape=cloud.shape, all_points=pts,
                        all_pixels=cloud.all_pixels)
     graph = NeighbourGraph.build(pts, 8)
-    labels, planes = GraphCrfRefiner().refine_cloud(moved, graph, truth,
-                                                    np.array([[0, 0, 1.0, 0], [1.0, 0, 0, 0]]))
+    labels, planes = GraphCrfRefiner().refine_cloud(
+        moved, graph, truth, np.array([[0, 0, 1.0, 0], [1.0, 0, 0, 0]]), PARAMS)
     assert labels.max() == 3 and len(planes) == 3
     assert len(np.unique(labels[far])) == 1 and labels[far][0] not in labels[truth == 2]
 
@@ -89,8 +93,8 @@ def test_noise_based_distance_scale_is_three_sigma():
                        all_pixels=cloud.all_pixels)
     planes = np.array([[0, 0, 1.0, 0], [1.0, 0, 0, 0]])
     refiner = GraphCrfRefiner(GraphCrfConfig(noise_factor=3.0))
-    assert refiner.distance_scale(noisy, truth, planes) == pytest.approx(3 * sigma, rel=0.1)
-    # Never above the configured epsilon, and off by default.
+    assert refiner.distance_scale(noisy, truth, planes, PARAMS) == pytest.approx(3 * sigma, rel=0.1)
+    # Never above the RANSAC's epsilon, and off by default.
     assert GraphCrfRefiner(GraphCrfConfig(noise_factor=1e3)).distance_scale(
-        noisy, truth, planes) == 0.02
-    assert GraphCrfRefiner().distance_scale(noisy, truth, planes) == 0.02
+        noisy, truth, planes, PARAMS) == 0.02
+    assert GraphCrfRefiner().distance_scale(noisy, truth, planes, PARAMS) == 0.02

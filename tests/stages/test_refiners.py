@@ -8,8 +8,12 @@ from scipy import ndimage
 
 from monoplane.datamodel import Frame, Reconstruction
 from monoplane.errors import ConfigError
+from monoplane.stages.base import RansacParams
 from monoplane.stages.refiners import DenseCrfRefiner, NoRefiner, monoplane_register_refiners
 from monoplane.testing import ROOM, check_stage_contract, room_cues
+
+#: The pipeline's shared thresholds at their defaults.
+PARAMS = RansacParams()
 
 
 def room(height: int = 96, width: int = 128, grey: bool = False, seed: int = 0):
@@ -40,13 +44,13 @@ def test_registration_and_contract(synthetic_view):
 def test_none_refiner_is_the_identity():
     frame, gt = room()
     rec = noisy_reconstruction(frame, gt)
-    assert NoRefiner().refine(rec) is rec
+    assert NoRefiner().refine(rec, PARAMS) is rec
 
 
 def test_dense_crf_refiner_recovers_the_room():
     frame, gt = room()
     rec = noisy_reconstruction(frame, gt)
-    out = DenseCrfRefiner().refine(rec)
+    out = DenseCrfRefiner().refine(rec, PARAMS)
     assert out.num_planes == 5
     # Labels come back in the RANSAC order, so they can be compared directly.
     assert (rec.labels == gt).mean() < 0.9
@@ -64,7 +68,7 @@ def test_dense_crf_refiner_recovers_the_room():
     # those; in the paper's mode it counts every pixel of the region.
     inliers = np.bincount(out.labels[rec.labels > 0], minlength=6)[1:]
     np.testing.assert_array_equal(out.support, inliers)
-    paper = DenseCrfRefiner(DenseCrfRefiner.Config(fit_inliers_only=False)).refine(rec)
+    paper = DenseCrfRefiner(DenseCrfRefiner.Config(fit_inliers_only=False)).refine(rec, PARAMS)
     np.testing.assert_array_equal(paper.support, paper.area_px)
 
 
@@ -73,7 +77,7 @@ def test_dense_crf_refiner_on_grey_and_depth_only_frames(grey):
     frame, gt = room(grey=True)
     if not grey:
         frame = frame.with_(rgb=None)
-    out = DenseCrfRefiner().refine(noisy_reconstruction(frame, gt))
+    out = DenseCrfRefiner().refine(noisy_reconstruction(frame, gt), PARAMS)
     assert out.num_planes == 5
     assert (out.labels == gt).mean() > 0.98
 
@@ -86,16 +90,16 @@ def test_small_regions_and_splits_without_crf():
     labels[10:13, 10:13] = 3           # 9-px fragment of the back wall inside the left wall
     rec = Reconstruction(frame=frame, labels=labels, params=ROOM)
     paper = {"iterations": 0, "merge": False, "absorb": False}
-    out = DenseCrfRefiner(DenseCrfRefiner.Config(**paper)).refine(rec)
+    out = DenseCrfRefiner(DenseCrfRefiner.Config(**paper)).refine(rec, PARAMS)
     assert out.num_planes == 8         # 3 planes split in two, plus the two side walls
     assert not np.any(out.labels[10:13, 10:13])
     areas = np.bincount(out.labels.ravel())[1:]
     assert areas.min() >= 75
-    keep_all = DenseCrfRefiner(DenseCrfRefiner.Config(**paper, min_area=0)).refine(rec)
+    keep_all = DenseCrfRefiner(DenseCrfRefiner.Config(**paper, min_area=0)).refine(rec, PARAMS)
     assert keep_all.num_planes == 9
     # Default: the halves of each cut plane lie on one plane and are re-merged; the fragment
     # labelled "back wall" lies on the left wall it touches and joins it. The room comes back.
-    merged = DenseCrfRefiner(DenseCrfRefiner.Config(iterations=0)).refine(rec)
+    merged = DenseCrfRefiner(DenseCrfRefiner.Config(iterations=0)).refine(rec, PARAMS)
     np.testing.assert_array_equal(merged.labels, np.where(labels == 0, 0, gt))
     np.testing.assert_allclose(merged.params[:, :3], ROOM[:, :3], atol=1e-4)
 
@@ -128,7 +132,7 @@ def test_dense_crf_on_a_synthetic_view(synthetic_view):
                          params=np.tile([0.0, 0.0, -1.0, 1.0], (num, 1)))
     # The speckle includes label 0 as an observed label, so 0 keeps the paper's unary here.
     cfg = DenseCrfRefiner.Config(min_area=0, uniform_nonplanar=False)
-    out = DenseCrfRefiner(cfg).refine(rec)
+    out = DenseCrfRefiner(cfg).refine(rec, PARAMS)
     # Splitting renumbers labels: map each output label to its majority ground-truth label.
     majority = np.zeros(out.num_planes + 1, dtype=np.int64)
     for k in range(1, out.num_planes + 1):
@@ -152,11 +156,12 @@ def test_nonplanar_pixels_are_filled_but_do_not_bend_the_planes():
     depth = frame.depth.copy()
     depth[obj] *= 0.5                   # a non-planar object in front of the upper wall
     rec = Reconstruction(frame=frame.with_(depth=depth), labels=labels, params=ROOM)
-    ungated = DenseCrfRefiner(DenseCrfRefiner.Config(fill_distance=float("inf"))).refine(rec)
+    ungated = DenseCrfRefiner(DenseCrfRefiner.Config(fill_distance=float("inf"))).refine(
+        rec, PARAMS)
     assert ungated.num_planes == 5
     assert np.all(ungated.labels[band] == 3)
     np.testing.assert_allclose(ungated.params[2], ROOM[2], atol=1e-4)
-    gated = DenseCrfRefiner().refine(rec)
+    gated = DenseCrfRefiner().refine(rec, PARAMS)
     assert not np.any(gated.labels[obj])
     assert np.all(gated.labels[band & ~obj] == 3)
     np.testing.assert_array_equal(gated.labels[~band], ungated.labels[~band])

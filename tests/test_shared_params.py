@@ -1,0 +1,120 @@
+"""Shared thresholds are declared once ([ransac]) and reach every stage that uses them."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from monoplane import detect_planes
+from monoplane.hookspecs import hookimpl
+from monoplane.pipeline import Pipeline
+from monoplane.plugin_manager import get_plugin_manager
+from monoplane.stages.graph_refiner import GraphCrfRefiner
+from monoplane.stages.labelers import ProximityGraphCutLabeler
+from monoplane.stages.samplers import NormalConsistentSampler
+from monoplane.stages.scorers import MsacNormalScorer
+from monoplane.testing import box_frame
+
+#: kind -> the thresholds each of its calls received.
+SEEN: dict[str, set[tuple[float, float]]] = {}
+
+
+def _record(kind: str, params: object) -> None:
+    SEEN.setdefault(kind, set()).add((params.epsilon, params.epsilon_n_deg))
+
+
+class SpySampler(NormalConsistentSampler):
+    name = "spy-sampler"
+
+    def sample(self, cloud, pool, count, rng, params):
+        _record("sampler", params)
+        return super().sample(cloud, pool, count, rng, params)
+
+
+class SpyScorer(MsacNormalScorer):
+    name = "spy-scorer"
+
+    def score(self, cloud, pool, planes, model_normals, params):
+        _record("scorer", params)
+        return super().score(cloud, pool, planes, model_normals, params)
+
+
+class SpyLabeler(ProximityGraphCutLabeler):
+    name = "spy-labeler"
+
+    def label(self, cloud, graph, pool, plane, model_normal, params):
+        _record("labeler", params)
+        return super().label(cloud, graph, pool, plane, model_normal, params)
+
+
+class SpyRefiner(GraphCrfRefiner):
+    name = "spy-refiner"
+
+    def refine_cloud(self, cloud, graph, labels, planes, params):
+        _record("refiner", params)
+        return super().refine_cloud(cloud, graph, labels, planes, params)
+
+
+class Spies:
+    @hookimpl
+    def monoplane_register_samplers(self):
+        return [SpySampler]
+
+    @hookimpl
+    def monoplane_register_scorers(self):
+        return [SpyScorer]
+
+    @hookimpl
+    def monoplane_register_labelers(self):
+        return [SpyLabeler]
+
+    @hookimpl
+    def monoplane_register_refiners(self):
+        return [SpyRefiner]
+
+
+SPY_OVERRIDES = ["sampler.plugin=spy-sampler", "scorer.plugin=spy-scorer",
+                 "labeler.plugin=spy-labeler", "refiner.plugin=spy-refiner",
+                 "ransac.epsilon=0.03", "ransac.epsilon_n_deg=12.5"]
+
+
+@pytest.fixture
+def spies():
+    SEEN.clear()
+    yield get_plugin_manager(autoload=False, extra_plugins=(Spies(),))
+    SEEN.clear()
+
+
+@pytest.mark.parametrize("preset", ["range", "cloud"])
+def test_set_ransac_epsilon_reaches_every_stage_on_frames(spies, preset: str) -> None:
+    frame, _ = box_frame()
+    Pipeline.from_preset(preset, overrides=SPY_OVERRIDES, pm=spies).run(frame)
+    assert SEEN == {kind: {(0.03, 12.5)}
+                    for kind in ("sampler", "scorer", "labeler", "refiner")}
+
+
+def test_set_ransac_epsilon_reaches_every_stage_on_clouds(spies) -> None:
+    frame, _ = box_frame()
+    points = frame.points()[frame.depth > 0]
+    detect_planes(points, overrides=SPY_OVERRIDES, pm=spies)
+    assert SEEN == {kind: {(0.03, 12.5)}
+                    for kind in ("sampler", "scorer", "labeler", "refiner")}
+
+
+def test_the_refiner_has_no_thresholds_of_its_own() -> None:
+    keys = {key for key, *_ in GraphCrfRefiner.parameters()}
+    assert not keys & {"epsilon", "epsilon_n_deg"}
+
+
+def test_the_graph_refiner_follows_the_shared_epsilon() -> None:
+    """A point 0.025 from a plane is non-planar at ε = 0.02 and on the plane at ε = 0.03."""
+    from monoplane.stages.base import RansacParams
+    from monoplane.testing import cloud_from_arrays
+
+    points = np.array([[0.0, 0.0, 0.025]])
+    cloud = cloud_from_arrays(points, np.array([[0.0, 0.0, 1.0]]))
+    planes = np.array([[0.0, 0.0, 1.0, 0.0]])
+    refiner = GraphCrfRefiner(GraphCrfRefiner.Config(normal_weight=0.0))
+    tight = refiner.unary(cloud, planes, RansacParams(epsilon=0.02))
+    loose = refiner.unary(cloud, planes, RansacParams(epsilon=0.03))
+    assert tight[0].argmin() == 0 and loose[0].argmin() == 1
