@@ -391,54 +391,70 @@ def crf_features(
     return _kernels(cues.features(params, u.ravel(), v.ravel(), h * w, np.arange(h * w)))
 
 
-def _kernels(specs: list[tuple[np.ndarray, float]]) -> list[GaussianKernel]:
+def _kernels(specs: list[tuple[np.ndarray, float]], threaded: bool = True
+             ) -> list[GaussianKernel]:
     """Build kernels from (features, weight) pairs, in parallel threads (numba, no GIL), the
-    highest-dimensional first."""
+    highest-dimensional first; one after the other on this thread unless ``threaded``."""
     order = sorted(range(len(specs)), key=lambda i: (-specs[i][0].shape[1], i))
-    built = run_threaded([lambda s=specs[i]: GaussianKernel(*s) for i in order])
+    tasks = [lambda s=specs[i]: GaussianKernel(*s) for i in order]
+    built = run_threaded(tasks) if threaded else [task() for task in tasks]
     by_spec = dict(zip(order, built, strict=True))
     return [by_spec[i] for i in range(len(specs))]
 
 
 @dataclass
 class _Cues:
-    """Flattened cues of a frame, with what decides which kernels exist (see crf_features)."""
+    """A frame's cues, flattened, with what decides which kernels exist (see crf_features).
+
+    Each array is the frame's own (a flat view, not converted): features are scaled only at
+    the pixels asked for (block centres, the band), which gives the values scaling every
+    pixel first would (elementwise float64 arithmetic) without converting whole images.
+    """
 
     rgb: np.ndarray | None
+    """(H W, 3) RGB, or None when absent, grey or weighted 0."""
     depth: np.ndarray | None
+    """(H W,) depth, or None when absent, all invalid or weighted 0."""
+    depth_top: float
+    """Largest depth, which depth is divided by (with θ_d)."""
     normals: np.ndarray | None
+    """(H W, 3) normals, or None when absent or weighted 0."""
 
     @classmethod
     def of(cls, params: CrfParams, rgb: np.ndarray | None, depth: np.ndarray | None,
            normals: np.ndarray | None) -> _Cues:
         grey = rgb is None or not (np.any(rgb[..., 0] != rgb[..., 1])
                                    or np.any(rgb[..., 1] != rgb[..., 2]))
-        col = None if grey or not params.w_appearance > 0 else (
-            np.asarray(rgb, dtype=np.float64).reshape(-1, 3) / params.theta_color)
-        dep = None
+        col = None if grey or not params.w_appearance > 0 else np.asarray(rgb).reshape(-1, 3)
+        dep, top = None, 0.0
         if depth is not None and params.w_depth > 0:
-            flat = np.asarray(depth, dtype=np.float64).ravel()
-            top = flat.max() if flat.size else 0.0
+            flat = np.asarray(depth).ravel()
+            top = float(flat.max()) if flat.size else 0.0
             if top > 0:
-                dep = flat[:, None] / top / params.theta_depth
+                dep = flat
         nor = None if normals is None or not params.w_normal > 0 else (
-            np.asarray(normals, dtype=np.float64).reshape(-1, 3) / params.theta_normal)
-        return cls(col, dep, nor)
+            np.asarray(normals).reshape(-1, 3))
+        return cls(col, dep, top, nor)
 
     def features(self, params: CrfParams, u: np.ndarray, v: np.ndarray, grid_area: int,
                  pixels: np.ndarray) -> list[tuple[np.ndarray, float]]:
         """(features, weight) of each enabled kernel at positions (u, v) of a grid of
         ``grid_area`` cells (θ_s scales with it), with the cues of flat pixel indices
-        ``pixels``."""
+        ``pixels``: RGB / θ_a (8-bit levels), depth / largest depth / θ_d, normals / θ_n."""
         theta_p = params.theta_position * np.sqrt(grid_area / REFERENCE_AREA)
         pos = np.stack([u, v], axis=1).astype(np.float64) / theta_p
         specs: list[tuple[np.ndarray, float]] = []
         if params.w_smoothness > 0:
             specs.append((pos, params.w_smoothness))
-        for cue, weight in ((self.rgb, params.w_appearance), (self.depth, params.w_depth),
-                            (self.normals, params.w_normal)):
-            if cue is not None:
-                specs.append((np.hstack([pos, cue[pixels]]), weight))
+        if self.rgb is not None:
+            col = self.rgb[pixels].astype(np.float64) / params.theta_color
+            specs.append((np.hstack([pos, col]), params.w_appearance))
+        if self.depth is not None:
+            dep = self.depth[pixels].astype(np.float64)[:, None] / self.depth_top
+            specs.append((np.hstack([pos, dep / params.theta_depth]), params.w_depth))
+        if self.normals is not None:
+            nor = self.normals[pixels].astype(np.float64) / params.theta_normal
+            specs.append((np.hstack([pos, nor]), params.w_normal))
         return specs
 
 
@@ -519,6 +535,80 @@ def _not_constant_3x3(image: np.ndarray) -> np.ndarray:
 
 
 
+@dataclass
+class CrfGrid:
+    """What :func:`dense_crf` computes from a frame's cues alone, whatever its labels.
+
+    Mean field runs on this grid with these kernels; only the unary and what follows depend
+    on the labels. :func:`crf_grid` builds it, so a caller can build it before the labels
+    exist (the dense-crf refiner does, on a background thread while RANSAC runs).
+
+    Attributes
+    ----------
+    shape : tuple of int
+        ``(H, W)`` of the image.
+    step : int
+        Block size in pixels (1: mean field at full resolution).
+    cues : _Cues
+        The flattened, scaled cues (pixel features of the band are taken from them).
+    kernels : list of GaussianKernel
+        The enabled kernels over the grid cells (blocks, or pixels when ``step`` is 1).
+    block : numpy.ndarray
+        (H W,) int64 block of each pixel (empty when ``step`` is 1).
+    """
+
+    shape: tuple[int, int]
+    step: int
+    cues: _Cues
+    kernels: list[GaussianKernel]
+    block: np.ndarray
+
+
+def crf_grid(shape: tuple[int, int], params: CrfParams, rgb: np.ndarray | None = None,
+             depth: np.ndarray | None = None, normals: np.ndarray | None = None,
+             threaded: bool = True) -> CrfGrid:
+    """The label-independent part of :func:`dense_crf`: block grid, cues and lattices.
+
+    Parameters
+    ----------
+    shape : tuple of int
+        ``(H, W)`` of the label map.
+    params : CrfParams
+        As for :func:`dense_crf`.
+    rgb, depth, normals : numpy.ndarray, optional
+        Cues as in :func:`crf_features`.
+    threaded : bool
+        Build the kernels' lattices on parallel threads; False builds them one after the
+        other on this thread (a background thread that should take one core only).
+
+    Returns
+    -------
+    CrfGrid
+        To pass to :func:`dense_crf` with the same params and cues.
+    """
+    h, w = shape
+    step = 1
+    if params.max_pixels:
+        while -(-h // step) * -(-w // step) > params.max_pixels:
+            step += 1
+    cues = _Cues.of(params, rgb, depth, normals)
+    if step == 1:
+        v, u = np.mgrid[0:h, 0:w]
+        kernels = _kernels(cues.features(params, u.ravel(), v.ravel(), h * w,
+                                         np.arange(h * w)), threaded)
+        return CrfGrid((h, w), 1, cues, kernels, np.zeros(0, dtype=np.int64))
+    hs, ws = -(-h // step), -(-w // step)
+    # Block centres: the pixel at (step//2, step//2) of each block, clipped to the image.
+    cv, cu = np.mgrid[0:hs, 0:ws]
+    centre = (np.minimum(cv * step + step // 2, h - 1) * w
+              + np.minimum(cu * step + step // 2, w - 1)).ravel()
+    block = (np.minimum(np.arange(h) // step, hs - 1)[:, None] * ws
+             + np.minimum(np.arange(w) // step, ws - 1)[None, :]).ravel()
+    kernels = _kernels(cues.features(params, cu.ravel(), cv.ravel(), hs * ws, centre),
+                       threaded)
+    return CrfGrid((h, w), step, cues, kernels, block)
+
+
 def dense_crf(
     labels: np.ndarray,
     num_labels: int,
@@ -526,6 +616,7 @@ def dense_crf(
     rgb: np.ndarray | None = None,
     depth: np.ndarray | None = None,
     normals: np.ndarray | None = None,
+    grid: CrfGrid | None = None,
 ) -> np.ndarray:
     """Refine a multi-plane label map with the dense CRF (paper appendix, eq. 13).
 
@@ -539,6 +630,9 @@ def dense_crf(
         Kernel deviations, weights, unary confidence and iteration count.
     rgb, depth, normals : numpy.ndarray, optional
         Cues as in :func:`crf_features`.
+    grid : CrfGrid, optional
+        :func:`crf_grid` of the same shape, params and cues, built beforehand; built here
+        when omitted (the result is the same).
 
     Returns
     -------
@@ -557,7 +651,7 @@ def dense_crf(
     resolution with coarse messages. Away from label changes of the coarse result those
     messages are bilinearly upsampled; in the band of blocks next to a label change each pixel
     gets them from the coarse lattices sliced at its own features
-    (:meth:`GaussianKernel.message_at`), so boundaries follow full-resolution edges.
+    (:meth:`GaussianKernel.messages`), so boundaries follow full-resolution edges.
     """
     lab = np.asarray(labels)
     if lab.ndim != 2:
@@ -566,27 +660,20 @@ def dense_crf(
         raise InvalidInput(f"labels must lie in 0..{num_labels - 1}")
     if num_labels < 2 or params.iterations == 0:
         return lab.astype(np.int32)
+    if grid is None:
+        grid = crf_grid(lab.shape, params, rgb=rgb, depth=depth, normals=normals)
+    elif grid.shape != lab.shape:
+        raise InvalidInput(f"the CRF grid is for {grid.shape} images, the labels are "
+                           f"{lab.shape}")
     h, w = lab.shape
-    step = 1
-    if params.max_pixels:
-        while -(-h // step) * -(-w // step) > params.max_pixels:
-            step += 1
+    step, cues, kernels, block = grid.step, grid.cues, grid.kernels, grid.block
     if step == 1:
         unary = unary_from_labels(lab, num_labels, params.confidence,
                                   uniform_label=0 if params.uniform_nonplanar else None)
-        kernels = crf_features(lab.shape, params, rgb=rgb, depth=depth, normals=normals)
         q = mean_field(unary, kernels, params.iterations)
         return q.argmax(axis=1).astype(np.int32).reshape(lab.shape)
     hs, ws = -(-h // step), -(-w // step)
-    # Block centres: the pixel at (step//2, step//2) of each block, clipped to the image.
-    cv, cu = np.mgrid[0:hs, 0:ws]
-    centre = (np.minimum(cv * step + step // 2, h - 1) * w
-              + np.minimum(cu * step + step // 2, w - 1)).ravel()
-    block = (np.minimum(np.arange(h) // step, hs - 1)[:, None] * ws
-             + np.minimum(np.arange(w) // step, ws - 1)[None, :]).ravel()
     mean = _block_mean_probabilities(lab.ravel(), block, hs * ws, num_labels, params)
-    cues = _Cues.of(params, rgb, depth, normals)
-    kernels = _kernels(cues.features(params, cu.ravel(), cv.ravel(), hs * ws, centre))
     q = mean_field(-np.log(mean), kernels, params.iterations)
     # Near a label change of the coarse result, interpolated messages would blur the edge:
     # there each pixel gets its messages from the coarse lattices sliced at its own features,

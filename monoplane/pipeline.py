@@ -128,8 +128,11 @@ class Pipeline:
         labeler = self.stage("labeler", Labeler)
         driver = SequentialRansac(sampler, scorer, labeler, self.config.host["ransac"])
         label = f"{sampler.name} + {scorer.name} + {labeler.name}"
-        rec = self.call("ransac", label, lambda: driver.run(frame), frame.name, timings)
         refiner = self.stage("refiner", Refiner)
+        # The refiner's label-independent work runs in the background during the RANSAC.
+        rec = self.call("ransac", label,
+                        lambda: driver.run(frame, meanwhile=lambda: refiner.prepare(frame)),
+                        frame.name, timings)
         params = self.config.host["ransac"].params
         rec = self.call("refiner", refiner.name, lambda: refiner.refine(rec, params),
                         frame.name, timings)

@@ -197,13 +197,18 @@ class SequentialRansac:
         self.labeler = labeler
         self.config = RansacConfig() if config is None else config
 
-    def run(self, frame: Frame) -> Reconstruction:
+    def run(self, frame: Frame, meanwhile: Callable[[], None] | None = None) -> Reconstruction:
         """Detect planes in a frame.
 
         Parameters
         ----------
         frame : Frame
             With ``depth`` and ``normals`` (camera frame); colour optional.
+        meanwhile : callable, optional
+            Called once the neighbour graph is being built in the background, e.g. to queue
+            label-independent work of a later stage behind it (see
+            :meth:`monoplane.stages.base.Refiner.prepare`): the background thread is idle
+            while the planes are searched and labelled one by one.
 
         Returns
         -------
@@ -231,6 +236,8 @@ class SequentialRansac:
         # meanwhile on another thread (when the thread budget has one); the results are those
         # of building it first.
         graph = in_background(build_graph)
+        if meanwhile is not None:
+            meanwhile()
         if cloud.subsampled:  # the finaliser's image-nearest samples, while the graph builds
             cloud.image_nearest_sample  # noqa: B018 (fills the cached property)
         result = self._run(cloud, graph, rng)

@@ -16,6 +16,7 @@ from monoplane.densecrf import (
     PermutohedralLattice,
     _not_constant_3x3,
     crf_features,
+    crf_grid,
     dense_crf,
     mean_field,
     unary_from_labels,
@@ -308,6 +309,24 @@ def test_working_resolution_cap():
     assert (coarse == full).mean() > 0.99
     with pytest.raises(InvalidInput):
         params(max_pixels=-1)
+
+
+@pytest.mark.parametrize("max_pixels", [0, 3100])
+def test_a_grid_built_beforehand_gives_the_same_labels(max_pixels):
+    # The label-independent part (block grid, cues, lattices) may be built before the labels
+    # exist, on this thread alone or on parallel ones: the result is the same to the bit.
+    rgb, depth, normals, gt, _ = room_cues(96, 128)
+    rng = np.random.default_rng(4)
+    noisy = np.where(rng.random(gt.shape) < 0.2, rng.integers(0, 6, gt.shape), gt)
+    p = params(max_pixels=max_pixels)
+    direct = dense_crf(noisy, 6, p, rgb, depth, normals)
+    for threaded in (True, False):
+        grid = crf_grid(gt.shape, p, rgb, depth, normals, threaded=threaded)
+        assert grid.step == (1 if max_pixels == 0 else 2)
+        np.testing.assert_array_equal(
+            dense_crf(noisy, 6, p, rgb, depth, normals, grid=grid), direct)
+    with pytest.raises(InvalidInput, match="grid is for"):
+        dense_crf(noisy[:-1], 6, p, rgb[:-1], depth[:-1], normals[:-1], grid=grid)
 
 
 # --- refinement on label maps with known answers --------------------------------------------

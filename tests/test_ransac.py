@@ -107,6 +107,15 @@ def test_same_seed_same_result():
     np.testing.assert_array_equal(a.params, b.params)
 
 
+def test_meanwhile_runs_once_with_the_graph_under_way():
+    frame, _, _ = room()
+    calls = []
+    a = make("monoplane-nocrf", max_points=3000).run(frame, meanwhile=lambda: calls.append(1))
+    b = make("monoplane-nocrf", max_points=3000).run(frame)
+    assert calls == [1]
+    np.testing.assert_array_equal(a.labels, b.labels)
+
+
 def test_depth_only_input_without_colour():
     frame, labels, planes = room(rgb=False)
     rec = make("monoplane-nocrf").run(frame)

@@ -305,6 +305,16 @@ class Refiner(Stage):
     #: True when the refiner works on the image grid and so cannot refine a bare point cloud.
     needs_pixels: ClassVar[bool] = True
 
+    def prepare(self, frame: Frame) -> None:
+        """Start the work of :meth:`refine` that depends on the frame alone, not on its labels.
+
+        The pipeline calls this while RANSAC runs on the frame, once the RANSAC's own
+        background work is under way; a refiner may start such work with
+        :func:`monoplane.jit.in_background` (it queues behind the RANSAC's) and pick it up in
+        :meth:`refine` when that gets the same frame. The default does nothing. The result of
+        :meth:`refine` must not depend on whether this was called.
+        """
+
     def refine(self, rec: Reconstruction, params: RansacParams) -> Reconstruction:
         """Return a refined reconstruction (labels, and params refit on the final masks).
 

@@ -9,16 +9,18 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, fields
 
 import numpy as np
 
-from monoplane.datamodel import Reconstruction
-from monoplane.densecrf import REFERENCE_AREA, CrfParams, dense_crf
+from monoplane.datamodel import Frame, Reconstruction
+from monoplane.densecrf import REFERENCE_AREA, CrfGrid, CrfParams, crf_grid, dense_crf
 from monoplane.errors import ConfigError, InvalidInput
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.hookspecs import hookimpl
+from monoplane.jit import in_background, thread_budget
 from monoplane.regions import (
     MIN_AREA_AT_REFERENCE,
     clean_regions,
@@ -27,6 +29,26 @@ from monoplane.regions import (
     scene_radius,
 )
 from monoplane.stages.base import RansacParams, Refiner, Stage, param
+
+
+@dataclass
+class _FrameWork:
+    """What the dense-crf refiner computes from a frame alone (see :meth:`Refiner.prepare`).
+
+    Attributes
+    ----------
+    grid : CrfGrid
+        The CRF's block grid and lattices (:func:`monoplane.densecrf.crf_grid`).
+    points : numpy.ndarray
+        (H, W, 3) camera-frame points, depth units (``frame.points()``).
+    fill_tolerance : float
+        Distance in depth units within which a filled pixel keeps its plane:
+        ``fill_distance`` times the scene radius of the valid pixels (inf without the gate).
+    """
+
+    grid: CrfGrid
+    points: np.ndarray
+    fill_tolerance: float
 
 
 class NoRefiner(Refiner):
@@ -143,6 +165,30 @@ class DenseCrfRefiner(Refiner):
         except InvalidInput as exc:
             raise ConfigError(f"refiner: {exc}") from exc
 
+    _pending: tuple[Frame, Callable[[], _FrameWork]] | None = None
+
+    def prepare(self, frame: Frame) -> None:
+        """Build the CRF's lattices, the 3D points and the fill tolerance of ``frame`` on the
+        background thread (they do not depend on the labels); :meth:`refine` picks them up.
+        With a budget of one thread (batch workers) :meth:`refine` builds them itself, so
+        that the time stays in the refiner's."""
+        if frame.depth is not None and thread_budget() > 1:
+            # One thread: the other core runs the RANSAC's plane loop meanwhile.
+            self._pending = (frame, in_background(lambda: self._frame_work(frame, False)))
+
+    def _frame_work(self, frame: Frame, threaded: bool = True) -> _FrameWork:
+        """The label-independent part of :meth:`refine` for ``frame`` (which has depth); with
+        ``threaded`` False on this thread alone."""
+        assert frame.depth is not None
+        c = self.config
+        grid = crf_grid(frame.shape, self.crf, rgb=frame.rgb, depth=frame.depth,
+                        normals=frame.normals, threaded=threaded)
+        points = frame.points()
+        tolerance = np.inf
+        if c.uniform_nonplanar and np.isfinite(c.fill_distance):
+            tolerance = c.fill_distance * scene_radius(points, frame.depth > 0)
+        return _FrameWork(grid, points, tolerance)
+
     def refine(self, rec: Reconstruction, params: RansacParams) -> Reconstruction:
         """Refine ``rec``'s labels and refit its planes.
 
@@ -163,23 +209,24 @@ class DenseCrfRefiner(Refiner):
         frame = rec.frame
         if frame.depth is None:
             raise InvalidInput(f"{frame.name}: the dense-crf refiner needs a depth map")
-        depth = frame.depth
         start = time.perf_counter()
+        pending, self._pending = self._pending, None
+        work = (pending[1]() if pending is not None and pending[0] is frame
+                else self._frame_work(frame))
         labels = dense_crf(rec.labels, rec.num_planes + 1, self.crf, rgb=frame.rgb,
-                           depth=frame.depth, normals=frame.normals)
+                           depth=frame.depth, normals=frame.normals, grid=work.grid)
         min_area = scaled_min_area(frame.shape, self.config.min_area)
         c = self.config
-        points = frame.points()
-        if c.uniform_nonplanar and np.isfinite(c.fill_distance):
-            valid = depth > 0
-            labels = gate_filled_pixels(points, valid, rec.labels, labels, rec.params,
-                                        c.fill_distance * scene_radius(points, valid))
+        if np.isfinite(work.fill_tolerance):
+            labels = gate_filled_pixels(work.points, frame.depth > 0, rec.labels, labels,
+                                        rec.params, work.fill_tolerance)
         crf = time.perf_counter() - start
         out = clean_regions(rec, labels, min_area, c.connectivity, split=c.split, merge=c.merge,
                             absorb=c.absorb, max_angle_deg=c.merge_angle_deg,
                             max_distance=c.merge_distance, inliers_only=c.fit_inliers_only,
-                            merge_adjacent=c.merge_adjacent, points=points)
-        # Sub-steps for 'monoplane bench': the CRF (with the fill gate), then the regions.
+                            merge_adjacent=c.merge_adjacent, points=work.points)
+        # Sub-steps for 'monoplane bench': the CRF (with the fill gate, and the wait for the
+        # work prepared in the background, if any), then the regions.
         out.timings["refiner.crf"] = crf
         out.timings["refiner.regions"] = time.perf_counter() - start - crf
         return out

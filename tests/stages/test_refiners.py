@@ -41,6 +41,28 @@ def test_registration_and_contract(synthetic_view):
         check_stage_contract(cls, synthetic_view.frame)
 
 
+def test_dense_crf_work_prepared_in_the_background_changes_nothing(monkeypatch):
+    monkeypatch.setenv("OMP_NUM_THREADS", "2")
+    frame, gt = room()
+    rec = noisy_reconstruction(frame, gt)
+    expected = DenseCrfRefiner().refine(rec, PARAMS)
+    refiner = DenseCrfRefiner()
+    refiner.prepare(frame)
+    assert refiner._pending is not None and refiner._pending[0] is frame
+    out = refiner.refine(rec, PARAMS)
+    assert refiner._pending is None  # picked up
+    np.testing.assert_array_equal(out.labels, expected.labels)
+    np.testing.assert_array_equal(out.params, expected.params)
+    # Work prepared for another frame is not used (and not kept).
+    refiner.prepare(room(seed=1)[0])
+    np.testing.assert_array_equal(refiner.refine(rec, PARAMS).labels, expected.labels)
+    assert refiner._pending is None
+    # With one thread the refiner does all of its work itself, inside refine.
+    monkeypatch.setenv("OMP_NUM_THREADS", "1")
+    refiner.prepare(frame)
+    assert refiner._pending is None
+
+
 def test_none_refiner_is_the_identity():
     frame, gt = room()
     rec = noisy_reconstruction(frame, gt)
