@@ -174,3 +174,44 @@ def test_cli_multiview_end_to_end(synth_pair, tmp_path: Path) -> None:
     doc = json.loads((tmp_path / "mv" / "scene.json").read_text())
     assert len(doc["cameras"]) == 2 and len(doc["planes"]) >= 3
     assert (tmp_path / "mv" / "view_001" / "labels.png").is_file()
+
+
+@pytest.mark.render
+def test_cli_multiview_writes_scene_glb_report_and_recording(synth_pair, tmp_path: Path) -> None:
+    import os
+    import shutil
+    import subprocess
+
+    import pygltflib
+
+    from monoplane.cli import main
+
+    pytest.importorskip("rerun", reason="the rerun extra is not installed (setup.sh installs it)")
+    images = _write_pair(synth_pair, tmp_path)
+    K = synth_pair.views[0].frame.K
+    out, rrd = tmp_path / "mv", tmp_path / "mv.rrd"
+    assert main(["multiview", *images,
+                 "--depth", str(tmp_path / "depth0.npy"), str(tmp_path / "depth1.npy"),
+                 "--normals", str(tmp_path / "normals0.npy"), str(tmp_path / "normals1.npy"),
+                 "--relative-depth", "--intrinsics", f"{K[0, 0]},{K[1, 1]},{K[0, 2]},{K[1, 2]}",
+                 "--set", "cues.plugin=given", "--out", str(out), "--report",
+                 "--rerun", str(rrd), "--quiet"]) == 0
+    doc = json.loads((out / "scene.json").read_text())
+    gltf = pygltflib.GLTF2().load(str(out / "scene.glb"))
+    names = {n.name for n in gltf.nodes}
+    assert {f"plane_{p['id']}" for p in doc["planes"]} <= names
+    assert {"camera_0", "camera_1"} <= names and len(gltf.cameras) == 2
+    assert (out / "view_000" / "planes.glb").is_file()
+    report = (out / "report.html").read_text()
+    assert 'src="summary.png"' in report and (out / "summary.png").is_file()
+    assert "Interactive 3D view" in report
+    if shutil.which("rerun"):  # the viewer's CLI, shipped with rerun-sdk
+        env = {**os.environ, "XDG_CONFIG_HOME": str(tmp_path / "rerun-config")}
+        subprocess.run(["rerun", "analytics", "disable"], env=env, check=True,
+                       capture_output=True)
+        subprocess.run(["rerun", "rrd", "verify", str(rrd)], env=env, check=True,
+                       capture_output=True)
+        printed = subprocess.run(["rerun", "rrd", "print", str(rrd)], env=env, check=True,
+                                 capture_output=True, text=True).stdout
+        for entity in ("/world/view_000", "/world/view_001/labels", "/world/sfm_points"):
+            assert f" - {entity} - " in printed

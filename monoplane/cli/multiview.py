@@ -9,8 +9,10 @@ from monoplane.cli.common import (
     add_input_args,
     add_output_args,
     add_pipeline_args,
+    check_rerun_arg,
     depth_reading,
     pipeline_from_args,
+    write_rerun_arg,
 )
 from monoplane.fileio import check_output_dir, load_frame
 
@@ -21,13 +23,15 @@ points, single-view planes per image, then plane matching and fusion into global
 Writes into --out: view_000/, view_001/, ... (the single-view outputs of each image, planes in
 that camera's frame), scene.json (cameras and global planes in the SfM world frame, with the
 links from view planes to global planes), scene.ply (one coloured polygon per global plane),
+scene.glb (the same planes, one glTF mesh node per global plane, and the cameras),
 cameras.json and points.ply (sparse SfM points). Each view folder also holds
 labels_global.png (global plane id + 1 per pixel).
 
-Images that structure from motion cannot register are tried with a fallback two-view pose
-(essential matrix + monocular depth, marked "fallback" in cameras.json); those that still fail
-are left out, named in a warning and in scene.json ("unregistered"). --strict makes that an
-error instead.
+Images that structure from motion cannot register (and weakly supported SfM placements) go to
+the registrar stage ([registrar], default plane-aware): it places them from their planes,
+normals, depth and whatever feature matches exist, verifies each pose densely, and names the
+method and evidence in cameras.json. Images no method places are left out, named with their
+reason in a warning and in scene.json ("unregistered"). --strict makes that an error instead.
 
 --depth/--normals, when given, take one file per image, in image order."""
 
@@ -64,6 +68,7 @@ def run(args: argparse.Namespace) -> int:
     from monoplane.multiview import hold_intrinsics_fixed, reconstruct_multiview, save_scene
 
     check_output_dir(args.out, args.overwrite)  # fail before any work
+    check_rerun_arg(args)
     n = len(args.images)
     if n < 2:
         raise InvalidInput(f"multiview needs at least 2 images, got {n}")
@@ -88,6 +93,7 @@ def run(args: argparse.Namespace) -> int:
     result = reconstruct_multiview(frames, pipe, progress=not args.quiet, strict=args.strict,
                                    workers=args.workers)
     out = save_scene(result, args.out, overwrite=args.overwrite, report=args.report)
+    write_rerun_arg(args, result)
     if not args.quiet:
         scene = result.scene
         per_view = ", ".join(str(v.num_planes) for v in scene.views)
@@ -117,11 +123,11 @@ def adjustment_summary(adj: dict) -> str:
     str
         The line, or "" when there is nothing to report.
     """
+    if not adj.get("accepted", True):
+        return f"refinement rejected, scene as fused: {adj.get('reason', '')}"
     b, a = adj.get("before"), adj.get("after")
     if not b or not a:
         return ""
-    if not adj.get("accepted", True):
-        return f"refinement rejected, scene as fused: {adj.get('reason', '')}"
     parts = []
     if b["sfm_points_on_planes"]:
         parts.append(f"SfM points to their planes {100 * b['sfm_point_plane_median_rel']:.2f}% "
