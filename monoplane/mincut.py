@@ -75,7 +75,8 @@ def min_cut(num_nodes: int, tails: np.ndarray, heads: np.ndarray, caps: np.ndarr
     terminal = np.ascontiguousarray(terminal, dtype=np.float64).ravel()
     n_edges = tails.shape[0]
     if not validate:
-        flow, sink_side = _bk_min_cut(int(num_nodes), tails, heads, caps, rev_caps, terminal)
+        flow, sink_side, _ = _bk_min_cut(int(num_nodes), tails, heads, caps, rev_caps,
+                                         terminal)
         return float(flow), sink_side
     if heads.shape[0] != n_edges or caps.shape[0] != n_edges or rev_caps.shape[0] != n_edges:
         raise InvalidInput(f"min_cut: tails, heads, caps and rev_caps must have one length, got "
@@ -92,14 +93,46 @@ def min_cut(num_nodes: int, tails: np.ndarray, heads: np.ndarray, caps: np.ndarr
         raise InvalidInput("min_cut: capacities must be finite")
     if n_edges and min(caps.min(), rev_caps.min()) < 0:
         raise InvalidInput("min_cut: edge capacities must be non-negative")
-    flow, sink_side = _bk_min_cut(int(num_nodes), tails, heads, caps, rev_caps, terminal)
+    flow, sink_side, _ = _bk_min_cut(int(num_nodes), tails, heads, caps, rev_caps, terminal)
     return float(flow), sink_side
+
+
+def min_cut_flows(num_nodes: int, tails: np.ndarray, heads: np.ndarray, caps: np.ndarray,
+                  rev_caps: np.ndarray, terminal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`min_cut` (unvalidated input) that also returns each edge's final flow.
+
+    For warm starts: a graph whose edges carry a flow ``phi`` may be given as its residual,
+    ``caps - phi`` forward, ``rev_caps + phi`` backward, with ``phi`` moved into the
+    terminals of its ends (``terminal[tail] -= phi``, ``terminal[head] += phi``). That graph
+    has the same minimum cuts, and the same cut comes back (the sink side is what reaches the
+    sink in the final residual graph, the smallest sink side of any minimum cut), with less
+    flow left to find. That is exact in exact arithmetic; in floating point two minimum cuts
+    that tie (or differ by rounding) may be told apart differently after different flows.
+
+    Parameters
+    ----------
+    num_nodes, tails, heads, caps, rev_caps, terminal
+        As for :func:`min_cut`, already int64 / float64 and checked by the caller.
+
+    Returns
+    -------
+    sink_side : numpy.ndarray
+        (N,) bool, True for the nodes on the sink side of the cut.
+    reverse : numpy.ndarray
+        (E,) float64 residual capacity of each edge from head to tail at the end:
+        ``rev_caps`` plus the flow the solve sent from tail to head.
+    """
+    _, sink_side, reverse = _bk_min_cut(int(num_nodes), tails, heads, caps, rev_caps,
+                                        terminal)
+    return sink_side, reverse
 
 
 @kernel
 def _bk_min_cut(n: int, tails: np.ndarray, heads: np.ndarray, caps: np.ndarray,
-                rev_caps: np.ndarray, terminal: np.ndarray) -> tuple[float, np.ndarray]:
-    """:func:`min_cut` on validated int64 / float64 arrays.
+                rev_caps: np.ndarray, terminal: np.ndarray
+                ) -> tuple[float, np.ndarray, np.ndarray]:
+    """:func:`min_cut` on validated int64 / float64 arrays, and the (E,) final residual
+    capacities from head to tail (:func:`min_cut_flows`).
 
     Arcs are numbered by their slot in the per-node lists (node i's arcs are
     ``first[i]:first[i + 1]``), so a node's arcs are read from contiguous memory; ``sister[a]``
@@ -115,6 +148,7 @@ def _bk_min_cut(n: int, tails: np.ndarray, heads: np.ndarray, caps: np.ndarray,
     for i in range(n):
         first[i + 1] += first[i]
     fill = first[1:].copy()
+    forward = np.empty(m, dtype=np.int64)  # each edge's tail -> head arc
     sister = np.empty(2 * m, dtype=np.int32)
     head = np.empty(2 * m, dtype=np.int32)
     rcap = np.empty(2 * m)
@@ -125,6 +159,7 @@ def _bk_min_cut(n: int, tails: np.ndarray, heads: np.ndarray, caps: np.ndarray,
         fill[v] -= 1
         b = fill[v]
         head[a], rcap[a], sister[a] = v, caps[e], b
+        forward[e] = a
         head[b], rcap[b], sister[b] = u, rev_caps[e], a
     tr = terminal.copy()
     parent = np.full(n, _FREE, dtype=np.int32)
@@ -328,4 +363,7 @@ def _bk_min_cut(n: int, tails: np.ndarray, heads: np.ndarray, caps: np.ndarray,
     sink_side = np.zeros(n, dtype=np.bool_)
     for i in range(n):
         sink_side[i] = is_sink[i] and parent[i] != _FREE
-    return flow, sink_side
+    reverse = np.empty(m)
+    for e in range(m):
+        reverse[e] = rcap[sister[forward[e]]]
+    return flow, sink_side, reverse

@@ -65,7 +65,26 @@ class GraphCutConfig:
         True, "divide E_s by the graph's mean degree, so λ does not depend on knn")
 
 
-class GraphCutLabeler(Labeler):
+class _WarmStarts:
+    """The max-flow of a pool's last labelling, to start the next one on the same pool from.
+
+    The local optimisation labels a pool for a hypothesis, then for its refit: the two
+    problems differ a little, and the first one's flow is a good start for the second
+    (:func:`~monoplane.graphcut.minimize_gc_ransac`; the result does not depend on it).
+    """
+
+    _last: tuple[np.ndarray, np.ndarray] | None = None
+
+    def _flow(self, edge_ids: np.ndarray) -> np.ndarray:
+        """(E',) flow buffer of the pool whose subgraph edges are ``edge_ids`` (kept while
+        the pool is, zeros for a new one)."""
+        last = self._last
+        if last is None or last[0] is not edge_ids:
+            last = self._last = (edge_ids, np.zeros(edge_ids.size))
+        return last[1]
+
+
+class GraphCutLabeler(_WarmStarts, Labeler):
     """GC-RANSAC: truncated-L2 data term, constant Potts pairwise term, exact graph cut."""
 
     name = "graph-cut"
@@ -75,9 +94,10 @@ class GraphCutLabeler(Labeler):
               plane: np.ndarray, model_normal: np.ndarray, params: RansacParams) -> Labeling:
         """See :meth:`monoplane.stages.base.Labeler.label`."""
         f0, f1 = data_costs(cloud.points, cloud.normals, pool, plane, None, params.epsilon)
-        edges, _ = graph.subgraph(pool)
+        edges, edge_ids = graph.subgraph(pool)
         scale = degree_normalisation(graph.mean_degree) if self.config.normalise else 1.0
-        inliers, energy = minimize_gc_ransac(f0, f1, edges, 1.0, self.config.lambda_, scale)
+        inliers, energy = minimize_gc_ransac(f0, f1, edges, 1.0, self.config.lambda_, scale,
+                                             flow=self._flow(edge_ids))
         return Labeling(inliers=inliers, energy=energy)
 
 
@@ -91,7 +111,7 @@ class ProximityGraphCutConfig(ProximityAffinities):
         False, "divide E_s by the graph's mean degree (off: the paper's weights as given)")
 
 
-class ProximityGraphCutLabeler(Labeler):
+class ProximityGraphCutLabeler(_WarmStarts, Labeler):
     """MonoPlane labeler: E_d + E_n data terms and proximity-weighted pairwise cut costs."""
 
     name = "proximity-graph-cut"
@@ -130,7 +150,8 @@ class ProximityGraphCutLabeler(Labeler):
         edges, edge_ids = graph.subgraph(pool)
         cut = self._pool_weights(cloud, graph, edge_ids)
         scale = degree_normalisation(graph.mean_degree) if self.config.normalise else 1.0
-        inliers, energy = minimize_gc_ransac(f0, data1, edges, cut, self.config.lambda_, scale)
+        inliers, energy = minimize_gc_ransac(f0, data1, edges, cut, self.config.lambda_, scale,
+                                             flow=self._flow(edge_ids))
         return Labeling(inliers=inliers, energy=energy)
 
 

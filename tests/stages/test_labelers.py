@@ -127,6 +127,30 @@ def test_subgraph_pool_and_weight_cache():
     assert len(graph.cache) == 1
 
 
+@pytest.mark.parametrize("labeler", [GraphCutLabeler, ProximityGraphCutLabeler])
+def test_relabelling_a_pool_from_the_last_flow_changes_nothing(labeler):
+    # The local optimisation labels one pool for a hypothesis, then for its refit: the second
+    # max-flow starts from the first one's flow, kept per pool by the labeler.
+    cloud, _, _, _ = grid_cloud(tilt_deg=5.0)
+    graph = NeighbourGraph.build(cloud.points, k=8)
+    pool = np.arange(cloud.size, dtype=np.int64)
+    params = RansacParams(epsilon=EPS, epsilon_n_deg=10.0)
+    tilted = np.array([0.0, np.sin(0.02), -np.cos(0.02), 0.004])
+    mn = np.array([0.0, 0.0, -1.0])
+    warm = labeler()
+    first = warm.label(cloud, graph, pool, PLANE, mn, params)
+    kept = warm._last
+    second = warm.label(cloud, graph, pool, tilted, mn, params)
+    assert warm._last is kept and np.any(kept[1] > 0)  # the same pool's flow, reused
+    for plane, lab in ((PLANE, first), (tilted, second)):
+        cold = labeler().label(cloud, graph, pool, plane, mn, params)
+        np.testing.assert_array_equal(lab.inliers, cold.inliers)
+        assert lab.energy == cold.energy
+    # Another pool starts from no flow.
+    warm.label(cloud, graph, pool[::2], PLANE, mn, params)
+    assert warm._last is not kept
+
+
 @pytest.mark.parametrize("normalise", [False, True])
 def test_degree_normalisation_decides_whether_an_isolated_far_point_is_absorbed(normalise):
     # A flat 20x20 grid (spacing 0.01) with one point lifted to 6ε: r = φ²/ε² = 36. All its

@@ -63,3 +63,40 @@ def test_normal_term_penalises_a_wrong_model_normal(setup):
     plain = MsacScorer().score(cloud, pool, planes[:1], mn[:1], params)
     assert bad[0] > good[0] >= plain[0]
 
+
+
+def test_normal_cells_bound_their_normals_and_skipping_changes_nothing():
+    from monoplane.stages.scorers import (
+        _MSAC_NORMAL,
+        NORMAL_CELLS,
+        _binned_points,
+        _cell_cones,
+        _costs,
+    )
+
+    rng = np.random.default_rng(3)
+    n = 4000
+    # Boxes of random yaw: a few orientations, with noise, plus normals on cell borders.
+    axes = rng.normal(size=(12, 3))
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    nrm = axes[rng.integers(0, 12, n)] + rng.normal(0, 0.05, (n, 3))
+    nrm[:6] = [[1, 0, 0], [0, -1, 0], [0, 0, 1], [1, 1, 0], [1, 1, 1], [-1, 0.5, 0.5]]
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    pts = rng.uniform(-0.5, 0.5, (n, 3))
+    cloud = cloud_from_arrays(pts, nrm)
+    pool = np.sort(rng.choice(n, 3000, replace=False)).astype(np.int64)
+    coords, start = _binned_points(cloud.points, cloud.normals, pool, NORMAL_CELLS)
+    centres, radii = _cell_cones(NORMAL_CELLS)
+    # Every point lies in its cell's cone, and the cells hold every pool point once.
+    cell = np.repeat(np.arange(len(radii)), np.diff(start))
+    angle = np.arccos(np.clip(np.einsum("ij,ij->i", coords[3:].T, centres[cell]), -1, 1))
+    assert np.all(angle <= radii[cell] + 1e-12)
+    assert sorted(map(tuple, coords[:3].T)) == sorted(map(tuple, cloud.points[pool]))
+    planes = np.column_stack([axes[rng.integers(0, 12, 200)], rng.uniform(-0.3, 0.3, 200)])
+    mn = planes[:, :3] + rng.normal(0, 0.05, (200, 3))
+    mn /= np.linalg.norm(mn, axis=1, keepdims=True)
+    params = RansacParams()
+    full = _costs(cloud.points, cloud.normals, pool, planes, mn, params.epsilon,
+                  params.epsilon_n, _MSAC_NORMAL)
+    np.testing.assert_allclose(MsacNormalScorer().score(cloud, pool, planes, mn, params), full,
+                               rtol=1e-13)
