@@ -146,3 +146,11 @@ def test_a_warm_start_from_any_flow_gives_the_same_cut(seed):
     assert np.all(reverse >= -1e-12) and np.all(reverse <= caps + 1e-12)
     assert cut_capacity(sink, tails, heads, caps, rev, terminal) == pytest.approx(
         cold_flow, abs=1e-9)
+
+
+def test_graphs_beyond_int32_indices_are_refused():
+    empty = np.zeros(0)
+    with pytest.raises(InvalidInput, match="2\\^31"):
+        min_cut(2**31, empty, empty, empty, empty, empty)
+    with pytest.raises(InvalidInput, match="2\\^31"):
+        min_cut_flows(2**31, empty, empty, empty, empty, empty)
