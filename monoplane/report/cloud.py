@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import time
 from datetime import datetime
 from pathlib import Path
@@ -20,6 +19,7 @@ from monoplane.report.frame import (
     open_report,
     rendered_views,
     summary_section,
+    timing_section,
     views_3d_body,
 )
 from monoplane.report.render3d import DEFAULT_TIMEOUT, Mesh, RenderResult, Shot, render
@@ -138,15 +138,8 @@ def write_cloud_report(result: CloudPlaneResult, out_dir: Path, source: str = ""
         + html.table(["id", "normal (x, y, z)", "offset d", "points (share)", "RMSE",
                       "centroid"], rows, raw=True)))
     sections.append(html.section("Notes", html.bullet_list(notes) or html.paragraph("none")))
-    timing_rows = [[k, f"{float(v):.3f}"] for k, v in result.timings.items()]
-    if render_3d:
-        timing_rows.append(["3D rendering (report)", f"{rendered.seconds:.3f}"])
-    timing_rows.append(["report total", f"{time.perf_counter() - start:.3f}"])
-    timing = html.table(["step", "seconds"], timing_rows)
-    if result.config:
-        timing += html.preformatted(json.dumps(result.config, indent=2, default=str),
-                                    "resolved configuration")
-    sections.append(html.section("Timing and configuration", timing))
+    sections.append(timing_section(result.timings, result.config,
+                                   rendered.seconds if render_3d else None, start))
     labelled = int((result.labels > 0).sum())
     subtitle = (f"{result.points.shape[0]} points · {result.num_planes} planes covering "
                 f"{100.0 * labelled / total:.1f} % of the points · "

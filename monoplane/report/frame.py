@@ -161,6 +161,22 @@ def summary_section(contents: str) -> str:
         [html.Figure("summary.png", f"summary.png: {contents}, in one picture")], 1))
 
 
+def timing_section(timings: dict[str, float], config: dict | None,
+                   render_seconds: float | None, start: float) -> str:
+    """The "Timing and configuration" section (markup): each step's seconds, the report's own
+    rendering (``render_seconds``, None when nothing was rendered) and total since ``start``
+    (a ``time.perf_counter()`` value), then the resolved config."""
+    rows = [[k, f"{float(v):.3f}"] for k, v in timings.items()]
+    if render_seconds is not None:
+        rows.append(["3D rendering (report)", f"{render_seconds:.3f}"])
+    rows.append(["report total", f"{time.perf_counter() - start:.3f}"])
+    body = html.table(["step", "seconds"], rows)
+    if config:
+        body += html.preformatted(json.dumps(config, indent=2, default=str),
+                                  "resolved configuration")
+    return html.section("Timing and configuration", body)
+
+
 def glb_for_report(out: Path, name: str, build: Callable[[], bytes]) -> bytes:
     """The bytes of the ``.glb`` file ``name`` in the report folder ``out``; ``build()`` makes
     it, and it is written, when the folder does not hold it yet (a report written on its own)."""
@@ -284,15 +300,8 @@ def write_frame_report(rec: Reconstruction, out_dir: Path, render_3d: bool = Tru
         + html.table(header, plane_rows(rec), raw=True),
     ))
     sections.append(html.section("Notes", html.bullet_list(notes) or html.paragraph("none")))
-    timing_rows = [[k, f"{float(v):.3f}"] for k, v in rec.timings.items()]
-    if render_3d:
-        timing_rows.append(["3D rendering (report)", f"{rendered.seconds:.3f}"])
-    timing_rows.append(["report total", f"{time.perf_counter() - start:.3f}"])
-    timing = html.table(["step", "seconds"], timing_rows)
-    if rec.config:
-        timing += html.preformatted(json.dumps(rec.config, indent=2, default=str),
-                                    "resolved configuration")
-    sections.append(html.section("Timing and configuration", timing))
+    sections.append(timing_section(rec.timings, rec.config,
+                                   rendered.seconds if render_3d else None, start))
     K = frame.K
     subtitle = (f"{frame.width}×{frame.height} px · {rec.num_planes} planes covering "
                 f"{coverage:.1f} % of the image · depth {frame.depth_kind} in "
