@@ -32,8 +32,8 @@ Protocol (see ``docs/multiview.md``, "Evaluating on a posed RGB-D sequence"):
    set of K views has K - 1 views to register. Over every pair of views in a set: whether both
    are registered, then the rotation error and the translation-direction error of their
    relative pose (degrees), and whether it is *correct* (both below thresholds). Each view's
-   registration method (``sfm``, ``origin``, ``features``, ``planes``, ...; ``none`` when left out) is
-   counted as an opaque string.
+   registration method (``sfm``, ``origin``, ``features``, ``planes``, ...; ``none`` when left
+   out) is counted as an opaque string.
 """
 
 from __future__ import annotations

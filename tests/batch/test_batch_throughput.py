@@ -1,4 +1,5 @@
-"""``monoplane bench --batch``: the batch command timed per worker count (monoplane/batch/throughput.py)."""
+"""``monoplane bench --batch``: the batch command timed per worker count
+(monoplane/batch/throughput.py)."""
 
 from __future__ import annotations
 
