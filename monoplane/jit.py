@@ -143,7 +143,8 @@ def thread_budget() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-_POOLS: dict[str, tuple[Any, ThreadPoolExecutor] | None] = {"work": None, "background": None}
+_POOLS: dict[str, tuple[Any, ThreadPoolExecutor] | None] = {
+    "work": None, "background": None, "pool": None}
 
 
 def _executor(threads: int, role: str = "work") -> ThreadPoolExecutor:
@@ -178,7 +179,7 @@ def run_threaded(tasks: Sequence[Callable[[], T]]) -> list[T]:
     return list(_executor(threads).map(lambda task: task(), tasks))
 
 
-def in_background(task: Callable[[], T]) -> Callable[[], T]:
+def in_background(task: Callable[[], T], role: str = "background") -> Callable[[], T]:
     """Start ``task`` on a background thread, when the thread budget allows two or more.
 
     The caller goes on with work that does not need the result, then calls the returned
@@ -190,6 +191,11 @@ def in_background(task: Callable[[], T]) -> Callable[[], T]:
     task : callable
         A zero-argument call; its own :func:`run_threaded` calls run on the worker threads
         (the background thread is not one of them, so it cannot starve them).
+    role : {"background", "pool"}
+        Which background thread: tasks of one role run one after the other, in the order
+        they were started. ``"background"`` takes the frame's long tasks (the neighbour
+        graph, then a refiner's preparation), ``"pool"`` the RANSAC's short per-pool ones,
+        which must not queue behind those.
 
     Returns
     -------
@@ -199,7 +205,7 @@ def in_background(task: Callable[[], T]) -> Callable[[], T]:
     if thread_budget() < 2:
         result = task()
         return lambda: result
-    return _executor(1, "background").submit(task).result
+    return _executor(1, role).submit(task).result
 
 
 def chunks(n: int, min_size: int) -> list[tuple[int, int]]:

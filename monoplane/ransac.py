@@ -297,6 +297,7 @@ class SequentialRansac:
         point_labels = np.zeros(cloud.size, dtype=np.int32)
         pool = np.arange(cloud.size, dtype=np.int64)
         found: list[np.ndarray] = []
+        prepared: Callable[[], None] | None = None
         while len(found) < cfg.max_planes and pool.size >= min_support:
             t = time.perf_counter()
             best = self._search(cloud, pool, rng, params)
@@ -305,6 +306,8 @@ class SequentialRansac:
                 break
             graph = get_graph()
             t = time.perf_counter()
+            if prepared is not None:
+                prepared()  # the labeler's per-pool work, done while the search ran
             plane, inliers = self._label(cloud, graph, pool, best[0], best[1], params)
             if cfg.split_components and inliers.any():
                 members = np.flatnonzero(inliers)
@@ -315,6 +318,13 @@ class SequentialRansac:
             found.append(plane)
             point_labels[pool[inliers]] = len(found)
             pool = pool[~inliers]
+            # The next pool's hypothesis-independent work (its subgraph, ...) runs on the
+            # second core while this thread searches its next plane.
+            prepared = in_background(
+                lambda pool=pool, graph=graph: _call(self.labeler, self.labeler.prepare_pool,
+                                                     cloud, graph, pool), role="pool")
+        if prepared is not None:
+            prepared()  # nothing of this frame runs on after it
         planes = np.array(found, dtype=np.float64).reshape(-1, 4)
         return CloudPlanes(labels=point_labels, planes=planes, timings=timings)
 

@@ -53,3 +53,23 @@ def test_kernels_inline_the_helpers_of_their_module(tmp_path, monkeypatch):
 
     assert helper_module.plus_one_twice(3) == 7 == helper_module.plus_one_twice.py_func(3)
     assert helper_module.twice(3) == 6  # still a plain function outside kernels
+
+
+def test_background_roles_run_their_tasks_on_separate_threads(monkeypatch):
+    import threading
+
+    from monoplane.jit import in_background
+
+    monkeypatch.setenv("OMP_NUM_THREADS", "2")
+    release = threading.Event()
+    slow = in_background(lambda: release.wait(5.0))  # holds the "background" thread
+    # A "pool" task does not queue behind it.
+    assert in_background(lambda: threading.current_thread().name, role="pool")().startswith(
+        "monoplane-pool")
+    release.set()
+    assert slow() is True
+    # One thread: the task runs at once, here.
+    monkeypatch.setenv("OMP_NUM_THREADS", "1")
+    ran = []
+    get = in_background(lambda: ran.append(threading.current_thread().name) or 7, role="pool")
+    assert ran == [threading.current_thread().name] and get() == 7

@@ -116,6 +116,22 @@ def test_meanwhile_runs_once_with_the_graph_under_way():
     np.testing.assert_array_equal(a.labels, b.labels)
 
 
+def test_labeler_pool_preparation_runs_for_every_later_pool(monkeypatch):
+    monkeypatch.setenv("OMP_NUM_THREADS", "2")
+    frame, _, _ = room()
+    driver = make("monoplane-nocrf", max_points=3000)
+    pools = []
+    prepare = driver.labeler.prepare_pool
+    monkeypatch.setattr(driver.labeler, "prepare_pool",
+                        lambda cloud, graph, pool: (pools.append(pool.size),
+                                                    prepare(cloud, graph, pool)))
+    rec = driver.run(frame)
+    # Once after each accepted plane, on the shrinking pool; the labels do not change.
+    assert len(pools) == rec.num_planes and pools == sorted(pools, reverse=True)
+    np.testing.assert_array_equal(rec.labels,
+                                  make("monoplane-nocrf", max_points=3000).run(frame).labels)
+
+
 def test_depth_only_input_without_colour():
     frame, labels, planes = room(rgb=False)
     rec = make("monoplane-nocrf").run(frame)

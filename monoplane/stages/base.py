@@ -291,6 +291,18 @@ class Labeler(Stage):
         """
         raise NotImplementedError
 
+    def prepare_pool(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray) -> None:
+        """Compute what :meth:`label` needs of a pool whatever the hypothesis.
+
+        The RANSAC driver calls this on a background thread as soon as a plane's inliers
+        leave the pool, while the next plane's hypotheses are searched, and waits for it
+        before the first :meth:`label` call on that pool; per-pool results should be kept
+        where :meth:`label` finds them again (the default builds the pool's subgraph, which
+        :meth:`NeighbourGraph.subgraph <monoplane.geometry.graph.NeighbourGraph.subgraph>`
+        keeps). It must not change what :meth:`label` returns.
+        """
+        graph.subgraph(pool)
+
 
 class Refiner(Stage):
     """Refines the multi-plane labelling.

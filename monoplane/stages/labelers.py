@@ -75,6 +75,12 @@ class _WarmStarts:
 
     _last: tuple[np.ndarray, np.ndarray] | None = None
 
+    def prepare_pool(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray) -> None:
+        """The pool's subgraph and an empty flow buffer for it (see
+        :meth:`monoplane.stages.base.Labeler.prepare_pool`)."""
+        _, edge_ids = graph.subgraph(pool)
+        self._flow(edge_ids)
+
     def _flow(self, edge_ids: np.ndarray) -> np.ndarray:
         """(E',) flow buffer of the pool whose subgraph edges are ``edge_ids`` (kept while
         the pool is, zeros for a new one)."""
@@ -140,6 +146,13 @@ class ProximityGraphCutLabeler(_WarmStarts, Labeler):
             pooled = weights if edge_ids.size == weights.size else weights[edge_ids]
             last = self._last_pool_weights = (edge_ids, pooled)
         return last[1]
+
+    def prepare_pool(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray) -> None:
+        """The pool's subgraph, its edges' cut costs and an empty flow buffer (see
+        :meth:`monoplane.stages.base.Labeler.prepare_pool`)."""
+        _, edge_ids = graph.subgraph(pool)
+        self._pool_weights(cloud, graph, edge_ids)
+        self._flow(edge_ids)
 
     def label(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray,
               plane: np.ndarray, model_normal: np.ndarray, params: RansacParams) -> Labeling:
