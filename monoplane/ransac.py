@@ -236,10 +236,14 @@ class SequentialRansac:
         # meanwhile on another thread (when the thread budget has one); the results are those
         # of building it first.
         graph = in_background(build_graph)
+        # Only the finaliser needs the graph's adjacency lists and, when the cloud is
+        # subsampled, the image-nearest samples: they are built after the graph on the same
+        # thread, off the path to the first label, while this one labels planes.
+        in_background(lambda: graph().adjacency())
+        if cloud.subsampled:
+            in_background(lambda: cloud.image_nearest_sample)
         if meanwhile is not None:
             meanwhile()
-        if cloud.subsampled:  # the finaliser's image-nearest samples, while the graph builds
-            cloud.image_nearest_sample  # noqa: B018 (fills the cached property)
         result = self._run(cloud, graph, rng)
 
         t = time.perf_counter()

@@ -8,6 +8,7 @@ is what keeps max-flow fast.
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -15,7 +16,10 @@ import numpy as np
 from monoplane.errors import InvalidInput
 from monoplane.geometry.components import largest_component
 from monoplane.geometry.neighbours import PointIndex
-from monoplane.jit import kernel
+from monoplane.jit import chunks, kernel, run_threaded
+
+#: Nodes per thread below which the edge list is built on one thread.
+THREADED_NODES = 4096
 
 
 @dataclass
@@ -30,7 +34,9 @@ class NeighbourGraph:
         (E, 2) int64 unique undirected edges ``(i, j)`` with ``i < j``, sorted by ``(i, j)``.
     indptr, indices : numpy.ndarray
         Symmetric CSR adjacency: the neighbours of node ``i`` are
-        ``indices[indptr[i]:indptr[i + 1]]`` (int64, ascending).
+        ``indices[indptr[i]:indptr[i + 1]]`` (int64, ascending). Given to the constructor, or
+        ``None`` there: then built from ``edges`` when first asked for (the graph cuts need
+        only the edge list; the RANSAC builds these on its background thread).
     tree : PointIndex
         Nearest-neighbour index over the points the graph was built on.
     spacing : float
@@ -42,13 +48,32 @@ class NeighbourGraph:
 
     num_nodes: int
     edges: np.ndarray
-    indptr: np.ndarray
-    indices: np.ndarray
+    _indptr: np.ndarray | None
+    _indices: np.ndarray | None
     tree: PointIndex
     spacing: float
     cache: dict = field(default_factory=dict, repr=False)
     _last_subgraph: tuple[np.ndarray, np.ndarray, np.ndarray] | None = field(
         default=None, init=False, repr=False, compare=False)
+    _lock: threading.Lock = field(default_factory=threading.Lock, init=False, repr=False,
+                                  compare=False)
+
+    @property
+    def indptr(self) -> np.ndarray:
+        """(N + 1,) int64 row starts of the adjacency (see the class docstring)."""
+        return self.adjacency()[0]
+
+    @property
+    def indices(self) -> np.ndarray:
+        """(2E,) int64 neighbours of each row of the adjacency, ascending."""
+        return self.adjacency()[1]
+
+    def adjacency(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(indptr, indices)``, built from the edges on first use (thread-safe)."""
+        with self._lock:
+            if self._indptr is None or self._indices is None:
+                self._indptr, self._indices = _adjacency(self.num_nodes, self.edges)
+            return self._indptr, self._indices
 
     @classmethod
     def build(cls, points: np.ndarray, k: int, tree: PointIndex | None = None
@@ -84,9 +109,14 @@ class NeighbourGraph:
             return cls(n, empty, np.zeros(n + 1, dtype=np.int64), np.zeros(0, dtype=np.int64),
                        tree, 0.0)
         dist, nbr = tree.query_indexed(kk + 1)
-        edges, indptr, indices = _knn_edges(np.ascontiguousarray(nbr, dtype=np.int64))
+        nbr = np.ascontiguousarray(nbr, dtype=np.int64)
+        # Each thread lists the edges whose smaller end lies in its range of nodes; in range
+        # order they are the sorted edge list.
+        parts = run_threaded([lambda a=a, b=b: _knn_edges(nbr, a, b)
+                              for a, b in chunks(n, THREADED_NODES)])
+        edges = np.concatenate(parts) if len(parts) > 1 else parts[0]
         spacing = float(np.median(dist[:, 1]))
-        return cls(n, edges, indptr, indices, tree, spacing)
+        return cls(n, edges, None, None, tree, spacing)
 
     @property
     def num_edges(self) -> int:
@@ -162,38 +192,38 @@ class NeighbourGraph:
 
 
 @kernel
-def _knn_edges(nbr: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Unique undirected edges and symmetric CSR adjacency of kNN lists.
+def _knn_edges(nbr: np.ndarray, lo_start: int, lo_stop: int) -> np.ndarray:
+    """Unique undirected edges of kNN lists whose smaller end lies in ``[lo_start, lo_stop)``.
 
     ``nbr`` is the (N, K) int64 neighbour table of a kNN query (a row may contain the point
     itself, anywhere among exact duplicates). Returns the (E, 2) edges ``i < j`` sorted by
-    ``(i, j)`` without self-loops or repeats, and ``indptr`` (N + 1,), ``indices`` (2E,) with
-    every node's neighbours in ascending order. A bucket per smaller end, sorted in place,
-    replaces a global sort of all pairs.
+    ``(i, j)`` without self-loops or repeats. A bucket per smaller end, sorted in place,
+    replaces a global sort of all pairs; every row is read, only the range's buckets filled.
     """
     n, k = nbr.shape
-    start = np.zeros(n + 1, dtype=np.int64)
+    width = lo_stop - lo_start
+    start = np.zeros(width + 1, dtype=np.int64)
     for i in range(n):
         for c in range(k):
             j = nbr[i, c]
-            if j != i:
-                start[min(i, j) + 1] += 1
-    for i in range(n):
+            lo = min(i, j)
+            if j != i and lo_start <= lo < lo_stop:
+                start[lo - lo_start + 1] += 1
+    for i in range(width):
         start[i + 1] += start[i]
-    bucket = np.empty(start[n], dtype=np.int64)
-    fill = start[:n].copy()
+    bucket = np.empty(start[width], dtype=np.int64)
+    fill = start[:width].copy()
     for i in range(n):
         for c in range(k):
             j = nbr[i, c]
-            if j != i:
-                lo = min(i, j)
-                bucket[fill[lo]] = max(i, j)
-                fill[lo] += 1
-    edges = np.empty((start[n], 2), dtype=np.int64)
-    degree = np.zeros(n, dtype=np.int64)
+            lo = min(i, j)
+            if j != i and lo_start <= lo < lo_stop:
+                bucket[fill[lo - lo_start]] = max(i, j)
+                fill[lo - lo_start] += 1
+    edges = np.empty((start[width], 2), dtype=np.int64)
     count = 0
-    for lo in range(n):
-        a, b = start[lo], start[lo + 1]
+    for r in range(width):
+        a, b = start[r], start[r + 1]
         for x in range(a + 1, b):  # insertion sort: buckets hold about K entries
             v = bucket[x]
             y = x - 1
@@ -203,26 +233,33 @@ def _knn_edges(nbr: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             bucket[y + 1] = v
         for x in range(a, b):
             if x == a or bucket[x] != bucket[x - 1]:
-                edges[count, 0] = lo
+                edges[count, 0] = lo_start + r
                 edges[count, 1] = bucket[x]
-                degree[lo] += 1
-                degree[bucket[x]] += 1
                 count += 1
+    return edges[:count].copy()
+
+
+@kernel
+def _adjacency(n: int, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Symmetric CSR adjacency ``indptr`` (N + 1,), ``indices`` (2E,) of (E, 2) int64 edges
+    ``i < j`` sorted by ``(i, j)``, every node's neighbours in ascending order."""
     indptr = np.zeros(n + 1, dtype=np.int64)
+    for e in range(edges.shape[0]):
+        indptr[edges[e, 0] + 1] += 1
+        indptr[edges[e, 1] + 1] += 1
     for i in range(n):
-        indptr[i + 1] = indptr[i] + degree[i]
-    indices = np.empty(2 * count, dtype=np.int64)
+        indptr[i + 1] += indptr[i]
+    indices = np.empty(2 * edges.shape[0], dtype=np.int64)
     pos = indptr[:n].copy()
     # Edges come sorted by (lo, hi): each row receives its smaller neighbours (as hi) before
     # its larger ones (as lo), both ascending, so rows come out sorted.
-    for e in range(count):
+    for e in range(edges.shape[0]):
         lo, hi = edges[e, 0], edges[e, 1]
         indices[pos[lo]] = hi
         pos[lo] += 1
         indices[pos[hi]] = lo
         pos[hi] += 1
-    return edges[:count].copy(), indptr, indices
-
+    return indptr, indices
 
 
 @kernel

@@ -137,7 +137,8 @@ class PointIndex:
         The kNN graph asks this of every point. Points sharing a cell share their candidates
         (the points of the 3 x 3 x 3 cells around it), gathered once per cell; a point whose
         k-th candidate is not provably nearer than every point outside that block is searched
-        again with :meth:`query`. The answer is exactly :meth:`query`'s.
+        again as :meth:`query` searches, on the thread of its cells. The answer is exactly
+        :meth:`query`'s.
 
         Parameters
         ----------
@@ -161,15 +162,23 @@ class PointIndex:
         bounds = np.searchsorted(self._start[cells], [a for a, _ in chunks(self.n,
                                                                           THREADED_QUERIES)])
         parts = [cells[a:b] for a, b in zip(bounds, [*bounds[1:], cells.size], strict=True)]
-        run_threaded([
-            lambda part=part: _cell_knn(self._sorted, self._order, self._start, self._lo,
-                                        self._width, self._dims, part, int(k), d2, idx, redo)
-            for part in parts])
-        dist = np.sqrt(d2, out=d2)
-        again = np.flatnonzero(redo)
-        if again.size:
-            dist[again], idx[again] = self.query(self._points[again], k)
-        return dist, idx
+
+        def part_knn(part: np.ndarray) -> None:
+            if part.size == 0:
+                return
+            _cell_knn(self._sorted, self._order, self._start, self._lo, self._width,
+                      self._dims, part, int(k), d2, idx, redo)
+            # The part's points whose block did not settle them are searched again on the
+            # same thread: by shells of cells, as query() does.
+            rows = self._order[self._start[part[0]]:self._start[part[-1] + 1]]
+            again = rows[redo[rows]]
+            if again.size:
+                d2[again], idx[again] = _grid_knn(
+                    self._sorted, self._order, self._start, self._lo, self._width,
+                    self._dims, self._points[again], int(k), np.inf)
+
+        run_threaded([lambda part=part: part_knn(part) for part in parts])
+        return np.sqrt(d2, out=d2), idx
 
 
 @inline

@@ -7,7 +7,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from monoplane.geometry.components import largest_component
-from monoplane.geometry.graph import NeighbourGraph, _knn_edges, _pool_edges
+from monoplane.geometry.graph import NeighbourGraph, _adjacency, _knn_edges, _pool_edges
 
 
 def grid_points(n=6):
@@ -174,10 +174,31 @@ def test_knn_edge_kernel_matches_the_sorting_reference(seed):
     else:
         nbr = rng.integers(0, n, size=(n, int(rng.integers(1, 12))))
     nbr = np.ascontiguousarray(nbr, dtype=np.int64)
-    edges, indptr, indices = _knn_edges(nbr)
+    edges = _knn_edges(nbr, 0, n)
+    indptr, indices = _adjacency(n, edges)
     ref_edges, ref_rows = reference_knn_edges(nbr)
     np.testing.assert_array_equal(edges.reshape(-1, 2), ref_edges.reshape(-1, 2))
     assert [indices[indptr[i]:indptr[i + 1]].tolist() for i in range(n)] == ref_rows
+    # Ranges of smaller ends, listed apart (on threads) and joined: the same list.
+    cut = int(rng.integers(0, n + 1))
+    np.testing.assert_array_equal(
+        np.concatenate([_knn_edges(nbr, 0, cut), _knn_edges(nbr, cut, n)]).reshape(-1, 2),
+        ref_edges.reshape(-1, 2))
+
+
+@pytest.mark.parametrize("threads", [1, 2, 3])
+def test_graph_edges_and_lazy_adjacency_do_not_depend_on_threads(threads, monkeypatch):
+    monkeypatch.setenv("OMP_NUM_THREADS", str(threads))
+    monkeypatch.setattr("monoplane.geometry.graph.THREADED_NODES", 50)
+    pts = np.random.default_rng(5).uniform(size=(400, 3))
+    g = NeighbourGraph.build(pts, 6)
+    monkeypatch.setenv("OMP_NUM_THREADS", "1")
+    ref = NeighbourGraph.build(pts, 6)
+    np.testing.assert_array_equal(g.edges, ref.edges)
+    assert g._indptr is None  # built when first asked for
+    np.testing.assert_array_equal(g.indptr, ref.indptr)
+    np.testing.assert_array_equal(g.indices, ref.indices)
+    assert g._indptr is not None
 
 
 def reference_largest_component(members, edges):
