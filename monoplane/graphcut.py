@@ -445,10 +445,39 @@ def minimize(unary: np.ndarray, edges: np.ndarray, tables: np.ndarray) -> np.nda
     return sink_side
 
 
+def pool_payback(num_nodes: int, edges: np.ndarray, cut_cost: np.ndarray | float,
+                 lambda_: float, pairwise_scale: float = 1.0) -> np.ndarray:
+    """The most each point's edges can give back when it turns inlier: λ s Σ_q w_pq.
+
+    It depends on the pool's graph only, not on the hypothesis: callers labelling one pool
+    several times compute it once and pass it to :func:`minimize_gc_ransac`.
+
+    Parameters
+    ----------
+    num_nodes : int
+        M.
+    edges : numpy.ndarray
+        (E, 2) int node pairs among the M points.
+    cut_cost : numpy.ndarray or float
+        (E,) cut costs w_pq (or one for all edges).
+    lambda_, pairwise_scale : float
+        λ and s as for :func:`minimize_gc_ransac`.
+
+    Returns
+    -------
+    numpy.ndarray
+        (M,) float64.
+    """
+    edges = np.ascontiguousarray(np.asarray(edges, dtype=np.int64).reshape(-1, 2))
+    cut = np.ascontiguousarray(np.broadcast_to(np.asarray(cut_cost, dtype=np.float64),
+                                               edges.shape[:1]))
+    return _payback(int(num_nodes), edges, cut, float(lambda_ * pairwise_scale))
+
+
 def minimize_gc_ransac(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray,
                        cut_cost: np.ndarray | float, lambda_: float,
-                       pairwise_scale: float = 1.0, flow: np.ndarray | None = None
-                       ) -> tuple[np.ndarray, float]:
+                       pairwise_scale: float = 1.0, flow: np.ndarray | None = None,
+                       payback: np.ndarray | None = None) -> tuple[np.ndarray, float]:
     """Exact minimiser and minimum of the (proximity) GC-RANSAC energy, without edge tables.
 
     The same energy as ``gc_ransac_energy(f0, f1, edges, cut_cost, lambda_, g1,
@@ -485,6 +514,9 @@ def minimize_gc_ransac(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray,
         (E,) float64 flow along each edge (from its first end to its second) of an earlier
         call on the same edges, zeros for none: a warm start, overwritten with this call's
         flow. It changes the speed, not the result.
+    payback : numpy.ndarray, optional
+        (M,) :func:`pool_payback` of these edges, cut costs, λ and s, when the caller keeps
+        it; computed here when omitted.
 
     Returns
     -------
@@ -512,11 +544,20 @@ def minimize_gc_ransac(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray,
         raise InvalidInput(f"flow must have one entry per edge ({edges.shape[0]}), got "
                            f"{flow.shape}")
     lam, ls = float(lambda_), float(lambda_ * pairwise_scale)
-    bad, nodes, src, dst, cap, slope, edge_of = _gc_ransac_graph(f0, data1, edges, cut, lam,
-                                                                 ls)
-    if bad:
-        raise InvalidInput(f"{bad} edge tables are not submodular; graph cuts cannot "
-                           "minimise this energy")
+    # With f(0, p) <= 1 an edge whose cut costs at least 1/2 is submodular whatever the
+    # hypothesis (2 λs w >= λs >= its both-outlier cost), so most calls check nothing.
+    if edges.shape[0] and not (cut.min() >= 0.5 and f0.max() <= 1.0):
+        bad = _non_submodular(f0, edges, cut, ls)
+        if bad:
+            raise InvalidInput(f"{bad} edge tables are not submodular; graph cuts cannot "
+                               "minimise this energy")
+    if payback is None:
+        payback = _payback(f0.shape[0], edges, cut, ls)
+    elif payback.shape != f0.shape:
+        raise InvalidInput(f"payback must have one entry per point ({f0.shape[0]}), got "
+                           f"{payback.shape}")
+    nodes, src, dst, cap, slope, edge_of = _gc_ransac_graph(f0, data1, edges, cut, lam, ls,
+                                                            payback)
     labels = np.zeros(f0.shape[0], dtype=bool)
     through = np.zeros(src.size)
     if nodes.size:
@@ -566,30 +607,44 @@ def _warm_start(src: np.ndarray, dst: np.ndarray, cap: np.ndarray, slope: np.nda
 
 
 @kernel
+def _payback(m: int, edges: np.ndarray, cut: np.ndarray, ls: float) -> np.ndarray:
+    """(M,) λs Σ_q w_pq of each node over the (E, 2) int64 ``edges`` with (E,) cut costs, added
+    in edge order (see :func:`pool_payback`)."""
+    payback = np.zeros(m)
+    for e in range(edges.shape[0]):
+        b = ls * cut[e]
+        payback[edges[e, 0]] += b
+        payback[edges[e, 1]] += b
+    return payback
+
+
+@kernel
+def _non_submodular(f0: np.ndarray, edges: np.ndarray, cut: np.ndarray, ls: float) -> int:
+    """How many edges cut cheaper than half their both-outlier cost (see
+    :func:`minimize_gc_ransac`)."""
+    bad = 0
+    for e in range(edges.shape[0]):
+        a = 0.5 * ls * (f0[edges[e, 0]] + f0[edges[e, 1]])
+        if 2.0 * (ls * cut[e]) - a < -1e-9 * max(1.0, a):
+            bad += 1
+    return bad
+
+
+@kernel
 def _gc_ransac_graph(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray, cut: np.ndarray,
-                     lam: float, ls: float
-                     ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                     lam: float, ls: float, payback: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
                                 np.ndarray]:
     """Max-flow graph of :func:`minimize_gc_ransac` on its undecided points.
 
     Inputs are float64 (M,) ``f0``, ``data1``, int64 (E, 2) ``edges``, float64 (E,) cut
-    costs, λ and λs. Returns the number of non-submodular edges (nothing else is meaningful
-    when it is not 0), the (F,) pool positions of the undecided points, the (E',) local ends
-    and capacities of the edges among them, their (F,) cost slopes ``U(1) - U(0)`` and the
-    (E',) row of ``edges`` each edge comes from.
+    costs, λ, λs and the (M,) :func:`pool_payback`. Returns the (F,) pool positions of the
+    undecided points, the (E',) local ends and capacities of the edges among them, their (F,)
+    cost slopes ``U(1) - U(0)`` and the (E',) row of ``edges`` each edge comes from.
     """
     m, n_edges = f0.shape[0], edges.shape[0]
     ei, ej = edges[:, 0], edges[:, 1]
     keep = 1.0 - lam
-    payback = np.zeros(m)
-    bad = 0
-    for e in range(n_edges):
-        a = 0.5 * ls * (f0[ei[e]] + f0[ej[e]])
-        b = ls * cut[e]
-        if 2.0 * b - a < -1e-9 * max(1.0, a):
-            bad += 1
-        payback[ei[e]] += b
-        payback[ej[e]] += b
     local = np.full(m, -1, dtype=np.int64)
     count = 0
     for p in range(m):
@@ -634,7 +689,7 @@ def _gc_ransac_graph(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray, cut: 
         else:
             # An edge to a fixed outlier costs e(0,0) = a or e(1,0) = b: a unary of its free end.
             slope[max(li, lj)] += b - a
-    return bad, nodes, src, dst, cap, slope, edge_of
+    return nodes, src, dst, cap, slope, edge_of
 
 
 @kernel

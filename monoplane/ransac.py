@@ -343,6 +343,7 @@ class SequentialRansac:
             scored = np.sort(rng.choice(pool, size=cfg.score_points, replace=False))
         best_cost = math.inf
         best: tuple[np.ndarray, np.ndarray] | None = None
+        scored_points: np.ndarray | None = None  # gathered at the first improvement
         needed = float(cfg.max_iterations)
         drawn = 0
         while drawn < min(max(needed, cfg.min_iterations), cfg.max_iterations):
@@ -364,7 +365,9 @@ class SequentialRansac:
             if costs[i] < best_cost:
                 best_cost = float(costs[i])
                 best = (planes[i], model_normals[i])
-                dist = np.abs(cloud.points[scored] @ planes[i, :3] + planes[i, 3])
+                if scored_points is None:
+                    scored_points = cloud.points[scored]
+                dist = np.abs(scored_points @ planes[i, :3] + planes[i, 3])
                 ratio = float((dist < params.epsilon).mean())
                 needed = required_iterations(ratio, cfg.confidence)
         return best

@@ -18,6 +18,7 @@ from monoplane.graphcut import (
     msac_costs,
     normal_angles,
     normal_costs,
+    pool_payback,
     proximity_weights,
 )
 
@@ -184,6 +185,34 @@ def test_warm_started_minimiser_gives_the_cold_result(seed):
     assert warm[1] == cold[1]
     with pytest.raises(InvalidInput, match="one entry per edge"):
         minimize_gc_ransac(f0, f1, edges, cut, lam, scale, flow=np.zeros(len(edges) + 1))
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_payback_kept_per_pool_gives_the_same_result(seed):
+    f0, f1, g1, edges, cut, lam, scale = random_gc_problem(seed)
+    payback = pool_payback(len(f0), edges, cut, lam, scale)
+    # λ s Σ_q w_pq over each point's edges.
+    expected = np.zeros(len(f0))
+    np.add.at(expected, edges[:, 0], lam * scale * cut)
+    np.add.at(expected, edges[:, 1], lam * scale * cut)
+    np.testing.assert_allclose(payback, expected, rtol=1e-12)
+    with_it = minimize_gc_ransac(f0, f1 + g1, edges, cut, lam, scale, payback=payback)
+    without = minimize_gc_ransac(f0, f1 + g1, edges, cut, lam, scale)
+    np.testing.assert_array_equal(with_it[0], without[0])
+    assert with_it[1] == without[1]
+    with pytest.raises(InvalidInput, match="one entry per point"):
+        minimize_gc_ransac(f0, f1, edges, cut, lam, scale, payback=payback[:-1])
+
+
+def test_submodularity_is_checked_whenever_a_cut_can_be_too_cheap():
+    # Cut costs >= 1/2 with f(0, p) <= 1 cannot break submodularity; anything else is checked.
+    f0 = np.array([1.0, 1.0])
+    edges = np.array([[0, 1]])
+    assert minimize_gc_ransac(f0, np.zeros(2), edges, 0.5, 0.9)[0].all()
+    with pytest.raises(InvalidInput, match="not submodular"):
+        minimize_gc_ransac(f0, np.zeros(2), edges, 0.49, 0.9)
+    with pytest.raises(InvalidInput, match="not submodular"):
+        minimize_gc_ransac(np.array([3.0, 3.0]), np.zeros(2), edges, 1.0, 0.9)
 
 
 def test_fast_gc_ransac_minimiser_on_small_problems_is_the_brute_force_optimum():

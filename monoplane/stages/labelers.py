@@ -26,6 +26,7 @@ from monoplane.graphcut import (
     data_costs,
     degree_normalisation,
     minimize_gc_ransac,
+    pool_payback,
     proximity_weights,
 )
 from monoplane.hookspecs import hookimpl
@@ -65,46 +66,82 @@ class GraphCutConfig:
         True, "divide E_s by the graph's mean degree, so λ does not depend on knn")
 
 
-class _WarmStarts:
-    """The max-flow of a pool's last labelling, to start the next one on the same pool from.
+@dataclass
+class _PoolTerms:
+    """What a graph-cut labeler keeps of the pool it labels, whatever the hypothesis."""
 
-    The local optimisation labels a pool for a hypothesis, then for its refit: the two
-    problems differ a little, and the first one's flow is a good start for the second
-    (:func:`~monoplane.graphcut.minimize_gc_ransac`; the result does not depend on it).
+    edges: np.ndarray
+    """(E', 2) the pool's subgraph, in pool positions."""
+    edge_ids: np.ndarray
+    """(E',) rows of the graph's edges it comes from: identifies the pool."""
+    cut: np.ndarray | float
+    """(E',) cut cost of each subgraph edge (or one for all)."""
+    scale: float
+    """Pairwise scale s of the frame's graph."""
+    payback: np.ndarray
+    """(M,) :func:`~monoplane.graphcut.pool_payback` of the pool's points."""
+    flow: np.ndarray
+    """(E',) max-flow of the pool's last labelling, the next one's warm start."""
+
+
+class _PoolGraphCut(Labeler):
+    """A graph-cut labeler whose per-pool terms are built once per pool.
+
+    The local optimisation labels a pool for a hypothesis, then for its refit, and the driver
+    has the pool's terms built beforehand (:meth:`prepare_pool`, on a background thread while
+    it searches): the subgraph, its cut costs, each point's payback, and the flow of the last
+    labelling, from which the next max-flow starts (the two problems differ a little; the
+    result does not depend on the start, see :func:`~monoplane.graphcut.minimize_gc_ransac`).
     """
 
-    _last: tuple[np.ndarray, np.ndarray] | None = None
+    _pool: _PoolTerms | None = None
+
+    def _cut(self, cloud: PlaneCloud, graph: NeighbourGraph, edge_ids: np.ndarray
+             ) -> np.ndarray | float:
+        """Cut costs of the pool's subgraph edges (``edge_ids`` rows of the graph's)."""
+        raise NotImplementedError
+
+    def _terms(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray) -> _PoolTerms:
+        """The terms of ``pool``, built when it is not the pool of the last call."""
+        edges, edge_ids = graph.subgraph(pool)
+        scale = degree_normalisation(graph.mean_degree) if self.config.normalise else 1.0
+        last = self._pool
+        if last is None or last.edge_ids is not edge_ids or last.scale != scale:
+            cut = self._cut(cloud, graph, edge_ids)
+            payback = pool_payback(pool.size, edges, cut, self.config.lambda_, scale)
+            last = self._pool = _PoolTerms(edges, edge_ids, cut, scale, payback,
+                                           np.zeros(edge_ids.size))
+        return last
 
     def prepare_pool(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray) -> None:
-        """The pool's subgraph and an empty flow buffer for it (see
-        :meth:`monoplane.stages.base.Labeler.prepare_pool`)."""
-        _, edge_ids = graph.subgraph(pool)
-        self._flow(edge_ids)
+        """The pool's terms (see :meth:`monoplane.stages.base.Labeler.prepare_pool`)."""
+        self._terms(cloud, graph, pool)
 
-    def _flow(self, edge_ids: np.ndarray) -> np.ndarray:
-        """(E',) flow buffer of the pool whose subgraph edges are ``edge_ids`` (kept while
-        the pool is, zeros for a new one)."""
-        last = self._last
-        if last is None or last[0] is not edge_ids:
-            last = self._last = (edge_ids, np.zeros(edge_ids.size))
-        return last[1]
+    def _minimize(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray,
+                  f0: np.ndarray, data1: np.ndarray) -> Labeling:
+        """Minimise the pool's energy for the data costs of one hypothesis."""
+        terms = self._terms(cloud, graph, pool)
+        inliers, energy = minimize_gc_ransac(f0, data1, terms.edges, terms.cut,
+                                             self.config.lambda_,
+                                             terms.scale, flow=terms.flow,
+                                             payback=terms.payback)
+        return Labeling(inliers=inliers, energy=energy)
 
 
-class GraphCutLabeler(_WarmStarts, Labeler):
+class GraphCutLabeler(_PoolGraphCut):
     """GC-RANSAC: truncated-L2 data term, constant Potts pairwise term, exact graph cut."""
 
     name = "graph-cut"
     Config = GraphCutConfig
 
+    def _cut(self, cloud: PlaneCloud, graph: NeighbourGraph, edge_ids: np.ndarray) -> float:
+        return 1.0
+
     def label(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray,
               plane: np.ndarray, model_normal: np.ndarray, params: RansacParams) -> Labeling:
         """See :meth:`monoplane.stages.base.Labeler.label`."""
         f0, f1 = data_costs(cloud.points, cloud.normals, pool, plane, None, params.epsilon)
-        edges, edge_ids = graph.subgraph(pool)
-        scale = degree_normalisation(graph.mean_degree) if self.config.normalise else 1.0
-        inliers, energy = minimize_gc_ransac(f0, f1, edges, 1.0, self.config.lambda_, scale,
-                                             flow=self._flow(edge_ids))
-        return Labeling(inliers=inliers, energy=energy)
+        return self._minimize(cloud, graph, pool, f0, f1)
 
 
 @dataclass
@@ -117,12 +154,11 @@ class ProximityGraphCutConfig(ProximityAffinities):
         False, "divide E_s by the graph's mean degree (off: the paper's weights as given)")
 
 
-class ProximityGraphCutLabeler(_WarmStarts, Labeler):
+class ProximityGraphCutLabeler(_PoolGraphCut):
     """MonoPlane labeler: E_d + E_n data terms and proximity-weighted pairwise cut costs."""
 
     name = "proximity-graph-cut"
     Config = ProximityGraphCutConfig
-    _last_pool_weights: tuple[np.ndarray, np.ndarray] | None = None
 
     def _edge_weights(self, cloud: PlaneCloud, graph: NeighbourGraph) -> np.ndarray:
         """(E,) cut costs of every graph edge; they depend on the frame only, so cached."""
@@ -136,23 +172,11 @@ class ProximityGraphCutLabeler(_WarmStarts, Labeler):
             graph.cache[key] = w
         return w
 
-    def _pool_weights(self, cloud: PlaneCloud, graph: NeighbourGraph,
-                      edge_ids: np.ndarray) -> np.ndarray:
-        """Cut costs of a pool's subgraph edges; kept while the pool (its ``edge_ids``) is."""
-        last = self._last_pool_weights
-        if last is None or last[0] is not edge_ids:
-            weights = self._edge_weights(cloud, graph)
-            # Ascending distinct edge rows as many as the graph's are all of them, in order.
-            pooled = weights if edge_ids.size == weights.size else weights[edge_ids]
-            last = self._last_pool_weights = (edge_ids, pooled)
-        return last[1]
-
-    def prepare_pool(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray) -> None:
-        """The pool's subgraph, its edges' cut costs and an empty flow buffer (see
-        :meth:`monoplane.stages.base.Labeler.prepare_pool`)."""
-        _, edge_ids = graph.subgraph(pool)
-        self._pool_weights(cloud, graph, edge_ids)
-        self._flow(edge_ids)
+    def _cut(self, cloud: PlaneCloud, graph: NeighbourGraph, edge_ids: np.ndarray
+             ) -> np.ndarray:
+        weights = self._edge_weights(cloud, graph)
+        # Ascending distinct edge rows as many as the graph's are all of them, in order.
+        return weights if edge_ids.size == weights.size else weights[edge_ids]
 
     def label(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray,
               plane: np.ndarray, model_normal: np.ndarray, params: RansacParams) -> Labeling:
@@ -160,12 +184,7 @@ class ProximityGraphCutLabeler(_WarmStarts, Labeler):
         f0, data1 = data_costs(cloud.points, cloud.normals, pool, plane,
                                model_normal if self.config.normal_term else None,
                                params.epsilon, params.epsilon_n)
-        edges, edge_ids = graph.subgraph(pool)
-        cut = self._pool_weights(cloud, graph, edge_ids)
-        scale = degree_normalisation(graph.mean_degree) if self.config.normalise else 1.0
-        inliers, energy = minimize_gc_ransac(f0, data1, edges, cut, self.config.lambda_, scale,
-                                             flow=self._flow(edge_ids))
-        return Labeling(inliers=inliers, energy=energy)
+        return self._minimize(cloud, graph, pool, f0, data1)
 
 
 @hookimpl

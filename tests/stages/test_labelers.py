@@ -139,16 +139,16 @@ def test_relabelling_a_pool_from_the_last_flow_changes_nothing(labeler):
     mn = np.array([0.0, 0.0, -1.0])
     warm = labeler()
     first = warm.label(cloud, graph, pool, PLANE, mn, params)
-    kept = warm._last
+    kept = warm._pool
     second = warm.label(cloud, graph, pool, tilted, mn, params)
-    assert warm._last is kept and np.any(kept[1] > 0)  # the same pool's flow, reused
+    assert warm._pool is kept and np.any(kept.flow > 0)  # the same pool's terms, reused
     for plane, lab in ((PLANE, first), (tilted, second)):
         cold = labeler().label(cloud, graph, pool, plane, mn, params)
         np.testing.assert_array_equal(lab.inliers, cold.inliers)
         assert lab.energy == cold.energy
-    # Another pool starts from no flow.
+    # Another pool gets terms of its own, and starts from no flow.
     warm.label(cloud, graph, pool[::2], PLANE, mn, params)
-    assert warm._last is not kept
+    assert warm._pool is not kept
 
 
 @pytest.mark.parametrize("normalise", [False, True])
