@@ -618,16 +618,11 @@ def _payback(m: int, edges: np.ndarray, cut: np.ndarray, ls: float) -> np.ndarra
     return payback
 
 
-@kernel
 def _non_submodular(f0: np.ndarray, edges: np.ndarray, cut: np.ndarray, ls: float) -> int:
     """How many edges cut cheaper than half their both-outlier cost (see
-    :func:`minimize_gc_ransac`)."""
-    bad = 0
-    for e in range(edges.shape[0]):
-        a = 0.5 * ls * (f0[edges[e, 0]] + f0[edges[e, 1]])
-        if 2.0 * (ls * cut[e]) - a < -1e-9 * max(1.0, a):
-            bad += 1
-    return bad
+    :func:`minimize_gc_ransac`); rarely asked, so numpy."""
+    a = 0.5 * ls * (f0[edges[:, 0]] + f0[edges[:, 1]])
+    return int(np.count_nonzero(2.0 * (ls * cut) - a < -1e-9 * np.maximum(1.0, a)))
 
 
 @kernel
