@@ -9,7 +9,7 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
-__version__ = "0.2.0"
+from monoplane.version import __version__
 
 #: Module -> the public names it defines.
 _MODULES: dict[str, tuple[str, ...]] = {

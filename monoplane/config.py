@@ -20,8 +20,6 @@ from __future__ import annotations
 
 import dataclasses
 import tomllib
-import types
-import typing
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -29,6 +27,7 @@ from typing import Any
 
 import tomli_w
 
+from monoplane.config_fields import build_dataclass
 from monoplane.errors import ConfigError
 from monoplane.plugin_manager import Registry, get_registry
 from monoplane.stages.base import STAGE_KINDS, config_key
@@ -36,7 +35,7 @@ from monoplane.stages.base import STAGE_KINDS, config_key
 DEFAULT_PRESET = "monoplane"
 #: Host tables (not stages) and the import path of their config dataclass.
 HOST_TABLES: dict[str, str] = {"ransac": "monoplane.ransac:RansacConfig",
-                               "cloud": "monoplane.detect:CloudConfig"}
+                               "cloud": "monoplane.cloud_config:CloudConfig"}
 
 
 def list_presets() -> list[str]:
@@ -163,79 +162,6 @@ def overrides_to_tables(overrides: dict[str, Any] | list[str] | None) -> dict[st
     for table, key, value in items:
         tables.setdefault(table, {})[key] = value
     return tables
-
-
-def _type_name(tp: Any) -> str:
-    return getattr(tp, "__name__", None) or str(tp).replace("typing.", "")
-
-
-def _coerce(value: Any, tp: Any, where: str) -> Any:
-    """Check (and gently convert) a TOML value to a dataclass field type."""
-    origin = typing.get_origin(tp)
-    if origin in (typing.Union, types.UnionType):
-        args = typing.get_args(tp)
-        if value is None and type(None) in args:
-            return None
-        errors = []
-        for arg in args:
-            if arg is type(None):
-                continue
-            try:
-                return _coerce(value, arg, where)
-            except ConfigError as exc:
-                errors.append(str(exc))
-        raise ConfigError(errors[0] if errors else f"{where}: invalid value {value!r}")
-    if typing.get_origin(tp) is typing.Literal:
-        choices = typing.get_args(tp)
-        if value not in choices:
-            raise ConfigError(f"{where} must be one of {', '.join(map(str, choices))}, "
-                              f"got {value!r}")
-        return value
-    if origin in (list, tuple):
-        if not isinstance(value, (list, tuple)):
-            raise ConfigError(f"{where} must be a list, got {value!r}")
-        args = typing.get_args(tp)
-        item_tp = args[0] if args else Any
-        items = [_coerce(v, item_tp, f"{where}[{i}]") for i, v in enumerate(value)]
-        return items if origin is list else tuple(items)
-    if tp is Any:
-        return value
-    if tp is bool:
-        if not isinstance(value, bool):
-            raise ConfigError(f"{where} must be true or false, got {value!r}")
-        return value
-    if tp is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError(f"{where} must be a number, got {value!r}")
-        return float(value)
-    if tp is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(f"{where} must be an integer, got {value!r}")
-        return value
-    if tp is str:
-        if not isinstance(value, str):
-            raise ConfigError(f"{where} must be a string, got {value!r}")
-        return value
-    if not isinstance(value, tp):
-        raise ConfigError(f"{where} must be {_type_name(tp)}, got {value!r}")
-    return value
-
-
-def build_dataclass(cls: type, values: dict[str, Any], where: str) -> Any:
-    """Instantiate a config dataclass from user keys, rejecting unknown or ill-typed ones."""
-    fields = {config_key(f): f for f in dataclasses.fields(cls)}
-    hints = typing.get_type_hints(cls)
-    kwargs = {}
-    for key, value in values.items():
-        if key not in fields:
-            valid = ", ".join(sorted(fields)) or "(none)"
-            raise ConfigError(f"unknown key {key!r} in {where}; valid keys: {valid}")
-        f = fields[key]
-        kwargs[f.name] = _coerce(value, hints[f.name], f"{where}.{key}")
-    try:
-        return cls(**kwargs)
-    except (TypeError, ValueError) as exc:
-        raise ConfigError(f"{where}: {exc}") from None
 
 
 def _host_config_class(table: str) -> type:

@@ -18,49 +18,19 @@ The cloud goes through the same stages as an image, without the pixel grid:
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 
+from monoplane.cloud_config import CloudConfig
 from monoplane.errors import ConfigError, InvalidInput
 from monoplane.geometry.cloud import PROPAGATION_NEIGHBOURS, PROPAGATION_RADIUS_FACTOR, PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.geometry.planes import fit_planes_per_label
 from monoplane.geometry.polygons import PlaneMesh, points_plane_mesh
 from monoplane.io_checks import MAX_MAGNITUDE
-from monoplane.stages.base import Labeler, Refiner, Sampler, Scorer, param
-
-
-@dataclass
-class CloudConfig:
-    """How :func:`detect_planes` prepares a cloud (config table ``[cloud]``).
-
-    Normal orientation matters: the sampler, scorer and labeler compare signed normals.
-
-    * ``viewpoint`` (default): every normal is turned towards ``viewpoint``. Right for a
-      single scan (LiDAR, one depth camera, an unprojected range image) whose sensor sat at
-      that point, by default the origin of the cloud's frame; also right for a convex object
-      or a room seen from a point inside it.
-    * ``consistent``: Open3D's ``orient_normals_consistent_tangent_plane`` propagates one
-      orientation over a Riemannian graph. Right for fused scans and sampled meshes, which
-      have no single viewpoint; it is slower and orients each connected part independently.
-    """
-
-    normals_knn: int = param(30, "neighbours of the PCA normal estimate (missing normals)")
-    orient: Literal["viewpoint", "consistent"] = param(
-        "viewpoint", "orient estimated normals towards `viewpoint` (single scans) or "
-        "consistently over the surface (fused scans, meshes)")
-    viewpoint: list[float] = param(
-        [0.0, 0.0, 0.0], "sensor position for orient = viewpoint, in the cloud's frame")
-
-    def __post_init__(self) -> None:
-        if self.normals_knn < 3:
-            raise ConfigError(f"[cloud] normals_knn must be at least 3, got {self.normals_knn}")
-        if len(self.viewpoint) != 3 or not all(math.isfinite(v) for v in self.viewpoint):
-            raise ConfigError(f"[cloud] viewpoint must be 3 finite numbers, got "
-                              f"{self.viewpoint}")
+from monoplane.stages.base import Labeler, Refiner, Sampler, Scorer
 
 
 @dataclass

@@ -36,6 +36,7 @@ from monoplane.errors import InvalidInput
 from monoplane.export.gltf import reconstruction_glb
 from monoplane.geometry.polygons import PlaneMesh, reconstruction_mesh
 from monoplane.io_checks import MAX_MAGNITUDE, load_npy, read_png
+from monoplane.version import __version__
 
 #: Accepted pinhole intrinsics, in pixels. A focal length below 0.1 px is a field of view of
 #: nearly 180 degrees on any image; no sensor is near 1e8 px wide. Beyond these bounds a value
@@ -470,7 +471,6 @@ def planes_document(rec: Reconstruction) -> dict:
 
 def write_reconstruction_files(rec: Reconstruction, folder: Path) -> None:
     """Write the single-view outputs into an existing folder (not atomic by itself)."""
-    from monoplane import __version__
     from monoplane.config import dumps_toml  # config imports the plugin registry
 
     if rec.num_planes > np.iinfo(np.uint16).max:

@@ -22,6 +22,7 @@ import pluggy
 from monoplane import hookspecs
 from monoplane.errors import ConfigError, PluginError
 from monoplane.stages.base import KINDS, STAGE_KINDS, Stage
+from monoplane.version import __version__
 
 #: The built-in stage modules, registered in this order. The one place that names them.
 DEFAULT_PLUGINS: tuple[str, ...] = (
@@ -35,7 +36,7 @@ DEFAULT_PLUGINS: tuple[str, ...] = (
     "monoplane.stages.registrars",
     "monoplane.stages.fusers",
     "monoplane.stages.adjusters",
-    "monoplane.evaluation.baselines",
+    "monoplane.evaluation.open3d_baseline",
 )
 
 #: Set this environment variable to disable entry-point autoloading of third-party plugins.
@@ -119,7 +120,6 @@ class Registry:
     def _provider(plugin: object, plugin_name: str, dists: dict[int, Any],
                   builtin: set[str]) -> tuple[str, str]:
         if plugin_name in builtin:
-            from monoplane import __version__
             return "monoplane", __version__
         dist = dists.get(id(plugin))
         if dist is not None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
@@ -121,3 +122,103 @@ def test_the_public_plugin_api_defines_all_it_lists() -> None:
     import monoplane.plugin
 
     assert [n for n in monoplane.plugin.__all__ if not hasattr(monoplane.plugin, n)] == []
+
+
+# --- import cycles ---------------------------------------------------------------------------
+
+#: A string that names a module for lazy loading: "monoplane.x.y" or "monoplane.x.y:Name".
+_MODULE_REFERENCE = re.compile(r"monoplane(\.\w+)+(:\w+)?")
+
+#: Every module of the package by name; ``__main__`` modules are scripts run with ``python -m``,
+#: which nothing imports.
+_FILES = {_module_name(p): p for p in sorted(PACKAGE.rglob("*.py")) if p.stem != "__main__"}
+
+
+def _home(name: str) -> str | None:
+    """The module ``name`` stands in: itself, or the module that defines it (``a.b.Name``)."""
+    while name and name not in _FILES:
+        name = name.rpartition(".")[0]
+    return name or None
+
+
+def _run_as_script(tree: ast.AST) -> set[int]:
+    """Nodes of the strings after ``-m`` in a command list: a child process runs that module,
+    this one does not import it."""
+    return {id(b) for node in ast.walk(tree) if isinstance(node, (ast.List, ast.Tuple))
+            for a, b in zip(node.elts, node.elts[1:], strict=False)
+            if isinstance(a, ast.Constant) and a.value == "-m"}
+
+
+def _dependencies(path: Path) -> set[str]:
+    """The modules of the package one source file needs, in every form it can name them.
+
+    Imports anywhere (top level, inside functions, under ``if TYPE_CHECKING:``); strings used
+    for lazy loading (``"monoplane.x.y"``, ``"monoplane.x:Name"``, and f-strings such as
+    ``f"monoplane.cli.{name}"``, which stand for every module below that prefix). ``from P
+    import N`` needs ``P.N`` when that is a module (Python imports it) and ``P`` otherwise. The
+    import of a parent package that every form implies is not counted, in no form: Python
+    puts the package in ``sys.modules`` before its submodule runs, and counting it would make
+    every package whose ``__init__`` re-exports a submodule a cycle.
+    """
+    tree = ast.parse(path.read_text())
+    scripts = _run_as_script(tree)
+    named: list[str] = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            named += [alias.name for alias in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.module:
+            named += [f"{node.module}.{alias.name}" for alias in node.names]
+        elif (isinstance(node, ast.Constant) and isinstance(node.value, str)
+              and id(node) not in scripts and _MODULE_REFERENCE.fullmatch(node.value)):
+            named.append(node.value.partition(":")[0])
+        elif (isinstance(node, ast.JoinedStr) and node.values
+              and isinstance(node.values[0], ast.Constant)
+              and str(node.values[0].value).startswith("monoplane.")):
+            named += [m for m in _FILES if m.startswith(str(node.values[0].value))]
+    homes = {_home(n) for n in named if n.split(".")[0] == "monoplane"}
+    return {h for h in homes if h is not None} - {_module_name(path)}
+
+
+def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan's algorithm)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    found: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        for w in sorted(graph[v]):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = [stack.pop()]
+            while component[-1] != v:
+                component.append(stack.pop())
+            if len(component) > 1:
+                found.append(sorted(component))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return found
+
+
+def test_the_cycle_check_sees_every_import_form() -> None:
+    deps = {m: _dependencies(p) for m, p in _FILES.items()}
+    assert "monoplane.cloud_config" in deps["monoplane.config"]            # "module:Name"
+    assert "monoplane.stages.samplers" in deps["monoplane.plugin_manager"]  # "module"
+    assert "monoplane.cli.run" in deps["monoplane.cli"]                     # f"prefix.{name}"
+    assert "monoplane.pipeline" in deps["monoplane"]                        # TYPE_CHECKING
+    assert "monoplane.report.colors" in deps["monoplane.detect"]            # inside a function
+    assert "monoplane.report.html" in deps["monoplane.report.frame"]        # from P import N
+    assert "monoplane.cli" not in deps["monoplane.batch.throughput"]        # python -m
+    assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+
+
+def test_no_import_cycles() -> None:
+    assert _cycles({m: _dependencies(p) for m, p in _FILES.items()}) == []

@@ -18,17 +18,21 @@ from __future__ import annotations
 import json
 import shutil
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from monoplane.batch.specs import FrameSpec
 from monoplane.errors import MonoplaneError
+from monoplane.version import __version__
 
 #: Files ``monoplane run`` writes for every frame.
 OUTPUT_FILES = ("labels.png", "planes.json", "planes.ply", "planes.glb", "depth_planar.npy",
                 "config.toml")
 REPORT_FILE = "report.html"
+#: Folder of ``index.html``'s thumbnails and of the one 3D viewer script every frame report of
+#: the batch shares.
+ASSETS = "index_files"
 
 
 @dataclass(frozen=True)
@@ -76,6 +80,52 @@ class FrameResult:
         return {"name": self.name, "status": self.status, "planes": self.planes,
                 "seconds": None if self.seconds is None else round(self.seconds, 4),
                 "error": self.error}
+
+
+@dataclass
+class BatchSummary:
+    """What ``summary.json`` holds.
+
+    Attributes
+    ----------
+    frames : list of FrameResult
+        One per input frame, in input order (frames an interrupt left undone are absent).
+    config : dict
+        The resolved pipeline config every frame ran with.
+    interrupted : bool
+        The run was stopped (Ctrl-C) before every frame was done.
+    """
+
+    frames: list[FrameResult]
+    config: dict[str, Any]
+    engine: str = "local"
+    workers: int | None = None
+    seconds: float = 0.0
+    interrupted: bool = False
+    notes: list[str] = field(default_factory=list)
+    info: dict[str, Any] = field(default_factory=dict)
+
+    def count(self, status: str) -> int:
+        """Number of frames with ``status`` (``"ok"``, ``"failed"`` or ``"skipped"``)."""
+        return sum(f.status == status for f in self.frames)
+
+    @property
+    def failed(self) -> list[FrameResult]:
+        return [f for f in self.frames if f.status == "failed"]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "monoplane_version": __version__,
+            **self.info,
+            "engine": self.engine,
+            "workers": self.workers,
+            "seconds": round(self.seconds, 3),
+            "interrupted": self.interrupted,
+            "notes": self.notes,
+            "counts": {s: self.count(s) for s in ("ok", "failed", "skipped")},
+            "frames": [f.to_dict() for f in self.frames],
+            "config": self.config,
+        }
 
 
 def one_line(exc: BaseException) -> str:
@@ -144,7 +194,6 @@ def process_frame(job: BatchJob, spec: FrameSpec) -> FrameResult:
         rec = pipe.run(frame.with_(name=spec.name))
         viewer = None
         if job.report:  # one copy of the 3D viewer (1 MB) for all frame reports
-            from monoplane.batch.index import ASSETS
             from monoplane.report.viewer import install_viewer
 
             viewer = f"../{ASSETS}/{install_viewer(Path(job.out) / ASSETS)}"

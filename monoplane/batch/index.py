@@ -12,22 +12,17 @@ import os
 import tempfile
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
 
-from monoplane.batch.frame import REPORT_FILE
+from monoplane.batch.frame import ASSETS, REPORT_FILE, BatchSummary
 from monoplane.batch.specs import FrameSpec
 from monoplane.report import figures as fig
 from monoplane.report import html
 from monoplane.report.viewer import SECTION_ID
 
-if TYPE_CHECKING:
-    from monoplane.batch.runner import BatchSummary
-
 THUMB_WIDTH = 240
-ASSETS = "index_files"
 
 
 def thumbnail(spec: FrameSpec, frame_dir: Path, dest: Path) -> bool:

@@ -16,7 +16,6 @@ import sys
 import tempfile
 import time
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -26,6 +25,7 @@ from tqdm import tqdm
 from monoplane.batch.engines import check_engine, run_engine
 from monoplane.batch.frame import (
     BatchJob,
+    BatchSummary,
     FrameResult,
     clean_stale,
     is_complete,
@@ -35,55 +35,6 @@ from monoplane.batch.specs import FrameSpec, absolute_paths, check_name, read_fr
 from monoplane.errors import InvalidInput
 
 LOCK_FILE = ".monoplane-batch.lock"
-
-
-@dataclass
-class BatchSummary:
-    """What ``summary.json`` holds.
-
-    Attributes
-    ----------
-    frames : list of FrameResult
-        One per input frame, in input order (frames an interrupt left undone are absent).
-    config : dict
-        The resolved pipeline config every frame ran with.
-    interrupted : bool
-        The run was stopped (Ctrl-C) before every frame was done.
-    """
-
-    frames: list[FrameResult]
-    config: dict[str, Any]
-    engine: str = "local"
-    workers: int | None = None
-    seconds: float = 0.0
-    interrupted: bool = False
-    notes: list[str] = field(default_factory=list)
-    info: dict[str, Any] = field(default_factory=dict)
-
-    def count(self, status: str) -> int:
-        """Number of frames with ``status`` (``"ok"``, ``"failed"`` or ``"skipped"``)."""
-        return sum(f.status == status for f in self.frames)
-
-    @property
-    def failed(self) -> list[FrameResult]:
-        return [f for f in self.frames if f.status == "failed"]
-
-    def to_dict(self) -> dict[str, Any]:
-        from monoplane import __version__
-
-        return {
-            "monoplane_version": __version__,
-            **self.info,
-            "engine": self.engine,
-            "workers": self.workers,
-            "seconds": round(self.seconds, 3),
-            "interrupted": self.interrupted,
-            "notes": self.notes,
-            "counts": {s: self.count(s) for s in ("ok", "failed", "skipped")},
-            "frames": [f.to_dict() for f in self.frames],
-            "config": self.config,
-        }
-
 
 
 class _Bar(tqdm):

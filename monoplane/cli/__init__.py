@@ -13,8 +13,8 @@ import os
 import sys
 import traceback
 
-from monoplane import __version__
 from monoplane.errors import MonoplaneError
+from monoplane.version import __version__
 
 #: Subcommand modules, in the order ``monoplane --help`` lists them.
 SUBCOMMANDS: tuple[str, ...] = (

@@ -46,7 +46,9 @@ from typing import Any
 import numpy as np
 
 from monoplane.datamodel import Camera, Reconstruction, Scene
+from monoplane.geometry.camera import frustum
 from monoplane.geometry.polygons import PlaneMesh, reconstruction_mesh
+from monoplane.version import __version__
 
 #: Name of the root node that carries the frame conversion.
 ROOT_NODE = "monoplane"
@@ -86,8 +88,6 @@ class _Document:
     """A glTF document and its one binary buffer, filled in build order."""
 
     def __init__(self) -> None:
-        from monoplane import __version__
-
         self.json: dict[str, Any] = {
             "asset": {"version": "2.0", "generator": f"monoplane {__version__}"},
             "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [], "meshes": [],
@@ -208,8 +208,6 @@ def planes_glb(mesh: PlaneMesh, planes: np.ndarray, colors: np.ndarray, first_id
 def _add_cameras(doc: _Document, root: dict[str, Any], cameras: Sequence[Camera],
                  depth: float) -> None:
     """Add a glTF camera node and a frustum line mesh per camera under ``root``."""
-    from monoplane.report.scene import frustum  # the report draws the same pyramids
-
     first = doc.add("materials", {"name": "camera_first", "pbrMetallicRoughness": {
         "baseColorFactor": [*srgb_to_linear(np.array(_FIRST_CAMERA_RGB)).tolist(), 1.0]}})
     other = doc.add("materials", {"name": "camera", "pbrMetallicRoughness": {

@@ -1,4 +1,5 @@
-"""Camera poses built from where a camera is and what it looks at."""
+"""Camera poses built from where a camera is and what it looks at, and the viewing pyramid a
+report or a glTF file draws for a camera."""
 
 from __future__ import annotations
 
@@ -44,3 +45,30 @@ def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray, roll_deg: float
     x, y = np.cos(a) * x + np.sin(a) * y, -np.sin(a) * x + np.cos(a) * y
     R = np.stack([x, y, z])
     return R, -R @ eye
+
+
+def frustum(K: np.ndarray, R: np.ndarray, t: np.ndarray, width: int, height: int,
+            size: float) -> tuple[np.ndarray, np.ndarray]:
+    """A camera's viewing pyramid as line segments.
+
+    Parameters
+    ----------
+    K, R, t : numpy.ndarray
+        Intrinsics and world-to-camera pose (OpenCV axes).
+    width, height : int
+        Image size in pixels.
+    size : float
+        Depth of the pyramid's base, world units.
+
+    Returns
+    -------
+    points : numpy.ndarray
+        (5, 3) world points: centre, then the image corners at depth ``size``.
+    edges : numpy.ndarray
+        (8, 2) index pairs: four rays and the base rectangle.
+    """
+    corners = np.array([[0, 0, 1], [width, 0, 1], [width, height, 1], [0, height, 1]], float)
+    cam = np.vstack([np.zeros(3), size * corners @ np.linalg.inv(K).T])
+    points = (cam - t) @ R
+    edges = np.array([[0, 1], [0, 2], [0, 3], [0, 4], [1, 2], [2, 3], [3, 4], [4, 1]])
+    return points, edges

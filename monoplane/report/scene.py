@@ -10,6 +10,7 @@ import numpy as np
 
 from monoplane.datamodel import Reconstruction, Scene, plane_to_camera, plane_to_world
 from monoplane.export.gltf import SOURCE_TO_GLTF, scene_glb
+from monoplane.geometry.camera import frustum
 from monoplane.geometry.mesh import planar_mesh
 from monoplane.report import figures as fig
 from monoplane.report import html
@@ -86,33 +87,6 @@ def fused_view_mesh(rec: Reconstruction, links: dict[int, int], planes_world: np
     snapped = Reconstruction(frame=rec.frame, labels=rec.labels, params=params)
     v, tris, colors, local_ids = planar_mesh(snapped, mesh_step(*rec.frame.shape))
     return (v - t) @ R, tris, colors, local_ids, plane_to_world(snapped.params, R, t)
-
-
-def frustum(K: np.ndarray, R: np.ndarray, t: np.ndarray, width: int, height: int,
-            size: float) -> tuple[np.ndarray, np.ndarray]:
-    """A camera's viewing pyramid as line segments.
-
-    Parameters
-    ----------
-    K, R, t : numpy.ndarray
-        Intrinsics and world-to-camera pose (OpenCV axes).
-    width, height : int
-        Image size in pixels.
-    size : float
-        Depth of the pyramid's base, world units.
-
-    Returns
-    -------
-    points : numpy.ndarray
-        (5, 3) world points: centre, then the image corners at depth ``size``.
-    edges : numpy.ndarray
-        (8, 2) index pairs: four rays and the base rectangle.
-    """
-    corners = np.array([[0, 0, 1], [width, 0, 1], [width, height, 1], [0, height, 1]], float)
-    cam = np.vstack([np.zeros(3), size * corners @ np.linalg.inv(K).T])
-    points = (cam - t) @ R
-    edges = np.array([[0, 1], [0, 2], [0, 3], [0, 4], [1, 2], [2, 3], [3, 4], [4, 1]])
-    return points, edges
 
 
 def scene_views(scene: Scene, out_dir: Path, timeout: float = DEFAULT_TIMEOUT
