@@ -13,6 +13,7 @@ import io
 import json
 import struct
 import warnings
+import zlib
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -171,6 +172,25 @@ CLOUD_CASES = [
          "line 1 must be the point count of a PTS file"),
     Case("xyz-one-point-repeated", _write("c.xyz", b"1 2 3\n" * 50),
          "the cloud has 1 distinct finite point(s); a plane needs at least 3"),
+    # The remaining formats of each kind of damage (issue 27: every reader, every case).
+    Case("pcd-empty", _write("c.pcd", b""), "the file is empty"),
+    Case("xyz-empty", _write("c.xyz", b""), "the file is empty"),
+    Case("pts-random-bytes", _write("c.pts", RANDOM), "the file is not text"),
+    Case("pcd-absurd-magnitude",
+         _write("c.pcd", _pcd_ascii(_ascii_rows(_with(POINTS[:100], slice(5, 7), 1e300))
+                                    .decode(), 100)),
+         "2 point(s) have coordinates beyond ±3.4e+38"),
+    Case("pts-absurd-magnitude",
+         _write("c.pts", b"100\n" + _ascii_rows(_with(POINTS[:100], slice(9, 10), 1e300))),
+         "1 point(s) have coordinates beyond ±3.4e+38"),
+    Case("pcd-nan-points",
+         _write("c.pcd", _pcd_ascii(_ascii_rows(_with(POINTS, slice(0, 30), np.nan)).decode(),
+                                    len(POINTS))),
+         "30 NaN/inf points left unlabelled", runs=True),
+    Case("pts-inf-points",
+         _write("c.pts", f"{len(POINTS)}\n".encode()
+                + _ascii_rows(_with(POINTS, slice(0, 3), np.inf))),
+         "3 NaN/inf points left unlabelled", runs=True),
 ]
 
 
@@ -222,6 +242,27 @@ def _lying_npy(folder: Path) -> bytes:
     data = _npy(depth)
     old = repr(depth.shape).encode()
     new = repr((depth.shape[0] // 2, depth.shape[1])).encode()
+    return data.replace(old, new.ljust(len(old)), 1)
+
+
+def _lying_png(folder: Path) -> bytes:
+    """A depth PNG whose IHDR (CRC recomputed) says twice the width its image data hold."""
+    data = bytearray(_png_depth(folder))
+    width = struct.unpack(">I", data[16:20])[0]
+    data[16:20] = struct.pack(">I", 2 * width)
+    data[29:33] = struct.pack(">I", zlib.crc32(bytes(data[12:29])))
+    return bytes(data)
+
+
+def _normals(folder: Path) -> np.ndarray:
+    return np.load(folder / "normals.npy")
+
+
+def _lying_normals(folder: Path) -> bytes:
+    normals = _normals(folder)
+    data = _npy(normals)
+    old = repr(normals.shape).encode()
+    new = repr((normals.shape[0] // 2, *normals.shape[1:])).encode()
     return data.replace(old, new.ljust(len(old)), 1)
 
 
@@ -302,6 +343,30 @@ FRAME_CASES = [
          _frame_file("k.json", "--intrinsics",
                      _intrinsics({"fx": 50, "fy": 50, "cx": 1e300, "cy": 24})),
          "the principal point must be within ±1e+08 pixels"),
+    # The remaining readers of each kind of damage (issue 27: every reader, every case).
+    Case("depth-png-empty", _frame_file("d.png", "--depth", lambda f: b"",
+                                        ("--depth-scale", "1000")), "the file is empty"),
+    Case("depth-png-lying-header", _frame_file("d.png", "--depth", _lying_png,
+                                               ("--depth-scale", "1000")),
+         "the file is corrupt: its image data inflate to 6192 bytes, 128x48 needs 12336"),
+    Case("normals-npy-empty", _frame_file("n.npy", "--normals", lambda f: b""),
+         "the file is empty"),
+    Case("normals-npy-random-bytes", _frame_file("n.npy", "--normals", lambda f: RANDOM),
+         "not an .npy file (it does not start with numpy's magic string)"),
+    Case("normals-npy-truncated",
+         _frame_file("n.npy", "--normals", lambda f: _npy(_normals(f))[:3000]),
+         "the file is truncated: its header declares (48, 64, 3) float16 (18432 bytes), the "
+         "file holds 2872"),
+    Case("normals-npy-lying-header", _frame_file("n.npy", "--normals", _lying_normals),
+         "the data do not match the header: its header declares (24, 64, 3) float16 (9216 "
+         "bytes), the file holds 18432"),
+    Case("normals-png-empty", _frame_file("n.png", "--normals", lambda f: b""),
+         "the file is empty"),
+    Case("normals-png-random-bytes", _frame_file("n.png", "--normals", lambda f: RANDOM),
+         "not a PNG file (no PNG signature)"),
+    Case("intrinsics-truncated",
+         _frame_file("k.json", "--intrinsics", lambda f: b'{"fx": 50, "fy": 5'),
+         "is not valid JSON: Expecting ',' delimiter"),
 ]
 
 
