@@ -38,7 +38,7 @@ class CloudConfig:
 
     def __post_init__(self) -> None:
         if self.normals_knn < 3:
-            raise ConfigError(f"[cloud] normals_knn must be at least 3, got {self.normals_knn}")
+            raise ConfigError(f"normals_knn must be at least 3, got {self.normals_knn}")
         if len(self.viewpoint) != 3 or not all(math.isfinite(v) for v in self.viewpoint):
-            raise ConfigError(f"[cloud] viewpoint must be 3 finite numbers, got "
+            raise ConfigError(f"viewpoint must be 3 finite numbers, got "
                               f"{self.viewpoint}")

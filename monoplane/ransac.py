@@ -111,7 +111,9 @@ class RansacConfig:
         ]
         for ok, message in checks:
             if not ok:
-                raise ConfigError(f"ransac: {message}")
+                # No table name: the config loader says which table (and a direct caller
+                # knows which object it built).
+                raise ConfigError(message)
 
     @property
     def params(self) -> RansacParams:

@@ -73,3 +73,24 @@ def test_config_file_with_preset_and_invalid_toml(tmp_path):
 def test_plugin_must_be_a_name(value):
     with pytest.raises(ConfigError, match=r"\[sampler\] plugin must be a plugin name; valid"):
         config.load(overrides=[f"sampler.plugin={value}"])
+
+
+@pytest.mark.parametrize("override, table, message", [
+    ("ransac.epsilon=-1", "ransac", "epsilon must be positive"),
+    ("cloud.normals_knn=1", "cloud", "normals_knn must be at least 3, got 1"),
+    ("cues.max_jump=0", "cues", "max_jump must be positive, got 0.0"),
+])
+def test_a_rejected_value_names_its_table_once(override, table, message):
+    with pytest.raises(ConfigError) as caught:
+        config.load(preset="monoplane", overrides=[override])
+    text = str(caught.value)
+    assert text.startswith(f"[{table}]") and text.endswith(message)
+    assert text.count(table) == 1 + message.count(table)
+
+
+def test_the_cli_names_the_table_once(capsys, tmp_path):
+    from monoplane.cli import main
+
+    assert main(["run", "no-such.png", "--out", str(tmp_path / "out"),
+                 "--set", "ransac.epsilon=-1"]) != 0
+    assert capsys.readouterr().err.strip() == "monoplane: error: [ransac]: epsilon must be positive"

@@ -115,7 +115,7 @@ class PlaneAwareRegistrar(Registrar):
         def __post_init__(self) -> None:
             unknown = [m for m in self.methods if m not in METHODS]
             if unknown or not self.methods:
-                raise ConfigError(f"[registrar] methods: unknown {', '.join(unknown) or '(none)'}"
+                raise ConfigError(f"methods: unknown {', '.join(unknown) or '(none)'}"
                                   f"; valid choices: {', '.join(METHODS)}")
 
     def register(self, views: list[Reconstruction], sfm: SfmResult,
