@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import json
+from pathlib import Path
 
 from monoplane.cli.common import (
     add_input_args,
@@ -14,10 +16,12 @@ from monoplane.cli.common import (
     write_rerun_arg,
 )
 from monoplane.cli.models import prepare_cue_model
+from monoplane.config import load as load_config
 from monoplane.cues import CueNetwork
-from monoplane.errors import InvalidInput
+from monoplane.errors import ConfigError, InvalidInput
 from monoplane.fileio import check_output_dir, load_frame, save_reconstruction
 from monoplane.pipeline import Pipeline
+from monoplane.plugin_manager import Registry, get_registry
 from monoplane.stages.base import CueProvider
 
 DESCRIPTION = """Recover the planes of one image and write labels.png (uint16, 0 = non-planar),
@@ -38,8 +42,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_input_args(p)
     group = p.add_argument_group("monocular models")
     group.add_argument("--cues", metavar="NAME",
-                       help="predict depth/normals with a catalogue model (same as --set "
-                            "cues.model=NAME)")
+                       help="predict depth/normals with a catalogue model (the configured cue "
+                            "provider sets its own keys for it; onnx: cues.model=NAME)")
     group.add_argument("--fetch", action="store_true",
                        help="download the configured catalogue model first if it is not "
                             "cached (nothing is downloaded without this flag)")
@@ -53,7 +57,8 @@ def run(args: argparse.Namespace) -> int:
     check_output_dir(args.out, args.overwrite)  # fail before any work
     check_rerun_arg(args)
     if args.cues:
-        args.overrides = [f"cues.model={args.cues}", *args.overrides]
+        args.overrides = [*cue_model_overrides(args.cues, args.preset, args.config,
+                                               args.overrides), *args.overrides]
     pipe = pipeline_from_args(args)
     prepare_cue_model(pipe, fetch_missing=args.fetch, has_depth=args.depth is not None,
                       has_normals=args.normals is not None, quiet=args.quiet)
@@ -70,6 +75,38 @@ def run(args: argparse.Namespace) -> int:
             print(f"note: {note}")
         print(f"{rec.num_planes} planes in {rec.timings.get('total', 0.0):.2f} s -> {out}")
     return 0
+
+
+def cue_model_overrides(model: str, preset: str | None = None,
+                        config: str | Path | None = None, overrides: list[str] | None = None,
+                        registry: Registry | None = None) -> list[str]:
+    """``--cues NAME`` as ``cues.KEY=VALUE`` overrides, for whichever cue provider the config
+    names: the provider says which of its keys select a catalogue model
+    (:meth:`~monoplane.stages.base.CueProvider.catalogue_config`).
+
+    Parameters
+    ----------
+    model : str
+        Catalogue name given to ``--cues``.
+    preset, config, overrides
+        The run's ``--preset``, ``--config`` and ``--set`` (they pick the provider).
+    registry : Registry, optional
+        Stage registry; the default plugin manager's when omitted.
+
+    Raises
+    ------
+    ConfigError
+        When the configured provider takes no catalogue model.
+    """
+    registry = registry or get_registry()
+    name = load_config(preset, config, overrides, registry).stages["cues"][0]
+    keys = registry.get("cues", name).cls.catalogue_config(model)
+    if keys is None:
+        raise ConfigError(f"--cues {model}: cue provider '{name}' takes no catalogue model; "
+                          "pick one that does with --set cues.plugin=NAME (see 'monoplane "
+                          "plugins')")
+    # json.dumps writes strings, numbers, booleans and lists as valid TOML values too.
+    return [f"cues.{key}={json.dumps(value)}" for key, value in keys.items()]
 
 
 def require_depth_source(pipe: Pipeline, image: str) -> None:

@@ -169,6 +169,23 @@ class CueProvider(Stage):
         the cache, or fetch on request, before any image is read."""
         return None
 
+    @classmethod
+    def catalogue_config(cls, model: str) -> dict[str, Any] | None:
+        """The keys of this provider's ``[cues]`` table that make it use the model-catalogue
+        entry ``model`` (``monoplane run --cues NAME``), or None when it takes no catalogue
+        model (default).
+
+        The host never names a provider's keys: it merges what this returns into the
+        ``[cues]`` table (before the user's ``--set`` overrides), and the provider's ``Config``
+        checks the name as it checks any value.
+
+        Parameters
+        ----------
+        model : str
+            A catalogue name, as ``monoplane models list`` shows them.
+        """
+        return None
+
     def provide(self, frame: Frame) -> Frame:
         """Return a frame with ``depth`` and ``normals`` set.
 

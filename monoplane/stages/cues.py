@@ -26,6 +26,7 @@ did in ``frame.notes`` (written to ``planes.json``).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -184,6 +185,11 @@ class OnnxCues(NetworkCues):
             config.resolved_profile(), config.depth_model or None, config.normal_model or None,
             threads=config.threads, disparity_floor=config.disparity_floor,
             hfov_deg=config.hfov_deg or None, normals_options=config.normals_options())
+
+    @classmethod
+    def catalogue_config(cls, model: str) -> dict[str, Any] | None:
+        """``{"model": model}``: the catalogue entry sets the profile and the depth model."""
+        return {"model": model}
 
     def catalogue_model(self, missing_depth: bool, missing_normals: bool) -> str | None:
         """``cues.model`` when a frame lacking these cues needs the network: always without

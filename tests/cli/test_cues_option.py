@@ -1,0 +1,59 @@
+"""``run --cues NAME``: the configured cue provider, not the host, says which of its keys
+select a catalogue model, so a third-party provider can take ``--cues`` too."""
+
+import dataclasses
+
+import pytest
+
+from monoplane import config
+from monoplane.cli import main
+from monoplane.cli.run import cue_model_overrides
+from monoplane.errors import ConfigError
+from monoplane.hookspecs import hookimpl
+from monoplane.plugin_manager import get_plugin_manager, get_registry
+from monoplane.stages.base import CueProvider, param
+
+
+class _StandIn(CueProvider):
+    """A third-party provider whose catalogue models go into a key of its own."""
+
+    name = "stand-in"
+
+    @dataclasses.dataclass
+    class Config:
+        weights: str = param("", "catalogue name of its weights")
+
+    @classmethod
+    def catalogue_config(cls, model: str) -> dict[str, str]:
+        return {"weights": model}
+
+
+class _ThirdParty:
+    @hookimpl
+    def monoplane_register_cue_providers(self):
+        return [_StandIn]
+
+
+def test_the_onnx_provider_maps_a_catalogue_name_to_its_model_key() -> None:
+    reg = get_registry(get_plugin_manager(autoload=False))
+    assert cue_model_overrides("depth-anything-v2-small", registry=reg) == [
+        'cues.model="depth-anything-v2-small"']
+
+
+def test_a_third_party_provider_takes_cues_through_its_own_keys() -> None:
+    reg = get_registry(get_plugin_manager(autoload=False, extra_plugins=(_ThirdParty(),)))
+    overrides = ["cues.plugin=stand-in"]
+    extra = cue_model_overrides("my-net", overrides=overrides, registry=reg)
+    assert extra == ['cues.weights="my-net"']
+    resolved = config.load(overrides=[*extra, *overrides], registry=reg)
+    assert resolved.stages["cues"][0] == "stand-in"
+    assert resolved.stages["cues"][1].weights == "my-net"
+
+
+def test_a_provider_without_catalogue_models_refuses_cues(capsys, tmp_path) -> None:
+    with pytest.raises(ConfigError, match="cue provider 'given' takes no catalogue model"):
+        cue_model_overrides("depth-anything-v2-small", overrides=["cues.plugin=given"],
+                            registry=get_registry(get_plugin_manager(autoload=False)))
+    assert main(["run", "x.png", "--out", str(tmp_path / "out"), "--cues",
+                 "depth-anything-v2-small", "--set", "cues.plugin=given"]) != 0
+    assert "takes no catalogue model" in capsys.readouterr().err
