@@ -24,7 +24,7 @@ import json
 import os
 import shutil
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import cv2
@@ -489,8 +489,7 @@ def write_reconstruction_files(rec: Reconstruction, folder: Path) -> None:
 
 
 def save_reconstruction(rec: Reconstruction, out_dir: str | Path, overwrite: bool = False,
-                        report: bool = False, progress: bool = False,
-                        report_viewer: str | None = None) -> Path:
+                        also: Callable[[Path], object] | None = None) -> Path:
     """Write a reconstruction's outputs atomically into ``out_dir``.
 
     Parameters
@@ -501,13 +500,10 @@ def save_reconstruction(rec: Reconstruction, out_dir: str | Path, overwrite: boo
         Target folder; must not exist (or be empty) unless ``overwrite``.
     overwrite : bool
         Replace an existing folder.
-    report : bool
-        Also write ``report.html`` with its figures (see :mod:`monoplane.report`).
-    progress : bool
-        Show a progress bar while the report renders.
-    report_viewer : str, optional
-        Relative URL, from ``out_dir``, of a 3D viewer script that several reports share (the
-        batch command's); by default the report gets its own copy.
+    also : callable, optional
+        Writes more files into the folder, given its temporary path, before the folder is put
+        in place, so that they appear with the outputs or not at all (the CLI and the batch
+        pass :func:`monoplane.report.write_frame_report` this way).
 
     Returns
     -------
@@ -516,7 +512,6 @@ def save_reconstruction(rec: Reconstruction, out_dir: str | Path, overwrite: boo
     """
     with atomic_output_dir(out_dir, overwrite) as tmp:
         write_reconstruction_files(rec, tmp)
-        if report:
-            from monoplane.report import write_frame_report
-            write_frame_report(rec, tmp, progress=progress, viewer=report_viewer)
+        if also is not None:
+            also(tmp)
     return Path(out_dir)

@@ -116,6 +116,7 @@ def _workloads(report: bool = True) -> Iterator[tuple[str, Callable[[], Any]]]:
     from monoplane.detect import detect_planes
     from monoplane.fileio import save_reconstruction
     from monoplane.pipeline import Pipeline
+    from monoplane.report.frame import write_frame_report
     from monoplane.synth import generate
 
     frame = generate(0, "mild", width=256, height=192, n_views=1).views[0].frame
@@ -130,7 +131,8 @@ def _workloads(report: bool = True) -> Iterator[tuple[str, Callable[[], Any]]]:
         with tempfile.TemporaryDirectory() as tmp:
             # The report also fills the OpenGL driver's shader cache (Mesa keeps one per user),
             # which the first report's 3D renders would otherwise build.
-            save_reconstruction(rec, f"{tmp}/out", report=report, progress=False)
+            save_reconstruction(rec, f"{tmp}/out",
+                                also=functools.partial(write_frame_report, rec) if report else None)
 
     yield "outputs" + (" and report" if report else ""), save
     depth, normals, rgb, K = frame.depth, frame.normals, frame.rgb, frame.K

@@ -222,3 +222,9 @@ def test_the_cycle_check_sees_every_import_form() -> None:
 
 def test_no_import_cycles() -> None:
     assert _cycles({m: _dependencies(p) for m, p in _FILES.items()}) == []
+
+
+def test_file_outputs_trigger_no_report() -> None:
+    # Reports are the caller's choice (save_reconstruction's `also`), not the writer's.
+    deps = _dependencies(_FILES["monoplane.fileio"])
+    assert {d for d in deps if _within(d, ("monoplane.report",))} == set()

@@ -15,6 +15,7 @@ by :func:`clean_stale` at the start of the next run.
 
 from __future__ import annotations
 
+import functools
 import json
 import shutil
 import time
@@ -192,14 +193,15 @@ def process_frame(job: BatchJob, spec: FrameSpec) -> FrameResult:
                            intrinsics=spec.intrinsics, depth_scale=spec.depth_scale,
                            nan_as_invalid=spec.nan_as_invalid, depth_kind=spec.depth_kind)
         rec = pipe.run(frame.with_(name=spec.name))
-        viewer = None
+        report = None
         if job.report:  # one copy of the 3D viewer (1 MB) for all frame reports
+            from monoplane.report.frame import write_frame_report
             from monoplane.report.viewer import install_viewer
 
             viewer = f"../{ASSETS}/{install_viewer(Path(job.out) / ASSETS)}"
+            report = functools.partial(write_frame_report, rec, viewer=viewer)
         # overwrite=True: the caller already decided this frame must be (re)computed.
-        save_reconstruction(rec, Path(job.out) / spec.name, overwrite=True, report=job.report,
-                            report_viewer=viewer)
+        save_reconstruction(rec, Path(job.out) / spec.name, overwrite=True, also=report)
     except Exception as exc:
         return FrameResult(spec.name, "failed", seconds=time.perf_counter() - start,
                            error=one_line(exc))

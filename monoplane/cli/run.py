@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 from pathlib import Path
 
@@ -67,8 +68,12 @@ def run(args: argparse.Namespace) -> int:
     if frame.depth is None:
         require_depth_source(pipe, args.image)
     rec = pipe.run(frame)
-    out = save_reconstruction(rec, args.out, overwrite=args.overwrite, report=args.report,
-                              progress=not args.quiet)
+    report = None
+    if args.report:
+        from monoplane.report import write_frame_report  # loads the plotting libraries
+
+        report = functools.partial(write_frame_report, rec, progress=not args.quiet)
+    out = save_reconstruction(rec, args.out, overwrite=args.overwrite, also=report)
     write_rerun_arg(args, rec)
     if not args.quiet:
         for note in rec.frame.notes:
