@@ -24,8 +24,9 @@ for plugin in plugins/*/; do
     "$PYTHON" -m pip install --quiet -e "$plugin"
   fi
 done
-# Compile monoplane's numba kernels now (cached on disk beside the sources), so that the first
-# run does not spend 15-30 s doing it; a failure here only leaves that cost to the first run.
+# Compile monoplane's numba kernels now (cached on disk beside the sources; 30-60 s on 2 cores),
+# so that the first run does not spend 20-30 s doing it; a failure here only leaves that cost
+# to the first run.
 "$PYTHON" -m monoplane.warmup --quiet \
   || echo "setup.sh: the kernel warm-up failed; the first run will compile the kernels" >&2
 "$PYTHON" -c "import monoplane, open3d, pycolmap, onnxruntime; print('monoplane', monoplane.__version__, 'ready')"

@@ -2,7 +2,7 @@
 
 monoplane's kernels (:mod:`monoplane.jit`, :mod:`monoplane.lattice_kernels`) compile on their
 first call and cache the machine code on disk. Without a warm-up, the first ``monoplane run``
-on a machine spends 15-30 s compiling; ``setup.sh`` runs this module instead, so the user's
+on a machine spends 20-30 s compiling; ``setup.sh`` runs this module instead, so the user's
 first run costs what every later run does::
 
     python3 -m monoplane.warmup
@@ -198,7 +198,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-report", action="store_true",
                         help="skip the HTML report (and its 3D renders)")
     args = parser.parse_args(argv)
-    print("monoplane: compiling the numba kernels once, cached on disk (15-40 s) ...",
+    print("monoplane: compiling the numba kernels once, cached on disk (30-60 s on 2 cores) ...",
           flush=True)
     result = warm(progress=not args.quiet, report=not args.no_report)
     total = len(result.compiled) + len(result.missed)

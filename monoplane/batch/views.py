@@ -225,7 +225,8 @@ class ViewPool:
         # E.g. a script without an ``if __name__ == "__main__":`` guard, which spawned
         # workers cannot import: run the views here instead.
         print(f"monoplane: warning: per-view workers could not start ({exc}); "
-              "running the views in this process", file=sys.stderr)
+              "running the views in this process (in a script, put the calls under "
+              "'if __name__ == \"__main__\":' or pass workers=1)", file=sys.stderr)
         if self.pool is not None:
             self.pool.__exit__(None, None, None)
             self.pool = None
