@@ -397,6 +397,63 @@ def atomic_output_dir(out_dir: str | Path, overwrite: bool = False) -> Iterator[
         raise
 
 
+def write_ascii_ply(path: Path, vertices: np.ndarray, vertex_rgb: np.ndarray,
+                    faces: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+                    comment: str | None = None) -> None:
+    """Write coloured points, or a triangle mesh whose faces carry a colour and a plane id, as
+    an ASCII PLY (the one PLY writer of the package's outputs).
+
+    Parameters
+    ----------
+    path : Path
+        Output file.
+    vertices : numpy.ndarray
+        (N, 3) coordinates, written as ``float`` with 7 significant digits.
+    vertex_rgb : numpy.ndarray
+        (N, 3) uint8 RGB.
+    faces : tuple of numpy.ndarray, optional
+        ``(triangles, face_rgb, plane_ids)``: (F, 3) vertex indices, (F, 3) uint8 RGB and (F,)
+        int plane id of each triangle; without them the file holds points only.
+    comment : str, optional
+        One header comment line.
+    """
+    header = ["ply", "format ascii 1.0", *([f"comment {comment}"] if comment else []),
+              f"element vertex {len(vertices)}",
+              "property float x", "property float y", "property float z",
+              "property uchar red", "property uchar green", "property uchar blue"]
+    lines = [f"{x:.7g} {y:.7g} {z:.7g} {r} {g} {b}"
+             for (x, y, z), (r, g, b) in zip(np.asarray(vertices).tolist(),
+                                             np.asarray(vertex_rgb).tolist(), strict=True)]
+    if faces is not None:
+        triangles, face_rgb, plane_ids = faces
+        header += [f"element face {len(triangles)}", "property list uchar int vertex_indices",
+                   "property uchar red", "property uchar green", "property uchar blue",
+                   "property int plane_id"]
+        lines += [f"3 {a} {b} {c} {r} {g} {bl} {pid}"
+                  for (a, b, c), (r, g, bl), pid in zip(
+                      np.asarray(triangles).tolist(), np.asarray(face_rgb).tolist(),
+                      np.asarray(plane_ids).tolist(), strict=True)]
+    path.write_text("\n".join([*header, "end_header", *lines]) + "\n")
+
+
+def write_points_ply(path: Path, points: np.ndarray, colors: np.ndarray | None = None) -> None:
+    """Write a coloured point cloud as an ASCII PLY.
+
+    Parameters
+    ----------
+    path : Path
+        Output file.
+    points : numpy.ndarray
+        (M, 3) points.
+    colors : numpy.ndarray, optional
+        (M, 3) uint8 RGB; grey when omitted.
+    """
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    col = (np.full((len(pts), 3), 200, np.uint8) if colors is None
+           else np.asarray(colors, dtype=np.uint8).reshape(-1, 3))
+    write_ascii_ply(path, pts, col)
+
+
 def write_plane_mesh_ply(path: Path, mesh: PlaneMesh, colors: np.ndarray,
                          first_id: int = 1) -> None:
     """Write plane regions as an ASCII PLY triangle mesh, each face tagged with its plane id.
@@ -423,21 +480,9 @@ def write_plane_mesh_ply(path: Path, mesh: PlaneMesh, colors: np.ndarray,
     face_rgb = colors[mesh.plane_ids - first_id].reshape(-1, 3)
     vertex_rgb = np.zeros((len(mesh.vertices), 3), np.uint8)
     vertex_rgb[mesh.triangles.reshape(-1)] = np.repeat(face_rgb, 3, axis=0)
-    header = ["ply", "format ascii 1.0", "comment monoplane plane regions; "
-              "face plane_id = plane id in the accompanying JSON",
-              f"element vertex {len(mesh.vertices)}",
-              "property float x", "property float y", "property float z",
-              "property uchar red", "property uchar green", "property uchar blue",
-              f"element face {len(mesh.triangles)}", "property list uchar int vertex_indices",
-              "property uchar red", "property uchar green", "property uchar blue",
-              "property int plane_id", "end_header"]
-    vertices = [f"{x:.7g} {y:.7g} {z:.7g} {r} {g} {b}"
-                for (x, y, z), (r, g, b) in zip(mesh.vertices.tolist(), vertex_rgb.tolist(),
-                                                strict=True)]
-    faces = [f"3 {a} {b} {c} {r} {g} {bl} {pid}"
-             for (a, b, c), (r, g, bl), pid in zip(mesh.triangles.tolist(), face_rgb.tolist(),
-                                                   mesh.plane_ids.tolist(), strict=True)]
-    path.write_text("\n".join(header + vertices + faces) + "\n")
+    write_ascii_ply(path, mesh.vertices, vertex_rgb, (mesh.triangles, face_rgb, mesh.plane_ids),
+                    comment="monoplane plane regions; face plane_id = plane id in the "
+                            "accompanying JSON")
 
 
 def planes_document(rec: Reconstruction) -> dict:

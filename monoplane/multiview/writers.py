@@ -13,6 +13,12 @@ import numpy as np
 
 from monoplane.datamodel import Camera, SfmResult
 from monoplane.export.gltf import scene_glb
+from monoplane.fileio import (
+    atomic_output_dir,
+    write_plane_mesh_ply,
+    write_points_ply,
+    write_reconstruction_files,
+)
 from monoplane.multiview.fusion import global_label_map, scene_mesh, scene_plane_colors
 
 if TYPE_CHECKING:
@@ -48,33 +54,8 @@ def cameras_document(cameras: list[Camera], registration: list[dict] | None = No
     return doc
 
 
-def write_points_ply(path: Path, points: np.ndarray, colors: np.ndarray | None = None) -> None:
-    """Write a coloured point cloud as an ASCII PLY.
-
-    Parameters
-    ----------
-    path : Path
-        Output file.
-    points : numpy.ndarray
-        (M, 3) points.
-    colors : numpy.ndarray, optional
-        (M, 3) uint8 RGB; grey when omitted.
-    """
-    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    col = (np.full((len(pts), 3), 200, np.uint8) if colors is None
-           else np.asarray(colors, dtype=np.uint8).reshape(-1, 3))
-    header = ["ply", "format ascii 1.0", f"element vertex {len(pts)}",
-              "property float x", "property float y", "property float z",
-              "property uchar red", "property uchar green", "property uchar blue", "end_header"]
-    rows = [f"{x:.6g} {y:.6g} {z:.6g} {r} {g} {b}"
-            for (x, y, z), (r, g, b) in zip(pts.tolist(), col.tolist(), strict=True)]
-    path.write_text("\n".join(header + rows) + "\n")
-
-
 def save_sfm(sfm: SfmResult, out_dir: str | Path, overwrite: bool = False) -> Path:
     """Write ``cameras.json`` and ``points.ply`` of an SfM result atomically into ``out_dir``."""
-    from monoplane.fileio import atomic_output_dir
-
     with atomic_output_dir(out_dir, overwrite) as tmp:
         keep = [v for v, ok in enumerate(sfm.registered) if ok]
         doc = cameras_document([sfm.cameras[v] for v in keep],
@@ -149,8 +130,6 @@ def save_scene(result: MultiviewResult, out_dir: str | Path, overwrite: bool = F
     :mod:`monoplane.export.gltf`), ``cameras.json`` and ``points.ply`` (sparse SfM points);
     with ``report``, ``report.html`` and its figures.
     """
-    from monoplane.fileio import atomic_output_dir, write_plane_mesh_ply, write_reconstruction_files
-
     scene = result.scene
     with atomic_output_dir(out_dir, overwrite) as tmp:
         for v, rec in enumerate(scene.views):

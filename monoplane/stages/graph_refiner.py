@@ -253,28 +253,17 @@ class GraphCrfRefiner(Refiner):
         order = np.argsort(labels, kind="stable")
         counts = np.bincount(labels, minlength=num + 1)
         groups = np.split(order, np.cumsum(counts)[:-1])
-        parent = np.arange(num + 1)
-
-        def root(x: int) -> int:
-            while parent[x] != x:
-                parent[x] = parent[parent[x]]
-                x = parent[x]
-            return x
-
-        for p, q in pairs:
+        agree = np.zeros(len(pairs), dtype=np.bool_)
+        for i, (p, q) in enumerate(pairs):
             n_p, n_q = planes[p - 1], planes[q - 1]
             if abs(float(n_p[:3] @ n_q[:3])) < cos_max:
                 continue
             pts_p, pts_q = cloud.points[groups[p]], cloud.points[groups[q]]
-            if (np.mean((pts_p @ n_q[:3] + n_q[3]) ** 2) > tol2
-                    or np.mean((pts_q @ n_p[:3] + n_p[3]) ** 2) > tol2):
-                continue
-            rp, rq = root(int(p)), root(int(q))
-            if rp != rq:
-                parent[max(rp, rq)] = min(rp, rq)
-        roots = np.array([root(x) for x in range(num + 1)])
-        _, dense = np.unique(roots, return_inverse=True)
-        return dense.astype(np.int32)[labels]
+            agree[i] = not (np.mean((pts_p @ n_q[:3] + n_q[3]) ** 2) > tol2
+                            or np.mean((pts_q @ n_p[:3] + n_p[3]) ** 2) > tol2)
+        # Components number by their smallest region, so label 0 stays 0 and the merged
+        # labels are dense in the order of their first region.
+        return graph_components(num + 1, pairs[agree]).astype(np.int32)[labels]
 
     def refine_cloud(self, cloud: PlaneCloud, graph: NeighbourGraph, labels: np.ndarray,
                      planes: np.ndarray, params: RansacParams) -> tuple[np.ndarray, np.ndarray]:

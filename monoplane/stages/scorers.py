@@ -27,7 +27,7 @@ import numpy as np
 
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.hookspecs import hookimpl
-from monoplane.jit import kernel
+from monoplane.jit import inline, kernel
 from monoplane.stages.base import RansacParams, Scorer, Stage
 
 #: Cost kinds of :func:`_costs`.
@@ -124,6 +124,26 @@ def _face_direction(face: int, u: float, v: float) -> np.ndarray:
     return d / np.linalg.norm(d)
 
 
+@inline
+def _sum4(term: np.ndarray, n: int) -> float:
+    """Sum of ``term[:n]`` in four interleaved partial sums, which the CPU adds independently
+    (one running sum waits for each addition); the order of the additions is fixed, so the
+    scores do not depend on the compiler."""
+    s0 = s1 = s2 = s3 = 0.0
+    j = 0
+    while j + 4 <= n:
+        s0 += term[j]
+        s1 += term[j + 1]
+        s2 += term[j + 2]
+        s3 += term[j + 3]
+        j += 4
+    total = (s0 + s1) + (s2 + s3)
+    while j < n:
+        total += term[j]
+        j += 1
+    return total
+
+
 @kernel
 def _binned_points(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, cells: int
                    ) -> tuple[np.ndarray, np.ndarray]:
@@ -217,19 +237,7 @@ def _binned_costs(coords: np.ndarray, start: np.ndarray, centres: np.ndarray,
                 q = min((phi / epsilon) ** 2, 1.0)
                 run[t] = q if cos > cos_n else 1.0
             k += hi - lo
-        s0 = s1 = s2 = s3 = 0.0
-        j = 0
-        while j + 4 <= k:
-            s0 += term[j]
-            s1 += term[j + 1]
-            s2 += term[j + 2]
-            s3 += term[j + 3]
-            j += 4
-        total = (s0 + s1) + (s2 + s3)
-        while j < k:
-            total += term[j]
-            j += 1
-        out[h] = total + far
+        out[h] = _sum4(term, k) + far
     return out
 
 
@@ -282,19 +290,7 @@ def _costs(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, planes: np
                 # compiles to a branch, which keeps the loop from being vectorised.
                 q = min((phi / epsilon) ** 2, 1.0)
                 term[i] = q if cos > cos_n else 1.0
-        s0 = s1 = s2 = s3 = 0.0
-        j = 0
-        while j + 4 <= m:
-            s0 += term[j]
-            s1 += term[j + 1]
-            s2 += term[j + 2]
-            s3 += term[j + 3]
-            j += 4
-        total = (s0 + s1) + (s2 + s3)
-        while j < m:
-            total += term[j]
-            j += 1
-        out[h] = total
+        out[h] = _sum4(term, m)
     return out
 
 
