@@ -1,4 +1,5 @@
-"""The README's command synopsis and presets table agree with the code, so neither goes stale.
+"""The README's command synopsis, presets table and setup text agree with the code and setup.sh,
+so none of them goes stale.
 
 Both checks read content, not layout: the synopsis is every fenced block of the README's
 "Command line" section, a command being a line that starts with ``monoplane NAME`` plus its
@@ -147,3 +148,19 @@ def test_preset_table_matches_the_shipped_presets():
                                           ("`dense-crf`", "dense-crf"), ("none", "none")])
 def test_plugin_cells_read_their_first_word(text, plugin):
     assert _plugin(text) == plugin
+
+
+def test_setup_text_matches_setup_sh():
+    """The README's Setup section names the extras and system packages setup.sh installs."""
+    script = (README.parent / "setup.sh").read_text()
+    setup = _section(README.read_text(), "Setup")
+    extras = re.search(r'pip install --quiet -e "(\.\[[^\]]*\])"', script)
+    assert extras, "setup.sh no longer runs pip install -e \".[...]\""
+    assert f'pip install -e "{extras.group(1)}"' in setup, (
+        f"the README's Setup section should say setup.sh runs pip install -e \"{extras.group(1)}\"")
+    packages = re.search(r'^APT_PACKAGES="([^"]*)"', script, re.M)
+    assert packages, "setup.sh no longer lists APT_PACKAGES"
+    named = set(re.findall(r"[\w.+-]+", setup))
+    missing = [p for p in packages.group(1).split() if p not in named]
+    assert not missing, f"system packages setup.sh installs, not named in the README: {missing}"
+    assert "monoplane.warmup" in script and "monoplane.warmup" in setup
