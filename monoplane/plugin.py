@@ -15,7 +15,8 @@ What it holds, by use:
 * Stage contracts: :class:`Stage` and the base class of each kind (:data:`KINDS` lists them
   with their registration hooks), :class:`NetworkCues` for cue providers that run a
   :class:`CueNetwork`, :func:`param` for config fields, :class:`RansacParams` (the shared
-  thresholds, and their defaults), :class:`Labeling`, :class:`ProximityAffinities`.
+  thresholds, and their defaults), :class:`Labeling`, :class:`LabelingContext`,
+  :class:`ProximityAffinities`.
 * Data: :class:`Frame`, :class:`Reconstruction`, :class:`Camera`, :class:`Scene`,
   :class:`SfmResult`, :func:`default_intrinsics`; the RANSAC stages' :class:`PlaneCloud` and
   :class:`NeighbourGraph`, the registrar's :class:`ScaleAlignment`, :func:`fit_plane`.
@@ -65,6 +66,7 @@ from monoplane.stages.base import (
     Fuser,
     Labeler,
     Labeling,
+    LabelingContext,
     Matcher,
     NetworkCues,
     NoConfig,
@@ -82,7 +84,8 @@ from monoplane.stages.base import (
 __all__ = [
     "CALL_TIMING", "IMAGENET_MEAN", "IMAGENET_STD", "KINDS", "STAGE_KINDS", "Adjuster",
     "Baseline", "Camera", "ConfigError", "CueNetwork", "CueProvider", "Frame", "Fuser",
-    "InvalidInput", "Labeler", "Labeling", "Matcher", "ModelSpec", "MonoplaneError",
+    "InvalidInput", "Labeler", "Labeling", "LabelingContext", "Matcher", "ModelSpec",
+    "MonoplaneError",
     "NeighbourGraph", "NetworkCues", "NoConfig", "OnnxProfile", "PlaneCloud", "PluginError",
     "ProximityAffinities", "RansacBaselineSettings", "RansacParams", "Reconstruction",
     "Refiner", "Registrar", "Sampler", "ScaleAlignment", "Scene", "Scorer", "SfmResult",

@@ -42,6 +42,7 @@ from monoplane.jit import in_background, kernel
 from monoplane.stages.base import (
     Labeler,
     Labeling,
+    LabelingContext,
     RansacParams,
     Sampler,
     Scorer,
@@ -303,6 +304,7 @@ class SequentialRansac:
         point_labels = np.zeros(cloud.size, dtype=np.int32)
         pool = np.arange(cloud.size, dtype=np.int64)
         found: list[np.ndarray] = []
+        context = self.labeler.new_context()  # the labeler's memory of this frame
         prepared: Callable[[], None] | None = None
         while len(found) < cfg.max_planes and pool.size >= min_support:
             t = time.perf_counter()
@@ -314,7 +316,8 @@ class SequentialRansac:
             t = time.perf_counter()
             if prepared is not None:
                 prepared()  # the labeler's per-pool work, done while the search ran
-            plane, inliers = self._label(cloud, graph, pool, best[0], best[1], params)
+            plane, inliers = self._label(cloud, graph, pool, best[0], best[1], params,
+                                         context)
             if cfg.split_components and inliers.any():
                 members = np.flatnonzero(inliers)
                 inliers[members[~graph.largest_component_within(pool, inliers)]] = False
@@ -328,7 +331,7 @@ class SequentialRansac:
             # second core while this thread searches its next plane.
             prepared = in_background(
                 lambda pool=pool, graph=graph: _call(self.labeler, self.labeler.prepare_pool,
-                                                     cloud, graph, pool), role="pool")
+                                                     cloud, graph, pool, context), role="pool")
         if prepared is not None:
             prepared()  # nothing of this frame runs on after it
         planes = np.array(found, dtype=np.float64).reshape(-1, 4)
@@ -375,14 +378,14 @@ class SequentialRansac:
         return best
 
     def _label(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray,
-               plane: np.ndarray, model_normal: np.ndarray,
-               params: RansacParams) -> tuple[np.ndarray, np.ndarray]:
+               plane: np.ndarray, model_normal: np.ndarray, params: RansacParams,
+               context: LabelingContext) -> tuple[np.ndarray, np.ndarray]:
         """Label the pool for a hypothesis, then refit and relabel while the energy drops.
 
         Returns the plane (4,) of the kept labelling and its (M,) bool inlier mask.
         """
         lab: Labeling = _call(self.labeler, self.labeler.label, cloud, graph, pool, plane,
-                              model_normal, params)
+                              model_normal, params, context)
         for _ in range(self.config.lo_iterations):
             members = pool[lab.inliers]
             if members.size < 3:
@@ -390,7 +393,7 @@ class SequentialRansac:
             refit, _ = fit_plane(cloud.points[members])
             refit_normal = _unit_mean(cloud.normals[members][None], model_normal[None])[0]
             new = _call(self.labeler, self.labeler.label, cloud, graph, pool, refit,
-                        refit_normal, params)
+                        refit_normal, params, context)
             if not new.energy < lab.energy - 1e-9 * max(1.0, abs(lab.energy)):
                 break
             lab, plane = new, refit

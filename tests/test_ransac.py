@@ -123,8 +123,8 @@ def test_labeler_pool_preparation_runs_for_every_later_pool(monkeypatch):
     pools = []
     prepare = driver.labeler.prepare_pool
     monkeypatch.setattr(driver.labeler, "prepare_pool",
-                        lambda cloud, graph, pool: (pools.append(pool.size),
-                                                    prepare(cloud, graph, pool)))
+                        lambda cloud, graph, pool, context: (
+                            pools.append(pool.size), prepare(cloud, graph, pool, context)))
     rec = driver.run(frame)
     # Once after each accepted plane, on the shrinking pool; the labels do not change.
     assert len(pools) == rec.num_planes and pools == sorted(pools, reverse=True)

@@ -42,9 +42,9 @@ class SpyScorer(MsacNormalScorer):
 class SpyLabeler(ProximityGraphCutLabeler):
     name = "spy-labeler"
 
-    def label(self, cloud, graph, pool, plane, model_normal, params):
+    def label(self, cloud, graph, pool, plane, model_normal, params, context=None):
         _record("labeler", params)
-        return super().label(cloud, graph, pool, plane, model_normal, params)
+        return super().label(cloud, graph, pool, plane, model_normal, params, context)
 
 
 class SpyRefiner(GraphCrfRefiner):

@@ -41,9 +41,6 @@ class NeighbourGraph:
         Nearest-neighbour index over the points the graph was built on.
     spacing : float
         Median distance from a point to its nearest other point, in the points' unit.
-    cache : dict
-        Per-edge arrays that stages derive from static point attributes (e.g. proximity
-        weights), keyed by the stage; lives as long as the graph, i.e. one frame.
     """
 
     num_nodes: int
@@ -52,7 +49,6 @@ class NeighbourGraph:
     _indices: np.ndarray | None
     tree: PointIndex
     spacing: float
-    cache: dict = field(default_factory=dict, repr=False)
     _last_subgraph: tuple[np.ndarray, np.ndarray, np.ndarray] | None = field(
         default=None, init=False, repr=False, compare=False)
     _lock: threading.Lock = field(default_factory=threading.Lock, init=False, repr=False,

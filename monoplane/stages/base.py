@@ -281,13 +281,30 @@ class Scorer(Stage):
         raise NotImplementedError
 
 
+class LabelingContext:
+    """A labeler's working memory for one frame (one run of the sequential RANSAC).
+
+    The driver asks the labeler for one (:meth:`Labeler.new_context`) at the start of a
+    frame, hands it to every :meth:`Labeler.prepare_pool` and :meth:`Labeler.label` call of
+    that frame and drops it at the end. Whatever a labeler reuses between those calls (a pool's
+    subgraph terms, per-edge weights, the last max-flow) lives here, not on the labeler, so one
+    labeler instance can label several frames at once and nothing of one frame reaches the
+    next. The base holds nothing; a labeler subclasses it for what it keeps.
+    """
+
+
 class Labeler(Stage):
     """Labels the remaining points as inliers/outliers of one plane."""
 
     kind = "labeler"
 
+    def new_context(self) -> LabelingContext:
+        """A fresh :class:`LabelingContext` for one frame (the default keeps nothing)."""
+        return LabelingContext()
+
     def label(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray,
-              plane: np.ndarray, model_normal: np.ndarray, params: RansacParams) -> Labeling:
+              plane: np.ndarray, model_normal: np.ndarray, params: RansacParams,
+              context: LabelingContext | None = None) -> Labeling:
         """Binary labelling of ``pool`` for the plane ``plane``.
 
         Parameters
@@ -305,18 +322,23 @@ class Labeler(Stage):
             (3,) unit model normal θ_n.
         params : RansacParams
             Shared thresholds.
+        context : LabelingContext, optional
+            The frame's context (:meth:`new_context`), the same for every call of one frame;
+            without one the call starts from nothing and keeps nothing.
         """
         raise NotImplementedError
 
-    def prepare_pool(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray) -> None:
+    def prepare_pool(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray,
+                     context: LabelingContext) -> None:
         """Compute what :meth:`label` needs of a pool whatever the hypothesis.
 
         The RANSAC driver calls this on a background thread as soon as a plane's inliers
         leave the pool, while the next plane's hypotheses are searched, and waits for it
-        before the first :meth:`label` call on that pool; per-pool results should be kept
-        where :meth:`label` finds them again (the default builds the pool's subgraph, which
-        :meth:`NeighbourGraph.subgraph <monoplane.geometry.graph.NeighbourGraph.subgraph>`
-        keeps). It must not change what :meth:`label` returns.
+        before the first :meth:`label` call on that pool; per-pool results should be kept in
+        ``context``, where :meth:`label` finds them again (the default builds the pool's
+        subgraph, which :meth:`NeighbourGraph.subgraph
+        <monoplane.geometry.graph.NeighbourGraph.subgraph>` keeps). It must not change what
+        :meth:`label` returns.
         """
         graph.subgraph(pool)
 

@@ -33,6 +33,7 @@ from monoplane.hookspecs import hookimpl
 from monoplane.stages.base import (
     Labeler,
     Labeling,
+    LabelingContext,
     ProximityAffinities,
     RansacParams,
     Stage,
@@ -51,7 +52,8 @@ class ThresholdLabeler(Labeler):
     name = "threshold"
 
     def label(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray,
-              plane: np.ndarray, model_normal: np.ndarray, params: RansacParams) -> Labeling:
+              plane: np.ndarray, model_normal: np.ndarray, params: RansacParams,
+              context: LabelingContext | None = None) -> Labeling:
         """See :meth:`monoplane.stages.base.Labeler.label`; energy is −(inlier count)."""
         inliers = _pool_distances(cloud, pool, plane) < params.epsilon
         return Labeling(inliers=inliers, energy=-float(inliers.sum()))
@@ -84,6 +86,32 @@ class _PoolTerms:
     """(E',) max-flow of the pool's last labelling, the next one's warm start."""
 
 
+class GraphCutContext(LabelingContext):
+    """What a graph-cut labeler keeps of one frame.
+
+    Attributes
+    ----------
+    pool : _PoolTerms or None
+        The terms of the pool labelled last (or prepared for the next labelling).
+    weights : numpy.ndarray or None
+        (E,) cut cost of every edge of the frame's graph, for labelers whose cut costs
+        depend on the points only (computed on first use).
+    """
+
+    def __init__(self) -> None:
+        self.pool: _PoolTerms | None = None
+        self.weights: np.ndarray | None = None
+
+
+def _own(context: LabelingContext) -> GraphCutContext:
+    """``context`` as the graph-cut labelers' own: the driver passes back what
+    :meth:`_PoolGraphCut.new_context` made."""
+    if not isinstance(context, GraphCutContext):
+        raise TypeError(f"a graph-cut labeler needs the context its new_context() makes, got "
+                        f"{type(context).__name__}")
+    return context
+
+
 class _PoolGraphCut(Labeler):
     """A graph-cut labeler whose per-pool terms are built once per pool.
 
@@ -92,35 +120,42 @@ class _PoolGraphCut(Labeler):
     it searches): the subgraph, its cut costs, each point's payback, and the flow of the last
     labelling, from which the next max-flow starts (the two problems differ a little; the
     result does not depend on the start, see :func:`~monoplane.graphcut.minimize_gc_ransac`).
+    They are kept in the frame's :class:`GraphCutContext`.
     """
 
-    _pool: _PoolTerms | None = None
+    def new_context(self) -> GraphCutContext:
+        """A fresh :class:`GraphCutContext` for one frame."""
+        return GraphCutContext()
 
-    def _cut(self, cloud: PlaneCloud, graph: NeighbourGraph, edge_ids: np.ndarray
-             ) -> np.ndarray | float:
+    def _cut(self, cloud: PlaneCloud, graph: NeighbourGraph, edge_ids: np.ndarray,
+             context: GraphCutContext) -> np.ndarray | float:
         """Cut costs of the pool's subgraph edges (``edge_ids`` rows of the graph's)."""
         raise NotImplementedError
 
-    def _terms(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray) -> _PoolTerms:
+    def _terms(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray,
+               context: GraphCutContext) -> _PoolTerms:
         """The terms of ``pool``, built when it is not the pool of the last call."""
         edges, edge_ids = graph.subgraph(pool)
         scale = degree_normalisation(graph.mean_degree) if self.config.normalise else 1.0
-        last = self._pool
+        last = context.pool
         if last is None or last.edge_ids is not edge_ids or last.scale != scale:
-            cut = self._cut(cloud, graph, edge_ids)
+            cut = self._cut(cloud, graph, edge_ids, context)
             payback = pool_payback(pool.size, edges, cut, self.config.lambda_, scale)
-            last = self._pool = _PoolTerms(edges, edge_ids, cut, scale, payback,
-                                           np.zeros(edge_ids.size))
+            last = context.pool = _PoolTerms(edges, edge_ids, cut, scale, payback,
+                                             np.zeros(edge_ids.size))
         return last
 
-    def prepare_pool(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray) -> None:
+    def prepare_pool(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray,
+                     context: LabelingContext) -> None:
         """The pool's terms (see :meth:`monoplane.stages.base.Labeler.prepare_pool`)."""
-        self._terms(cloud, graph, pool)
+        self._terms(cloud, graph, pool, _own(context))
 
     def _minimize(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray,
-                  f0: np.ndarray, data1: np.ndarray) -> Labeling:
+                  f0: np.ndarray, data1: np.ndarray,
+                  context: LabelingContext | None) -> Labeling:
         """Minimise the pool's energy for the data costs of one hypothesis."""
-        terms = self._terms(cloud, graph, pool)
+        terms = self._terms(cloud, graph, pool,
+                            GraphCutContext() if context is None else _own(context))
         inliers, energy = minimize_gc_ransac(f0, data1, terms.edges, terms.cut,
                                              self.config.lambda_,
                                              terms.scale, flow=terms.flow,
@@ -134,14 +169,16 @@ class GraphCutLabeler(_PoolGraphCut):
     name = "graph-cut"
     Config = GraphCutConfig
 
-    def _cut(self, cloud: PlaneCloud, graph: NeighbourGraph, edge_ids: np.ndarray) -> float:
+    def _cut(self, cloud: PlaneCloud, graph: NeighbourGraph, edge_ids: np.ndarray,
+             context: GraphCutContext) -> float:
         return 1.0
 
     def label(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray,
-              plane: np.ndarray, model_normal: np.ndarray, params: RansacParams) -> Labeling:
+              plane: np.ndarray, model_normal: np.ndarray, params: RansacParams,
+              context: LabelingContext | None = None) -> Labeling:
         """See :meth:`monoplane.stages.base.Labeler.label`."""
         f0, f1 = data_costs(cloud.points, cloud.normals, pool, plane, None, params.epsilon)
-        return self._minimize(cloud, graph, pool, f0, f1)
+        return self._minimize(cloud, graph, pool, f0, f1, context)
 
 
 @dataclass
@@ -160,31 +197,25 @@ class ProximityGraphCutLabeler(_PoolGraphCut):
     name = "proximity-graph-cut"
     Config = ProximityGraphCutConfig
 
-    def _edge_weights(self, cloud: PlaneCloud, graph: NeighbourGraph) -> np.ndarray:
-        """(E,) cut costs of every graph edge; they depend on the frame only, so cached."""
-        c = self.config
-        key = ("proximity-graph-cut", id(cloud), *c.affinities())
-        w = graph.cache.get(key)
-        if w is None:
-            w = proximity_weights(cloud.points, graph.edges, cloud.normals, cloud.colors,
-                                  *c.affinities())
-            w.flags.writeable = False  # shared by every pool of the frame
-            graph.cache[key] = w
-        return w
-
-    def _cut(self, cloud: PlaneCloud, graph: NeighbourGraph, edge_ids: np.ndarray
-             ) -> np.ndarray:
-        weights = self._edge_weights(cloud, graph)
+    def _cut(self, cloud: PlaneCloud, graph: NeighbourGraph, edge_ids: np.ndarray,
+             context: GraphCutContext) -> np.ndarray:
+        weights = context.weights
+        if weights is None:  # they depend on the frame only: once per frame
+            weights = proximity_weights(cloud.points, graph.edges, cloud.normals, cloud.colors,
+                                        *self.config.affinities())
+            weights.flags.writeable = False  # shared by every pool of the frame
+            context.weights = weights
         # Ascending distinct edge rows as many as the graph's are all of them, in order.
         return weights if edge_ids.size == weights.size else weights[edge_ids]
 
     def label(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray,
-              plane: np.ndarray, model_normal: np.ndarray, params: RansacParams) -> Labeling:
+              plane: np.ndarray, model_normal: np.ndarray, params: RansacParams,
+              context: LabelingContext | None = None) -> Labeling:
         """See :meth:`monoplane.stages.base.Labeler.label`."""
         f0, data1 = data_costs(cloud.points, cloud.normals, pool, plane,
                                model_normal if self.config.normal_term else None,
                                params.epsilon, params.epsilon_n)
-        return self._minimize(cloud, graph, pool, f0, data1)
+        return self._minimize(cloud, graph, pool, f0, data1, context)
 
 
 @hookimpl

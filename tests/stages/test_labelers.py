@@ -121,10 +121,14 @@ def test_subgraph_pool_and_weight_cache():
     cloud, bump, far, _ = grid_cloud()
     pool = np.arange(0, 950, 2, dtype=np.int64)
     labeler = ProximityGraphCutLabeler()
-    lab, graph = run(labeler, cloud, pool)
+    graph = NeighbourGraph.build(cloud.points, k=8)
+    context = labeler.new_context()
+    lab = labeler.label(cloud, graph, pool, PLANE, np.array([0.0, 0.0, -1.0]),
+                        RansacParams(epsilon=EPS, epsilon_n_deg=10.0), context)
     assert lab.inliers.shape == pool.shape
     assert not lab.inliers[np.isin(pool, far)].any()
-    assert len(graph.cache) == 1
+    # The frame's edge weights are computed once, for the whole graph, in the context.
+    assert context.weights is not None and context.weights.shape == (graph.edges.shape[0],)
 
 
 @pytest.mark.parametrize("labeler", [GraphCutLabeler, ProximityGraphCutLabeler])
@@ -138,17 +142,41 @@ def test_relabelling_a_pool_from_the_last_flow_changes_nothing(labeler):
     tilted = np.array([0.0, np.sin(0.02), -np.cos(0.02), 0.004])
     mn = np.array([0.0, 0.0, -1.0])
     warm = labeler()
-    first = warm.label(cloud, graph, pool, PLANE, mn, params)
-    kept = warm._pool
-    second = warm.label(cloud, graph, pool, tilted, mn, params)
-    assert warm._pool is kept and np.any(kept.flow > 0)  # the same pool's terms, reused
+    context = warm.new_context()
+    first = warm.label(cloud, graph, pool, PLANE, mn, params, context)
+    kept = context.pool
+    second = warm.label(cloud, graph, pool, tilted, mn, params, context)
+    assert context.pool is kept and np.any(kept.flow > 0)  # the same pool's terms, reused
     for plane, lab in ((PLANE, first), (tilted, second)):
         cold = labeler().label(cloud, graph, pool, plane, mn, params)
         np.testing.assert_array_equal(lab.inliers, cold.inliers)
         assert lab.energy == cold.energy
     # Another pool gets terms of its own, and starts from no flow.
-    warm.label(cloud, graph, pool[::2], PLANE, mn, params)
-    assert warm._pool is not kept
+    warm.label(cloud, graph, pool[::2], PLANE, mn, params, context)
+    assert context.pool is not kept
+    assert vars(warm) == vars(labeler())  # the labeler itself keeps nothing
+
+
+@pytest.mark.parametrize("labeler", [GraphCutLabeler, ProximityGraphCutLabeler])
+def test_two_frames_labelled_in_turn_with_one_labeler_match_each_alone(labeler):
+    # The driver's per-frame context holds all the labeler reuses, so interleaving the calls
+    # of two frames (as two threads sharing one pipeline would) changes nothing.
+    params = RansacParams(epsilon=EPS, epsilon_n_deg=10.0)
+    mn = np.array([0.0, 0.0, -1.0])
+    frames = []
+    for tilt in (2.0, 7.0):
+        cloud, _, _, _ = grid_cloud(tilt_deg=tilt)
+        frames.append((cloud, NeighbourGraph.build(cloud.points, k=8),
+                       np.arange(cloud.size, dtype=np.int64)))
+    alone = [[labeler().label(c, g, p[::s], PLANE, mn, params) for s in (1, 2)]
+             for c, g, p in frames]
+    shared = labeler()
+    contexts = [shared.new_context() for _ in frames]
+    for step in (1, 2):
+        for (c, g, p), ctx, expected in zip(frames, contexts, alone, strict=True):
+            lab = shared.label(c, g, p[::step], PLANE, mn, params, ctx)
+            np.testing.assert_array_equal(lab.inliers, expected[step - 1].inliers)
+            assert lab.energy == expected[step - 1].energy
 
 
 @pytest.mark.parametrize("normalise", [False, True])
