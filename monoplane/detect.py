@@ -24,13 +24,13 @@ from typing import Any
 import numpy as np
 
 from monoplane.cloud_config import CloudConfig
-from monoplane.errors import ConfigError, InvalidInput
-from monoplane.geometry.cloud import PROPAGATION_NEIGHBOURS, PROPAGATION_RADIUS_FACTOR, PlaneCloud
+from monoplane.errors import InvalidInput
+from monoplane.geometry.cloud import PROPAGATION_RADIUS_FACTOR, PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
+from monoplane.geometry.neighbours import PointIndex
 from monoplane.geometry.planes import fit_planes_per_label
 from monoplane.geometry.polygons import PlaneMesh, points_plane_mesh
 from monoplane.io_checks import MAX_MAGNITUDE
-from monoplane.stages.base import Labeler, Refiner, Sampler, Scorer
 
 
 @dataclass
@@ -110,9 +110,7 @@ class CloudPlaneResult:
         if cell is None:
             pts = self.points[finite & (self.labels > 0)]
             if len(pts) >= 2:
-                from scipy.spatial import cKDTree  # imported here: config loading imports us
-
-                d, _ = cKDTree(pts).query(pts[:: max(1, len(pts) // 2000)], k=2)
+                d, _ = PointIndex(pts).query(pts[:: max(1, len(pts) // 2000)], k=2)
                 cell = 2.0 * float(np.median(d[:, 1]))
             cell = cell if cell and cell > 0 else 1.0
         parts = []
@@ -214,31 +212,16 @@ def _estimate_normals(points: np.ndarray, cfg: CloudConfig) -> np.ndarray:
     return normals
 
 
-def _propagate(points: np.ndarray, sample: np.ndarray, labels: np.ndarray,
+def _propagate(cloud: PlaneCloud, points: np.ndarray, sample: np.ndarray, labels: np.ndarray,
                planes: np.ndarray, spacing: float) -> np.ndarray:
-    """Labels of all (normalised) points from the labelled sample (see module docstring)."""
+    """Labels of all (normalised) ``points`` from the labelled ``sample`` of them that
+    ``cloud`` holds (see the module docstring and :meth:`PlaneCloud.label_points`)."""
     if sample.size == points.shape[0]:
         out = np.zeros(points.shape[0], dtype=np.int32)
         out[sample] = labels
         return out
-    from scipy.spatial import cKDTree  # imported here: config loading imports this module
-
-    tree = cKDTree(points[sample])
-    k = min(PROPAGATION_NEIGHBOURS, sample.size)
-    radius = PROPAGATION_RADIUS_FACTOR * max(spacing, 1e-12)
-    out = np.zeros(points.shape[0], dtype=np.int32)
-    for start in range(0, points.shape[0], 200_000):
-        chunk = points[start:start + 200_000]
-        dist, nbr = tree.query(chunk, k=k, distance_upper_bound=radius)
-        dist, nbr = dist.reshape(len(chunk), k), nbr.reshape(len(chunk), k)
-        cand = np.where(np.isfinite(dist), labels[np.minimum(nbr, sample.size - 1)], 0)
-        if planes.shape[0] == 0:
-            continue
-        lab = np.maximum(cand - 1, 0)
-        resid = np.abs(np.einsum("vkc,vc->vk", planes[lab, :3], chunk) + planes[lab, 3])
-        resid[cand == 0] = np.inf
-        best = cand[np.arange(len(chunk)), np.argmin(resid, axis=1)]
-        out[start:start + len(chunk)] = np.where(cand[:, 0] > 0, best, 0)
+    out = cloud.label_points(points, labels, planes,
+                             PROPAGATION_RADIUS_FACTOR * max(spacing, 1e-12))
     out[sample] = labels
     return out
 
@@ -277,15 +260,11 @@ def detect_planes(cloud: Any, preset: str = "cloud",
 
     from monoplane import config as config_mod
     from monoplane.pipeline import Pipeline
-    from monoplane.ransac import SequentialRansac
 
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     pipe = Pipeline.from_preset(preset, overrides=overrides, pm=pm)
-    refiner = pipe.stage("refiner", Refiner)
-    if refiner.needs_pixels:
-        raise ConfigError(f"refiner '{refiner.name}' works on images only and cannot refine a "
-                          "point cloud; use refiner.plugin=graph-crf or none")
+    pipe.cloud_refiner()  # a refiner that needs pixels fails before any work
     cfg: CloudConfig = pipe.config.host["cloud"]
     rcfg = pipe.config.host["ransac"]
     points, normals, colors = _as_arrays(cloud)
@@ -360,17 +339,12 @@ def detect_planes(cloud: Any, preset: str = "cloud",
     t = time.perf_counter()
     graph = NeighbourGraph.build(pc.points, rcfg.knn, tree=pc.tree)
     timings["graph"] = time.perf_counter() - t
-    driver = SequentialRansac(pipe.stage("sampler", Sampler), pipe.stage("scorer", Scorer),
-                              pipe.stage("labeler", Labeler), rcfg)
-    t = time.perf_counter()
-    found = driver.run_cloud(pc, graph, rng)
-    timings["ransac"] = time.perf_counter() - t
-    t = time.perf_counter()
-    labels, planes = refiner.refine_cloud(pc, graph, found.labels, found.planes, rcfg.params)
-    timings["refiner"] = time.perf_counter() - t
+    # The RANSAC stages and the refiner, with the pipeline's hooks and error wrapping; they
+    # add their seconds to timings["ransac"] and timings["refiner"].
+    labels, planes = pipe.segment_cloud(pc, graph, rng, "cloud", timings)
 
     t = time.perf_counter()
-    u_labels = _propagate(norm_pts, sample, np.asarray(labels, dtype=np.int32),
+    u_labels = _propagate(pc, norm_pts, sample, np.asarray(labels, dtype=np.int32),
                           np.asarray(planes, dtype=np.float64).reshape(-1, 4), graph.spacing)
     num = int(u_labels.max(initial=0))
     params, rmse, support = fit_planes_per_label(unique, u_labels, num)

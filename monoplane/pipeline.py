@@ -17,16 +17,21 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
+import numpy as np
 import pluggy
 
 from monoplane import config as config_mod
 from monoplane.cues.given import use_given_cues
 from monoplane.datamodel import Frame, Reconstruction
-from monoplane.errors import StageError
+from monoplane.errors import ConfigError, StageError
 from monoplane.plugin_manager import get_plugin_manager, get_registry
 from monoplane.stages.base import CueProvider, Labeler, Refiner, Sampler, Scorer, Stage
+
+if TYPE_CHECKING:
+    from monoplane.geometry.cloud import PlaneCloud
+    from monoplane.geometry.graph import NeighbourGraph
 
 T = TypeVar("T")
 S = TypeVar("S", bound=Stage)
@@ -139,6 +144,68 @@ class Pipeline:
         rec.config = self.config.to_dict()
         rec.timings = {**rec.timings, **timings}
         return rec
+
+    def cloud_refiner(self) -> Refiner:
+        """The configured refiner, checked to work without pixels (:meth:`segment_cloud`).
+
+        Raises
+        ------
+        ConfigError
+            When the refiner works on the image grid only (e.g. ``dense-crf``).
+        """
+        refiner = self.stage("refiner", Refiner)
+        if refiner.needs_pixels:
+            raise ConfigError(f"refiner '{refiner.name}' works on images only and cannot refine "
+                              "a point cloud; use refiner.plugin=graph-crf or none")
+        return refiner
+
+    def segment_cloud(self, cloud: PlaneCloud, graph: NeighbourGraph, rng: np.random.Generator,
+                      name: str = "cloud", timings: dict[str, float] | None = None
+                      ) -> tuple[np.ndarray, np.ndarray]:
+        """Sequential RANSAC then the refiner on a cloud without pixels (:func:`detect_planes`).
+
+        The same stages, ``monoplane_stage_finished`` hooks and :class:`StageError` wrapping as
+        :meth:`segment`: the RANSAC's :meth:`~monoplane.ransac.SequentialRansac.run_cloud` and
+        the refiner's :meth:`~monoplane.stages.base.Refiner.refine_cloud`.
+
+        Parameters
+        ----------
+        cloud : PlaneCloud
+            Normalised oriented cloud (unit sphere); only its points, normals and colours are
+            used.
+        graph : NeighbourGraph
+            kNN graph over ``cloud.points`` (``ransac.knn`` neighbours).
+        rng : numpy.random.Generator
+            Source of the RANSAC's randomness.
+        name : str
+            Name of the run in the hooks and errors (the ``frame_name`` of a frame).
+        timings : dict, optional
+            Seconds per stage kind are added to it (``ransac``, ``refiner``).
+
+        Returns
+        -------
+        labels : numpy.ndarray
+            (N,) int32 plane of each point, 0 = none.
+        planes : numpy.ndarray
+            (P, 4) float64 planes ``n . x + d = 0`` in the normalised frame.
+        """
+        from monoplane.ransac import SequentialRansac
+
+        timings = {} if timings is None else timings
+        refiner = self.cloud_refiner()
+        sampler = self.stage("sampler", Sampler)
+        scorer = self.stage("scorer", Scorer)
+        labeler = self.stage("labeler", Labeler)
+        rcfg = self.config.host["ransac"]
+        driver = SequentialRansac(sampler, scorer, labeler, rcfg)
+        found = self.call("ransac", f"{sampler.name} + {scorer.name} + {labeler.name}",
+                          lambda: driver.run_cloud(cloud, graph, rng), name, timings)
+        labels, planes = self.call(
+            "refiner", refiner.name,
+            lambda: refiner.refine_cloud(cloud, graph, found.labels, found.planes, rcfg.params),
+            name, timings)
+        return (np.asarray(labels, dtype=np.int32),
+                np.asarray(planes, dtype=np.float64).reshape(-1, 4))
 
     def run(self, frame: Frame) -> Reconstruction:
         """Cues, RANSAC and refinement on one frame.

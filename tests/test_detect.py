@@ -7,7 +7,12 @@ import open3d as o3d
 import pytest
 
 from monoplane.detect import detect_planes
-from monoplane.errors import ConfigError, InvalidInput
+from monoplane.errors import ConfigError, InvalidInput, StageError
+from monoplane.hookspecs import hookimpl
+from monoplane.pipeline import Pipeline
+from monoplane.plugin_manager import get_plugin_manager
+from monoplane.stages.base import Refiner
+from monoplane.testing import box_frame
 
 
 def grid(x0: float, x1: float, y0: float, y1: float, z: float, step: float) -> np.ndarray:
@@ -160,3 +165,52 @@ def test_conversions_to_open3d():
         pts = points[res.labels == pid]
         box = np.ptp(pts[:, 0]) * np.ptp(pts[:, 1])
         assert mesh.get_surface_area() == pytest.approx(box, rel=0.25)
+
+
+class _StageLog:
+    """A plugin that records every finished stage (the ``monoplane_stage_finished`` hook)."""
+
+    def __init__(self) -> None:
+        self.seen: list[tuple[str, str]] = []
+
+    @hookimpl
+    def monoplane_stage_finished(self, kind: str, name: str, seconds: float,
+                                 frame_name: str) -> None:
+        self.seen.append((kind, frame_name))
+
+
+def test_a_plugin_sees_the_stages_of_a_cloud_run_as_of_an_image_run():
+    log = _StageLog()
+    pm = get_plugin_manager(autoload=False, extra_plugins=(log,))
+    points, _ = two_coplanar_tops()
+    detect_planes(points, overrides=VIEW, pm=pm)
+    cloud_run = list(log.seen)
+    log.seen.clear()
+    frame = box_frame()[0]
+    Pipeline.from_preset("monoplane-nocrf", pm=pm).run(frame)
+    image_run = [kind for kind, name in log.seen if name == frame.name]
+    assert cloud_run[:2] == [("ransac", "cloud"), ("refiner", "cloud")]
+    assert image_run[:3] == ["cues", "ransac", "refiner"]
+
+
+class _Failing(Refiner):
+    """A pixel-free refiner that fails, as a plugin's bug would."""
+
+    name = "failing"
+    needs_pixels = False
+
+    def refine_cloud(self, cloud, graph, labels, planes, params):
+        raise RuntimeError("boom")
+
+
+class _FailingPlugin:
+    @hookimpl
+    def monoplane_register_refiners(self):
+        return [_Failing]
+
+
+def test_a_failing_stage_of_a_cloud_run_is_a_stage_error():
+    pm = get_plugin_manager(autoload=False, extra_plugins=(_FailingPlugin(),))
+    points, _ = two_coplanar_tops()
+    with pytest.raises(StageError, match="refiner.*failing.*boom"):
+        detect_planes(points, overrides=[*VIEW, "refiner.plugin=failing"], pm=pm)

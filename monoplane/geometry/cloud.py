@@ -46,6 +46,8 @@ PROPAGATION_RADIUS_FACTOR = 4.0
 PROPAGATION_NEIGHBOURS = 4
 #: Neighbours per sample of the graph :meth:`PlaneCloud.propagate` builds when given none.
 PROPAGATION_GRAPH_K = 8
+#: Query points labelled at a time by :meth:`PlaneCloud.label_points`.
+_LABEL_CHUNK = 200_000
 #: Pixels per thread below which propagation runs on one thread.
 THREADED_PIXELS = 16_384
 
@@ -289,13 +291,50 @@ class PlaneCloud:
         # jump from it: their nearest samples in 3D come from the point index.
         gap = np.flatnonzero(gap)
         if gap.size:
-            d_k, n_k = self.tree.query(self.all_points[gap], k=k, distance_upper_bound=radius)
-            full[gap] = _closest_plane(self.all_points[gap], d_k.reshape(gap.size, k),
-                                       n_k.reshape(gap.size, k), labels, p)
+            full[gap] = self.label_points(self.all_points[gap], labels, p, radius)
         out[self.all_pixels] = full
         # Sampled pixels keep their own label even if a closer duplicate point exists.
         out[self.pixels] = labels
         return out.reshape(h, w)
+
+    def label_points(self, queries: np.ndarray, labels: np.ndarray, planes: np.ndarray,
+                     radius: float) -> np.ndarray:
+        """Labels of any points from the labels of this cloud's points (grid kNN index).
+
+        A query point is non-planar when its nearest cloud point within ``radius`` is
+        non-planar or there is none; otherwise it takes, among the planar labels of its
+        :data:`PROPAGATION_NEIGHBOURS` nearest cloud points within ``radius``, the plane it is
+        closest to. :meth:`propagate` uses it for the pixels across a depth jump from their
+        image-nearest sample, and :func:`monoplane.detect_planes` for the points of a cloud
+        left out of the search.
+
+        Parameters
+        ----------
+        queries : numpy.ndarray
+            (Q, 3) points in the normalised frame.
+        labels : numpy.ndarray
+            (N,) int labels of ``points`` (0 = non-planar, ``i`` = ``planes[i - 1]``).
+        planes : numpy.ndarray
+            (P, 4) planes of the labels, normalised frame.
+        radius : float
+            Farthest a cloud point may lie from a query to count, normalised units.
+
+        Returns
+        -------
+        numpy.ndarray
+            (Q,) int32 labels.
+        """
+        queries = np.asarray(queries, dtype=np.float64).reshape(-1, 3)
+        labels = np.asarray(labels)
+        k = min(PROPAGATION_NEIGHBOURS, self.size) if len(planes) else 1
+        out = np.zeros(queries.shape[0], dtype=np.int32)
+        # Chunks bound the (Q, k) answers' memory on clouds of millions of points.
+        for start in range(0, queries.shape[0], _LABEL_CHUNK):
+            part = queries[start:start + _LABEL_CHUNK]
+            d_k, n_k = self.tree.query(part, k=k, distance_upper_bound=radius)
+            out[start:start + len(part)] = _closest_plane(
+                part, d_k.reshape(len(part), k), n_k.reshape(len(part), k), labels, planes)
+        return out
 
 
 def nearest_true_pixel(mask: np.ndarray) -> np.ndarray:
