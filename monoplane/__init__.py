@@ -9,8 +9,6 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
-from monoplane.version import __version__
-
 #: Module -> the public names it defines.
 _MODULES: dict[str, tuple[str, ...]] = {
     "monoplane.detect": ("detect_planes",),
@@ -20,6 +18,7 @@ _MODULES: dict[str, tuple[str, ...]] = {
     "monoplane.fileio": ("load_frame", "save_reconstruction"),
     "monoplane.pipeline": ("Pipeline",),
     "monoplane.datamodel": ("Camera", "Frame", "Reconstruction", "Scene"),
+    "monoplane.version": ("__version__",),
 }
 _LAZY = {name: module for module, names in _MODULES.items() for name in names}
 
@@ -37,6 +36,7 @@ if TYPE_CHECKING:
     from monoplane.fileio import load_frame, save_reconstruction
     from monoplane.hookspecs import hookimpl
     from monoplane.pipeline import Pipeline
+    from monoplane.version import __version__
 
 
 def __getattr__(name: str) -> Any:
