@@ -6,6 +6,7 @@ import argparse
 import functools
 import json
 from pathlib import Path
+from typing import cast
 
 from monoplane.cli.common import (
     add_input_args,
@@ -105,7 +106,9 @@ def cue_model_overrides(model: str, preset: str | None = None,
     """
     registry = registry or get_registry()
     name = load_config(preset, config, overrides, registry).stages["cues"][0]
-    keys = registry.get("cues", name).cls.catalogue_config(model)
+    # The registry admits only CueProvider subclasses under "cues".
+    provider = cast(type[CueProvider], registry.get("cues", name).cls)
+    keys = provider.catalogue_config(model)
     if keys is None:
         raise ConfigError(f"--cues {model}: cue provider '{name}' takes no catalogue model; "
                           "pick one that does with --set cues.plugin=NAME (see 'monoplane "
