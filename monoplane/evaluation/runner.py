@@ -18,7 +18,11 @@ The protocol of ``monoplane eval``:
    runs once, untimed, on the first scene: that run loads compiled kernels from their disk
    cache and builds lazily created state, a one-off cost of a process that ``monoplane bench``
    reports apart (``first call``), so the times are steady-state ones.
-4. A method that raises a :class:`~monoplane.errors.MonoplaneError` on a frame is scored as if
+4. Next to them, what that protocol cannot see (:mod:`~monoplane.evaluation.surfaces`), pooled
+   over frames: the share of curved-surface pixels labelled planar (``curved``), predicted
+   planes lying mostly on curved surfaces per frame (``false/fr``) and the purity of the
+   predicted planes (share of planar-labelled pixels on their plane's dominant true face).
+5. A method that raises a :class:`~monoplane.errors.MonoplaneError` on a frame is scored as if
    it had found no plane there (all pixels non-planar), and counted in ``n_failed``.
 """
 
@@ -37,6 +41,7 @@ from monoplane.errors import ConfigError, InvalidInput, MonoplaneError
 from monoplane.evaluation.baselines import CALL_TIMING, baseline_names, bind_baseline
 from monoplane.evaluation.recall import DEPTH_THRESHOLDS, plane_recall
 from monoplane.evaluation.segmentation import segmentation_scores
+from monoplane.evaluation.surfaces import SurfaceCounts, pooled, surface_counts
 
 #: The paper's ablation rows (Tab. IV), in table order.
 PAPER_PRESETS: tuple[str, ...] = (
@@ -139,6 +144,7 @@ class FrameResult:
     core_seconds: float = float("nan")
     failed: bool = False
     error: str = ""
+    surfaces: SurfaceCounts | None = None
 
 
 class FrameMean:
@@ -202,6 +208,12 @@ class MethodResult:
                 for k in range(len(self.thresholds))]
 
     @property
+    def surfaces(self) -> dict[str, float]:
+        """Surface-truth scores pooled over the frames (:func:`monoplane.evaluation.surfaces.
+        pooled`): ``curved_planar``, ``false_planes`` per frame and ``purity``."""
+        return pooled([f.surfaces for f in self.frames if f.surfaces is not None])
+
+    @property
     def n_failed(self) -> int:
         """Frames on which the method raised."""
         return sum(f.failed for f in self.frames)
@@ -213,7 +225,7 @@ class MethodResult:
             "recall": {f"{t:g}": r for t, r in zip(self.thresholds, self.recall, strict=True)},
             "seconds_per_frame": self.seconds_per_frame,
             "core_seconds_per_frame": self.core_seconds_per_frame,
-            "planes_per_frame": self.planes_per_frame,
+            "planes_per_frame": self.planes_per_frame, **self.surfaces,
             "n_frames": len(self.frames), "n_failed": self.n_failed,
         }
 
@@ -361,7 +373,8 @@ def evaluate(methods: Sequence[Method], n: int = 50, level: str = "mild", seed: 
                 result.frames.append(FrameResult(
                     scene_seed=scene_seed, voi=voi, ri=ri, sc=sc, recalled=recalled, n_gt=n_gt,
                     n_planes=rec.num_planes, seconds=seconds, core_seconds=core, failed=failed,
-                    error=error))
+                    error=error,
+                    surfaces=surface_counts(rec.labels, view.gt_faces, view.gt_curved)))
                 bar.update(1)
     finally:
         bar.close()
@@ -378,13 +391,15 @@ def format_table(results: EvalResults) -> str:
     is appended to the name when a method failed on some frames.
     """
     thr = results.settings.get("thresholds", list(DEPTH_THRESHOLDS))
-    header = ["method", "VOI↓", "RI↑", "SC↑", *[f"R@{t:g}m↑" for t in thr], "planes",
-              "s/frame", "core s"]
+    header = ["method", "VOI↓", "RI↑", "SC↑", *[f"R@{t:g}m↑" for t in thr], "curved↓",
+              "false/fr↓", "purity↑", "planes", "s/frame", "core s"]
     rows = []
     for m in results.methods:
         name = m.name if not m.n_failed else f"{m.name} ({m.n_failed} failed)"
         rows.append([name, f"{m.voi:.3f}", f"{m.ri:.3f}", f"{m.sc:.3f}",
-                     *[f"{r:.3f}" for r in m.recall], f"{m.planes_per_frame:.1f}",
+                     *[f"{r:.3f}" for r in m.recall], f"{m.surfaces['curved_planar']:.3f}",
+                     f"{m.surfaces['false_planes']:.2f}", f"{m.surfaces['purity']:.3f}",
+                     f"{m.planes_per_frame:.1f}",
                      f"{m.seconds_per_frame:.3f}", f"{m.core_seconds_per_frame:.3f}"])
     widths = [max(len(r[c]) for r in [header, *rows]) for c in range(len(header))]
 

@@ -58,6 +58,12 @@ class SynthView:
     gt_params : numpy.ndarray
         (P, 4) float64 camera-frame planes ``n · X + d = 0`` in metres, ``|n| = 1``, ``d > 0``
         (normal facing the camera); row ``i - 1`` is label ``i``.
+    gt_faces : numpy.ndarray
+        (H, W) int32 exact surface truth: every visible planar face has an id, however small
+        (``gt_faces == gt_labels`` wherever ``gt_labels > 0``; faces below the area threshold
+        get the ids after P), 0 on curved surfaces.
+    gt_curved : numpy.ndarray
+        (H, W) bool: the pixel lies on a curved surface (sphere, dome, cylinder, torus).
     R, t : numpy.ndarray
         (3, 3) and (3,) world-to-camera pose, ``x_cam = R x_world + t``.
     scale : float
@@ -70,6 +76,8 @@ class SynthView:
     gt_normals: np.ndarray
     gt_labels: np.ndarray
     gt_params: np.ndarray
+    gt_faces: np.ndarray
+    gt_curved: np.ndarray
     R: np.ndarray
     t: np.ndarray
     scale: float = 1.0
@@ -201,6 +209,11 @@ def render_scene(layout: Layout, poses: list[tuple[np.ndarray, np.ndarray]], see
         lut = np.zeros(len(layout.surfaces), dtype=np.int32)
         lut[sids] = np.arange(1, len(sids) + 1, dtype=np.int32)
         labels = lut[r.surface]
+        # Faces below the area threshold: ids after the labelled ones, in surface order.
+        small = np.setdiff1d(np.flatnonzero(planar & (np.bincount(
+            r.surface.ravel(), minlength=len(layout.surfaces)) > 0)), sids)
+        lut[small] = np.arange(len(sids) + 1, len(sids) + 1 + len(small), dtype=np.int32)
+        faces = lut[r.surface]
         params = r.planes_cam[sids].copy()
         cues = corrupt(r.depth, r.normals, K, level,
                        np.random.default_rng([seed, _STREAM_CUES, level_idx, v]))
@@ -212,7 +225,8 @@ def render_scene(layout: Layout, poses: list[tuple[np.ndarray, np.ndarray]], see
             notes=[f"synthetic scene seed={seed} level={level} view={v}"],
         )
         views.append(SynthView(frame=frame, gt_depth=r.depth, gt_normals=r.normals,
-                               gt_labels=labels, gt_params=params, R=R.copy(), t=t.copy(),
+                               gt_labels=labels, gt_params=params, gt_faces=faces,
+                               gt_curved=~planar[r.surface], R=R.copy(), t=t.copy(),
                                scale=cues.scale))
         links.append({i + 1: global_index[int(s)] for i, s in enumerate(sids)})
 
