@@ -3,7 +3,7 @@
 A config is TOML with one table per stage kind (:data:`~monoplane.stages.base.STAGE_KINDS`:
 ``[cues]``, ``[sampler]``, ...), each holding ``plugin = "name"`` and that plugin's parameters,
 plus the host's tables (:data:`HOST_TABLES`: ``[ransac]`` for the sequential driver,
-``[cloud]`` for point clouds). A config
+``[cloud]`` for point clouds, ``[planarity]`` for the planarity test after the refiner). A config
 may start from a preset with a top-level ``preset = "name"``; without one it starts from the
 default preset :data:`DEFAULT_PRESET`. A shipped preset may extend another the same way.
 Overrides are ``table.key=value`` strings (values in TOML syntax; bare words are taken as
@@ -35,7 +35,8 @@ from monoplane.stages.base import STAGE_KINDS, config_key
 DEFAULT_PRESET = "monoplane"
 #: Host tables (not stages) and the import path of their config dataclass.
 HOST_TABLES: dict[str, str] = {"ransac": "monoplane.ransac:RansacConfig",
-                               "cloud": "monoplane.cloud_config:CloudConfig"}
+                               "cloud": "monoplane.cloud_config:CloudConfig",
+                               "planarity": "monoplane.planarity:PlanarityConfig"}
 
 
 def list_presets() -> list[str]:

@@ -156,6 +156,10 @@ class Frame:
         Identifier used in messages and outputs (usually the image file stem).
     notes : list of str
         Provenance remarks, e.g. that intrinsics were assumed. Written to ``planes.json``.
+    normals_from_depth : bool
+        True when ``normals`` were estimated from this frame's own ``depth`` (no normal cue of
+        their own): they then carry no evidence that the depth does not, and the planarity
+        test (:mod:`monoplane.planarity`) judges curvature by the depth alone.
     """
 
     rgb: np.ndarray | None
@@ -167,6 +171,7 @@ class Frame:
     confidence: np.ndarray | None = None
     name: str = "frame"
     notes: list[str] = field(default_factory=list)
+    normals_from_depth: bool = False
     _shape: tuple[int, int] = field(init=False, repr=False, default=(0, 0))
 
     def __post_init__(self) -> None:

@@ -28,6 +28,7 @@ from monoplane.errors import InvalidInput
 from monoplane.geometry.cloud import PROPAGATION_RADIUS_FACTOR, PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.geometry.neighbours import PointIndex
+from monoplane.geometry.orientation import orient_normals
 from monoplane.geometry.planes import fit_planes_per_label
 from monoplane.geometry.polygons import PlaneMesh, points_plane_mesh
 from monoplane.io_checks import MAX_MAGNITUDE
@@ -204,12 +205,12 @@ def _estimate_normals(points: np.ndarray, cfg: CloudConfig) -> np.ndarray:
     pcd.estimate_normals(o3d.geometry.KDTreeSearchParamKNN(knn=k))
     if cfg.orient == "consistent" and len(points) > 3:
         pcd.orient_normals_consistent_tangent_plane(min(15, len(points) - 1))
-        normals = np.asarray(pcd.normals, dtype=np.float64)
-    else:
-        normals = np.asarray(pcd.normals, dtype=np.float64)
-        towards = np.asarray(cfg.viewpoint, dtype=np.float64) - points
-        normals = np.where(((normals * towards).sum(axis=1) < 0)[:, None], -normals, normals)
-    return normals
+        return np.asarray(pcd.normals, dtype=np.float64)
+    normals = np.asarray(pcd.normals, dtype=np.float64)
+    if cfg.orient == "auto":
+        return orient_normals(points, normals, np.asarray(cfg.viewpoint, dtype=np.float64))
+    towards = np.asarray(cfg.viewpoint, dtype=np.float64) - points
+    return np.where(((normals * towards).sum(axis=1) < 0)[:, None], -normals, normals)
 
 
 def _propagate(cloud: PlaneCloud, points: np.ndarray, sample: np.ndarray, labels: np.ndarray,
@@ -341,7 +342,8 @@ def detect_planes(cloud: Any, preset: str = "cloud",
     timings["graph"] = time.perf_counter() - t
     # The RANSAC stages and the refiner, with the pipeline's hooks and error wrapping; they
     # add their seconds to timings["ransac"] and timings["refiner"].
-    labels, planes = pipe.segment_cloud(pc, graph, rng, "cloud", timings)
+    labels, planes = pipe.segment_cloud(pc, graph, rng, "cloud", timings,
+                                        own_normals=u_normals is not None)
 
     t = time.perf_counter()
     u_labels = _propagate(pc, norm_pts, sample, np.asarray(labels, dtype=np.int32),

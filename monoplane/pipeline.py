@@ -1,4 +1,5 @@
-"""The single-view pipeline: cue provider → sequential RANSAC (sampler, scorer, labeler) → refiner.
+"""The single-view pipeline: cue provider → sequential RANSAC (sampler, scorer, labeler) → refiner
+→ planarity test (:mod:`monoplane.planarity`).
 
 Python API first::
 
@@ -26,6 +27,7 @@ from monoplane import config as config_mod
 from monoplane.cues.given import use_given_cues
 from monoplane.datamodel import Frame, Reconstruction
 from monoplane.errors import ConfigError, StageError
+from monoplane.planarity import check_cloud, check_image
 from monoplane.plugin_manager import get_plugin_manager, get_registry
 from monoplane.stages.base import CueProvider, Labeler, Refiner, Sampler, Scorer, Stage
 
@@ -141,6 +143,9 @@ class Pipeline:
         params = self.config.host["ransac"].params
         rec = self.call("refiner", refiner.name, lambda: refiner.refine(rec, params),
                         frame.name, timings)
+        planarity = self.config.host["planarity"]
+        rec = self.call("planarity", "planarity test", lambda: check_image(rec, planarity),
+                        frame.name, timings)
         rec.config = self.config.to_dict()
         rec.timings = {**rec.timings, **timings}
         return rec
@@ -160,9 +165,10 @@ class Pipeline:
         return refiner
 
     def segment_cloud(self, cloud: PlaneCloud, graph: NeighbourGraph, rng: np.random.Generator,
-                      name: str = "cloud", timings: dict[str, float] | None = None
-                      ) -> tuple[np.ndarray, np.ndarray]:
-        """Sequential RANSAC then the refiner on a cloud without pixels (:func:`detect_planes`).
+                      name: str = "cloud", timings: dict[str, float] | None = None,
+                      own_normals: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """Sequential RANSAC, the refiner and the planarity test on a cloud without pixels
+        (:func:`detect_planes`).
 
         The same stages, ``monoplane_stage_finished`` hooks and :class:`StageError` wrapping as
         :meth:`segment`: the RANSAC's :meth:`~monoplane.ransac.SequentialRansac.run_cloud` and
@@ -180,7 +186,11 @@ class Pipeline:
         name : str
             Name of the run in the hooks and errors (the ``frame_name`` of a frame).
         timings : dict, optional
-            Seconds per stage kind are added to it (``ransac``, ``refiner``).
+            Seconds per stage kind are added to it (``ransac``, ``refiner``, ``planarity``).
+        own_normals : bool
+            The cloud's normals came with it; False when they were estimated from its points,
+            which tells the planarity test nothing the points do not
+            (:func:`monoplane.planarity.check_cloud`).
 
         Returns
         -------
@@ -204,6 +214,13 @@ class Pipeline:
             "refiner", refiner.name,
             lambda: refiner.refine_cloud(cloud, graph, found.labels, found.planes, rcfg.params),
             name, timings)
+        planes = np.asarray(planes, dtype=np.float64).reshape(-1, 4)
+        labels, kept = self.call(
+            "planarity", "planarity test",
+            lambda: check_cloud(cloud.points, cloud.normals if own_normals else None, labels,
+                                graph.edges, planes, rcfg.epsilon,
+                                self.config.host["planarity"]), name, timings)
+        planes = planes[kept]
         return (np.asarray(labels, dtype=np.int32),
                 np.asarray(planes, dtype=np.float64).reshape(-1, 4))
 

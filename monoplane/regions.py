@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from monoplane.datamodel import Reconstruction
@@ -434,9 +435,17 @@ def _absorb_remap(moments: RegionMoments, area: np.ndarray, edges: np.ndarray,
 
 
 def gate_filled_pixels(points: np.ndarray, valid: np.ndarray, before: np.ndarray,
-                       after: np.ndarray, params: np.ndarray, max_distance: float
-                       ) -> np.ndarray:
-    """Keep a refinement's move from non-planar to a plane only where the point fits the plane.
+                       after: np.ndarray, params: np.ndarray, max_distance: float,
+                       normals: np.ndarray | None = None, max_angle_deg: float = 180.0,
+                       patch_px: int = 0) -> np.ndarray:
+    """Keep a refinement's change of a pixel's plane only where the pixel fits its new plane.
+
+    A refiner (a CRF, label propagation) decides labels from smoothness and appearance; it
+    must not grow a plane onto a surface that is not on it: a curved object, or an object
+    standing in front of the plane. So every pixel whose label the refinement changed, from
+    non-planar or from another plane, keeps its new plane only when its point lies within
+    ``max_distance`` of it and its normal within ``max_angle_deg`` of the plane's normal;
+    otherwise it gets back its label from ``before``.
 
     Parameters
     ----------
@@ -450,20 +459,43 @@ def gate_filled_pixels(points: np.ndarray, valid: np.ndarray, before: np.ndarray
     params : numpy.ndarray
         (P, 4) planes ``n · X + d = 0`` (unit n) of labels 1..P, depth units.
     max_distance : float
-        Largest point-to-plane distance of a filled pixel, depth units.
+        Largest point-to-plane distance of a pixel given a new plane, depth units.
+    normals : numpy.ndarray, optional
+        (H, W, 3) unit normals, camera frame (zero where unknown: no angle test there).
+    max_angle_deg : float
+        Largest angle between a pixel's normal and its new plane's normal, degrees (unsigned:
+        the plane's side does not matter). 180 (or no ``normals``) tests distance only.
+    patch_px : int
+        With ``patch_px`` > 0 a pixel that fails is sent back only when it lies in a patch of
+        failing pixels at least ``2 patch_px + 1`` wide (a morphological opening of the
+        failures with that square); 0 sends back every failing pixel.
 
     Returns
     -------
     numpy.ndarray
-        (H, W) int32 ``after``, with 0 restored at pixels that were 0 in ``before`` and whose
-        point lies farther than ``max_distance`` from their new plane (or whose depth is
-        invalid).
+        (H, W) int32 ``after``, with ``before``'s label restored where the new plane does
+        not fit (or the depth is invalid).
     """
+    before = np.asarray(before)
     out = np.asarray(after, dtype=np.int32).copy()
-    filled = (np.asarray(before) == 0) & (out > 0)
-    plane = params[out[filled] - 1]
-    dist = np.abs(np.einsum("nc,nc->n", points[filled], plane[:, :3]) + plane[:, 3])
-    out[filled] = np.where(valid[filled] & (dist <= max_distance), out[filled], 0)
+    moved = (out > 0) & (out != before)
+    plane = params[out[moved] - 1]
+    dist = np.abs(np.einsum("nc,nc->n", points[moved], plane[:, :3]) + plane[:, 3])
+    fits = valid[moved] & (dist <= max_distance)
+    if normals is not None and max_angle_deg < 180.0:
+        n = normals[moved]
+        cos = np.abs(np.einsum("nc,nc->n", n, plane[:, :3]))
+        known = np.einsum("nc,nc->n", n, n) > 0.5
+        fits &= ~known | (cos >= np.cos(np.radians(max_angle_deg)))
+    if patch_px > 0 and not fits.all():
+        # A morphological opening keeps the failures that form patches: a blob of a curved
+        # object or of an object in front, not the thin band along a crease where the cue's
+        # blurred normals lie between the two planes' and the CRF is right.
+        fail = np.zeros(out.shape, np.uint8)
+        fail[moved] = ~fits
+        kernel = np.ones((2 * patch_px + 1, 2 * patch_px + 1), np.uint8)
+        fits = ~cv2.morphologyEx(fail, cv2.MORPH_OPEN, kernel).astype(bool)[moved]
+    out[moved] = np.where(fits, out[moved], before[moved])
     return out
 
 

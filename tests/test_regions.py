@@ -365,3 +365,42 @@ def test_scene_radius_kernel_matches_the_numpy_formula():
         sel = pts[valid] - pts[valid].mean(axis=0)
         expected = np.sqrt((sel**2).sum(axis=1).max())
         assert scene_radius(pts, valid) == pytest.approx(expected, rel=1e-12)
+
+
+def test_gate_sends_back_a_patch_whose_normals_leave_the_plane_but_not_a_thin_band() -> None:
+    # Plane 1 is z = 5 (normal (0, 0, -1)); the refinement gave it every pixel of a 7 x 12
+    # map. Columns 0-3 carry the plane's normal; column 4, a 1-px band, and the 3-px-wide
+    # patch of columns 8-10 carry a normal 60 degrees off. The band stays (a crease's blurred
+    # normals); the patch goes back to its RANSAC label 0.
+    z = np.full((7, 12), 5.0)
+    before = np.zeros((7, 12), np.int64)
+    after = np.ones((7, 12), np.int64)
+    normals = np.zeros((7, 12, 3))
+    normals[..., 2] = -1.0
+    off = np.array([np.sin(np.radians(60)), 0.0, -np.cos(np.radians(60))])
+    normals[:, 4] = off
+    normals[:, 8:11] = off
+    plane = np.array([[0.0, 0.0, -1.0, 5.0]])
+    out = gate_filled_pixels(flat_points(z), np.ones(z.shape, bool), before, after, plane,
+                             np.inf, normals, 45.0, patch_px=1)
+    expected = np.ones((7, 12), np.int32)
+    expected[:, 8:11] = 0
+    np.testing.assert_array_equal(out, expected)
+    # Without the patch rule every failing pixel goes back; within 60 + 1 degrees none does.
+    out = gate_filled_pixels(flat_points(z), np.ones(z.shape, bool), before, after, plane,
+                             np.inf, normals, 45.0)
+    assert (out[:, 4] == 0).all() and (out[:, 8:11] == 0).all() and out[:, :4].all()
+    out = gate_filled_pixels(flat_points(z), np.ones(z.shape, bool), before, after, plane,
+                             np.inf, normals, 61.0)
+    assert out.all()
+
+
+def test_gate_tests_a_move_between_planes_too() -> None:
+    # A pixel RANSAC gave plane 1 (z = 5) that the refinement moved to plane 2 (z = 9) while its
+    # point lies on plane 1 gets plane 1 back.
+    z = np.array([[5.0, 9.0]])
+    before = np.array([[1, 2]])
+    after = np.array([[2, 2]])
+    planes = np.array([[0.0, 0.0, -1.0, 5.0], [0.0, 0.0, -1.0, 9.0]])
+    out = gate_filled_pixels(flat_points(z), np.ones(z.shape, bool), before, after, planes, 0.5)
+    np.testing.assert_array_equal(out, [[1, 2]])

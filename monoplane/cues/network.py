@@ -243,6 +243,7 @@ class CueNetwork:
                 else:
                     normals = normals_from_depth(depth, frame.K, **self.normals_options)
                     notes.append("normals: estimated from depth (edge-aware inverse-depth fits)")
+                    changes["normals_from_depth"] = True
             changes["normals"] = np.where((depth > 0)[..., None], normals, 0).astype(np.float32)
         else:
             changes["normals"] = orient_normals(frame.normals, frame.K)

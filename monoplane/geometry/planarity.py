@@ -26,6 +26,8 @@ import numpy as np
 
 #: Fewest sampled interior pixels a plane needs for its spread to be measured.
 MIN_SAMPLES = 30
+#: Smallest quadric residual :func:`quadric_ratio` divides by, as a fraction of the extent.
+QUADRIC_FLOOR = 3e-5
 
 
 def interior_labels(labels: np.ndarray, radius: int) -> np.ndarray:
@@ -85,21 +87,66 @@ def normal_spread_deg(normals: np.ndarray, labels: np.ndarray, num_planes: int,
     samples : numpy.ndarray
         (P,) int64 number of pixels each spread was measured on.
     """
-    spread = np.full(num_planes, np.nan)
-    samples = np.zeros(num_planes, dtype=np.int64)
-    if num_planes == 0:
-        return spread, samples
     lab = interior_labels(labels, radius)[::step, ::step].ravel()
     n = np.asarray(normals, dtype=np.float64)[::step, ::step].reshape(-1, 3)
-    ok = (lab > 0) & (np.einsum("ij,ij->i", n, n) > 0.5)
-    lab, n = lab[ok], n[ok]
-    order = np.argsort(lab, kind="stable")
+    return spread_of_groups(n, lab, num_planes)
+
+
+def _groups(labels: np.ndarray, num_planes: int, max_samples: int | None
+            ) -> list[tuple[int, np.ndarray]]:
+    """``(plane index, indices of its members)`` for every label 1..P present, each at most
+    ``max_samples`` evenly spaced members."""
+    lab = np.asarray(labels).ravel()
+    on = np.flatnonzero((lab > 0) & (lab <= num_planes))
+    order = on[np.argsort(lab[on], kind="stable")]
     ids, starts = np.unique(lab[order], return_index=True)
+    out = []
     for p, idx in zip(ids, np.split(order, starts[1:]), strict=True):
-        samples[p - 1] = len(idx)
+        if max_samples is not None and len(idx) > max_samples:
+            idx = idx[np.linspace(0, len(idx) - 1, max_samples).astype(np.int64)]
+        out.append((int(p) - 1, idx))
+    return out
+
+
+def spread_of_groups(normals: np.ndarray, labels: np.ndarray, num_planes: int,
+                     max_samples: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Median angle between each group's normals and their dominant direction.
+
+    The dominant direction starts at the component-wise median of the normals and is refined
+    three times as the mean of the normals within ``max(2 × median angle, 3°)`` of it, a
+    mean-shift step that settles on the mode of the normals. The angle is unsigned in the
+    sense of a plane: a normal and its opposite are one direction.
+
+    Parameters
+    ----------
+    normals : numpy.ndarray
+        (M, 3) unit normals, any frame; rows of zeros are unknown and left out.
+    labels : numpy.ndarray
+        (M,) int group of each normal, 0 = none, 1..P.
+    num_planes : int
+        P.
+    max_samples : int, optional
+        Use at most this many evenly spaced members of a group.
+
+    Returns
+    -------
+    spread : numpy.ndarray
+        (P,) float64 degrees; NaN where a group has fewer than :data:`MIN_SAMPLES` normals.
+    samples : numpy.ndarray
+        (P,) int64 number of normals each spread was measured on.
+    """
+    spread = np.full(num_planes, np.nan)
+    samples = np.zeros(num_planes, dtype=np.int64)
+    n = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+    lab = np.where(np.einsum("ij,ij->i", n, n) > 0.5, np.asarray(labels).ravel(), 0)
+    for p, idx in _groups(lab, num_planes, max_samples):
+        samples[p] = len(idx)
         if len(idx) < MIN_SAMPLES:
             continue
         x = n[idx]
+        # One side for all: flip each normal towards the group's first principal direction.
+        axis = np.linalg.eigh(x.T @ x)[1][:, -1]
+        x = x * np.where(x @ axis < 0, -1.0, 1.0)[:, None]
         centre = np.median(x, axis=0)
         for _ in range(3):
             centre /= max(np.linalg.norm(centre), 1e-12)
@@ -107,8 +154,57 @@ def normal_spread_deg(normals: np.ndarray, labels: np.ndarray, num_planes: int,
             near = angle <= max(2.0 * float(np.median(angle)), 3.0)
             centre = x[near].mean(axis=0)
         centre /= max(np.linalg.norm(centre), 1e-12)
-        spread[p - 1] = float(np.median(np.degrees(np.arccos(np.clip(x @ centre, -1.0, 1.0)))))
+        spread[p] = float(np.median(np.degrees(np.arccos(np.clip(x @ centre, -1.0, 1.0)))))
     return spread, samples
+
+
+def quadric_ratio(points: np.ndarray, labels: np.ndarray, num_planes: int,
+                  max_samples: int | None = None) -> np.ndarray:
+    """How much better a quadric fits each group's points than a plane: RMS ratio.
+
+    In each group's principal frame (origin at the centroid, ``w`` along the smallest
+    principal axis, ``u, v`` in the plane) the heights ``w`` are fitted by ``a + b u + c v``
+    and by that plus ``d u² + e u v + f v²``, in least squares; the ratio is the plane's RMS
+    residual over the quadric's. About 1 on a plane with noise (the three extra terms absorb
+    next to nothing), large on a cap of a sphere or a strip of a cylinder once the bend
+    exceeds the noise.
+
+    Parameters
+    ----------
+    points : numpy.ndarray
+        (M, 3) points, any frame and unit.
+    labels : numpy.ndarray
+        (M,) int group of each point, 0 = none, 1..P.
+    num_planes : int
+        P.
+    max_samples : int, optional
+        Use at most this many evenly spaced members of a group.
+
+    Returns
+    -------
+    numpy.ndarray
+        (P,) float64 ratios, NaN where a group has fewer than :data:`MIN_SAMPLES` points.
+    """
+    out = np.full(num_planes, np.nan)
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    lab = np.where(np.isfinite(pts).all(axis=1), np.asarray(labels).ravel(), 0)
+    for p, idx in _groups(lab, num_planes, max_samples):
+        if len(idx) < MIN_SAMPLES:
+            continue
+        x = pts[idx] - pts[idx].mean(axis=0)
+        # Scale-free: the fits are done in units of the group's extent.
+        x /= max(float(np.abs(x).max()), 1e-300)
+        basis = np.linalg.eigh(x.T @ x)[1]
+        w, u, v = x @ basis[:, 0], x @ basis[:, 2], x @ basis[:, 1]
+        # In the principal frame the best plane is w = 0 up to rounding (the centroid and the
+        # smallest axis are its least-squares solution), so its residual is w itself.
+        quad = np.column_stack([np.ones_like(u), u, v, u * u, u * v, v * v])
+        r_quad = w - quad @ np.linalg.lstsq(quad, w, rcond=None)[0]
+        e_lin, e_quad = float(np.sqrt(np.mean(w ** 2))), float(np.sqrt(np.mean(r_quad ** 2)))
+        # Residuals below QUADRIC_FLOOR of the extent are rounding (float32 depth is quantised
+        # in a pattern a quadric partly fits), not a bend: an exact plane stays flat.
+        out[p] = e_lin / max(e_quad, QUADRIC_FLOOR)
+    return out
 
 
 def noise_floor_deg(spreads: np.ndarray, weights: np.ndarray) -> float:

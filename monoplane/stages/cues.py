@@ -105,7 +105,7 @@ class GivenCues(CueProvider):
             return use_given_cues(frame)
         normals = normals_from_depth(frame.depth, frame.K, **cfg.normals_options())
         normals = np.where((frame.depth > 0)[..., None], normals, 0).astype(np.float32)
-        return frame.with_(normals=normals, notes=[
+        return frame.with_(normals=normals, normals_from_depth=True, notes=[
             *frame.notes, "normals: estimated from depth (edge-aware inverse-depth fits)"])
 
     def needs_cues(self, frame: Frame) -> bool:

@@ -137,8 +137,14 @@ class DenseCrfRefiner(Refiner):
         uniform_nonplanar: bool = param(
             True, "unary: pixels the RANSAC left non-planar get no preference, the kernels decide")
         fill_distance: float = param(
-            0.1, "a filled non-planar pixel keeps its plane only within this distance "
+            0.1, "a pixel the CRF gives a new plane keeps it only within this distance "
             "of it, fraction of scene radius (inf: no test)")
+        fill_angle_deg: float = param(
+            45.0, "... and only where its normal lies within this angle of the plane's, "
+            "degrees (180: no test)")
+        fill_patch_px: int = param(
+            1, "the normal test rejects only patches at least 2 × this + 1 pixels wide (at "
+            "256 px, scaled with the width): the cue blurs normals across a crease")
         fit_inliers_only: bool = param(
             True, "refit planes only on pixels the RANSAC labelled planar (not on filled holes)")
 
@@ -154,6 +160,11 @@ class DenseCrfRefiner(Refiner):
             raise ConfigError(f"refiner.merge_distance must be positive, got {c.merge_distance}")
         if not c.fill_distance > 0:
             raise ConfigError(f"refiner.fill_distance must be positive, got {c.fill_distance}")
+        if not 0 < c.fill_angle_deg <= 180:
+            raise ConfigError(
+                f"refiner.fill_angle_deg must lie in (0, 180], got {c.fill_angle_deg}")
+        if c.fill_patch_px < 0:
+            raise ConfigError(f"refiner.fill_patch_px must be >= 0, got {c.fill_patch_px}")
         if c.min_area < 0:
             raise ConfigError(f"refiner.min_area must be >= 0, got {c.min_area}")
         # Above 1/2 the RANSAC label stays the most likely one whatever the number of planes.
@@ -185,7 +196,7 @@ class DenseCrfRefiner(Refiner):
                         normals=frame.normals, threaded=threaded)
         points = frame.points()
         tolerance = np.inf
-        if c.uniform_nonplanar and np.isfinite(c.fill_distance):
+        if np.isfinite(c.fill_distance):
             tolerance = c.fill_distance * scene_radius(points, frame.depth > 0)
         return _FrameWork(grid, points, tolerance)
 
@@ -215,11 +226,13 @@ class DenseCrfRefiner(Refiner):
                 else self._frame_work(frame))
         labels = dense_crf(rec.labels, rec.num_planes + 1, self.crf, rgb=frame.rgb,
                            depth=frame.depth, normals=frame.normals, grid=work.grid)
-        min_area = scaled_min_area(frame.shape, self.config.min_area)
         c = self.config
-        if np.isfinite(work.fill_tolerance):
-            labels = gate_filled_pixels(work.points, frame.depth > 0, rec.labels, labels,
-                                        rec.params, work.fill_tolerance)
+        min_area = scaled_min_area(frame.shape, c.min_area)
+        if np.isfinite(work.fill_tolerance) or c.fill_angle_deg < 180:
+            labels = gate_filled_pixels(
+                work.points, frame.depth > 0, rec.labels, labels, rec.params,
+                work.fill_tolerance, frame.normals, c.fill_angle_deg,
+                patch_px=int(round(c.fill_patch_px * frame.width / 256)))
         crf = time.perf_counter() - start
         out = clean_regions(rec, labels, min_area, c.connectivity, split=c.split, merge=c.merge,
                             absorb=c.absorb, max_angle_deg=c.merge_angle_deg,

@@ -58,3 +58,35 @@ def test_too_few_samples_give_nan_and_the_floor_is_the_weighted_median() -> None
                            np.array([100, 10, 50, 1000])) == 1.0
     assert noise_floor_deg(np.array([1.0, 2.0]), np.array([10, 30])) == 2.0
     assert np.isnan(noise_floor_deg(np.array([np.nan]), np.array([5])))
+
+
+def test_spread_of_groups_ignores_the_sign_of_a_normal() -> None:
+    # A face whose normals flip sign from point to point (a viewpoint on its plane) is still one
+    # direction: the spread is its noise, not 90 degrees.
+    from monoplane.geometry.planarity import spread_of_groups
+
+    rng = np.random.default_rng(1)
+    n = _unit(np.array([0.0, 0.0, 1.0]) + rng.normal(0, 0.01, (400, 3)))
+    n *= np.where(rng.random(400) < 0.5, -1.0, 1.0)[:, None]
+    spread, count = spread_of_groups(n, np.ones(400, np.int64), 1)
+    assert count[0] == 400 and spread[0] < 1.5
+
+
+def test_quadric_ratio_is_one_on_a_noisy_plane_and_large_on_a_cap_and_a_strip() -> None:
+    from monoplane.geometry.planarity import quadric_ratio
+
+    rng = np.random.default_rng(2)
+    u, v = rng.uniform(-1, 1, (2, 2000))
+    plane = np.stack([u, v, 0.3 * u - 0.2 * v + rng.normal(0, 0.01, u.size)], 1)
+    # A spherical cap of radius 5 over the same square: sagitta 0.2, far above the noise.
+    cap = np.stack([u, v, np.sqrt(25 - u**2 - v**2) + rng.normal(0, 0.01, u.size)], 1)
+    # A 20-degree strip of a cylinder of radius 1 around the y axis, exact points.
+    a = np.radians(rng.uniform(-10, 10, u.size))
+    strip = np.stack([np.sin(a), v, np.cos(a)], 1)
+    points = np.concatenate([plane, cap, strip])
+    labels = np.repeat([1, 2, 3], u.size)
+    ratio = quadric_ratio(points, labels, 3)
+    assert ratio[0] == pytest.approx(1.0, abs=0.01)
+    assert ratio[1] > 3.0 and ratio[2] > 100.0
+    # Fewer than MIN_SAMPLES points: no evidence, NaN.
+    assert np.isnan(quadric_ratio(points[:10], np.ones(10, np.int64), 1)[0])

@@ -1,0 +1,249 @@
+"""The planarity test: planes on curved surfaces become non-planar (config table ``[planarity]``).
+
+RANSAC accepts any patch whose points lie within ε of a plane and whose normals lie within
+ε_n of its normal, so a cap of a sphere or a strip of a cylinder passes as a plane; a refiner
+then grows it. This step runs once after the refiner, on images and clouds alike, and sets to
+non-planar (label 0) every final plane whose points and normals show systematic curvature.
+Two signs, either one rejects a plane:
+
+1. **Normals that turn across the region.** On a flat region the normal cue scatters around
+   one direction by its noise only; on a curved one it turns with position, so it spreads
+   far wider. The spread of a plane is the median angle between its normals and their
+   dominant direction (:func:`~monoplane.geometry.planarity.spread_of_groups`), measured
+   away from the region's border (where the cue blurs across the neighbouring surface). The
+   cue's noise is the *noise floor*, the spread of the median planar point
+   (:func:`~monoplane.geometry.planarity.noise_floor_deg`): most points of a scene lie on
+   flat surfaces. A plane is curved when its spread exceeds the floor by more than
+   ``max_extra_spread_deg``.
+2. **A quadric that explains the points better than the plane.** In the plane's own frame
+   the points' heights are fitted by a plane and by a quadric. A plane is curved when the
+   plane leaves ``quadric_ratio`` times the quadric's RMS residual and that residual excess
+   is above the noise: noisy or warped depth (monocular cues) bends a flat wall gently, which
+   a quadric also absorbs, but never by that ratio.
+
+Thin genuine planes survive: a region with fewer than
+:data:`~monoplane.geometry.planarity.MIN_SAMPLES` points away from its border (a table top
+seen edge-on, a shelf board) has no evidence of curvature and is kept.
+
+Where the measurements come from: images use the frame's normal cue and its 3D points on the
+final label map, eroded by ``border_px`` (scaled with the image width, at 256 px); clouds use
+the working cloud's points and normals, without the points that have a graph neighbour of
+another label.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from monoplane.datamodel import Reconstruction
+from monoplane.errors import ConfigError
+from monoplane.geometry.planarity import (
+    MIN_SAMPLES,
+    interior_labels,
+    noise_floor_deg,
+    quadric_ratio,
+    spread_of_groups,
+)
+from monoplane.stages.base import param
+
+
+@dataclass
+class PlanarityConfig:
+    """Parameters of the planarity test (config table ``[planarity]``)."""
+
+    enabled: bool = param(True, "reject final planes whose points and normals show curvature")
+    max_extra_spread_deg: float = param(
+        4.5, "a plane is curved when its normals spread this many degrees beyond the noise "
+        "floor (the spread of the scene's median planar point)")
+    min_floor_deg: float = param(
+        1.0, "noise floor used at least, degrees (exact normals of a clean cloud have none)")
+    quadric_ratio: float = param(
+        3.0, "a plane is curved when a quadric fits its points this many times better (RMS) "
+        "than the plane (0 disables the quadric test)")
+    border_px: int = param(
+        2, "image pixels this close to another label are left out of the test (at 256 px "
+        "wide, scaled with the width)")
+    max_samples: int = param(1000, "points sampled per plane for the test")
+    max_points: int = param(
+        20000, "image pixels sampled for the test, on a regular grid (its speed at any size)")
+
+    def __post_init__(self) -> None:
+        checks = [
+            (self.max_extra_spread_deg > 0, "max_extra_spread_deg must be positive"),
+            (self.min_floor_deg >= 0, "min_floor_deg must be non-negative"),
+            (self.quadric_ratio == 0 or self.quadric_ratio > 1,
+             "quadric_ratio must be 0 (off) or above 1"),
+            (self.border_px >= 0, "border_px must be non-negative"),
+            (self.max_samples >= 30, "max_samples must be at least 30"),
+            (self.max_points >= 1000, "max_points must be at least 1000"),
+        ]
+        for ok, message in checks:
+            if not ok:
+                raise ConfigError(message)
+
+
+def curved_planes(points: np.ndarray, normals: np.ndarray | None, labels: np.ndarray,
+                  num_planes: int, cfg: PlanarityConfig) -> np.ndarray:
+    """Which planes show curvature, from their points and normals.
+
+    Parameters
+    ----------
+    points : numpy.ndarray
+        (M, 3) points (any frame and unit: the tests are scale-free).
+    normals : numpy.ndarray or None
+        (M, 3) unit normals in the points' frame, a cue of their own (rows of zeros are
+        unknown); None when the only normals were estimated from these points, which tells
+        nothing the points do not: the normal test is then skipped.
+    labels : numpy.ndarray
+        (M,) int plane of each point, 0 = not tested (non-planar, or on a border).
+    num_planes : int
+        P, the largest label.
+    cfg : PlanarityConfig
+
+    Returns
+    -------
+    numpy.ndarray
+        (P,) bool, True for a curved plane (a plane with too few points is never curved).
+    """
+    curved = np.zeros(num_planes, dtype=bool)
+    if num_planes == 0:
+        return curved
+    if normals is not None:
+        spread, count = spread_of_groups(normals, labels, num_planes, cfg.max_samples)
+        floor = noise_floor_deg(spread, count)
+        if np.isfinite(floor):
+            curved |= spread > max(floor, cfg.min_floor_deg) + cfg.max_extra_spread_deg
+    if cfg.quadric_ratio > 0:
+        curved |= quadric_ratio(points, labels, num_planes, cfg.max_samples) > cfg.quadric_ratio
+    return curved
+
+
+def drop_planes(rec: Reconstruction, drop: np.ndarray) -> Reconstruction:
+    """``rec`` with the planes flagged in ``drop`` made non-planar and the rest renumbered.
+
+    Parameters
+    ----------
+    rec : Reconstruction
+    drop : numpy.ndarray
+        (P,) bool.
+
+    Returns
+    -------
+    Reconstruction
+        Same frame, config and timings; labels 0..P' in the original order.
+    """
+    keep = ~np.asarray(drop, dtype=bool)
+    remap = np.zeros(rec.num_planes + 1, dtype=np.int32)
+    remap[1:][keep] = np.arange(1, int(keep.sum()) + 1, dtype=np.int32)
+    assert rec.rmse is not None and rec.support is not None
+    return Reconstruction(frame=rec.frame, labels=remap[rec.labels], params=rec.params[keep],
+                          rmse=rec.rmse[keep], support=rec.support[keep], config=rec.config,
+                          timings=rec.timings)
+
+
+def check_image(rec: Reconstruction, cfg: PlanarityConfig) -> Reconstruction:
+    """The planarity test on a refined image reconstruction.
+
+    Parameters
+    ----------
+    rec : Reconstruction
+        Final planes of one frame; its frame needs depth (and normals, else only the quadric
+        test runs).
+    cfg : PlanarityConfig
+
+    Returns
+    -------
+    Reconstruction
+        ``rec`` itself when no plane is curved, else a copy without the curved planes.
+    """
+    frame = rec.frame
+    if not cfg.enabled or rec.num_planes == 0 or frame.depth is None:
+        return rec
+    h, w = frame.shape
+    radius = int(round(cfg.border_px * w / 256))
+    # A regular grid of at most about max_points pixels measures every plane that matters.
+    step = max(1, math.ceil(math.sqrt(h * w / cfg.max_points)))
+    inner = (interior_labels(rec.labels, radius) * (frame.depth > 0))[::step, ::step].ravel()
+    v, u = np.mgrid[0:h:step, 0:w:step]
+    rays = np.stack([u.ravel(), v.ravel(), np.ones(u.size)], 1) @ np.linalg.inv(frame.K).T
+    points = rays * frame.depth[::step, ::step].reshape(-1, 1).astype(np.float64)
+    normals = (None if frame.normals is None or frame.normals_from_depth
+               else frame.normals[::step, ::step].reshape(-1, 3))
+    curved = curved_planes(points, normals, inner, rec.num_planes, cfg)
+    if not curved.any():
+        return rec
+    out = drop_planes(rec, curved)
+    out.frame.notes.append(f"planarity: {int(curved.sum())} plane(s) on curved surfaces set "
+                           "non-planar")
+    return out
+
+
+def check_cloud(points: np.ndarray, normals: np.ndarray | None, labels: np.ndarray,
+                edges: np.ndarray, planes: np.ndarray, epsilon: float, cfg: PlanarityConfig
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """The planarity test on a cloud's labels.
+
+    Parameters
+    ----------
+    points : numpy.ndarray
+        (M, 3) working-cloud points.
+    normals : numpy.ndarray or None
+        (M, 3) unit normals that came with the cloud; None when they were estimated from the
+        points (see :func:`curved_planes`).
+    labels : numpy.ndarray
+        (M,) int labels 0..P.
+    edges : numpy.ndarray
+        (E, 2) int edges of the cloud's neighbour graph; a point joined to a point of another
+        label is on a border and left out of the test.
+    planes : numpy.ndarray
+        (P, 4) planes ``n · X + d = 0`` of labels 1..P, in the points' frame.
+    epsilon : float
+        The RANSAC's inlier distance in the points' units.
+    cfg : PlanarityConfig
+
+    Returns
+    -------
+    labels : numpy.ndarray
+        (M,) int32 labels 0..P' with the curved planes set to 0 and the others renumbered in
+        their order.
+    kept : numpy.ndarray
+        (P,) bool, the planes kept (rows of the caller's plane array to keep).
+    """
+    labels = np.asarray(labels, dtype=np.int32)
+    num = int(labels.max(initial=0))
+    if not cfg.enabled or num == 0:
+        return labels, np.ones(num, dtype=bool)
+    e = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    border = np.zeros(len(labels), dtype=bool)
+    cross = labels[e[:, 0]] != labels[e[:, 1]]
+    border[e[cross, 0]] = True
+    border[e[cross, 1]] = True
+    inner = np.where(border, 0, labels)
+    curved = curved_planes(points, normals, inner, num, cfg)
+    thin = np.flatnonzero(np.bincount(inner, minlength=num + 1)[1:] < MIN_SAMPLES) + 1
+    for p in thin:
+        curved[p - 1] |= _crease_strip(points, labels, e[cross], p, planes, epsilon)
+    remap = np.zeros(num + 1, dtype=np.int32)
+    remap[1:][~curved] = np.arange(1, int((~curved).sum()) + 1, dtype=np.int32)
+    return remap[labels], ~curved
+
+
+def _crease_strip(points: np.ndarray, labels: np.ndarray, cross: np.ndarray, plane: int,
+                  planes: np.ndarray, epsilon: float) -> bool:
+    """Whether plane ``plane`` (1-based), too thin for the curvature tests, is a strip along a
+    crease: PCA normals estimated from a cloud blend two faces' normals along their crease,
+    and RANSAC can group those points into a plane of their own. Such a strip is redundant:
+    at least 80 % of its points lie within 2 ε of a plane it touches (across the ``cross``
+    edges, (E, 2) graph edges between different labels). A thin face of its own (a floor
+    seen at a grazing angle) leaves its neighbours' planes and is kept."""
+    members = labels == plane
+    ends = cross[members[cross[:, 0]] | members[cross[:, 1]]].ravel()
+    touching = np.setdiff1d(labels[ends], [0, plane])
+    if touching.size == 0:
+        return False
+    n = planes[touching - 1]
+    dist = np.abs(points[members] @ n[:, :3].T + n[:, 3]).min(axis=1)
+    return bool(np.mean(dist <= 2.0 * epsilon) >= 0.8)
