@@ -331,12 +331,8 @@ def detect_planes(cloud: Any, preset: str = "cloud",
         s_normals = u_normals[sample] / np.linalg.norm(u_normals[sample], axis=1, keepdims=True)
     timings["normals"] = time.perf_counter() - t
 
-    m = sample.size
-    pc = PlaneCloud(points=np.ascontiguousarray(norm_pts[sample]), normals=s_normals,
-                    colors=None if u_colors is None else u_colors[sample],
-                    pixels=np.arange(m, dtype=np.int64), center=center, scale=scale,
-                    shape=(1, m), all_points=norm_pts[sample],
-                    all_pixels=np.arange(m, dtype=np.int64))
+    pc = PlaneCloud.from_points(norm_pts[sample], s_normals,
+                                None if u_colors is None else u_colors[sample], center, scale)
     t = time.perf_counter()
     graph = NeighbourGraph.build(pc.points, rcfg.knn, tree=pc.tree)
     timings["graph"] = time.perf_counter() - t

@@ -408,7 +408,7 @@ class SequentialRansac:
         to the camera frame, where planes and RMSE are then expressed.
         """
         params, rmse, support = fit_planes_per_label(
-            cloud.all_points, labels.ravel()[cloud.all_pixels], int(labels.max(initial=0)))
+            cloud.all_points, labels.ravel()[cloud.pixel_grid()[2]], int(labels.max(initial=0)))
         params = cloud.plane_to_camera(params)
         rmse = rmse * cloud.scale
         kept = ~np.isnan(rmse)

@@ -117,7 +117,7 @@ def open3d_ransac(frame: Frame, *, seed: int = 0, **options: Any) -> Reconstruct
         planes.append(cloud.plane_to_camera(plane))
         rmses.append(rmse * cloud.scale)
         supports.append(chosen.size)
-        flat[cloud.all_pixels[chosen]] = len(planes)
+        flat[cloud.pixel_grid()[2][chosen]] = len(planes)
         remaining = np.setdiff1d(remaining, chosen, assume_unique=True)
     return Reconstruction(frame=frame, labels=flat.reshape(frame.shape),
                           params=np.asarray(planes, dtype=np.float64).reshape(-1, 4),

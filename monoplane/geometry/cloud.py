@@ -54,7 +54,13 @@ THREADED_PIXELS = 16_384
 
 @dataclass
 class PlaneCloud:
-    """Oriented point cloud of one frame, normalised into the unit sphere.
+    """Oriented point cloud of one frame, or of a point cloud, normalised into the unit sphere.
+
+    A frame's cloud (:meth:`from_frame`) knows the pixel of each point; a point cloud's
+    (:meth:`from_points`) has no image, and its pixel attributes are ``None``: the RANSAC's
+    :meth:`~monoplane.ransac.SequentialRansac.run_cloud`, a refiner's ``refine_cloud`` and
+    :meth:`label_points` need none, the methods on the pixel grid (:meth:`propagate`,
+    :meth:`image_nearest_sample`, :meth:`pixel_grid`) refuse such a cloud.
 
     Attributes
     ----------
@@ -66,30 +72,30 @@ class PlaneCloud:
     colors : numpy.ndarray or None
         (N, 3) float64 RGB in [0, 1]; ``None`` when the frame has no colour (depth-only or grey
         input), in which case colour terms are dropped.
-    pixels : numpy.ndarray
-        (N,) int64 flat pixel index ``v * W + u`` of each point.
+    pixels : numpy.ndarray or None
+        (N,) int64 flat pixel index ``v * W + u`` of each point; None without an image.
     center : numpy.ndarray
         (3,) float64 camera-frame centre subtracted before scaling, in depth units.
     scale : float
         Depth units per normalised unit.
-    shape : tuple of int
-        ``(H, W)`` of the frame.
+    shape : tuple of int or None
+        ``(H, W)`` of the frame; None without an image.
     all_points : numpy.ndarray
         (V, 3) float64 normalised points of *every* valid pixel (equal to ``points`` when no
-        subsampling happened).
-    all_pixels : numpy.ndarray
-        (V,) int64 flat pixel index of every valid pixel, ascending.
+        subsampling happened; ``points`` without an image).
+    all_pixels : numpy.ndarray or None
+        (V,) int64 flat pixel index of every valid pixel, ascending; None without an image.
     """
 
     points: np.ndarray
     normals: np.ndarray
     colors: np.ndarray | None
-    pixels: np.ndarray
+    pixels: np.ndarray | None
     center: np.ndarray
     scale: float
-    shape: tuple[int, int]
+    shape: tuple[int, int] | None
     all_points: np.ndarray
-    all_pixels: np.ndarray
+    all_pixels: np.ndarray | None
 
     def __post_init__(self) -> None:
         n = self.points.shape[0]
@@ -97,7 +103,10 @@ class PlaneCloud:
             raise InvalidInput("points and normals must both have shape (N, 3)")
         if self.colors is not None and self.colors.shape != (n, 3):
             raise InvalidInput("colors must have shape (N, 3)")
-        if self.pixels.shape != (n,):
+        grid = (self.pixels, self.shape, self.all_pixels)
+        if any(g is None for g in grid) and any(g is not None for g in grid):
+            raise InvalidInput("pixels, shape and all_pixels must be all given or all None")
+        if self.pixels is not None and self.pixels.shape != (n,):
             raise InvalidInput("pixels must have shape (N,)")
         if not self.scale > 0:
             raise InvalidInput(f"scale must be positive, got {self.scale}")
@@ -120,12 +129,24 @@ class PlaneCloud:
         It depends on the sampling only, not on labels, so RANSAC computes it while the
         neighbour graph is being built; :meth:`propagate` starts from it.
         """
-        h, w = self.shape
+        pixels, (h, w), all_pixels = self.pixel_grid()
         sampled = np.zeros((h, w), dtype=bool)
-        sampled.ravel()[self.pixels] = True
+        sampled.ravel()[pixels] = True
         sample_of = np.full(h * w, -1, dtype=np.int64)
-        sample_of[self.pixels] = np.arange(self.size)
-        return sample_of[nearest_true_pixel(sampled)[self.all_pixels]]
+        sample_of[pixels] = np.arange(self.size)
+        return sample_of[nearest_true_pixel(sampled)[all_pixels]]
+
+    def pixel_grid(self) -> tuple[np.ndarray, tuple[int, int], np.ndarray]:
+        """``(pixels, shape, all_pixels)`` of a frame's cloud (see the attributes).
+
+        Raises
+        ------
+        InvalidInput
+            For a cloud without an image (:meth:`from_points`).
+        """
+        if self.pixels is None or self.shape is None or self.all_pixels is None:
+            raise InvalidInput("this point cloud has no image: no pixel grid to work on")
+        return self.pixels, self.shape, self.all_pixels
 
     @property
     def subsampled(self) -> bool:
@@ -194,6 +215,28 @@ class PlaneCloud:
         return cls(points=np.ascontiguousarray(points), normals=normals, colors=colors,
                    pixels=keep, center=center, scale=scale, shape=frame.shape,
                    all_points=all_points, all_pixels=all_pixels)
+
+    @classmethod
+    def from_points(cls, points: np.ndarray, normals: np.ndarray, colors: np.ndarray | None,
+                    center: np.ndarray, scale: float) -> PlaneCloud:
+        """A cloud without an image, from points already normalised into the unit sphere.
+
+        Parameters
+        ----------
+        points : numpy.ndarray
+            (N, 3) normalised points ``(X - center) / scale``.
+        normals : numpy.ndarray
+            (N, 3) unit normals, oriented.
+        colors : numpy.ndarray or None
+            (N, 3) RGB in [0, 1], or None.
+        center : numpy.ndarray
+            (3,) centre subtracted before scaling, in the input's frame and units.
+        scale : float
+            Input units per normalised unit.
+        """
+        points = np.ascontiguousarray(points, dtype=np.float64)
+        return cls(points=points, normals=normals, colors=colors, pixels=None, center=center,
+                   scale=scale, shape=None, all_points=points, all_pixels=None)
 
     def plane_to_camera(self, planes: np.ndarray) -> np.ndarray:
         """Express normalised-frame planes in the camera frame and depth units.
@@ -266,10 +309,10 @@ class PlaneCloud:
             nearest-sample rule used on pixels that were not sampled.
         """
         labels = np.ascontiguousarray(labels, dtype=np.int32)
-        h, w = self.shape
+        pixels, (h, w), all_pixels = self.pixel_grid()
         out = np.zeros(h * w, dtype=np.int32)
         if not self.subsampled:
-            out[self.pixels] = labels
+            out[pixels] = labels
             return out.reshape(h, w)
         if graph is None:
             graph = NeighbourGraph.build(self.points, PROPAGATION_GRAPH_K, tree=self.tree)
@@ -292,9 +335,9 @@ class PlaneCloud:
         gap = np.flatnonzero(gap)
         if gap.size:
             full[gap] = self.label_points(self.all_points[gap], labels, p, radius)
-        out[self.all_pixels] = full
+        out[all_pixels] = full
         # Sampled pixels keep their own label even if a closer duplicate point exists.
-        out[self.pixels] = labels
+        out[pixels] = labels
         return out.reshape(h, w)
 
     def label_points(self, queries: np.ndarray, labels: np.ndarray, planes: np.ndarray,

@@ -115,9 +115,9 @@ def pixel_graph(cloud: PlaneCloud, max_jump: float) -> NeighbourGraph:
     max_jump : float
         Relative jump threshold.
     """
-    h, w = cloud.shape
+    pixels, (h, w), _ = cloud.pixel_grid()
     index = np.full(h * w, -1, dtype=np.int64)
-    index[cloud.pixels] = np.arange(cloud.size)
+    index[pixels] = np.arange(cloud.size)
     index = index.reshape(h, w)
     pairs = []
     for dv, du in ((0, 1), (1, 0), (1, 1), (1, -1)):
@@ -307,11 +307,12 @@ class GraphCrfRefiner(Refiner):
         frame = rec.frame
         cloud = PlaneCloud.from_frame(frame)
         graph = pixel_graph(cloud, self.config.max_jump)
-        start = rec.labels.ravel()[cloud.pixels]
+        pixels = cloud.pixel_grid()[0]
+        start = rec.labels.ravel()[pixels]
         planes = cloud.plane_to_normalised(rec.params) if rec.num_planes else np.zeros((0, 4))
         labels, _ = self.refine_cloud(cloud, graph, start, planes, params)
         image = np.zeros(frame.height * frame.width, dtype=np.int32)
-        image[cloud.pixels] = labels
+        image[pixels] = labels
         params, rmse, support = fit_planes_per_label(frame.points().reshape(-1, 3), image,
                                                      int(labels.max(initial=0)))
         return Reconstruction(frame=frame, labels=image.reshape(frame.shape),

@@ -230,3 +230,27 @@ def test_nearest_true_pixel_is_at_the_exact_euclidean_distance(seed):
     dist = np.hypot(rows - near // w, cols - near % w).reshape(h, w)
     np.testing.assert_allclose(dist, distance_transform_edt(~mask), rtol=0, atol=1e-12)
     assert (nearest_true_pixel(np.zeros((3, 4), bool)) == -1).all()
+
+
+def test_a_cloud_without_an_image_has_no_pixel_grid_and_labels_points_in_3d():
+    rng = np.random.default_rng(0)
+    xy = rng.uniform(-0.5, 0.5, (400, 2))
+    points = np.column_stack([xy, np.where(xy[:, 0] < 0, 0.0, 0.3)])  # two parallel planes
+    normals = np.tile([0.0, 0.0, 1.0], (400, 1))
+    cloud = PlaneCloud.from_points(points, normals, None, np.zeros(3), 1.0)
+    assert cloud.pixels is None and cloud.shape is None and not cloud.subsampled
+    with pytest.raises(InvalidInput, match="no pixel grid"):
+        cloud.pixel_grid()
+    with pytest.raises(InvalidInput, match="no pixel grid"):
+        cloud.propagate(np.zeros(400, dtype=np.int32))
+    labels = np.where(xy[:, 0] < 0, 1, 2).astype(np.int32)
+    planes = np.array([[0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 1.0, -0.3]])
+    queries = np.array([[-0.2, 0.0, 0.01], [0.2, 0.0, 0.29], [5.0, 5.0, 5.0]])
+    assert cloud.label_points(queries, labels, planes, radius=0.2).tolist() == [1, 2, 0]
+
+
+def test_pixel_fields_come_all_or_none():
+    with pytest.raises(InvalidInput, match="all given or all None"):
+        PlaneCloud(points=np.zeros((3, 3)), normals=np.tile([0.0, 0.0, 1.0], (3, 1)),
+                   colors=None, pixels=np.arange(3), center=np.zeros(3), scale=1.0,
+                   shape=None, all_points=np.zeros((3, 3)), all_pixels=None)
