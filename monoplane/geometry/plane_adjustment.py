@@ -268,6 +268,17 @@ def _residuals(x: np.ndarray, lay: _Layout, prob: AdjustmentProblem, bases: np.n
 
 #: The residual kinds, in the order of the residual vector (and of the Jacobian's rows).
 TERMS = ("reprojection", "plane_samples", "normals", "sfm_points_on_planes", "pose_prior")
+#: The figures a refinement reports before and after (:func:`residual_summary` keys), none of
+#: which an accepted solution may raise: each with its name and the rise too small to matter
+#: whatever its start (from an exact start every figure can only rise a little): 0.005 px,
+#: 0.05 degrees, 10⁻⁵ of the depth.
+FIGURES: dict[str, tuple[str, float]] = {
+    "reprojection_rms_px": ("the RMS reprojection error (px)", 5e-3),
+    "plane_rms_rel": ("the RMS plane-pixel distance (share of depth)", 1e-5),
+    "normal_rms_deg": ("the RMS view-plane normal angle (deg)", 5e-2),
+    "sfm_point_plane_median_rel": ("the median SfM point-to-plane distance (share of depth)",
+                                   1e-5),
+}
 
 
 def _terms(x: np.ndarray, lay: _Layout, prob: AdjustmentProblem, bases: np.ndarray
@@ -394,7 +405,7 @@ def _summary(x: np.ndarray, lay: _Layout, prob: AdjustmentProblem, bases: np.nda
 
 
 def adjust(prob: AdjustmentProblem, max_evaluations: int = 100, loss: str = "soft_l1",
-           refine_points: bool = True) -> AdjustmentResult:
+           refine_points: bool = True, figure_tolerance: float = np.inf) -> AdjustmentResult:
     """Solve the joint plane–camera refinement.
 
     Parameters
@@ -409,12 +420,15 @@ def adjust(prob: AdjustmentProblem, max_evaluations: int = 100, loss: str = "sof
     loss : str
         Robust loss of :func:`scipy.optimize.least_squares` on the unitless residuals (one
         of ``linear``, ``soft_l1``, ``huber``, ``cauchy``, ``arctan``).
+    figure_tolerance : float
+        Relative rise of a reported figure (:data:`FIGURES`) that still counts as no rise,
+        e.g. 0.05 for 5 %; ``inf`` judges the solution by its objective alone.
 
     Returns
     -------
     AdjustmentResult
-        The solution if its robust cost is not above the initial one, else the initial state
-        with ``accepted = False``.
+        The solution if its robust cost is not above the initial one and none of the reported
+        figures rises, else the initial state with ``accepted = False`` and the reason.
     """
     if loss not in _LOSSES:
         raise InvalidInput(f"unknown loss {loss!r}; choose one of {', '.join(_LOSSES)}")
@@ -447,13 +461,23 @@ def adjust(prob: AdjustmentProblem, max_evaluations: int = 100, loss: str = "sof
     # The trust-region solver only takes steps that lower it; this guards against anything
     # that breaks that (non-finite residuals, another solver) instead of trusting it. Written
     # as "not <=" so that a NaN cost is rejected too.
+    reason = ""
     if not after["cost"] <= before["cost"]:
+        reason = (f"the solution raised the robust cost from {before['cost']:.6g} to "
+                  f"{after['cost']:.6g}")
+    elif np.isfinite(figure_tolerance):
+        # A lower objective can still trade one reported figure for the others (reprojection
+        # for plane fit, say); a refinement must not make any figure it reports worse.
+        for key, (label, negligible) in FIGURES.items():
+            if not after[key] <= before[key] * (1.0 + figure_tolerance) + negligible:
+                reason = (f"the solution raised {label} from {before[key]:.4g} to "
+                          f"{after[key]:.4g}")
+                break
+    if reason:
         return AdjustmentResult(
             prob.R.copy(), prob.t.copy(), np.ones(lay.v), prob.planes.copy(),
             prob.points.copy(), before, before, bool(sol.success), str(sol.message),
-            accepted=False, rejected=after,
-            reason=f"the solution raised the robust cost from {before['cost']:.6g} to "
-                   f"{after['cost']:.6g}; the initial state is kept")
+            accepted=False, rejected=after, reason=f"{reason}; the initial state is kept")
     R, t, scales, planes, points = _unpack(sol.x, lay, prob, bases)
     return AdjustmentResult(R, t, scales, planes, points, before, after,
                             bool(sol.success), str(sol.message))

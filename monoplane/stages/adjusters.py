@@ -9,6 +9,8 @@ solve that raises its own objective (robust cost) is rejected and leaves the sce
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -55,6 +57,10 @@ class PlaneBundleConfig:
             "follow the monocular depth's warps and move the poses the wrong way "
             "(docs/multiview.md)")
     max_evaluations: int = param(20, "cap on the solver's residual evaluations")
+    figure_tolerance: float = param(
+        math.inf, "also reject a solution that raises a reported figure (reprojection, plane "
+        "pixels, normals, SfM points on planes) by more than this share (inf: judge by the "
+        "objective alone; 0.05 keeps only solves that worsen no figure)")
     seed: int = param(0, "seed of the plane-pixel subsampling")
 
 
@@ -78,8 +84,10 @@ class PlaneBundleAdjuster(Adjuster):
         """Refine ``scene``; see :meth:`monoplane.stages.base.Adjuster.adjust`.
 
         The report holds ``accepted``: when the solution's robust cost is above the initial
-        one, ``scene`` and ``sfm`` are returned as given, with ``accepted = False``, ``reason``
-        and the rejected solution's summary under ``rejected``.
+        one, or (with a finite ``figure_tolerance``) it raises one of the figures the report
+        gives (:data:`~monoplane.geometry.plane_adjustment.FIGURES`), ``scene`` and ``sfm``
+        are returned as given, with ``accepted = False``, ``reason`` and the rejected
+        solution's summary under ``rejected``.
         """
         cfg = self.config
         n_views = len(scene.cameras)
@@ -152,7 +160,8 @@ class PlaneBundleAdjuster(Adjuster):
             prior_rot_deg=cfg.prior_rot_deg,
             prior_t=self._prior_t(samp_view, samp_x, n_views),
         )
-        res = adjust(prob, max_evaluations=cfg.max_evaluations, refine_points=cfg.refine_points)
+        res = adjust(prob, max_evaluations=cfg.max_evaluations, refine_points=cfg.refine_points,
+                     figure_tolerance=cfg.figure_tolerance)
         report = {"accepted": res.accepted, "before": res.before, "after": res.after,
                   "converged": res.success, "message": res.message,
                   "planes_refined": len(refined),
