@@ -39,7 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from monoplane.datamodel import Reconstruction
-from monoplane.errors import ConfigError
+from monoplane.errors import check_config
 from monoplane.geometry.planarity import (
     MIN_SAMPLES,
     interior_labels,
@@ -66,12 +66,12 @@ class PlanarityConfig:
     border_px: int = param(
         2, "image pixels this close to another label are left out of the test (at 256 px "
         "wide, scaled with the width)")
-    max_samples: int = param(1000, "points sampled per plane for the test")
+    max_samples: int = param(400, "points sampled per plane for the test")
     max_points: int = param(
         20000, "image pixels sampled for the test, on a regular grid (its speed at any size)")
 
     def __post_init__(self) -> None:
-        checks = [
+        check_config([
             (self.max_extra_spread_deg > 0, "max_extra_spread_deg must be positive"),
             (self.min_floor_deg >= 0, "min_floor_deg must be non-negative"),
             (self.quadric_ratio == 0 or self.quadric_ratio > 1,
@@ -79,10 +79,7 @@ class PlanarityConfig:
             (self.border_px >= 0, "border_px must be non-negative"),
             (self.max_samples >= 30, "max_samples must be at least 30"),
             (self.max_points >= 1000, "max_points must be at least 1000"),
-        ]
-        for ok, message in checks:
-            if not ok:
-                raise ConfigError(message)
+        ])
 
 
 def curved_planes(points: np.ndarray, normals: np.ndarray | None, labels: np.ndarray,

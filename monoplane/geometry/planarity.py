@@ -82,10 +82,8 @@ def normal_spread_deg(normals: np.ndarray, labels: np.ndarray, num_planes: int,
 
     Returns
     -------
-    spread : numpy.ndarray
-        (P,) float64 degrees; NaN where a plane has fewer than :data:`MIN_SAMPLES` samples.
-    samples : numpy.ndarray
-        (P,) int64 number of pixels each spread was measured on.
+    spread, samples : numpy.ndarray
+        As :func:`spread_of_groups` returns them, over the sampled interior pixels.
     """
     lab = interior_labels(labels, radius)[::step, ::step].ravel()
     n = np.asarray(normals, dtype=np.float64)[::step, ::step].reshape(-1, 3)
@@ -173,12 +171,8 @@ def quadric_ratio(points: np.ndarray, labels: np.ndarray, num_planes: int,
     ----------
     points : numpy.ndarray
         (M, 3) points, any frame and unit.
-    labels : numpy.ndarray
-        (M,) int group of each point, 0 = none, 1..P.
-    num_planes : int
-        P.
-    max_samples : int, optional
-        Use at most this many evenly spaced members of a group.
+    labels, num_planes, max_samples
+        The groups, as for :func:`spread_of_groups`.
 
     Returns
     -------
