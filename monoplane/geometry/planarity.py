@@ -90,20 +90,56 @@ def normal_spread_deg(normals: np.ndarray, labels: np.ndarray, num_planes: int,
     return spread_of_groups(n, lab, num_planes)
 
 
-def _groups(labels: np.ndarray, num_planes: int, max_samples: int | None
-            ) -> list[tuple[int, np.ndarray]]:
-    """``(plane index, indices of its members)`` for every label 1..P present, each at most
-    ``max_samples`` evenly spaced members."""
+def _padded(values: np.ndarray, labels: np.ndarray, num_planes: int,
+            max_samples: int | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The members of every group with at least :data:`MIN_SAMPLES` of them, one row a group.
+
+    Parameters
+    ----------
+    values : numpy.ndarray
+        (M, 3) per-member vectors.
+    labels : numpy.ndarray
+        (M,) int group of each member, 0 = none, 1..P.
+    num_planes : int
+        P.
+    max_samples : int, optional
+        Keep at most this many evenly spaced members of a group.
+
+    Returns
+    -------
+    rows : numpy.ndarray
+        (G, L, 3) float64 members, NaN after each group's count.
+    counts : numpy.ndarray
+        (P,) int64 members of every group (sampled), measured or not.
+    plane : numpy.ndarray
+        (G,) int64 plane index (label - 1) of each row.
+    """
     lab = np.asarray(labels).ravel()
     on = np.flatnonzero((lab > 0) & (lab <= num_planes))
     order = on[np.argsort(lab[on], kind="stable")]
-    ids, starts = np.unique(lab[order], return_index=True)
-    out = []
-    for p, idx in zip(ids, np.split(order, starts[1:]), strict=True):
-        if max_samples is not None and len(idx) > max_samples:
-            idx = idx[np.linspace(0, len(idx) - 1, max_samples).astype(np.int64)]
-        out.append((int(p) - 1, idx))
-    return out
+    ids, starts, sizes = np.unique(lab[order], return_index=True, return_counts=True)
+    counts = np.zeros(num_planes, dtype=np.int64)
+    members = []
+    for p, start, size in zip(ids, starts, sizes, strict=True):
+        idx = order[start:start + size]
+        if max_samples is not None and size > max_samples:
+            idx = idx[np.linspace(0, size - 1, max_samples).astype(np.int64)]
+        counts[p - 1] = len(idx)
+        if len(idx) >= MIN_SAMPLES:
+            members.append((int(p) - 1, idx))
+    length = max((len(idx) for _, idx in members), default=0)
+    rows = np.full((len(members), length, 3), np.nan)
+    for g, (_, idx) in enumerate(members):
+        rows[g, :len(idx)] = values[idx]
+    return rows, counts, np.array([p for p, _ in members], dtype=np.int64)
+
+
+def _row_median(a: np.ndarray, count: np.ndarray) -> np.ndarray:
+    """Median of each row's first ``count`` values ((G, L) with NaN after them), as
+    ``numpy.median`` gives it (the mean of the two middle values of an even count)."""
+    s = np.sort(a, axis=1)  # NaN sort last
+    rows = np.arange(a.shape[0])
+    return 0.5 * (s[rows, (count - 1) // 2] + s[rows, count // 2])
 
 
 def spread_of_groups(normals: np.ndarray, labels: np.ndarray, num_planes: int,
@@ -113,7 +149,8 @@ def spread_of_groups(normals: np.ndarray, labels: np.ndarray, num_planes: int,
     The dominant direction starts at the component-wise median of the normals and is refined
     three times as the mean of the normals within ``max(2 × median angle, 3°)`` of it, a
     mean-shift step that settles on the mode of the normals. The angle is unsigned in the
-    sense of a plane: a normal and its opposite are one direction.
+    sense of a plane: a normal and its opposite are one direction. All groups are computed
+    together, one row each.
 
     Parameters
     ----------
@@ -134,25 +171,27 @@ def spread_of_groups(normals: np.ndarray, labels: np.ndarray, num_planes: int,
         (P,) int64 number of normals each spread was measured on.
     """
     spread = np.full(num_planes, np.nan)
-    samples = np.zeros(num_planes, dtype=np.int64)
     n = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
     lab = np.where(np.einsum("ij,ij->i", n, n) > 0.5, np.asarray(labels).ravel(), 0)
-    for p, idx in _groups(lab, num_planes, max_samples):
-        samples[p] = len(idx)
-        if len(idx) < MIN_SAMPLES:
-            continue
-        x = n[idx]
-        # One side for all: flip each normal towards the group's first principal direction.
-        axis = np.linalg.eigh(x.T @ x)[1][:, -1]
-        x = x * np.where(x @ axis < 0, -1.0, 1.0)[:, None]
-        centre = np.median(x, axis=0)
-        for _ in range(3):
-            centre /= max(np.linalg.norm(centre), 1e-12)
-            angle = np.degrees(np.arccos(np.clip(x @ centre, -1.0, 1.0)))
-            near = angle <= max(2.0 * float(np.median(angle)), 3.0)
-            centre = x[near].mean(axis=0)
-        centre /= max(np.linalg.norm(centre), 1e-12)
-        spread[p] = float(np.median(np.degrees(np.arccos(np.clip(x @ centre, -1.0, 1.0)))))
+    x, samples, plane = _padded(n, lab, num_planes, max_samples)
+    if plane.size == 0:
+        return spread, samples
+    count = samples[plane]
+    filled = np.nan_to_num(x)
+    # One side for all: flip each normal towards its group's first principal direction.
+    axis = np.linalg.eigh(np.einsum("gli,glj->gij", filled, filled))[1][:, :, -1]
+    x = x * np.where(np.einsum("gli,gi->gl", filled, axis) < 0, -1.0, 1.0)[..., None]
+    centre = np.stack([_row_median(x[..., c], count) for c in range(3)], axis=1)
+
+    def angles(c: np.ndarray) -> np.ndarray:
+        c = c / np.maximum(np.linalg.norm(c, axis=1, keepdims=True), 1e-12)
+        return np.degrees(np.arccos(np.clip(np.einsum("gli,gi->gl", x, c), -1.0, 1.0)))
+
+    for _ in range(3):
+        angle = angles(centre)
+        near = angle <= np.maximum(2.0 * _row_median(angle, count), 3.0)[:, None]
+        centre = np.where(near[..., None], x, 0.0).sum(axis=1) / near.sum(axis=1)[:, None]
+    spread[plane] = _row_median(angles(centre), count)
     return spread, samples
 
 
@@ -182,22 +221,29 @@ def quadric_ratio(points: np.ndarray, labels: np.ndarray, num_planes: int,
     out = np.full(num_planes, np.nan)
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     lab = np.where(np.isfinite(pts).all(axis=1), np.asarray(labels).ravel(), 0)
-    for p, idx in _groups(lab, num_planes, max_samples):
-        if len(idx) < MIN_SAMPLES:
-            continue
-        x = pts[idx] - pts[idx].mean(axis=0)
-        # Scale-free: the fits are done in units of the group's extent.
-        x /= max(float(np.abs(x).max()), 1e-300)
-        basis = np.linalg.eigh(x.T @ x)[1]
-        w, u, v = x @ basis[:, 0], x @ basis[:, 2], x @ basis[:, 1]
-        # In the principal frame the best plane is w = 0 up to rounding (the centroid and the
-        # smallest axis are its least-squares solution), so its residual is w itself.
-        quad = np.column_stack([np.ones_like(u), u, v, u * u, u * v, v * v])
-        r_quad = w - quad @ np.linalg.lstsq(quad, w, rcond=None)[0]
-        e_lin, e_quad = float(np.sqrt(np.mean(w ** 2))), float(np.sqrt(np.mean(r_quad ** 2)))
-        # Residuals below QUADRIC_FLOOR of the extent are rounding (float32 depth is quantised
-        # in a pattern a quadric partly fits), not a bend: an exact plane stays flat.
-        out[p] = e_lin / max(e_quad, QUADRIC_FLOOR)
+    x, samples, plane = _padded(pts, lab, num_planes, max_samples)
+    if plane.size == 0:
+        return out
+    count = samples[plane].astype(np.float64)
+    valid = ~np.isnan(x[..., 0])
+    x = np.nan_to_num(x - np.nansum(x, axis=1, keepdims=True) / count[:, None, None])
+    # Scale-free: the fits are done in units of each group's extent.
+    x /= np.maximum(np.abs(x).max(axis=(1, 2)), 1e-300)[:, None, None]
+    basis = np.linalg.eigh(np.einsum("gli,glj->gij", x, x))[1]
+    w, u, v = (np.einsum("gli,gi->gl", x, basis[:, :, k]) for k in (0, 2, 1))
+    # In the principal frame the best plane is w = 0 up to rounding (the centroid and the
+    # smallest axis are its least-squares solution), so its residual is w itself.
+    quad = np.stack([np.ones_like(u), u, v, u * u, u * v, v * v], axis=-1) * valid[..., None]
+    # Normal equations on coordinates within [-1, 1]; the pseudo-inverse copes with a group
+    # whose points lie on a line.
+    coef = np.einsum("gij,gj->gi", np.linalg.pinv(np.einsum("gli,glj->gij", quad, quad)),
+                     np.einsum("gli,gl->gi", quad, w))
+    r_quad = w - np.einsum("glj,gj->gl", quad, coef)
+    e_lin = np.sqrt((w ** 2).sum(axis=1) / count)
+    e_quad = np.sqrt((r_quad ** 2).sum(axis=1) / count)
+    # Residuals below QUADRIC_FLOOR of the extent are rounding (float32 depth is quantised in
+    # a pattern a quadric partly fits), not a bend: an exact plane stays flat.
+    out[plane] = e_lin / np.maximum(e_quad, QUADRIC_FLOOR)
     return out
 
 
