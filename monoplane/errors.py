@@ -6,6 +6,8 @@ data) is a :class:`MonoplaneError`. Anything else reaching the CLI is a bug in m
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 
 class MonoplaneError(Exception):
     """Base class of every user-facing monoplane error."""
@@ -17,6 +19,29 @@ class InvalidInput(MonoplaneError, ValueError):
 
 class ConfigError(MonoplaneError, ValueError):
     """A malformed config: unknown key, plugin or preset, or a value of the wrong type."""
+
+
+def check_config(checks: Iterable[tuple[bool, str]], prefix: str = "") -> None:
+    """Raise :class:`ConfigError` for the first check that fails.
+
+    Config dataclasses list their checks as ``(condition, message)`` pairs in
+    ``__post_init__`` and hand them here, so that each states its rules as a table.
+
+    Parameters
+    ----------
+    checks : iterable of (bool, str)
+        Each condition that must hold, with the message saying what it asks for.
+    prefix : str, optional
+        Put before the message (e.g. ``"refiner."``, when the table is not named elsewhere).
+
+    Raises
+    ------
+    ConfigError
+        ``prefix + message`` of the first condition that is false.
+    """
+    for ok, message in checks:
+        if not ok:
+            raise ConfigError(prefix + message)
 
 
 class PluginError(MonoplaneError):

@@ -34,7 +34,7 @@ from typing import Any, NamedTuple, TypeVar
 import numpy as np
 
 from monoplane.datamodel import Frame, Reconstruction, orient_towards_camera
-from monoplane.errors import ConfigError, InvalidInput, StageError
+from monoplane.errors import InvalidInput, StageError, check_config
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.geometry.planes import fit_plane, fit_planes_per_label, planes_from_triplets
@@ -94,7 +94,9 @@ class RansacConfig:
     seed: int = param(0, "seed of the random generator; equal seeds give equal results")
 
     def __post_init__(self) -> None:
-        checks = [
+        # No table name: the config loader says which table (and a direct caller knows which
+        # object it built).
+        check_config([
             (self.epsilon > 0, "epsilon must be positive"),
             (0 < self.epsilon_n_deg <= 180, "epsilon_n_deg must lie in (0, 180]"),
             (0 < self.confidence < 1, "confidence must lie in (0, 1)"),
@@ -109,12 +111,7 @@ class RansacConfig:
             (self.lo_iterations >= 0, "lo_iterations must be non-negative"),
             (self.score_points == 0 or self.score_points >= 3,
              "score_points must be 0 (all) or at least 3"),
-        ]
-        for ok, message in checks:
-            if not ok:
-                # No table name: the config loader says which table (and a direct caller
-                # knows which object it built).
-                raise ConfigError(message)
+        ])
 
     @property
     def params(self) -> RansacParams:

@@ -34,7 +34,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from monoplane.datamodel import Reconstruction, orient_towards_camera
-from monoplane.errors import ConfigError
+from monoplane.errors import check_config
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.components import graph_components
 from monoplane.geometry.graph import NeighbourGraph
@@ -71,7 +71,7 @@ class GraphCrfConfig(ProximityAffinities):
         0.5, "... and each region's RMS distance to the other's plane is below this times ε")
 
     def __post_init__(self) -> None:
-        checks = [
+        check_config([
             (self.noise_factor >= 0, "noise_factor must be >= 0"),
             (self.beta >= 0, "beta must be >= 0"),
             (self.normal_weight >= 0, "normal_weight must be >= 0"),
@@ -83,10 +83,7 @@ class GraphCrfConfig(ProximityAffinities):
             (self.min_support_points >= 3, "min_support_points must be at least 3"),
             (0 <= self.merge_angle_deg <= 90, "merge_angle_deg must lie in [0, 90]"),
             (self.merge_distance >= 0, "merge_distance must be >= 0"),
-        ]
-        for ok, message in checks:
-            if not ok:
-                raise ConfigError(f"refiner (graph-crf): {message}")
+        ], prefix="refiner (graph-crf): ")
 
 
 def _adjacency(graph: NeighbourGraph, weights: np.ndarray) -> csr_matrix:

@@ -16,7 +16,7 @@ import numpy as np
 
 from monoplane.datamodel import Frame, Reconstruction
 from monoplane.densecrf import REFERENCE_AREA, CrfGrid, CrfParams, crf_grid, dense_crf
-from monoplane.errors import ConfigError, InvalidInput
+from monoplane.errors import ConfigError, InvalidInput, check_config
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.hookspecs import hookimpl
@@ -151,25 +151,20 @@ class DenseCrfRefiner(Refiner):
     def __init__(self, config: Config | None = None) -> None:
         super().__init__(config)
         c = self.config
-        if c.connectivity not in (4, 8):
-            raise ConfigError(f"refiner.connectivity must be 4 or 8, got {c.connectivity}")
-        if not 0 < c.merge_angle_deg <= 90:
-            raise ConfigError(
-                f"refiner.merge_angle_deg must lie in (0, 90], got {c.merge_angle_deg}")
-        if not c.merge_distance > 0:
-            raise ConfigError(f"refiner.merge_distance must be positive, got {c.merge_distance}")
-        if not c.fill_distance > 0:
-            raise ConfigError(f"refiner.fill_distance must be positive, got {c.fill_distance}")
-        if not 0 < c.fill_angle_deg <= 180:
-            raise ConfigError(
-                f"refiner.fill_angle_deg must lie in (0, 180], got {c.fill_angle_deg}")
-        if c.fill_patch_px < 0:
-            raise ConfigError(f"refiner.fill_patch_px must be >= 0, got {c.fill_patch_px}")
-        if c.min_area < 0:
-            raise ConfigError(f"refiner.min_area must be >= 0, got {c.min_area}")
-        # Above 1/2 the RANSAC label stays the most likely one whatever the number of planes.
-        if not 0.5 < c.confidence < 1.0:
-            raise ConfigError(f"refiner.confidence must lie in (0.5, 1), got {c.confidence}")
+        check_config([
+            (c.connectivity in (4, 8), f"connectivity must be 4 or 8, got {c.connectivity}"),
+            (0 < c.merge_angle_deg <= 90,
+             f"merge_angle_deg must lie in (0, 90], got {c.merge_angle_deg}"),
+            (c.merge_distance > 0, f"merge_distance must be positive, got {c.merge_distance}"),
+            (c.fill_distance > 0, f"fill_distance must be positive, got {c.fill_distance}"),
+            (0 < c.fill_angle_deg <= 180,
+             f"fill_angle_deg must lie in (0, 180], got {c.fill_angle_deg}"),
+            (c.fill_patch_px >= 0, f"fill_patch_px must be >= 0, got {c.fill_patch_px}"),
+            (c.min_area >= 0, f"min_area must be >= 0, got {c.min_area}"),
+            # Above 1/2 the RANSAC label stays the most likely one whatever the number of
+            # planes.
+            (0.5 < c.confidence < 1.0, f"confidence must lie in (0.5, 1), got {c.confidence}"),
+        ], prefix="refiner.")
         try:
             # The CRF's parameters are a subset of this config, which alone holds defaults.
             self.crf = CrfParams(**{f.name: getattr(c, f.name) for f in fields(CrfParams)})
