@@ -9,9 +9,9 @@ test suite once monoplane is installed:
   plus whatever the test registers on it.
 
 :func:`plane_scene` (its shorthands :func:`box_frame`, :func:`room_cues`) and
-:func:`two_view_room` build exactly known views of planes; :func:`check_stage_contract`, which
-a plugin's own tests call on each of its stage classes, and :func:`check_baseline_contract`
-for ``monoplane eval`` baselines::
+:func:`two_view_room` build exactly known views of planes; :func:`stage_plugin` registers
+stage classes in a test; :func:`check_stage_contract`, which a plugin's own tests call on each
+of its stage classes, and :func:`check_baseline_contract` for ``monoplane eval`` baselines::
 
     from monoplane.testing import check_stage_contract
 
@@ -303,6 +303,39 @@ def plugin_manager() -> pluggy.PluginManager:
     from monoplane.plugin_manager import get_plugin_manager
 
     return get_plugin_manager(autoload=False)
+
+
+def stage_plugin(**hooks: list[type]) -> object:
+    """A plugin whose registration hooks return the given classes, for
+    ``get_plugin_manager(extra_plugins=(...,))``::
+
+        pm = get_plugin_manager(autoload=False,
+                                extra_plugins=(stage_plugin(monoplane_register_samplers=[S]),))
+
+    Parameters
+    ----------
+    **hooks : list of type
+        Registration hook name (``monoplane_register_samplers``, ...) and the classes it
+        returns; any hook may be named, so a test can register a class under the wrong kind.
+
+    Returns
+    -------
+    object
+        The plugin: one instance of a class with one hook implementation per keyword.
+    """
+    from monoplane.hookspecs import hookimpl
+
+    def implementation(classes: list[type]) -> Callable[[object], list[type]]:
+        # One function per hook: each returns its own list (a closure over a loop variable
+        # would give every hook the last one).
+        @hookimpl
+        def register(self: object) -> list[type]:
+            return list(classes)
+
+        return register
+
+    impls = {hook: implementation(classes) for hook, classes in hooks.items()}
+    return type("StagePlugin", (), impls)()
 
 
 def _check_config(cls: type[Stage]) -> Any:

@@ -4,10 +4,9 @@ from pathlib import Path
 import pytest
 
 from monoplane.errors import PluginError
-from monoplane.hookspecs import hookimpl
 from monoplane.plugin_manager import get_plugin_manager, get_registry
 from monoplane.stages.base import KINDS, STAGE_KINDS, Sampler, param
-from monoplane.testing import check_stage_contract
+from monoplane.testing import check_stage_contract, stage_plugin
 
 DOCS = Path(__file__).resolve().parents[1] / "docs" / "plugins.md"
 
@@ -33,14 +32,13 @@ class _Every3rd(Sampler):
         offset: int = param(0, "first index")
 
 
-class _ThirdParty:
-    @hookimpl
-    def monoplane_register_samplers(self):
-        return [_Every3rd]
+def _registry_with(**hooks: list[type]):
+    """The registry of the built-ins and one plugin registering ``hooks``' classes."""
+    return get_registry(get_plugin_manager(autoload=False, extra_plugins=(stage_plugin(**hooks),)))
 
 
 def test_third_party_registers_like_builtins():
-    reg = get_registry(get_plugin_manager(autoload=False, extra_plugins=(_ThirdParty(),)))
+    reg = _registry_with(monoplane_register_samplers=[_Every3rd])
     assert reg.get("sampler", "every-third").cls is _Every3rd
 
 
@@ -48,20 +46,10 @@ def test_duplicate_or_wrong_kind_is_rejected():
     class Dup(_Every3rd):
         name = "uniform"
 
-    class Bad:
-        @hookimpl
-        def monoplane_register_scorers(self):
-            return [Dup]
-
-    class Clash:
-        @hookimpl
-        def monoplane_register_samplers(self):
-            return [Dup]
-
     with pytest.raises(PluginError, match="does not subclass"):
-        get_registry(get_plugin_manager(autoload=False, extra_plugins=(Bad(),)))
+        _registry_with(monoplane_register_scorers=[Dup])
     with pytest.raises(PluginError, match="registered twice"):
-        get_registry(get_plugin_manager(autoload=False, extra_plugins=(Clash(),)))
+        _registry_with(monoplane_register_samplers=[Dup])
 
 
 def test_plugin_guide_documents_every_hook():
@@ -100,10 +88,5 @@ def test_wrong_base_names_the_base_class():
     class NotAScorer(_Every3rd):
         name = "not-a-scorer"
 
-    class Bad:
-        @hookimpl
-        def monoplane_register_cue_providers(self):
-            return [NotAScorer]
-
     with pytest.raises(PluginError, match="subclass monoplane.plugin.CueProvider"):
-        get_registry(get_plugin_manager(autoload=False, extra_plugins=(Bad(),)))
+        _registry_with(monoplane_register_cue_providers=[NotAScorer])

@@ -6,14 +6,13 @@ import numpy as np
 import pytest
 
 from monoplane import detect_planes
-from monoplane.hookspecs import hookimpl
 from monoplane.pipeline import Pipeline
 from monoplane.plugin_manager import get_plugin_manager
 from monoplane.stages.graph_refiner import GraphCrfRefiner
 from monoplane.stages.labelers import ProximityGraphCutLabeler
 from monoplane.stages.samplers import NormalConsistentSampler
 from monoplane.stages.scorers import MsacNormalScorer
-from monoplane.testing import box_frame
+from monoplane.testing import box_frame, stage_plugin
 
 #: kind -> the thresholds each of its calls received.
 SEEN: dict[str, set[tuple[float, float]]] = {}
@@ -55,24 +54,6 @@ class SpyRefiner(GraphCrfRefiner):
         return super().refine_cloud(cloud, graph, labels, planes, params)
 
 
-class Spies:
-    @hookimpl
-    def monoplane_register_samplers(self):
-        return [SpySampler]
-
-    @hookimpl
-    def monoplane_register_scorers(self):
-        return [SpyScorer]
-
-    @hookimpl
-    def monoplane_register_labelers(self):
-        return [SpyLabeler]
-
-    @hookimpl
-    def monoplane_register_refiners(self):
-        return [SpyRefiner]
-
-
 SPY_OVERRIDES = ["sampler.plugin=spy-sampler", "scorer.plugin=spy-scorer",
                  "labeler.plugin=spy-labeler", "refiner.plugin=spy-refiner",
                  "ransac.epsilon=0.03", "ransac.epsilon_n_deg=12.5"]
@@ -81,7 +62,9 @@ SPY_OVERRIDES = ["sampler.plugin=spy-sampler", "scorer.plugin=spy-scorer",
 @pytest.fixture
 def spies():
     SEEN.clear()
-    yield get_plugin_manager(autoload=False, extra_plugins=(Spies(),))
+    yield get_plugin_manager(autoload=False, extra_plugins=(stage_plugin(
+        monoplane_register_samplers=[SpySampler], monoplane_register_scorers=[SpyScorer],
+        monoplane_register_labelers=[SpyLabeler], monoplane_register_refiners=[SpyRefiner]),))
     SEEN.clear()
 
 
