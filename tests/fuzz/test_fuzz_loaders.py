@@ -7,8 +7,9 @@ import contextlib
 import io
 import json
 import warnings
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import TypeVar
 
 import cv2
 import numpy as np
@@ -85,6 +86,22 @@ def _silent(capfd: pytest.CaptureFixture[str]) -> Iterator[None]:
     assert capfd.readouterr() == ("", "")
 
 
+T = TypeVar("T")
+
+
+def _load(capfd: pytest.CaptureFixture[str], read: Callable[..., T], path: Path, *args: object,
+          unnamed: str | None = None) -> T | None:
+    """``read(path, *args)`` under :func:`_silent`: its result, or ``None`` once its
+    :class:`InvalidInput` is checked to be one line naming ``path`` (a message holding
+    ``unnamed`` is about an argument, not the file, and need not name it)."""
+    try:
+        with _silent(capfd):
+            return read(path, *args)
+    except InvalidInput as exc:
+        _one_line_error(exc, "" if unnamed and unnamed in str(exc) else path)
+        return None
+
+
 def test_depth_loader(fuzz, tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
     @fuzz
     @given(_CUE_FILES,
@@ -92,11 +109,8 @@ def test_depth_loader(fuzz, tmp_path: Path, capfd: pytest.CaptureFixture[str]) -
     def check(file: tuple[str, bytes], scale: float | None, nan_ok: bool) -> None:
         path = tmp_path / f"depth{file[0]}"
         path.write_bytes(file[1])
-        try:
-            with _silent(capfd):
-                depth = read_depth(path, scale, nan_ok)
-        except InvalidInput as exc:
-            _one_line_error(exc, path if "depth-scale" not in str(exc) else "")
+        depth = _load(capfd, read_depth, path, scale, nan_ok, unnamed="depth-scale")
+        if depth is None:
             return
         assert depth.dtype == np.float32 and depth.ndim == 2
         assert np.all(np.isfinite(depth)) and np.all(depth >= 0) and np.any(depth > 0)
@@ -110,11 +124,8 @@ def test_normals_loader(fuzz, tmp_path: Path, capfd: pytest.CaptureFixture[str])
     def check(file: tuple[str, bytes]) -> None:
         path = tmp_path / f"normals{file[0]}"
         path.write_bytes(file[1])
-        try:
-            with _silent(capfd):
-                normals = read_normals(path)
-        except InvalidInput as exc:
-            _one_line_error(exc, path)
+        normals = _load(capfd, read_normals, path)
+        if normals is None:
             return
         assert normals.dtype == np.float32 and normals.ndim == 3 and normals.shape[2] == 3
         norm = np.linalg.norm(normals, axis=-1)
@@ -163,12 +174,8 @@ def test_intrinsics_json(fuzz, tmp_path: Path, capfd: pytest.CaptureFixture[str]
     def check(text: str) -> None:
         path = tmp_path / "intrinsics.json"
         path.write_text(text, errors="surrogatepass")
-        try:
-            with _silent(capfd):
-                K = read_intrinsics(path)
-        except InvalidInput as exc:
-            _one_line_error(exc, path)
-            return
-        _check_K(K)
+        K = _load(capfd, read_intrinsics, path)
+        if K is not None:
+            _check_K(K)
 
     check()
