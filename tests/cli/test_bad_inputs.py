@@ -237,14 +237,6 @@ def _npz(folder: Path) -> bytes:
     return buf.getvalue()
 
 
-def _lying_npy(folder: Path) -> bytes:
-    depth = _depth(folder)
-    data = _npy(depth)
-    old = repr(depth.shape).encode()
-    new = repr((depth.shape[0] // 2, depth.shape[1])).encode()
-    return data.replace(old, new.ljust(len(old)), 1)
-
-
 def _lying_png(folder: Path) -> bytes:
     """A depth PNG whose IHDR (CRC recomputed) says twice the width its image data hold."""
     data = bytearray(_png_depth(folder))
@@ -254,16 +246,48 @@ def _lying_png(folder: Path) -> bytes:
     return bytes(data)
 
 
-def _normals(folder: Path) -> np.ndarray:
-    return np.load(folder / "normals.npy")
-
-
-def _lying_normals(folder: Path) -> bytes:
-    normals = _normals(folder)
-    data = _npy(normals)
-    old = repr(normals.shape).encode()
-    new = repr((normals.shape[0] // 2, *normals.shape[1:])).encode()
+def _lying_npy(array: np.ndarray) -> bytes:
+    """``array`` as ``.npy`` whose header declares half its rows."""
+    data = _npy(array)
+    old = repr(array.shape).encode()
+    new = repr((array.shape[0] // 2, *array.shape[1:])).encode()
     return data.replace(old, new.ljust(len(old)), 1)
+
+
+def _empty_or_random(prefix: str, name: str, flag: str, not_a: str,
+                     empty: str = "the file is empty", extra: tuple[str, ...] = ()
+                     ) -> list[Case]:
+    """An empty file and one of random bytes as the frame's ``flag`` file (cases
+    ``prefix-empty``, ``prefix-random-bytes``): what every reader is given; ``not_a`` is what
+    random bytes are reported as."""
+    return [Case(f"{prefix}-empty", _frame_file(name, flag, lambda f: b"", extra), empty),
+            Case(f"{prefix}-random-bytes", _frame_file(name, flag, lambda f: RANDOM, extra),
+                 not_a)]
+
+
+def _npy_damage(cue: str, shape: tuple[int, ...], dtype: str) -> list[Case]:
+    """The damage a depth or normals ``.npy`` file takes alike: empty, random bytes (see
+    :func:`_empty_or_random`), truncated to 3000 bytes, a header declaring half the rows.
+    ``shape`` and ``dtype`` are the good file's (``cue``.npy of the frame folder), which the
+    messages state."""
+    name, flag = f"{cue[0]}.npy", f"--{cue}"
+    size = int(np.prod(shape)) * np.dtype(dtype).itemsize
+    half = (shape[0] // 2, *shape[1:])
+
+    def good(folder: Path) -> np.ndarray:
+        return np.load(folder / f"{cue}.npy")
+
+    return [
+        *_empty_or_random(f"{cue}-npy", name, flag,
+                          "not an .npy file (it does not start with numpy's magic string)"),
+        Case(f"{cue}-npy-truncated", _frame_file(name, flag, lambda f: _npy(good(f))[:3000]),
+             f"the file is truncated: its header declares {shape} {dtype} ({size} bytes), the "
+             "file holds 2872"),
+        Case(f"{cue}-npy-lying-header",
+             _frame_file(name, flag, lambda f: _lying_npy(good(f))),
+             f"the data do not match the header: its header declares {half} {dtype} "
+             f"({size // 2} bytes), the file holds {size}"),
+    ]
 
 
 def _intrinsics(values: dict) -> Callable[[Path], bytes]:
@@ -271,17 +295,7 @@ def _intrinsics(values: dict) -> Callable[[Path], bytes]:
 
 
 FRAME_CASES = [
-    Case("depth-npy-empty", _frame_file("d.npy", "--depth", lambda f: b""),
-         "the file is empty"),
-    Case("depth-npy-random-bytes", _frame_file("d.npy", "--depth", lambda f: RANDOM),
-         "not an .npy file (it does not start with numpy's magic string)"),
-    Case("depth-npy-truncated",
-         _frame_file("d.npy", "--depth", lambda f: _npy(_depth(f))[:3000]),
-         "the file is truncated: its header declares (48, 64) float32 (12288 bytes), the "
-         "file holds 2872"),
-    Case("depth-npy-lying-header", _frame_file("d.npy", "--depth", _lying_npy),
-         "the data do not match the header: its header declares (24, 64) float32 (6144 "
-         "bytes), the file holds 12288"),
+    *_npy_damage("depth", (48, 64), "float32"),
     Case("depth-npy-damaged-header",
          _frame_file("d.npy", "--depth", lambda f: _npy(_depth(f)).replace(b"'descr'",
                                                                              b"'d#scr'")),
@@ -298,9 +312,8 @@ FRAME_CASES = [
          _frame_file("d.npy", "--depth",
                      lambda f: _npy(_with(_depth(f).astype(np.float64), slice(0, 1), 1e300))),
          "has values beyond 3.4e+38 (up to 1e+300)"),
-    Case("depth-png-random-bytes", _frame_file("d.png", "--depth", lambda f: RANDOM,
-                                               ("--depth-scale", "1000")),
-         "not a PNG file (no PNG signature)"),
+    *_empty_or_random("depth-png", "d.png", "--depth", "not a PNG file (no PNG signature)",
+                      extra=("--depth-scale", "1000")),
     Case("depth-png-truncated",
          _frame_file("d.png", "--depth", lambda f: _png_depth(f)[:-100],
                      ("--depth-scale", "1000")), "the file is truncated"),
@@ -324,10 +337,8 @@ FRAME_CASES = [
          _frame_file("n.png", "--normals", lambda f: _png(np.full((48, 64, 3), 128,
                                                                   np.uint8))[:40]),
          "the file is truncated"),
-    Case("intrinsics-empty", _frame_file("k.json", "--intrinsics", lambda f: b""),
-         "is empty"),
-    Case("intrinsics-random-bytes", _frame_file("k.json", "--intrinsics", lambda f: RANDOM),
-         "is not valid JSON"),
+    *_empty_or_random("intrinsics", "k.json", "--intrinsics", "is not valid JSON",
+                      empty="is empty"),
     Case("intrinsics-missing-key",
          _frame_file("k.json", "--intrinsics", _intrinsics({"fx": 50, "cx": 32, "cy": 24})),
          "lacks fy"),
@@ -344,26 +355,11 @@ FRAME_CASES = [
                      _intrinsics({"fx": 50, "fy": 50, "cx": 1e300, "cy": 24})),
          "the principal point must be within ±1e+08 pixels"),
     # The remaining readers of each kind of damage (issue 27: every reader, every case).
-    Case("depth-png-empty", _frame_file("d.png", "--depth", lambda f: b"",
-                                        ("--depth-scale", "1000")), "the file is empty"),
     Case("depth-png-lying-header", _frame_file("d.png", "--depth", _lying_png,
                                                ("--depth-scale", "1000")),
          "the file is corrupt: its image data inflate to 6192 bytes, 128x48 needs 12336"),
-    Case("normals-npy-empty", _frame_file("n.npy", "--normals", lambda f: b""),
-         "the file is empty"),
-    Case("normals-npy-random-bytes", _frame_file("n.npy", "--normals", lambda f: RANDOM),
-         "not an .npy file (it does not start with numpy's magic string)"),
-    Case("normals-npy-truncated",
-         _frame_file("n.npy", "--normals", lambda f: _npy(_normals(f))[:3000]),
-         "the file is truncated: its header declares (48, 64, 3) float16 (18432 bytes), the "
-         "file holds 2872"),
-    Case("normals-npy-lying-header", _frame_file("n.npy", "--normals", _lying_normals),
-         "the data do not match the header: its header declares (24, 64, 3) float16 (9216 "
-         "bytes), the file holds 18432"),
-    Case("normals-png-empty", _frame_file("n.png", "--normals", lambda f: b""),
-         "the file is empty"),
-    Case("normals-png-random-bytes", _frame_file("n.png", "--normals", lambda f: RANDOM),
-         "not a PNG file (no PNG signature)"),
+    *_npy_damage("normals", (48, 64, 3), "float16"),
+    *_empty_or_random("normals-png", "n.png", "--normals", "not a PNG file (no PNG signature)"),
     Case("intrinsics-truncated",
          _frame_file("k.json", "--intrinsics", lambda f: b'{"fx": 50, "fy": 5'),
          "is not valid JSON: Expecting ',' delimiter"),
