@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -101,8 +100,7 @@ def write_cloud_report(result: CloudPlaneResult, out_dir: Path, source: str = ""
     pathlib.Path
         Path of ``report.html``.
     """
-    start = time.perf_counter()
-    out, bar = open_report(out_dir, 2, "cloud report", progress)
+    out, bar, start = open_report(out_dir, 2, "cloud report", progress)
     bar.set_postfix_str("3D views")
     views, rendered = rendered_views(render_3d, lambda: cloud_views(result, out, timeout))
     bar.update()

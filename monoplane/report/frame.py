@@ -146,12 +146,15 @@ def views_3d_body(views: list[html.Figure], reason: str | None, complete: str) -
     return body
 
 
-def open_report(out_dir: Path, steps: int, desc: str, progress: bool) -> tuple[Path, tqdm]:
-    """The report's folder (created if missing) and its progress bar of ``steps`` steps, shown
-    on stderr when ``progress``; :func:`finish_report` takes the last step."""
+def open_report(out_dir: Path, steps: int, desc: str, progress: bool
+                ) -> tuple[Path, tqdm, float]:
+    """The report's folder (created if missing), its progress bar of ``steps`` steps, shown
+    on stderr when ``progress`` (:func:`finish_report` takes the last step), and its start
+    (a ``time.perf_counter()`` value, for :func:`timing_section`'s total)."""
+    start = time.perf_counter()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    return out, tqdm(total=steps, desc=desc, unit="step", disable=not progress)
+    return out, tqdm(total=steps, desc=desc, unit="step", disable=not progress), start
 
 
 def summary_section(contents: str) -> str:
@@ -227,8 +230,7 @@ def write_frame_report(rec: Reconstruction, out_dir: Path, render_3d: bool = Tru
     pathlib.Path
         Path of ``report.html``.
     """
-    start = time.perf_counter()
-    out, bar = open_report(out_dir, 4, "report", progress)
+    out, bar, start = open_report(out_dir, 4, "report", progress)
     frame = rec.frame
 
     bar.set_postfix_str("inputs")

@@ -196,9 +196,8 @@ def write_scene_report(scene: Scene, out_dir: Path, render_3d: bool = True,
     pathlib.Path
         Path of ``report.html``.
     """
-    start = time.perf_counter()
     n_views, G = len(scene.views), scene.planes.shape[0]
-    out, bar = open_report(out_dir, n_views + 2, "scene report", progress)
+    out, bar, start = open_report(out_dir, n_views + 2, "scene report", progress)
 
     bar.set_postfix_str("3D views")
     views3d, rendered = rendered_views(render_3d, lambda: scene_views(scene, out, timeout))
