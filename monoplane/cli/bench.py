@@ -7,6 +7,7 @@ import json
 import sys
 from pathlib import Path
 
+from monoplane.cli.common import add_set_arg
 from monoplane.errors import InvalidInput
 
 DESCRIPTION = """Run a preset on seeded synthetic frames at one or more image sizes and print one
@@ -52,8 +53,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--preset", default="monoplane", metavar="NAME",
                    help="preset to benchmark (default: monoplane)")
-    p.add_argument("--set", dest="overrides", action="append", default=[],
-                   metavar="TABLE.KEY=VALUE", help="override one parameter (repeatable)")
+    add_set_arg(p)
     p.add_argument("--sizes", metavar="WxH[,WxH...]",
                    help="comma-separated image sizes (default: 256x192,640x480; with --batch "
                         "one size, default 640x480)")

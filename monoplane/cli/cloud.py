@@ -7,7 +7,7 @@ import json
 
 import numpy as np
 
-from monoplane.cli.common import add_rerun_arg, check_rerun_arg, write_rerun_arg
+from monoplane.cli.common import add_rerun_arg, add_set_arg, check_rerun_arg, write_rerun_arg
 from monoplane.errors import InvalidInput
 from monoplane.fileio import atomic_output_dir, check_output_dir, write_plane_mesh_ply
 
@@ -42,8 +42,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.add_argument("--preset", default="cloud",
                    help="config preset (default: cloud); its refiner must work without pixels")
-    p.add_argument("--set", dest="overrides", action="append", default=[],
-                   metavar="TABLE.KEY=VALUE", help="override one parameter (repeatable)")
+    add_set_arg(p)
     p.add_argument("--report", action="store_true",
                    help="also write report.html: the planes in an interactive 3D view, 3D "
                         "renders and a plane table")

@@ -17,10 +17,16 @@ def add_pipeline_args(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--config", metavar="FILE.toml",
                        help="TOML config: one table per stage with plugin = \"name\" and its "
                             "parameters; may set preset = \"name\"")
-    group.add_argument("--set", dest="overrides", action="append", default=[],
-                       metavar="TABLE.KEY=VALUE",
-                       help="override one parameter, e.g. --set labeler.lambda=0.9 or "
-                            "--set cues.profile=zerodepth (repeatable)")
+    add_set_arg(group, "override one parameter, e.g. --set labeler.lambda=0.9 or "
+                       "--set cues.profile=zerodepth (repeatable)")
+
+
+def add_set_arg(parser: argparse.ArgumentParser | argparse._ArgumentGroup,
+                text: str = "override one parameter (repeatable)") -> None:
+    """Repeatable ``--set TABLE.KEY=VALUE`` into ``args.overrides``, the list every command
+    hands to the config loader as its ``overrides``; ``text`` is the help."""
+    parser.add_argument("--set", dest="overrides", action="append", default=[],
+                        metavar="TABLE.KEY=VALUE", help=text)
 
 
 def pipeline_from_args(args: argparse.Namespace) -> Pipeline:

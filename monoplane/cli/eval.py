@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from monoplane.cli.common import add_set_arg
 from monoplane.errors import InvalidInput
 
 DESCRIPTION = """Score pipeline presets and external baselines on N seeded synthetic indoor
@@ -58,9 +59,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                            "cgal.min_support=0.001; unknown fields list the valid ones")
     what.add_argument("--all", dest="all_methods", action="store_true",
                       help="the paper's six ablation presets plus every available baseline")
-    what.add_argument("--set", dest="overrides", action="append", default=[],
-                      metavar="TABLE.KEY=VALUE",
-                      help="override one parameter of every preset (repeatable)")
+    add_set_arg(what, "override one parameter of every preset (repeatable)")
     data = p.add_argument_group("data")
     data.add_argument("--level", default="mild", choices=("clean", "mild", "strong"),
                       help="cue corruption: exact cues, or monocular-like errors (default: mild)")
