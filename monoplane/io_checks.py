@@ -125,10 +125,8 @@ def read_png(path: Path, what: str) -> np.ndarray:
 
     Parameters
     ----------
-    path : Path
-        The file.
-    what : str
-        What the file is (``"depth PNG"``, ``"image"``), for the messages.
+    path, what : Path, str
+        As for :func:`load_npy` (``what``: ``"depth PNG"``, ``"image"``).
 
     Returns
     -------

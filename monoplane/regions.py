@@ -289,8 +289,7 @@ def merge_coplanar(points: np.ndarray, valid: np.ndarray, labels: np.ndarray,
     Parameters
     ----------
     points, valid : numpy.ndarray
-        (H, W, 3) camera-frame points (OpenCV axes, depth units) and the (H, W) bool mask of
-        pixels with a valid depth.
+        As for :func:`scene_radius`.
     labels : numpy.ndarray
         (H, W) int region labels 0..R (0 = non-planar), e.g. from :func:`split_components`.
     origin : numpy.ndarray
@@ -385,8 +384,7 @@ def absorb_small_regions(points: np.ndarray, valid: np.ndarray, labels: np.ndarr
     Parameters
     ----------
     points, valid : numpy.ndarray
-        (H, W, 3) camera-frame points (OpenCV axes, depth units) and the (H, W) bool mask of
-        pixels with a valid depth.
+        As for :func:`scene_radius`.
     labels : numpy.ndarray
         (H, W) int labels 0..R.
     params : numpy.ndarray
@@ -450,8 +448,7 @@ def gate_filled_pixels(points: np.ndarray, valid: np.ndarray, before: np.ndarray
     Parameters
     ----------
     points, valid : numpy.ndarray
-        (H, W, 3) camera-frame points (OpenCV axes, depth units) and the (H, W) bool mask of
-        pixels with a valid depth.
+        As for :func:`scene_radius`.
     before : numpy.ndarray
         (H, W) int labels 0..P before refinement (the RANSAC's).
     after : numpy.ndarray
