@@ -10,7 +10,6 @@ solve that raises its own objective (robust cost) is rejected and leaves the sce
 from __future__ import annotations
 
 import math
-
 from dataclasses import dataclass, replace
 from typing import Any
 
