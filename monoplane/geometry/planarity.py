@@ -98,12 +98,8 @@ def _padded(values: np.ndarray, labels: np.ndarray, num_planes: int,
     ----------
     values : numpy.ndarray
         (M, 3) per-member vectors.
-    labels : numpy.ndarray
-        (M,) int group of each member, 0 = none, 1..P.
-    num_planes : int
-        P.
-    max_samples : int, optional
-        Keep at most this many evenly spaced members of a group.
+    labels, num_planes, max_samples
+        The groups, as for :func:`spread_of_groups`.
 
     Returns
     -------
