@@ -28,7 +28,11 @@ seen edge-on, a shelf board) has no evidence of curvature and is kept.
 Where the measurements come from: images use the frame's normal cue and its 3D points on the
 final label map, eroded by ``border_px`` (scaled with the image width, at 256 px); clouds use
 the working cloud's points and normals, without the points that have a graph neighbour of
-another label.
+another label. The normal test needs normals that are a cue of their own: normals estimated
+from the same depth (``Frame.normals_from_depth``) or the same points (a bare cloud) add no
+evidence and are noisy on oblique faces, so then the quadric alone decides. In clouds a third
+rule drops *crease strips*, planes too thin to test whose points lie on a plane they touch
+(estimated normals blend two faces along their crease, and RANSAC can group such points).
 """
 
 from __future__ import annotations
