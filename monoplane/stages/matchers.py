@@ -59,11 +59,16 @@ class ColmapConfig:
 
 @contextlib.contextmanager
 def _quiet_colmap() -> Iterator[None]:
-    """Silence glog's INFO chatter from pycolmap while keeping errors."""
+    """Silence glog's output from pycolmap below FATAL while SfM runs.
+
+    Its ERROR lines ("Failed to create any sparse model") describe outcomes this matcher
+    reports itself, in one line naming the views (and which the registrar then handles); printed
+    raw they reach the user's terminal as a third-party message with a glog prefix.
+    """
     import pycolmap
 
     previous = pycolmap.logging.minloglevel
-    pycolmap.logging.minloglevel = 2
+    pycolmap.logging.minloglevel = 3
     try:
         yield
     finally:
