@@ -1,6 +1,7 @@
 """The model catalogue: published ONNX exports monoplane knows how to fetch and run.
 
-Models are data, not code. A record says where a file comes from (a Hugging Face repository, a
+Models are data, not code: the records are the tables of ``catalogue.toml``, next to this
+module, and this module reads and checks them. A record says where a file comes from (a Hugging Face repository, a
 revision and a path inside it), how to check it (size and SHA-256), its licence, and which
 profile (:mod:`monoplane.cues.profiles`) runs it; the profile stays the one place that knows
 the network's inputs and outputs. Nothing here downloads: see :mod:`monoplane.models.cache`.
@@ -13,7 +14,9 @@ hash it got so that a maintainer can pin it.
 from __future__ import annotations
 
 import re
+import tomllib
 from dataclasses import asdict, dataclass
+from importlib import resources
 from typing import Any
 
 from monoplane.cues.profiles import get_profile
@@ -91,56 +94,17 @@ class ModelRecord:
         return {**asdict(self), "url": self.url, "pinned": self.pinned}
 
 
+def _load_catalogue() -> dict[str, ModelRecord]:
+    """The records of ``catalogue.toml``, by name, in the file's order (each checked by
+    :class:`ModelRecord`; a bad one raises :class:`ConfigError` on import)."""
+    tables = tomllib.loads((resources.files(__package__) / "catalogue.toml").read_text("utf-8"))
+    # TOML has no null: an unknown size or hash is a key left out.
+    return {name: ModelRecord(name=name, **{"size": None, "sha256": None, **fields})
+            for name, fields in tables.items()}
+
+
 #: The catalogue, by name. Every entry has a licence that allows any use (see docs/cues.md).
-CATALOGUE: dict[str, ModelRecord] = {r.name: r for r in (
-    ModelRecord(
-        name="depth-anything-v2-small",
-        task="depth",
-        licence="Apache-2.0 (model card; only the Small size is Apache-2.0, the larger ones "
-                "are CC-BY-NC-4.0)",
-        size=99_060_839,
-        profile="depth-anything-v2",
-        repo="onnx-community/depth-anything-v2-small",
-        revision="4472b7362082ad9968fee890ca0f1e5aca36b93d",
-        filename="onnx/model.onnx",
-        sha256="afb6a5c28f3b6bf1618c6e43f02073ef9dfdc70e937502d51603e57b0a1df10c",
-        summary="fast, sharp relative depth of any scene; normals estimated from depth",
-        provenance="revision, size and SHA-256 as recorded by independent projects that pin "
-                   "this file (the hash by two of them); not re-downloaded by monoplane's "
-                   "authors",
-    ),
-    ModelRecord(
-        name="metric3d-v2-small",
-        task="both",
-        licence="CC0-1.0 (ONNX model card); upstream Metric3D code BSD-2-Clause",
-        size=150_739_433,
-        profile="metric3d-v2",
-        repo="onnx-community/metric3d-vit-small",
-        revision="ee63b95d92d2f629b3e019e88f57eea7c1e97d4b",
-        filename="onnx/model.onnx",
-        sha256="674a665052f01bb2",
-        summary="metric depth and surface normals in one network; depth scale follows the "
-                "focal length",
-        provenance="revision, size and the first 16 SHA-256 digits as recorded by an "
-                   "independent project that pins this file; the full hash is not published "
-                   "there, so fetch checks the prefix and prints the full hash",
-    ),
-    ModelRecord(
-        name="moge-2-vits-normal",
-        task="both",
-        licence="MIT (upstream MoGe repository; the ONNX repository's card names none)",
-        size=140_852_051,
-        profile="moge-2",
-        repo="Ruicheng/moge-2-vits-normal-onnx",
-        revision="main",
-        filename="model.onnx",
-        sha256="24eacb5dc7a2c54c7bc98f7de085ffbed79ad006ea5b664c2c2cdc02ff3a52f0",
-        summary="metric point map, normals and the camera's field of view in one network",
-        provenance="size and SHA-256 as recorded by an independent project; the revision is "
-                   "the moving branch 'main' (no commit hash was available), so a changed "
-                   "upstream file fails the size/hash check instead of being used",
-    ),
-)}
+CATALOGUE: dict[str, ModelRecord] = _load_catalogue()
 
 
 def get_model(name: str) -> ModelRecord:
