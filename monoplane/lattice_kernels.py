@@ -251,18 +251,52 @@ def locate_vertices(key0: np.ndarray, rank: np.ndarray, weights: np.ndarray,
 
 
 @numba.njit(cache=True, nogil=True)
-def splat_blur(vertex_of: np.ndarray, weights: np.ndarray, neighbours: np.ndarray,
-               values: np.ndarray, m: int) -> np.ndarray:
-    """(M, C) float32 lattice values: ``values`` (N, C) splatted and blurred."""
+def _barycentric(vertex_of: np.ndarray, weights: np.ndarray, values: np.ndarray, rows: int,
+                 splat: bool) -> np.ndarray:
+    """Product with the (N, M) matrix ``B`` of the points' barycentric weights (row i: point
+    i's weights at its simplex's vertices), or with its transpose.
+
+    Splatting and slicing are the two directions of one sparse product, walked over the same
+    (point, vertex, weight) entries in the same order.
+
+    Parameters
+    ----------
+    vertex_of, weights : numpy.ndarray
+        (N, d+1) int32 vertex indices and float32 weights (:func:`insert_vertices`,
+        :func:`locate_vertices`).
+    values : numpy.ndarray
+        (N, C) float32 point values when ``splat``, else (M, C) lattice values.
+    rows : int
+        M when ``splat``, else N.
+    splat : bool
+        True for ``Bᵀ values`` (points onto the lattice), False for ``B values`` (lattice at
+        the points).
+
+    Returns
+    -------
+    numpy.ndarray
+        (rows, C) float32 product.
+    """
     n, d1 = vertex_of.shape
     c = values.shape[1]
-    lat = np.zeros((m, c), np.float32)
+    out = np.zeros((rows, c), np.float32)
     for i in range(n):
         for r in range(d1):
             v = vertex_of[i, r]
             w = weights[i, r]
+            src, dst = (i, v) if splat else (v, i)
             for j in range(c):
-                lat[v, j] += w * values[i, j]
+                out[dst, j] += w * values[src, j]
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def splat_blur(vertex_of: np.ndarray, weights: np.ndarray, neighbours: np.ndarray,
+               values: np.ndarray, m: int) -> np.ndarray:
+    """(M, C) float32 lattice values: ``values`` (N, C) splatted and blurred."""
+    d1 = vertex_of.shape[1]
+    c = values.shape[1]
+    lat = _barycentric(vertex_of, weights, values, m, True)
     tmp = np.empty_like(lat)
     for a in range(d1):
         for v in range(m):
@@ -282,13 +316,4 @@ def splat_blur(vertex_of: np.ndarray, weights: np.ndarray, neighbours: np.ndarra
 @numba.njit(cache=True, nogil=True)
 def slice_values(vertex_of: np.ndarray, weights: np.ndarray, lat: np.ndarray) -> np.ndarray:
     """(N, C) float32 barycentric interpolation of lattice values ``lat`` (M, C)."""
-    n, d1 = vertex_of.shape
-    c = lat.shape[1]
-    out = np.zeros((n, c), np.float32)
-    for i in range(n):
-        for r in range(d1):
-            v = vertex_of[i, r]
-            w = weights[i, r]
-            for j in range(c):
-                out[i, j] += w * lat[v, j]
-    return out
+    return _barycentric(vertex_of, weights, lat, vertex_of.shape[0], False)
