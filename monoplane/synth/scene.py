@@ -19,6 +19,7 @@ furniture: view 0 of a two-view scene is the single-view scene of the same seed.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -346,19 +347,6 @@ def build_layout(rng: np.random.Generator, objects: int | None = None) -> Layout
         xy = rng.uniform([r, r], [lx - r, ly - r])
         return xy if _free(xy, r, discs, size) and in_view(xy) else None
 
-    def floor_object(width: tuple[float, float], depth: tuple[float, float],
-                     height: tuple[float, float]
-                     ) -> tuple[float, float, float, float, np.ndarray] | None:
-        """Draw a box-shaped object's size (uniform in each range) and a free floor spot for
-        its footprint disc, up to 30 times: ``(w, depth, h, disc radius, xy)``, else None."""
-        for _try in range(30):
-            w, dpt, h = rng.uniform(*width), rng.uniform(*depth), rng.uniform(*height)
-            r = float(np.hypot(w, dpt) / 2)
-            xy = floor_spot(r)
-            if xy is not None:
-                return w, dpt, h, r, xy
-        return None
-
     def occupy(xy: np.ndarray, r: float) -> None:
         """Reserve the disc for later placements and record it as a footprint."""
         disc = np.array([xy[0], xy[1], r])
@@ -388,23 +376,40 @@ def build_layout(rng: np.random.Generator, objects: int | None = None) -> Layout
             return True
         return False
 
-    def free_box() -> bool:
+    def floor_placer(width: tuple[float, float], depth: tuple[float, float],
+                     height: tuple[float, float]
+                     ) -> Callable[[Callable[[float, float, float, np.ndarray], None]],
+                                   Callable[[], bool]]:
+        """Decorator making a placer of a box-shaped floor object from its builder.
+
+        The placer draws the object's size (uniform in each range) and a free floor spot for
+        its footprint disc, up to 30 times; on success it calls the builder with
+        ``(w, depth, h, xy)`` and reserves the disc (:func:`occupy`).
+        """
+        def placer(build: Callable[[float, float, float, np.ndarray], None]
+                   ) -> Callable[[], bool]:
+            def place() -> bool:
+                for _try in range(30):
+                    w, dpt, h = rng.uniform(*width), rng.uniform(*depth), rng.uniform(*height)
+                    r = float(np.hypot(w, dpt) / 2)
+                    xy = floor_spot(r)
+                    if xy is not None:
+                        build(w, dpt, h, xy)
+                        occupy(xy, r)
+                        return True
+                return False
+            return place
+        return placer
+
+    @floor_placer((0.3, 0.8), (0.3, 0.8), (0.3, 1.0))
+    def free_box(w: float, dpt: float, h: float, xy: np.ndarray) -> None:
         """A free-standing box with random yaw."""
-        placed = floor_object((0.3, 0.8), (0.3, 0.8), (0.3, 1.0))
-        if placed is None:
-            return False
-        w, dpt, h, r, xy = placed
         b.box(np.array([xy[0], xy[1], h / 2]), np.array([w / 2, dpt / 2, h / 2]),
               float(rng.uniform(0, np.pi)), "box", random_material(rng, "object"))
-        occupy(xy, r)
-        return True
 
-    def table() -> bool:
+    @floor_placer((0.8, 1.6), (0.6, 1.0), (0.68, 0.8))
+    def table(w: float, dpt: float, h: float, xy: np.ndarray) -> None:
         """A table: slab top, tube legs, and one or two things on top."""
-        placed = floor_object((0.8, 1.6), (0.6, 1.0), (0.68, 0.8))
-        if placed is None:
-            return False
-        w, dpt, h, r, xy = placed
         yaw = float(rng.uniform(0, np.pi))
         th = 0.04
         b.box(np.array([xy[0], xy[1], h - th / 2]), np.array([w / 2, dpt / 2, th / 2]), yaw,
@@ -433,8 +438,6 @@ def build_layout(rng: np.random.Generator, objects: int | None = None) -> Layout
                 rr = rng.uniform(0.03, 0.06)
                 _torus(b, np.array([oxy[0], oxy[1], h + rr]), rng.uniform(0.1, 0.18), rr,
                        mat)
-        occupy(xy, r)
-        return True
 
     def curved() -> bool:
         """A sphere, domed cylinder or torus on the floor."""
