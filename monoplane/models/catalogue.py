@@ -1,10 +1,11 @@
 """The model catalogue: published ONNX exports monoplane knows how to fetch and run.
 
 Models are data, not code: the records are the tables of ``catalogue.toml``, next to this
-module, and this module reads and checks them. A record says where a file comes from (a Hugging Face repository, a
-revision and a path inside it), how to check it (size and SHA-256), its licence, and which
-profile (:mod:`monoplane.cues.profiles`) runs it; the profile stays the one place that knows
-the network's inputs and outputs. Nothing here downloads: see :mod:`monoplane.models.cache`.
+module, which reads and checks them. A record says where a file comes from (a Hugging Face
+repository, a revision and a path inside it), how to check it (size and SHA-256), its licence,
+and which profile (:mod:`monoplane.cues.profiles`) runs it; the profile stays the one place
+that knows the network's inputs and outputs. Nothing here downloads: see
+:mod:`monoplane.models.cache`.
 
 Facts a record could not be checked against (a revision that is a branch name, a missing hash)
 are marked as such in the record and in ``docs/cues.md``; ``monoplane models fetch`` prints the
