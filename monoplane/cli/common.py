@@ -82,7 +82,7 @@ def add_output_args(parser: argparse.ArgumentParser) -> None:
                        help="replace DIR if it exists")
     group.add_argument("--report", action="store_true",
                        help="also write report.html with 2D figures, an interactive 3D view "
-                            "and off-screen 3D renders")
+                            "and rendered 3D views")
     add_rerun_arg(group)
 
 

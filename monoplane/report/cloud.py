@@ -21,7 +21,7 @@ from monoplane.report.frame import (
     timing_section,
     views_3d_body,
 )
-from monoplane.report.render3d import DEFAULT_TIMEOUT, Mesh, RenderResult, Shot, render
+from monoplane.report.render3d import Mesh, RenderResult, Shot, render
 from monoplane.report.viewer import install_viewer, viewer_section
 from monoplane.report.viewpoints import orbit_viewpoints, zoom_to_fit
 
@@ -43,8 +43,7 @@ def cloud_glb(result: CloudPlaneResult, mesh: PlaneMesh | None = None) -> bytes:
     return planes_glb(mesh, result.planes, plane_palette(result.num_planes), double_sided=True)
 
 
-def cloud_views(result: CloudPlaneResult, out_dir: Path, timeout: float = DEFAULT_TIMEOUT
-                ) -> tuple[list[html.Figure], RenderResult]:
+def cloud_views(result: CloudPlaneResult, out_dir: Path) -> tuple[list[html.Figure], RenderResult]:
     """Render the plane meshes from a bird's eye view and two oblique views.
 
     "Up" is the normal of the plane with the most points (a floor, a table, the ground); the
@@ -60,8 +59,7 @@ def cloud_views(result: CloudPlaneResult, out_dir: Path, timeout: float = DEFAUL
     vertex_plane = np.zeros(len(mesh.vertices), np.int64)
     vertex_plane[mesh.triangles.reshape(-1)] = np.repeat(face_plane, 3)
     colors = shade(palette[vertex_plane], result.planes[vertex_plane, :3])
-    triangles = mesh.triangles.astype(np.int32)
-    both_sides = Mesh(mesh.vertices, np.vstack([triangles, triangles[:, ::-1]]), colors)
+    mesh_3d = Mesh(mesh.vertices, mesh.triangles, colors)  # the renderer draws both sides
     up = result.planes[int(np.argmax(result.num_points)), :3]
     forward = np.cross(up, [1.0, 0.0, 0.0] if abs(up[0]) < 0.9 else [0.0, 1.0, 0.0])
     width, height = RENDER_SIZE
@@ -71,13 +69,12 @@ def cloud_views(result: CloudPlaneResult, out_dir: Path, timeout: float = DEFAUL
         shots.append(Shot(f"cloud3d_{vp.name}", vp.K, vp.world_to_cam, {0: None}, []))
         figures.append(html.Figure(f"cloud3d_{vp.name}.png",
                                    f"{vp.title}, planes coloured by id (both sides drawn)"))
-    result_3d = render([both_sides], [], shots, out_dir, width, height, timeout=timeout)
+    result_3d = render([mesh_3d], [], shots, out_dir, width, height)
     return [f for f in figures if f.src[:-4] in result_3d.paths], result_3d
 
 
 def write_cloud_report(result: CloudPlaneResult, out_dir: Path, source: str = "",
-                       render_3d: bool = True, progress: bool = False,
-                       timeout: float = DEFAULT_TIMEOUT) -> Path:
+                       render_3d: bool = True, progress: bool = False) -> Path:
     """Write ``report.html``, its renders and ``summary.png`` for the planes of a point cloud.
 
     The page shows ``planes.glb`` in an interactive 3D view (``planes.glb`` is written into
@@ -92,7 +89,7 @@ def write_cloud_report(result: CloudPlaneResult, out_dir: Path, source: str = ""
         Folder for ``report.html`` and its pictures (created if missing).
     source : str
         The cloud's file name, for the title.
-    render_3d, progress, timeout : bool, bool, float
+    render_3d, progress : bool
         As for :func:`~monoplane.report.frame.write_frame_report`.
 
     Returns
@@ -102,7 +99,7 @@ def write_cloud_report(result: CloudPlaneResult, out_dir: Path, source: str = ""
     """
     out, bar, start = open_report(out_dir, 2, "cloud report", progress)
     bar.set_postfix_str("3D views")
-    views, rendered = rendered_views(render_3d, lambda: cloud_views(result, out, timeout))
+    views, rendered = rendered_views(render_3d, lambda: cloud_views(result, out))
     bar.update()
 
     bar.set_postfix_str("html")

@@ -17,7 +17,7 @@ from monoplane.geometry.mesh import planar_mesh
 from monoplane.report import figures as fig
 from monoplane.report import html
 from monoplane.report.colors import colorize_normals, plane_palette, shade
-from monoplane.report.render3d import DEFAULT_TIMEOUT, Mesh, RenderResult, Shot, render
+from monoplane.report.render3d import Mesh, RenderResult, Shot, render
 from monoplane.report.viewer import install_viewer, viewer_section
 from monoplane.report.viewpoints import facing_triangles, orbit_viewpoints, zoom_to_fit
 
@@ -62,8 +62,7 @@ def estimate_up(rec: Reconstruction, max_tilt_deg: float = 35.0) -> np.ndarray:
     return rec.params[i, :3] * np.sign(cos_up[i])
 
 
-def frame_views(rec: Reconstruction, out_dir: Path, timeout: float = DEFAULT_TIMEOUT
-                ) -> tuple[list[html.Figure], RenderResult]:
+def frame_views(rec: Reconstruction, out_dir: Path) -> tuple[list[html.Figure], RenderResult]:
     """Render the planar mesh from the camera, from above and obliquely, by plane and textured.
 
     Returns
@@ -100,7 +99,7 @@ def frame_views(rec: Reconstruction, out_dir: Path, timeout: float = DEFAULT_TIM
             shots.append(Shot(f"3d_{name}_{kind}", K_v, T, {j: keep}))
             label = "coloured by plane" if kind == "planes" else "image texture"
             figures.append(html.Figure(f"3d_{name}_{kind}.png", f"{title}, {label}"))
-    result = render(meshes, [], shots, out_dir, width, height, timeout=timeout)
+    result = render(meshes, [], shots, out_dir, width, height)
     figures = [f for f in figures if f.src[:-4] in result.paths]
     return figures, result
 
@@ -127,10 +126,17 @@ def plane_rows(rec: Reconstruction) -> list[list[str]]:
 
 def rendered_views(render_3d: bool, make: Callable[[], tuple[list[html.Figure], RenderResult]]
                    ) -> tuple[list[html.Figure], RenderResult]:
-    """The 3D figures ``make()`` renders, or none (with the reason) when 3D was not asked for."""
+    """The 3D figures ``make()`` renders, or none (with the reason) when 3D was not asked for
+    or ``make()`` raised."""
     if not render_3d:
         return [], RenderResult({}, "3D views were not requested", 0.0)
-    return make()
+    start = time.perf_counter()
+    try:
+        return make()
+    except Exception as exc:  # the 3D views are extras: the report's 2D figures must still come out
+        first_line = (str(exc).splitlines() or [""])[0]
+        return [], RenderResult({}, f"3D rendering failed ({type(exc).__name__}: {first_line})",
+                                time.perf_counter() - start)
 
 
 def views_3d_body(views: list[html.Figure], reason: str | None, complete: str) -> str:
@@ -200,8 +206,7 @@ def finish_report(out: Path, bar: tqdm, title: str, subtitle: str, sections: lis
 
 
 def write_frame_report(rec: Reconstruction, out_dir: Path, render_3d: bool = True,
-                       progress: bool = False, timeout: float = DEFAULT_TIMEOUT,
-                       viewer: str | None = None) -> Path:
+                       progress: bool = False, viewer: str | None = None) -> Path:
     """Write ``report.html``, its PNG figures and ``summary.png`` for one reconstruction.
 
     The page also shows ``planes.glb`` in an interactive 3D view; ``planes.glb`` is written
@@ -214,12 +219,10 @@ def write_frame_report(rec: Reconstruction, out_dir: Path, render_3d: bool = Tru
     out_dir : pathlib.Path
         Folder for ``report.html`` and the PNGs (created if missing).
     render_3d : bool
-        Render the planar mesh with Open3D (in a child process). When false, or when rendering
-        fails, the report has the 2D figures and says why the 3D views are missing.
+        Render the planar mesh (:mod:`~monoplane.report.render3d`). When false, or when
+        rendering fails, the report has the 2D figures and says why the 3D views are missing.
     progress : bool
         Show a progress bar on stderr.
-    timeout : float
-        Seconds the 3D renderer may take.
     viewer : str, optional
         Relative URL, from ``out_dir``, of a copy of the 3D viewer script that several reports
         share (see :func:`~monoplane.report.viewer.install_viewer`); by default the report
@@ -267,7 +270,7 @@ def write_frame_report(rec: Reconstruction, out_dir: Path, render_3d: bool = Tru
 
     bar.set_postfix_str("3D views")
     notes = list(frame.notes)
-    views, rendered = rendered_views(render_3d, lambda: frame_views(rec, out, timeout))
+    views, rendered = rendered_views(render_3d, lambda: frame_views(rec, out))
     if render_3d and rendered.reason:
         notes.append(f"3D views: {rendered.reason}")
     bar.update()

@@ -26,7 +26,7 @@ from monoplane.report.frame import (
     summary_section,
     views_3d_body,
 )
-from monoplane.report.render3d import DEFAULT_TIMEOUT, Lines, Mesh, RenderResult, Shot, render
+from monoplane.report.render3d import Lines, Mesh, RenderResult, Shot, render
 from monoplane.report.viewer import install_viewer, viewer_section
 from monoplane.report.viewpoints import facing_triangles, orbit_viewpoints, zoom_to_fit
 
@@ -89,8 +89,7 @@ def fused_view_mesh(rec: Reconstruction, links: dict[int, int], planes_world: np
     return (v - t) @ R, tris, colors, local_ids, plane_to_world(snapped.params, R, t)
 
 
-def scene_views(scene: Scene, out_dir: Path, timeout: float = DEFAULT_TIMEOUT
-                ) -> tuple[list[html.Figure], RenderResult]:
+def scene_views(scene: Scene, out_dir: Path) -> tuple[list[html.Figure], RenderResult]:
     """Render cameras and fused planes from a bird's eye and two oblique viewpoints."""
     G = scene.planes.shape[0]
     palette = plane_palette(G) / 255.0
@@ -144,7 +143,7 @@ def scene_views(scene: Scene, out_dir: Path, timeout: float = DEFAULT_TIMEOUT
             label = "fused planes by global id" if kind == "planes" else "image texture"
             figures.append(html.Figure(f"{name}.png", f"{vp.title}, {label}; cameras as "
                                                       "frusta (view 1 red)"))
-    result = render(meshes, lines, shots, out_dir, width, height, timeout=timeout)
+    result = render(meshes, lines, shots, out_dir, width, height)
     return [f for f in figures if f.src[:-4] in result.paths], result
 
 
@@ -172,7 +171,7 @@ def first_camera_orbit(scene: Scene, raise_deg: float = 15.0) -> tuple[float, fl
 
 
 def write_scene_report(scene: Scene, out_dir: Path, render_3d: bool = True,
-                       progress: bool = False, timeout: float = DEFAULT_TIMEOUT) -> Path:
+                       progress: bool = False) -> Path:
     """Write ``report.html``, its PNG figures and ``summary.png`` for a multi-view scene.
 
     The page also shows ``scene.glb`` (fused planes and cameras) in an interactive 3D view;
@@ -186,10 +185,10 @@ def write_scene_report(scene: Scene, out_dir: Path, render_3d: bool = True,
     out_dir : pathlib.Path
         Folder for ``report.html`` and the PNGs (created if missing).
     render_3d : bool
-        Render cameras and fused planes with Open3D (in a child process). When false, or when
-        rendering fails, the report keeps its 2D figures and says why 3D views are missing.
-    progress, timeout : bool, float
-        As for :func:`~monoplane.report.frame.write_frame_report`.
+        Render cameras and fused planes (:mod:`~monoplane.report.render3d`). When false, or
+        when rendering fails, the report keeps its 2D figures and says why 3D views are missing.
+    progress : bool
+        Show a progress bar on stderr.
 
     Returns
     -------
@@ -200,7 +199,7 @@ def write_scene_report(scene: Scene, out_dir: Path, render_3d: bool = True,
     out, bar, start = open_report(out_dir, n_views + 2, "scene report", progress)
 
     bar.set_postfix_str("3D views")
-    views3d, rendered = rendered_views(render_3d, lambda: scene_views(scene, out, timeout))
+    views3d, rendered = rendered_views(render_3d, lambda: scene_views(scene, out))
     bar.update()
 
     per_view: list[html.Figure] = []
