@@ -6,7 +6,8 @@ cd "$(dirname "$0")"
 
 # libgl1 libegl1 libx11-6 libgomp1 libusb-1.0-0: needed by `import open3d` (libusb is missing on
 #   fresh machines and the import then fails).
-# libegl-mesa0 libgl1-mesa-dri: Mesa llvmpipe for Open3D's headless (EGL surfaceless) renderer.
+# libegl-mesa0 libgl1-mesa-dri: Mesa's OpenGL drivers, for Open3D's own renderer and viewers
+#   (monoplane's reports draw their 3D views without OpenGL).
 # chromium: the test that opens a report's interactive 3D view in a real (headless) browser.
 # Every Python dependency ships manylinux wheels, so no compiler is needed.
 APT_PACKAGES="libgl1 libegl1 libx11-6 libgomp1 libusb-1.0-0 libegl-mesa0 libgl1-mesa-dri chromium"

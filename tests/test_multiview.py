@@ -176,7 +176,6 @@ def test_cli_multiview_end_to_end(synth_pair, tmp_path: Path) -> None:
     assert (tmp_path / "mv" / "view_001" / "labels.png").is_file()
 
 
-@pytest.mark.render
 def test_cli_multiview_writes_scene_glb_report_and_recording(synth_pair, tmp_path: Path) -> None:
     import os
     import shutil

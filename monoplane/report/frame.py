@@ -82,8 +82,10 @@ def frame_views(rec: Reconstruction, out_dir: Path) -> tuple[list[html.Figure], 
     meshes = [Mesh(vertices, triangles, by_plane), Mesh(vertices, triangles, colors)]
     width, height = render_size(*frame.shape)
     K = frame.K.copy()
-    K[0] *= width / frame.width
-    K[1] *= height / frame.height
+    # Pixel centres sit at integers (OpenCV): a scale s maps x to s (x + ½) - ½, not s x.
+    for row, scale in ((0, width / frame.width), (1, height / frame.height)):
+        K[row] *= scale
+        K[row, 2] += 0.5 * (scale - 1.0)
     tri_planes = plane_ids[triangles[:, 0]] - 1
     views: list[tuple[str, str, np.ndarray, np.ndarray, np.ndarray | None]] = [
         ("frontal", "frontal view (the input camera)", K, np.eye(4), None)]

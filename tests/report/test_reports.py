@@ -90,7 +90,6 @@ def test_scene_label_maps_use_global_ids() -> None:
             assert np.all(lab[rec.labels == lo] > G)
 
 
-@pytest.mark.slow
 def test_scene_report_with_3d(tmp_path: Path) -> None:
     page = write_scene_report(make_scene(3), tmp_path)
     text = _assert_links_resolve(page)
