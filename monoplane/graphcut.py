@@ -476,8 +476,8 @@ def pool_payback(num_nodes: int, edges: np.ndarray, cut_cost: np.ndarray | float
 
 def minimize_gc_ransac(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray,
                        cut_cost: np.ndarray | float, lambda_: float,
-                       pairwise_scale: float = 1.0, flow: np.ndarray | None = None,
-                       payback: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+                       pairwise_scale: float = 1.0, payback: np.ndarray | None = None
+                       ) -> tuple[np.ndarray, float]:
     """Exact minimiser and minimum of the (proximity) GC-RANSAC energy, without edge tables.
 
     The same energy as ``gc_ransac_energy(f0, f1, edges, cut_cost, lambda_, g1,
@@ -490,11 +490,11 @@ def minimize_gc_ransac(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray,
     neighbours, which leaves the minimisers of the rest unchanged. With the normal term most
     points of other planes are fixed this way, which halves the max-flow graph.
 
-    The max-flow starts from a flow rather than from none (:func:`_warm_start`): the flow
-    ``flow`` holds, if any (the local optimisation labels one pool twice, for a hypothesis and
-    for its refit), then flow pushed straight from each outlier-preferring point to an
-    inlier-preferring neighbour. Any starting flow gives the same cut (see
-    :func:`monoplane.mincut.min_cut_flows`); a good one leaves less to search.
+    The max-flow starts from a flow rather than from none (:func:`_warm_start`): flow pushed
+    straight from each outlier-preferring point to an inlier-preferring neighbour. Any
+    starting flow gives the same cut (see :func:`monoplane.mincut.min_cut_flows`); this one
+    leaves less to search. (Starting the local optimisation's relabel from the flow of the
+    labelling before it was measured too, and saved nothing: docs/evaluation.md.)
 
     Parameters
     ----------
@@ -510,10 +510,6 @@ def minimize_gc_ransac(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray,
         Smoothness weight λ in [0, 1].
     pairwise_scale : float
         Positive factor s on the pairwise term.
-    flow : numpy.ndarray, optional
-        (E,) float64 flow along each edge (from its first end to its second) of an earlier
-        call on the same edges, zeros for none: a warm start, overwritten with this call's
-        flow. It changes the speed, not the result.
     payback : numpy.ndarray, optional
         (M,) :func:`pool_payback` of these edges, cut costs, λ and s, when the caller keeps
         it; computed here when omitted.
@@ -540,9 +536,6 @@ def minimize_gc_ransac(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray,
     edges = np.ascontiguousarray(np.asarray(edges, dtype=np.int64).reshape(-1, 2))
     cut = np.ascontiguousarray(np.broadcast_to(np.asarray(cut_cost, dtype=np.float64),
                                                edges.shape[:1]))
-    if flow is not None and flow.shape != (edges.shape[0],):
-        raise InvalidInput(f"flow must have one entry per edge ({edges.shape[0]}), got "
-                           f"{flow.shape}")
     lam, ls = float(lambda_), float(lambda_ * pairwise_scale)
     # With f(0, p) <= 1 an edge whose cut costs at least 1/2 is submodular whatever the
     # hypothesis (2 λs w >= λs >= its both-outlier cost), so most calls check nothing.
@@ -556,43 +549,30 @@ def minimize_gc_ransac(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray,
     elif payback.shape != f0.shape:
         raise InvalidInput(f"payback must have one entry per point ({f0.shape[0]}), got "
                            f"{payback.shape}")
-    nodes, src, dst, cap, slope, edge_of = _gc_ransac_graph(f0, data1, edges, cut, lam, ls,
-                                                            payback)
+    nodes, src, dst, cap, slope = _gc_ransac_graph(f0, data1, edges, cut, lam, ls, payback)
     labels = np.zeros(f0.shape[0], dtype=bool)
-    through = np.zeros(src.size)
     if nodes.size:
-        start = through if flow is None else flow[edge_of]
         # A positive slope makes label 1 (sink side) dearer: capacity on the source edge.
-        forward, reverse, terminal = _warm_start(src, dst, cap, slope, start)
-        labels[nodes], through = min_cut_flows(nodes.size, src, dst, forward, reverse,
-                                               terminal)
-    if flow is not None:
-        flow[:] = 0.0
-        flow[edge_of] = through
+        forward, reverse, terminal = _warm_start(src, dst, cap, slope)
+        labels[nodes] = min_cut_flows(nodes.size, src, dst, forward, reverse, terminal)[0]
     return labels, float(_gc_ransac_energy(f0, data1, edges, cut, lam, ls, labels))
 
 
 @kernel
-def _warm_start(src: np.ndarray, dst: np.ndarray, cap: np.ndarray, slope: np.ndarray,
-                start: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _warm_start(src: np.ndarray, dst: np.ndarray, cap: np.ndarray, slope: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Residual graph of a starting flow for the max-flow of :func:`minimize_gc_ransac`.
 
     ``src``, ``dst`` (E,) int64 and ``cap`` (E,) float64 are the graph's edges (no reverse
-    capacity), ``slope`` (F,) the terminal capacities (source minus sink) and ``start`` (E,)
-    a flow along the edges, clipped to ``[0, cap]``. On top of it, along each edge in order,
-    as much flow as its residual, its tail's source capacity and its head's sink capacity
+    capacity), ``slope`` (F,) the terminal capacities (source minus sink). Along each edge in
+    order, as much flow as its residual, its tail's source capacity and its head's sink capacity
     allow goes source -> tail -> head -> sink: the paths of length three the max-flow would
     otherwise find one search at a time. Returns the forward and reverse residual capacities
     (E,) and the terminals (F,), each edge's flow moved into the terminals of its ends.
     """
     forward = np.empty(src.shape[0])
-    reverse = np.empty(src.shape[0])
+    reverse = np.zeros(src.shape[0])
     terminal = slope.copy()
-    for e in range(src.shape[0]):
-        phi = min(max(start[e], 0.0), cap[e])
-        terminal[src[e]] -= phi
-        terminal[dst[e]] += phi
-        reverse[e] = phi
     for e in range(src.shape[0]):
         i, j = src[e], dst[e]
         if terminal[i] > 0.0 and terminal[j] < 0.0:
@@ -628,14 +608,13 @@ def _non_submodular(f0: np.ndarray, edges: np.ndarray, cut: np.ndarray, ls: floa
 @kernel
 def _gc_ransac_graph(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray, cut: np.ndarray,
                      lam: float, ls: float, payback: np.ndarray
-                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
-                                np.ndarray]:
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Max-flow graph of :func:`minimize_gc_ransac` on its undecided points.
 
     Inputs are float64 (M,) ``f0``, ``data1``, int64 (E, 2) ``edges``, float64 (E,) cut
     costs, λ, λs and the (M,) :func:`pool_payback`. Returns the (F,) pool positions of the
-    undecided points, the (E',) local ends and capacities of the edges among them, their (F,)
-    cost slopes ``U(1) - U(0)`` and the (E',) row of ``edges`` each edge comes from.
+    undecided points, the (E',) local ends and capacities of the edges among them, and their
+    (F,) cost slopes ``U(1) - U(0)``.
     """
     m, n_edges = f0.shape[0], edges.shape[0]
     ei, ej = edges[:, 0], edges[:, 1]
@@ -664,7 +643,6 @@ def _gc_ransac_graph(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray, cut: 
     src = np.empty(inner, dtype=np.int64)
     dst = np.empty(inner, dtype=np.int64)
     cap = np.empty(inner)
-    edge_of = np.empty(inner, dtype=np.int64)
     inner = 0
     for e in range(n_edges):
         li, lj = local[ei[e]], local[ej[e]]
@@ -677,14 +655,13 @@ def _gc_ransac_graph(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray, cut: 
             src[inner] = li
             dst[inner] = lj
             cap[inner] = max(2.0 * b - a, 0.0)
-            edge_of[inner] = e
             inner += 1
             slope[li] += b - a
             slope[lj] -= b
         else:
             # An edge to a fixed outlier costs e(0,0) = a or e(1,0) = b: a unary of its free end.
             slope[max(li, lj)] += b - a
-    return nodes, src, dst, cap, slope, edge_of
+    return nodes, src, dst, cap, slope
 
 
 @kernel

@@ -3,8 +3,8 @@
 The graph-cut labelers solve one binary energy per plane hypothesis, on graphs of a few hundred
 to about ten thousand nodes. Through PyMaxflow, even with its vectorised ``add_edges``,
 building those graphs takes longer than its C++ solve saves over this one (figures and the
-command in docs/design.md); here the graph arrives as arrays and is solved in one compiled
-call, which also returns each edge's flow for the next solve's warm start.
+command in docs/design.md); here the graph arrives as arrays, possibly as the residual of a
+starting flow, and is solved in one compiled call.
 
 Algorithm: Boykov and Kolmogorov, "An Experimental Comparison of Min-Cut/Max-Flow Algorithms
 for Energy Minimization in Vision" (PAMI 2004), in the form of Kolmogorov's reference

@@ -167,26 +167,6 @@ def test_fast_gc_ransac_minimiser_equals_the_table_based_one(seed):
     assert value == pytest.approx(ref.energy(expected), rel=1e-12, abs=1e-12)
 
 
-@pytest.mark.parametrize("seed", range(20))
-def test_warm_started_minimiser_gives_the_cold_result(seed):
-    # The local optimisation labels one pool twice: the second problem starts from the first
-    # one's flow. Same labels and energy as solving it from nothing.
-    f0, f1, g1, edges, cut, lam, scale = random_gc_problem(seed)
-    flow = np.zeros(len(edges))
-    first = minimize_gc_ransac(f0, f1 + g1, edges, cut, lam, scale, flow=flow)
-    np.testing.assert_array_equal(first[0], minimize_gc_ransac(f0, f1 + g1, edges, cut, lam,
-                                                               scale)[0])
-    assert np.all(flow >= 0.0)
-    rng = np.random.default_rng(seed)
-    moved = f1 + g1 + rng.normal(0.0, 0.05, f1.size).clip(0.0)  # a refit's costs
-    cold = minimize_gc_ransac(f0, moved, edges, cut, lam, scale)
-    warm = minimize_gc_ransac(f0, moved, edges, cut, lam, scale, flow=flow)
-    np.testing.assert_array_equal(warm[0], cold[0])
-    assert warm[1] == cold[1]
-    with pytest.raises(InvalidInput, match="one entry per edge"):
-        minimize_gc_ransac(f0, f1, edges, cut, lam, scale, flow=np.zeros(len(edges) + 1))
-
-
 @pytest.mark.parametrize("seed", range(10))
 def test_payback_kept_per_pool_gives_the_same_result(seed):
     f0, f1, g1, edges, cut, lam, scale = random_gc_problem(seed)

@@ -82,8 +82,6 @@ class _PoolTerms:
     """Pairwise scale s of the frame's graph."""
     payback: np.ndarray
     """(M,) :func:`~monoplane.graphcut.pool_payback` of the pool's points."""
-    flow: np.ndarray
-    """(E',) max-flow of the pool's last labelling, the next one's warm start."""
 
 
 class GraphCutContext(LabelingContext):
@@ -117,10 +115,8 @@ class _PoolGraphCut(Labeler):
 
     The local optimisation labels a pool for a hypothesis, then for its refit, and the driver
     has the pool's terms built beforehand (:meth:`prepare_pool`, on a background thread while
-    it searches): the subgraph, its cut costs, each point's payback, and the flow of the last
-    labelling, from which the next max-flow starts (the two problems differ a little; the
-    result does not depend on the start, see :func:`~monoplane.graphcut.minimize_gc_ransac`).
-    They are kept in the frame's :class:`GraphCutContext`.
+    it searches): the subgraph, its cut costs and each point's payback. They are kept in the
+    frame's :class:`GraphCutContext`.
     """
 
     def new_context(self) -> GraphCutContext:
@@ -141,8 +137,7 @@ class _PoolGraphCut(Labeler):
         if last is None or last.edge_ids is not edge_ids or last.scale != scale:
             cut = self._cut(cloud, graph, edge_ids, context)
             payback = pool_payback(pool.size, edges, cut, self.config.lambda_, scale)
-            last = context.pool = _PoolTerms(edges, edge_ids, cut, scale, payback,
-                                             np.zeros(edge_ids.size))
+            last = context.pool = _PoolTerms(edges, edge_ids, cut, scale, payback)
         return last
 
     def prepare_pool(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray,
@@ -158,8 +153,7 @@ class _PoolGraphCut(Labeler):
                             GraphCutContext() if context is None else _own(context))
         inliers, energy = minimize_gc_ransac(f0, data1, terms.edges, terms.cut,
                                              self.config.lambda_,
-                                             terms.scale, flow=terms.flow,
-                                             payback=terms.payback)
+                                             terms.scale, payback=terms.payback)
         return Labeling(inliers=inliers, energy=energy)
 
 
