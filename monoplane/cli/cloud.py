@@ -7,9 +7,9 @@ import json
 
 import numpy as np
 
-from monoplane.cli.common import add_rerun_arg, add_set_arg, check_rerun_arg, write_rerun_arg
+from monoplane.cli.common import add_rerun_arg, add_set_arg, check_output_args, write_rerun_arg
 from monoplane.errors import InvalidInput
-from monoplane.fileio import atomic_output_dir, check_output_dir, write_plane_mesh_ply
+from monoplane.fileio import atomic_output_dir, write_plane_mesh_ply
 
 DESCRIPTION = """Detect the planes of a point cloud (PLY, PCD, XYZ or PTS) with MonoPlane's
 graph-cut RANSAC and the graph-crf refiner, and write into --out:
@@ -60,8 +60,7 @@ def run(args: argparse.Namespace) -> int:
     from monoplane.detect import detect_planes
     from monoplane.report.cloud import cloud_glb, write_cloud_report
 
-    check_output_dir(args.out, args.overwrite)  # fail before any work
-    check_rerun_arg(args)
+    check_output_args(args)  # fail before any work
     cloud = read_point_cloud(args.cloud)
     try:
         result = detect_planes(cloud.to_open3d(), preset=args.preset,

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from monoplane.fileio import check_output_dir
 from monoplane.pipeline import Pipeline
 
 
@@ -92,6 +93,13 @@ def add_rerun_arg(group: argparse.ArgumentParser | argparse._ArgumentGroup) -> N
                        help="also write a Rerun recording of the result (image, depth, label "
                             "map, points, plane meshes, camera; open it with 'rerun "
                             "FILE.rrd'); needs pip install 'monoplane[rerun]'")
+
+
+def check_output_args(args: argparse.Namespace) -> None:
+    """Fail before any work when ``--out`` exists and is not empty (without ``--overwrite``) or
+    ``--rerun`` cannot be written."""
+    check_output_dir(args.out, args.overwrite)
+    check_rerun_arg(args)
 
 
 def check_rerun_arg(args: argparse.Namespace) -> None:

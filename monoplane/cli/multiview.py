@@ -9,12 +9,12 @@ from monoplane.cli.common import (
     add_input_args,
     add_output_args,
     add_pipeline_args,
-    check_rerun_arg,
+    check_output_args,
     depth_reading,
     pipeline_from_args,
     write_rerun_arg,
 )
-from monoplane.fileio import check_output_dir, load_frame
+from monoplane.fileio import load_frame
 
 DESCRIPTION = """Sparse-view planar reconstruction (MonoPlane §III-C): structure from motion
 (pycolmap SIFT, CPU), monocular cues per image, scale alignment of each depth onto the SfM
@@ -67,8 +67,7 @@ def run(args: argparse.Namespace) -> int:
     from monoplane.errors import InvalidInput
     from monoplane.multiview import hold_intrinsics_fixed, reconstruct_multiview, save_scene
 
-    check_output_dir(args.out, args.overwrite)  # fail before any work
-    check_rerun_arg(args)
+    check_output_args(args)  # fail before any work
     n = len(args.images)
     if n < 2:
         raise InvalidInput(f"multiview needs at least 2 images, got {n}")

@@ -12,7 +12,7 @@ from monoplane.cli.common import (
     add_input_args,
     add_output_args,
     add_pipeline_args,
-    check_rerun_arg,
+    check_output_args,
     depth_reading,
     pipeline_from_args,
     write_rerun_arg,
@@ -21,7 +21,7 @@ from monoplane.cli.models import prepare_cue_model
 from monoplane.config import load as load_config
 from monoplane.cues import CueNetwork
 from monoplane.errors import ConfigError, InvalidInput
-from monoplane.fileio import check_output_dir, load_frame, save_reconstruction
+from monoplane.fileio import load_frame, save_reconstruction
 from monoplane.pipeline import Pipeline
 from monoplane.plugin_manager import Registry, get_registry
 from monoplane.stages.base import CueProvider
@@ -56,8 +56,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    check_output_dir(args.out, args.overwrite)  # fail before any work
-    check_rerun_arg(args)
+    check_output_args(args)  # fail before any work
     if args.cues:
         args.overrides = [*cue_model_overrides(args.cues, args.preset, args.config,
                                                args.overrides), *args.overrides]
