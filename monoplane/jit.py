@@ -140,7 +140,13 @@ def thread_budget() -> int:
     try:
         return max(1, int(os.environ.get("OMP_NUM_THREADS", "")))
     except ValueError:
-        return max(1, os.cpu_count() or 1)
+        return _cpu_count()
+
+
+@functools.cache
+def _cpu_count() -> int:
+    # Asked about twenty times a frame; os.cpu_count() reads /sys each time (about 40 µs).
+    return max(1, os.cpu_count() or 1)
 
 
 _POOLS: dict[str, tuple[Any, ThreadPoolExecutor] | None] = {

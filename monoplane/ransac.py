@@ -37,8 +37,8 @@ from monoplane.datamodel import Frame, Reconstruction, orient_towards_camera
 from monoplane.errors import InvalidInput, StageError, check_config
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
-from monoplane.geometry.planes import fit_plane, fit_planes_per_label, planes_from_triplets
-from monoplane.jit import in_background, kernel
+from monoplane.geometry.planes import fit_plane, fit_planes_per_label, sample_hypotheses
+from monoplane.jit import in_background
 from monoplane.stages.base import (
     Labeler,
     Labeling,
@@ -134,24 +134,6 @@ def _unit_mean(normals: np.ndarray, fallback: np.ndarray) -> np.ndarray:
     m = normals.mean(axis=-2)
     norm = np.linalg.norm(m, axis=-1, keepdims=True)
     return np.where(norm > 1e-9, m / np.maximum(norm, 1e-300), fallback)
-
-
-@kernel
-def _sample_normals(normals: np.ndarray, samples: np.ndarray, fallback: np.ndarray
-                    ) -> np.ndarray:
-    """:func:`_unit_mean` of each (S, 3) int64 sample's three (N, 3) ``normals``, without
-    gathering them first; (S, 3) ``fallback`` where the mean vanishes. Same arithmetic order as
-    numpy's mean and norm, so the same values."""
-    out = np.empty((samples.shape[0], 3))
-    for s in range(samples.shape[0]):
-        m = np.empty(3)
-        for k in range(3):
-            m[k] = (normals[samples[s, 0], k] + normals[samples[s, 1], k]
-                    + normals[samples[s, 2], k]) / 3.0
-        norm = np.sqrt(m[0] * m[0] + m[1] * m[1] + m[2] * m[2])
-        for k in range(3):
-            out[s, k] = m[k] / max(norm, 1e-300) if norm > 1e-9 else fallback[s, k]
-    return out
 
 
 def required_iterations(inlier_ratio: float, confidence: float, sample_size: int = 3) -> float:
@@ -342,7 +324,11 @@ class SequentialRansac:
         # costs is stable under uniform subsampling, and scoring dominates the search time.
         scored = pool
         if 0 < cfg.score_points < pool.size:
-            scored = np.sort(rng.choice(pool, size=cfg.score_points, replace=False))
+            # The pool is ascending, so a mask of the drawn positions lists the subset in
+            # ascending order: np.sort of the drawn points, without the sort.
+            drawn_at = np.zeros(pool.size, dtype=bool)
+            drawn_at[rng.choice(pool.size, size=cfg.score_points, replace=False)] = True
+            scored = pool[drawn_at]
         best_cost = math.inf
         best: tuple[np.ndarray, np.ndarray] | None = None
         scored_points: np.ndarray | None = None  # gathered at the first improvement
@@ -356,11 +342,9 @@ class SequentialRansac:
             drawn += cfg.batch_size
             if samples.shape[0] == 0:
                 break
-            planes, valid = planes_from_triplets(cloud.points[samples])
-            if not valid.any():
+            planes, model_normals = sample_hypotheses(cloud.points, cloud.normals, samples)
+            if planes.shape[0] == 0:
                 continue
-            planes = planes[valid]
-            model_normals = _sample_normals(cloud.normals, samples[valid], planes[:, :3])
             costs = _call(self.scorer, self.scorer.score, cloud, scored, planes,
                           model_normals, params)
             i = int(np.argmin(costs))

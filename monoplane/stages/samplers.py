@@ -16,28 +16,26 @@ import numpy as np
 
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.hookspecs import hookimpl
-from monoplane.jit import kernel
+from monoplane.jit import inline, kernel
 from monoplane.stages.base import RansacParams, Sampler, Stage, param
 
 
 def _triplets(pool: np.ndarray, count: int, rng: np.random.Generator,
               normals: np.ndarray | None = None, cos_min: float = -2.0,
-              limit: int | None = None) -> np.ndarray:
-    """``count`` uniform samples of three distinct pool points, optionally normal-checked.
+              limit: int | None = None, budget: int | None = None) -> np.ndarray:
+    """Uniform samples of three distinct pool points, optionally normal-checked.
 
-    Returns the (S, 3) int64 point indices of the samples whose three (N, 3) ``normals`` are
-    pairwise within ``cos_min`` (all of them without ``normals``), in draw order, at most
-    ``limit`` of them. Needs at least three pool points.
+    ``count`` candidates are drawn; when fewer than ``limit`` of them pass and ``budget``
+    exceeds ``count``, the rest of the budget is drawn in one more round. Returns the (S, 3)
+    int64 point indices of the samples whose three (N, 3) ``normals`` are pairwise within
+    ``cos_min`` (all of them without ``normals``), in draw order, at most ``limit`` (default
+    ``count``) of them. Needs at least three pool points.
     """
-    m = pool.shape[0]
-    # Draw without replacement per row by offsetting: a in [0, m), b in [0, m-1), c in [0, m-2),
-    # then shift b past a and c past the two others; this is exact and needs no rejection.
-    a = rng.integers(0, m, size=count)
-    b = rng.integers(0, m - 1, size=count)
-    c = rng.integers(0, m - 2, size=count)
-    return _kept_triplets(np.ascontiguousarray(pool, dtype=np.int64), a, b, c,
-                          np.zeros((0, 3)) if normals is None else normals, normals is not None,
-                          float(cos_min), count if limit is None else int(limit))
+    limit = count if limit is None else int(limit)
+    return _drawn_triplets(rng, np.ascontiguousarray(pool, dtype=np.int64), int(count),
+                           max(int(count), count if budget is None else int(budget)), limit,
+                           np.zeros((0, 3)) if normals is None else normals,
+                           normals is not None, float(cos_min))
 
 
 class UniformSampler(Sampler):
@@ -77,18 +75,9 @@ class NormalConsistentSampler(Sampler):
         """
         if pool.size < 3 or count <= 0:
             return np.zeros((0, 3), dtype=np.int64)
-        cos_min = np.cos(params.epsilon_n)
-        accepted: list[np.ndarray] = []
-        n_ok = 0
-        drawn = 0
         budget = self.config.max_draw_factor * count
-        while n_ok < count and drawn < budget:
-            batch = min(2 * count, budget) if drawn == 0 else budget - drawn
-            good = _triplets(pool, batch, rng, cloud.normals, cos_min, count - n_ok)
-            drawn += batch
-            accepted.append(good)
-            n_ok += good.shape[0]
-        return np.concatenate(accepted) if accepted else np.zeros((0, 3), dtype=np.int64)
+        return _triplets(pool, min(2 * count, budget), rng, cloud.normals,
+                         np.cos(params.epsilon_n), count, budget)
 
 
 @dataclass
@@ -133,18 +122,22 @@ class NapsacSampler(Sampler):
         return np.concatenate([seeds[ok, None], picked], axis=1).astype(np.int64)
 
 
-@kernel
-def _kept_triplets(pool: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray,
-                   normals: np.ndarray, check: bool, cos_min: float, limit: int) -> np.ndarray:
-    """Samples of :func:`_triplets` from the raw (S,) int64 draws ``a``, ``b``, ``c``.
+@inline
+def _keep_triplets(rng: np.random.Generator, pool: np.ndarray, count: int, normals: np.ndarray,
+                   check: bool, cos_min: float, out: np.ndarray, kept: int) -> int:
+    """Draw ``count`` candidate samples and append those that pass to ``out`` from row
+    ``kept`` on, until it is full; returns the new number of rows.
 
-    Positions are made distinct (``b`` shifted past ``a``, ``c`` past both), mapped through
-    ``pool``, and with ``check`` kept only when the three normals' pairwise dot products all
-    reach ``cos_min``; returns the first ``limit`` kept rows, (K, 3) int64.
+    Draws without replacement per row by offsetting: a in [0, m), b in [0, m-1), c in
+    [0, m-2), then b shifted past a and c past the two others; this is exact and needs no
+    rejection. With ``check``, a sample is kept only when its three normals' pairwise dot
+    products all reach ``cos_min``.
     """
-    out = np.empty((min(a.shape[0], max(limit, 0)), 3), dtype=np.int64)
-    kept = 0
-    for s in range(a.shape[0]):
+    m = pool.shape[0]
+    a = rng.integers(0, m, size=count)
+    b = rng.integers(0, m - 1, size=count)
+    c = rng.integers(0, m - 2, size=count)
+    for s in range(count):
         if kept == out.shape[0]:
             break
         pa, pb, pc = a[s], b[s], c[s]
@@ -166,6 +159,23 @@ def _kept_triplets(pool: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray
                 continue
         out[kept, 0], out[kept, 1], out[kept, 2] = i, j, k
         kept += 1
+    return kept
+
+
+@kernel
+def _drawn_triplets(rng: np.random.Generator, pool: np.ndarray, first: int, budget: int,
+                    limit: int, normals: np.ndarray, check: bool, cos_min: float
+                    ) -> np.ndarray:
+    """:func:`_triplets` in one call: the generator is drawn from here, as numpy draws
+    (numba's ``Generator.integers`` gives numpy's stream), so no Python runs between rounds.
+
+    ``first`` candidates, then the other ``budget - first`` when fewer than ``limit`` passed;
+    (K, 3) int64 rows, K <= ``limit``.
+    """
+    out = np.empty((max(min(budget, limit), 0), 3), dtype=np.int64)
+    kept = _keep_triplets(rng, pool, first, normals, check, cos_min, out, 0)
+    if kept < out.shape[0] and budget > first:
+        kept = _keep_triplets(rng, pool, budget - first, normals, check, cos_min, out, kept)
     return out[:kept].copy()
 
 

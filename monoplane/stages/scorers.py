@@ -87,9 +87,8 @@ class MsacNormalScorer(_KernelScorer):
                 cloud.points, cloud.normals, np.ascontiguousarray(pool, dtype=np.int64),
                 NORMAL_CELLS))
         coords, start = last[2]
-        centres, radii = _cell_cones(NORMAL_CELLS)
-        reach = np.minimum(params.epsilon_n + radii + _SKIP_MARGIN, np.pi)
-        return _binned_costs(coords, start, centres, np.cos(reach),
+        centres, cos_reach = _cell_reach(NORMAL_CELLS, params.epsilon_n)
+        return _binned_costs(coords, start, centres, cos_reach,
                              np.ascontiguousarray(planes, dtype=np.float64),
                              np.ascontiguousarray(model_normals, dtype=np.float64),
                              float(params.epsilon), float(params.epsilon_n))
@@ -112,6 +111,15 @@ def _cell_cones(cells: int) -> tuple[np.ndarray, np.ndarray]:
                 centres.append(c)
                 radii.append(max(np.arccos(np.clip(c @ k, -1.0, 1.0)) for k in corners))
     return np.array(centres), np.array(radii)
+
+
+@functools.lru_cache(maxsize=8)
+def _cell_reach(cells: int, epsilon_n: float) -> tuple[np.ndarray, np.ndarray]:
+    """Centre directions (6 c², 3) of the cells of :func:`_cell_cones` and the cosine of
+    their radius plus ε_n (radians) plus a margin: the test :func:`_binned_costs` skips cells
+    by (asked once per batch of hypotheses, with the same ε_n all frame long)."""
+    centres, radii = _cell_cones(cells)
+    return centres, np.cos(np.minimum(epsilon_n + radii + _SKIP_MARGIN, np.pi))
 
 
 def _face_direction(face: int, u: float, v: float) -> np.ndarray:
