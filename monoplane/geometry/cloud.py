@@ -322,20 +322,22 @@ class PlaneCloud:
         near = self.image_nearest_sample
         p = np.zeros((0, 4)) if planes is None else np.asarray(planes, dtype=np.float64)
         k = min(PROPAGATION_NEIGHBOURS, self.size) if len(p) else 1
+        indptr, indices = graph.indptr, graph.indices
+
+        def label_chunk(a: int, b: int) -> np.ndarray:
+            part, gap = _propagate(self.all_points[a:b], near[a:b], self.points, labels, p,
+                                   indptr, indices, radius**2, float(tolerance), k)
+            # Pixels farther than the radius from their image-nearest sample lie across a
+            # depth jump from it: their nearest samples in 3D come from the point index.
+            gap = np.flatnonzero(gap)
+            if gap.size:
+                part[gap] = self.label_points(self.all_points[a:b][gap], labels, p, radius)
+            return part
+
         # Pixels are labelled independently: contiguous chunks run on parallel threads.
-        parts = run_threaded([
-            lambda a=a, b=b: _propagate(self.all_points[a:b], near[a:b], self.points, labels, p,
-                                        graph.indptr, graph.indices, radius**2,
-                                        float(tolerance), k)
-            for a, b in chunks(near.shape[0], THREADED_PIXELS)])
-        full = np.concatenate([part[0] for part in parts])
-        gap = np.concatenate([part[1] for part in parts])
-        # Pixels farther than the radius from their image-nearest sample lie across a depth
-        # jump from it: their nearest samples in 3D come from the point index.
-        gap = np.flatnonzero(gap)
-        if gap.size:
-            full[gap] = self.label_points(self.all_points[gap], labels, p, radius)
-        out[all_pixels] = full
+        parts = run_threaded([lambda a=a, b=b: label_chunk(a, b)
+                              for a, b in chunks(near.shape[0], THREADED_PIXELS)])
+        out[all_pixels] = np.concatenate(parts) if len(parts) > 1 else parts[0]
         # Sampled pixels keep their own label even if a closer duplicate point exists.
         out[pixels] = labels
         return out.reshape(h, w)
