@@ -175,13 +175,13 @@ def spread_of_groups(normals: np.ndarray, labels: np.ndarray, num_planes: int,
     count = samples[plane]
     filled = np.nan_to_num(x)
     # One side for all: flip each normal towards its group's first principal direction.
-    axis = np.linalg.eigh(np.einsum("gli,glj->gij", filled, filled))[1][:, :, -1]
-    x = x * np.where(np.einsum("gli,gi->gl", filled, axis) < 0, -1.0, 1.0)[..., None]
+    axis = np.linalg.eigh(filled.transpose(0, 2, 1) @ filled)[1][:, :, -1]
+    x = x * np.where(filled @ axis[..., None] < 0, -1.0, 1.0)
     centre = np.stack([_row_median(x[..., c], count) for c in range(3)], axis=1)
 
     def angles(c: np.ndarray) -> np.ndarray:
         c = c / np.maximum(np.linalg.norm(c, axis=1, keepdims=True), 1e-12)
-        return np.degrees(np.arccos(np.clip(np.einsum("gli,gi->gl", x, c), -1.0, 1.0)))
+        return np.degrees(np.arccos(np.clip((x @ c[..., None])[..., 0], -1.0, 1.0)))
 
     for _ in range(3):
         angle = angles(centre)
@@ -225,16 +225,17 @@ def quadric_ratio(points: np.ndarray, labels: np.ndarray, num_planes: int,
     x = np.nan_to_num(x - np.nansum(x, axis=1, keepdims=True) / count[:, None, None])
     # Scale-free: the fits are done in units of each group's extent.
     x /= np.maximum(np.abs(x).max(axis=(1, 2)), 1e-300)[:, None, None]
-    basis = np.linalg.eigh(np.einsum("gli,glj->gij", x, x))[1]
-    w, u, v = (np.einsum("gli,gi->gl", x, basis[:, :, k]) for k in (0, 2, 1))
+    basis = np.linalg.eigh(x.transpose(0, 2, 1) @ x)[1]
+    frame = x @ basis
+    w, u, v = frame[..., 0], frame[..., 2], frame[..., 1]
     # In the principal frame the best plane is w = 0 up to rounding (the centroid and the
     # smallest axis are its least-squares solution), so its residual is w itself.
     quad = np.stack([np.ones_like(u), u, v, u * u, u * v, v * v], axis=-1) * valid[..., None]
     # Normal equations on coordinates within [-1, 1]; the pseudo-inverse copes with a group
     # whose points lie on a line.
-    coef = np.einsum("gij,gj->gi", np.linalg.pinv(np.einsum("gli,glj->gij", quad, quad)),
-                     np.einsum("gli,gl->gi", quad, w))
-    r_quad = w - np.einsum("glj,gj->gl", quad, coef)
+    quad_t = quad.transpose(0, 2, 1)
+    coef = np.linalg.pinv(quad_t @ quad) @ (quad_t @ w[..., None])
+    r_quad = w - (quad @ coef)[..., 0]
     e_lin = np.sqrt((w ** 2).sum(axis=1) / count)
     e_quad = np.sqrt((r_quad ** 2).sum(axis=1) / count)
     # Residuals below QUADRIC_FLOOR of the extent are rounding (float32 depth is quantised in
