@@ -37,7 +37,7 @@ from monoplane.datamodel import Frame, Reconstruction, orient_towards_camera
 from monoplane.errors import InvalidInput, StageError, check_config
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
-from monoplane.geometry.planes import fit_plane, fit_planes_per_label, sample_hypotheses
+from monoplane.geometry.planes import fit_plane_of, fit_planes_per_label, sample_hypotheses
 from monoplane.jit import in_background
 from monoplane.stages.base import (
     Labeler,
@@ -371,7 +371,7 @@ class SequentialRansac:
             members = pool[lab.inliers]
             if members.size < 3:
                 break
-            refit, _ = fit_plane(cloud.points[members])
+            refit = fit_plane_of(cloud.points, members)
             refit_normal = _unit_mean(cloud.normals[members][None], model_normal[None])[0]
             new = _call(self.labeler, self.labeler.label, cloud, graph, pool, refit,
                         refit_normal, params, context)
