@@ -128,6 +128,7 @@ def _workloads(report: bool = True) -> Iterator[tuple[str, Callable[[], Any]]]:
     from monoplane import config
     from monoplane.detect import detect_planes
     from monoplane.fileio import save_reconstruction
+    from monoplane.geometry.planes import planes_from_triplets
     from monoplane.pipeline import Pipeline
     from monoplane.report.frame import write_frame_report
     from monoplane.synth import generate
@@ -149,6 +150,9 @@ def _workloads(report: bool = True) -> Iterator[tuple[str, Callable[[], Any]]]:
     # The frame report draws no lines, and --no-report skips it: the rasterizer's kernels get
     # a shot of their own.
     yield "3D rasterizer", _render_triangle_and_line
+    # The RANSAC computes its hypotheses without gathering the samples' points; the public
+    # planes_from_triplets (which takes them gathered) is reached by no preset.
+    yield "triplet planes", lambda: planes_from_triplets(np.eye(3)[None])
     depth, normals, rgb, K = frame.depth, frame.normals, frame.rgb, frame.K
     assert depth is not None and normals is not None and rgb is not None
     valid = depth > 0
