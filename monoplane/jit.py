@@ -50,7 +50,8 @@ def inline(fn: F) -> F:
     Parameters
     ----------
     fn : callable
-        A function numba can compile in nopython mode, calling no kernels or other helpers.
+        A function numba can compile in nopython mode, calling no kernels (other helpers of
+        its module are fine).
 
     Returns
     -------
@@ -70,7 +71,8 @@ def _with_helpers(fn: Callable[..., Any]) -> Callable[..., Any]:
     names = [n for n in fn.__code__.co_names if getattr(env.get(n), "_monoplane_inline", False)]
     if not names:
         return fn
-    env = {**env, **{n: numba.njit(inline="always")(env[n]) for n in names}}
+    # Helpers may call helpers: each is given its own compiled ones the same way.
+    env = {**env, **{n: numba.njit(inline="always")(_with_helpers(env[n])) for n in names}}
     clone = types.FunctionType(fn.__code__, env, fn.__name__, fn.__defaults__, fn.__closure__)
     clone.__qualname__, clone.__module__, clone.__doc__ = fn.__qualname__, fn.__module__, fn.__doc__
     return clone

@@ -37,7 +37,13 @@ from monoplane.datamodel import Frame, Reconstruction, orient_towards_camera
 from monoplane.errors import InvalidInput, StageError, check_config
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
-from monoplane.geometry.planes import fit_plane_of, fit_planes_per_label, sample_hypotheses
+from monoplane.geometry.hypotheses import (
+    inlier_ratio,
+    needed_samples,
+    sample_hypotheses,
+    search_batches,
+)
+from monoplane.geometry.planes import fit_plane_of, fit_planes_per_label
 from monoplane.jit import in_background
 from monoplane.stages.base import (
     Labeler,
@@ -134,31 +140,6 @@ def _unit_mean(normals: np.ndarray, fallback: np.ndarray) -> np.ndarray:
     m = normals.mean(axis=-2)
     norm = np.linalg.norm(m, axis=-1, keepdims=True)
     return np.where(norm > 1e-9, m / np.maximum(norm, 1e-300), fallback)
-
-
-def required_iterations(inlier_ratio: float, confidence: float, sample_size: int = 3) -> float:
-    """Samples needed to draw one all-inlier sample with the given confidence.
-
-    Parameters
-    ----------
-    inlier_ratio : float
-        Fraction w of inliers in the pool.
-    confidence : float
-        Wanted probability of success.
-    sample_size : int
-        Points per minimal sample.
-
-    Returns
-    -------
-    float
-        ``log(1 - confidence) / log(1 - w^s)``; ``inf`` when w = 0, 1 when w = 1.
-    """
-    good = inlier_ratio ** sample_size
-    if good <= 0:
-        return math.inf
-    if good >= 1:
-        return 1.0
-    return math.log(1.0 - confidence) / math.log1p(-good)
 
 
 class SequentialRansac:
@@ -329,9 +310,20 @@ class SequentialRansac:
             drawn_at = np.zeros(pool.size, dtype=bool)
             drawn_at[rng.choice(pool.size, size=cfg.score_points, replace=False)] = True
             scored = pool[drawn_at]
+        draws = _call(self.sampler, self.sampler.triplet_draws, cfg.batch_size, params)
+        binned = (None if draws is None else
+                  _call(self.scorer, self.scorer.binned_points, cloud, scored, params))
+        if draws is not None and binned is not None:
+            # The whole search in one compiled call: what the loop below does batch by batch.
+            found, plane, normal = search_batches(
+                rng, cloud.points, cloud.normals, pool, np.ascontiguousarray(scored),
+                cfg.batch_size, draws.first, max(draws.first, draws.budget),
+                draws.cos_min is not None, -2.0 if draws.cos_min is None else draws.cos_min,
+                *binned, params.epsilon, params.epsilon_n, cfg.min_iterations,
+                cfg.max_iterations, cfg.confidence)
+            return (plane, normal) if found else None
         best_cost = math.inf
         best: tuple[np.ndarray, np.ndarray] | None = None
-        scored_points: np.ndarray | None = None  # gathered at the first improvement
         needed = float(cfg.max_iterations)
         drawn = 0
         while drawn < min(max(needed, cfg.min_iterations), cfg.max_iterations):
@@ -351,11 +343,9 @@ class SequentialRansac:
             if costs[i] < best_cost:
                 best_cost = float(costs[i])
                 best = (planes[i], model_normals[i])
-                if scored_points is None:
-                    scored_points = cloud.points[scored]
-                dist = np.abs(scored_points @ planes[i, :3] + planes[i, 3])
-                ratio = float((dist < params.epsilon).mean())
-                needed = required_iterations(ratio, cfg.confidence)
+                needed = needed_samples(
+                    inlier_ratio(cloud.points, scored, planes[i], params.epsilon),
+                    cfg.confidence)
         return best
 
     def _label(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray,

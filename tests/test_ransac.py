@@ -7,7 +7,8 @@ from monoplane.datamodel import Frame, default_intrinsics, orient_towards_camera
 from monoplane.errors import InvalidInput, StageError
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
-from monoplane.ransac import RansacConfig, SequentialRansac, required_iterations
+from monoplane.geometry.hypotheses import needed_samples
+from monoplane.ransac import RansacConfig, SequentialRansac
 from monoplane.stages.labelers import GraphCutLabeler, ProximityGraphCutLabeler, ThresholdLabeler
 from monoplane.stages.samplers import NormalConsistentSampler, UniformSampler
 from monoplane.stages.scorers import InlierCountScorer, MsacNormalScorer, MsacScorer
@@ -186,10 +187,10 @@ def test_a_failing_stage_is_reported_with_kind_and_name():
         ransac.run(frame)
 
 
-def test_required_iterations():
-    assert required_iterations(0.5, 0.99) == pytest.approx(np.log(0.01) / np.log(1 - 0.125))
-    assert required_iterations(0.0, 0.99) == np.inf
-    assert required_iterations(1.0, 0.99) == 1.0
+def test_needed_samples():
+    assert needed_samples(0.5, 0.99) == pytest.approx(np.log(0.01) / np.log(1 - 0.125))
+    assert needed_samples(0.0, 0.99) == np.inf
+    assert needed_samples(1.0, 0.99) == 1.0
 
 
 @pytest.mark.parametrize("split", [False, True])
@@ -237,7 +238,8 @@ def test_run_cloud_rejects_a_graph_of_another_cloud():
 
 
 def test_sample_hypotheses_equal_the_triplet_planes_and_the_numpy_mean():
-    from monoplane.geometry.planes import planes_from_triplets, sample_hypotheses
+    from monoplane.geometry.hypotheses import sample_hypotheses
+    from monoplane.geometry.planes import planes_from_triplets
     from monoplane.ransac import _unit_mean
 
     rng = np.random.default_rng(3)
@@ -256,3 +258,45 @@ def test_sample_hypotheses_equal_the_triplet_planes_and_the_numpy_mean():
     np.testing.assert_array_equal(planes, want[valid])
     np.testing.assert_array_equal(model, _unit_mean(normals[samples[valid]], want[valid, :3]))
     np.testing.assert_array_equal(model[0], planes[0, :3])  # the fallback where it vanishes
+
+
+class _BatchByBatch:
+    """A sampler or scorer seen through a wrapper that hides its compiled form, so that the
+    driver calls it batch by batch."""
+
+    def __init__(self, stage):
+        self._stage = stage
+        self.kind, self.name = stage.kind, stage.name
+
+    def __getattr__(self, attr):
+        return getattr(self._stage, attr)
+
+    def triplet_draws(self, count, params):
+        return None
+
+    def binned_points(self, cloud, pool, params):
+        return None
+
+
+@pytest.mark.parametrize("sampler", [NormalConsistentSampler, UniformSampler])
+def test_the_compiled_search_equals_the_batch_by_batch_loop(sampler):
+    # search_batches runs the whole adaptive search in one call when the sampler and scorer
+    # allow it; it must give the loop's hypothesis and leave the generator where it does.
+    from monoplane.synth import generate
+
+    frame = generate(3, "mild", width=128, height=96, n_views=1, objects=6).views[0].frame
+    cloud = PlaneCloud.from_frame(frame)
+    fused = SequentialRansac(sampler(), MsacNormalScorer(), ThresholdLabeler())
+    looped = SequentialRansac(_BatchByBatch(fused.sampler), _BatchByBatch(fused.scorer),
+                              fused.labeler)
+    params = fused.config.params
+    pools = [np.arange(cloud.size), np.flatnonzero(np.arange(cloud.size) % 3 != 1),
+             np.arange(0, cloud.size, 7)[:40]]
+    for pool in pools:
+        rng_a, rng_b = np.random.default_rng(5), np.random.default_rng(5)
+        a = fused._search(cloud, pool, rng_a, params)
+        b = looped._search(cloud, pool, rng_b, params)
+        assert a is not None and b is not None
+        np.testing.assert_array_equal(a[0], b[0])
+        np.testing.assert_array_equal(a[1], b[1])
+        assert rng_a.bit_generator.state == rng_b.bit_generator.state

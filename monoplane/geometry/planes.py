@@ -10,7 +10,8 @@ from __future__ import annotations
 import numpy as np
 
 from monoplane.errors import InvalidInput
-from monoplane.jit import inline, kernel
+from monoplane.geometry.hypotheses import triplet_planes
+from monoplane.jit import kernel
 
 
 def fit_plane(points: np.ndarray, weights: np.ndarray | None = None) -> tuple[np.ndarray, float]:
@@ -127,96 +128,7 @@ def planes_from_triplets(triplets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     t = np.ascontiguousarray(triplets, dtype=np.float64)
     if t.ndim != 3 or t.shape[1:] != (3, 3):
         raise InvalidInput(f"triplets must have shape (S, 3, 3), got {t.shape}")
-    return _triplet_planes(t)
-
-
-@inline
-def _plane_through(ax: float, ay: float, az: float, bx: float, by: float, bz: float,
-                   cx: float, cy: float, cz: float
-                   ) -> tuple[float, float, float, float, bool]:
-    """Unit-normal plane ``(n, d)`` with ``d >= 0`` through points a, b, c, and whether they
-    are far enough from collinear to define one."""
-    u0, u1, u2 = bx - ax, by - ay, bz - az
-    v0, v1, v2 = cx - ax, cy - ay, cz - az
-    n0, n1, n2 = u1 * v2 - u2 * v1, u2 * v0 - u0 * v2, u0 * v1 - u1 * v0
-    norm = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
-    # Scale-aware degeneracy test: |cross| is twice the triangle area, compare to edge².
-    edge2 = max(u0 * u0 + u1 * u1 + u2 * u2, v0 * v0 + v1 * v1 + v2 * v2)
-    if not norm > 1e-9 * max(edge2, 1e-300):
-        return 0.0, 0.0, 0.0, 0.0, False
-    n0, n1, n2 = n0 / norm, n1 / norm, n2 / norm
-    d = -(n0 * ax + n1 * ay + n2 * az)
-    if d < 0:
-        n0, n1, n2, d = -n0, -n1, -n2, -d
-    return n0, n1, n2, d, True
-
-
-@kernel
-def _triplet_planes(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`planes_from_triplets` on a (S, 3, 3) float64 array, one sample at a time."""
-    planes = np.zeros((t.shape[0], 4))
-    valid = np.zeros(t.shape[0], dtype=np.bool_)
-    for s in range(t.shape[0]):
-        n0, n1, n2, d, ok = _plane_through(t[s, 0, 0], t[s, 0, 1], t[s, 0, 2], t[s, 1, 0],
-                                           t[s, 1, 1], t[s, 1, 2], t[s, 2, 0], t[s, 2, 1],
-                                           t[s, 2, 2])
-        if ok:
-            planes[s, 0], planes[s, 1], planes[s, 2], planes[s, 3] = n0, n1, n2, d
-            valid[s] = True
-    return planes, valid
-
-
-def sample_hypotheses(points: np.ndarray, normals: np.ndarray, samples: np.ndarray
-                      ) -> tuple[np.ndarray, np.ndarray]:
-    """The plane hypotheses of 3-point samples: each exact plane and its model normal.
-
-    The model normal θ_n of a sample is the normalised mean of its three point normals (the
-    plane's own normal where that mean vanishes). Degenerate (nearly collinear) samples are
-    left out.
-
-    Parameters
-    ----------
-    points, normals : numpy.ndarray
-        (N, 3) float64 points and unit normals, one frame.
-    samples : numpy.ndarray
-        (S, 3) int64 point indices.
-
-    Returns
-    -------
-    planes : numpy.ndarray
-        (V, 4) float64 unit-normal planes with ``d >= 0``, V <= S, in sample order:
-        :func:`planes_from_triplets` of the valid samples.
-    model_normals : numpy.ndarray
-        (V, 3) float64 unit model normals.
-    """
-    return _sample_hypotheses(points, normals, np.ascontiguousarray(samples, dtype=np.int64))
-
-
-@kernel
-def _sample_hypotheses(points: np.ndarray, normals: np.ndarray, samples: np.ndarray
-                       ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`sample_hypotheses` without gathering the samples' points first. The mean
-    normal is summed, divided and normalised in numpy's order for ``normals[s].mean(0)``
-    and its norm, so it has the same value."""
-    planes = np.empty((samples.shape[0], 4))
-    model = np.empty((samples.shape[0], 3))
-    m = np.empty(3)
-    kept = 0
-    for s in range(samples.shape[0]):
-        i, j, k = samples[s, 0], samples[s, 1], samples[s, 2]
-        n0, n1, n2, d, ok = _plane_through(points[i, 0], points[i, 1], points[i, 2],
-                                           points[j, 0], points[j, 1], points[j, 2],
-                                           points[k, 0], points[k, 1], points[k, 2])
-        if not ok:
-            continue
-        planes[kept, 0], planes[kept, 1], planes[kept, 2], planes[kept, 3] = n0, n1, n2, d
-        for c in range(3):
-            m[c] = (normals[i, c] + normals[j, c] + normals[k, c]) / 3.0
-        norm = np.sqrt(m[0] * m[0] + m[1] * m[1] + m[2] * m[2])
-        for c in range(3):
-            model[kept, c] = m[c] / max(norm, 1e-300) if norm > 1e-9 else planes[kept, c]
-        kept += 1
-    return planes[:kept].copy(), model[:kept].copy()
+    return triplet_planes(t)
 
 
 def point_plane_distances(points: np.ndarray, planes: np.ndarray) -> np.ndarray:

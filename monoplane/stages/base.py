@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
 
 import numpy as np
 
@@ -221,10 +221,50 @@ class NetworkCues(CueProvider):
         return self.network.provide(frame)
 
 
+class TripletDraws(NamedTuple):
+    """How a sampler draws a batch, when it draws as :func:`monoplane.geometry.hypotheses.
+    draw_triplets` does (see :meth:`Sampler.triplet_draws`)."""
+
+    first: int
+    """Candidate samples drawn first."""
+    budget: int
+    """Candidates drawn at most: when fewer than wanted passed, the other ``budget - first``
+    are drawn in one more round."""
+    cos_min: float | None
+    """A candidate passes when its three normals' pairwise dot products all reach this; None
+    passes every candidate."""
+
+
+class BinnedPoints(NamedTuple):
+    """Points a scorer scores on, grouped by normal direction, when it scores as
+    :func:`monoplane.geometry.hypotheses.binned_costs` does (see :meth:`Scorer.binned_points`).
+    """
+
+    coords: np.ndarray
+    """(6, K) float64 x, y, z, nx, ny, nz of the points, ordered by cell."""
+    start: np.ndarray
+    """(C + 1,) int64 start of each cell's run in ``coords``."""
+    centres: np.ndarray
+    """(C, 3) float64 unit centre direction of each cell."""
+    cos_reach: np.ndarray
+    """(C,) float64 cosine of each cell's angular radius plus ε_n (plus a margin)."""
+
+
 class Sampler(Stage):
     """Draws minimal samples (3 points) for plane hypotheses."""
 
     kind = "sampler"
+
+    def triplet_draws(self, count: int, params: RansacParams) -> TripletDraws | None:
+        """How a batch of ``count`` samples is drawn, if the way of
+        :func:`monoplane.geometry.hypotheses.draw_triplets` (uniform, optionally normal-
+        checked): then, with a scorer that answers :meth:`Scorer.binned_points`, the RANSAC
+        driver runs a whole plane search in one compiled call
+        (:func:`~monoplane.geometry.hypotheses.search_batches`) instead of calling
+        :meth:`sample` and :meth:`Scorer.score` batch by batch. The answer must describe
+        exactly what :meth:`sample` draws. The default, None, is always safe.
+        """
+        return None
 
     def sample(self, cloud: PlaneCloud, pool: np.ndarray, count: int,
                rng: np.random.Generator, params: RansacParams) -> np.ndarray:
@@ -255,6 +295,14 @@ class Scorer(Stage):
     """Scores plane hypotheses on the remaining points; lower cost is better."""
 
     kind = "scorer"
+
+    def binned_points(self, cloud: PlaneCloud, pool: np.ndarray, params: RansacParams
+                      ) -> BinnedPoints | None:
+        """The pool's points binned as :func:`monoplane.geometry.hypotheses.binned_costs`
+        scores them, if :meth:`score` is that cost (MSAC plus the normal term): see
+        :meth:`Sampler.triplet_draws`. The default, None, is always safe.
+        """
+        return None
 
     def score(self, cloud: PlaneCloud, pool: np.ndarray, planes: np.ndarray,
               model_normals: np.ndarray, params: RansacParams) -> np.ndarray:

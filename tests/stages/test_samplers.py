@@ -3,13 +3,9 @@
 import numpy as np
 import pytest
 
+from monoplane.geometry.hypotheses import draw_triplets
 from monoplane.stages.base import RansacParams
-from monoplane.stages.samplers import (
-    NapsacSampler,
-    NormalConsistentSampler,
-    UniformSampler,
-    _triplets,
-)
+from monoplane.stages.samplers import NapsacSampler, NormalConsistentSampler, UniformSampler
 from monoplane.testing import cloud_from_arrays
 
 
@@ -110,7 +106,8 @@ def test_triplet_kernel_matches_the_numpy_reference(limit):
     pool = np.sort(rng.choice(300, 200, replace=False))
     cos_min = np.cos(np.deg2rad(10.0))
     for normals in (None, nrm):
-        got = _triplets(pool, 2000, np.random.default_rng(9), normals, cos_min, limit)
+        got = draw_triplets(np.random.default_rng(9), pool, 2000, 2000,
+                            2000 if limit is None else limit, normals, cos_min)
         want = reference_triplets(pool, 2000, np.random.default_rng(9), normals, cos_min, limit)
         np.testing.assert_array_equal(got, want)
         assert got.dtype == np.int64

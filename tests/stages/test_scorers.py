@@ -66,13 +66,8 @@ def test_normal_term_penalises_a_wrong_model_normal(setup):
 
 
 def test_normal_cells_bound_their_normals_and_skipping_changes_nothing():
-    from monoplane.stages.scorers import (
-        _MSAC_NORMAL,
-        NORMAL_CELLS,
-        _binned_points,
-        _cell_cones,
-        _costs,
-    )
+    from monoplane.geometry.hypotheses import MSAC_NORMAL, bin_by_normal, hypothesis_costs
+    from monoplane.stages.scorers import NORMAL_CELLS, _cell_cones
 
     rng = np.random.default_rng(3)
     n = 4000
@@ -85,7 +80,7 @@ def test_normal_cells_bound_their_normals_and_skipping_changes_nothing():
     pts = rng.uniform(-0.5, 0.5, (n, 3))
     cloud = cloud_from_arrays(pts, nrm)
     pool = np.sort(rng.choice(n, 3000, replace=False)).astype(np.int64)
-    coords, start = _binned_points(cloud.points, cloud.normals, pool, NORMAL_CELLS)
+    coords, start = bin_by_normal(cloud.points, cloud.normals, pool, NORMAL_CELLS)
     centres, radii = _cell_cones(NORMAL_CELLS)
     # Every point lies in its cell's cone, and the cells hold every pool point once.
     cell = np.repeat(np.arange(len(radii)), np.diff(start))
@@ -96,7 +91,7 @@ def test_normal_cells_bound_their_normals_and_skipping_changes_nothing():
     mn = planes[:, :3] + rng.normal(0, 0.05, (200, 3))
     mn /= np.linalg.norm(mn, axis=1, keepdims=True)
     params = RansacParams()
-    full = _costs(cloud.points, cloud.normals, pool, planes, mn, params.epsilon,
-                  params.epsilon_n, _MSAC_NORMAL)
+    full = hypothesis_costs(cloud.points, cloud.normals, pool, planes, mn, params.epsilon,
+                            params.epsilon_n, MSAC_NORMAL)
     np.testing.assert_allclose(MsacNormalScorer().score(cloud, pool, planes, mn, params), full,
                                rtol=1e-13)
