@@ -40,10 +40,11 @@ from monoplane.geometry.graph import NeighbourGraph
 from monoplane.geometry.hypotheses import (
     inlier_ratio,
     needed_samples,
+    refit_hypothesis,
     sample_hypotheses,
     search_batches,
 )
-from monoplane.geometry.planes import fit_plane_of, fit_planes_per_label
+from monoplane.geometry.planes import fit_planes_per_label
 from monoplane.jit import in_background
 from monoplane.stages.base import (
     Labeler,
@@ -133,13 +134,6 @@ def _call(stage: Stage, fn: Callable[..., T], *args: Any) -> T:
         raise
     except Exception as exc:
         raise StageError(stage.kind, stage.name, exc) from exc
-
-
-def _unit_mean(normals: np.ndarray, fallback: np.ndarray) -> np.ndarray:
-    """Normalised mean of (..., K, 3) normals over K; ``fallback`` (..., 3) where it vanishes."""
-    m = normals.mean(axis=-2)
-    norm = np.linalg.norm(m, axis=-1, keepdims=True)
-    return np.where(norm > 1e-9, m / np.maximum(norm, 1e-300), fallback)
 
 
 class SequentialRansac:
@@ -361,8 +355,8 @@ class SequentialRansac:
             members = pool[lab.inliers]
             if members.size < 3:
                 break
-            refit = fit_plane_of(cloud.points, members)
-            refit_normal = _unit_mean(cloud.normals[members][None], model_normal[None])[0]
+            refit, refit_normal = refit_hypothesis(cloud.points, cloud.normals, members,
+                                                   model_normal)
             new = _call(self.labeler, self.labeler.label, cloud, graph, pool, refit,
                         refit_normal, params, context)
             if not new.energy < lab.energy - 1e-9 * max(1.0, abs(lab.energy)):

@@ -237,29 +237,6 @@ def test_run_cloud_rejects_a_graph_of_another_cloud():
         make("gc-ransac").run_cloud(cloud, graph)
 
 
-def test_sample_hypotheses_equal_the_triplet_planes_and_the_numpy_mean():
-    from monoplane.geometry.hypotheses import sample_hypotheses
-    from monoplane.geometry.planes import planes_from_triplets
-    from monoplane.ransac import _unit_mean
-
-    rng = np.random.default_rng(3)
-    points = rng.normal(size=(50, 3))
-    points[12] = points[10] + 2.0 * (points[11] - points[10])  # 10, 11, 12 collinear
-    normals = rng.normal(size=(50, 3))
-    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
-    normals[7] = -normals[8]  # with 8 and a zero vector the mean vanishes
-    normals[9] = 0.0
-    samples = rng.integers(0, 50, size=(200, 3))
-    samples[0] = [7, 8, 9]
-    samples[1] = [10, 11, 12]
-    planes, model = sample_hypotheses(points, normals, samples)
-    want, valid = planes_from_triplets(points[samples])
-    assert not valid[1] and valid[0]
-    np.testing.assert_array_equal(planes, want[valid])
-    np.testing.assert_array_equal(model, _unit_mean(normals[samples[valid]], want[valid, :3]))
-    np.testing.assert_array_equal(model[0], planes[0, :3])  # the fallback where it vanishes
-
-
 class _BatchByBatch:
     """A sampler or scorer seen through a wrapper that hides its compiled form, so that the
     driver calls it batch by batch."""

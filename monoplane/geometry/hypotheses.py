@@ -25,6 +25,7 @@ import math
 
 import numpy as np
 
+from monoplane.errors import InvalidInput
 from monoplane.jit import inline, kernel
 
 #: Cost kinds of :func:`hypothesis_costs`.
@@ -401,6 +402,79 @@ def hypothesis_costs(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, 
                 term[i] = q if cos > cos_n else 1.0
         out[h] = _sum4(term, m)
     return out
+
+
+def refit_hypothesis(points: np.ndarray, normals: np.ndarray, members: np.ndarray,
+                     fallback: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The hypothesis of a labelling, for the local optimisation: the total-least-squares plane
+    of its inliers and their mean normal.
+
+    One kernel reads the inliers in place; on thousands of points the numpy passes over a
+    gathered copy cost about ten times as much. The scatter's sums run in another order than
+    numpy's matrix product, so the plane can differ from
+    :func:`monoplane.geometry.planes.fit_plane`'s in the last bits; the mean normal is summed
+    as numpy sums it.
+
+    Parameters
+    ----------
+    points, normals : numpy.ndarray
+        (N, 3) float64 points and unit normals.
+    members : numpy.ndarray
+        (M,) int64 indices of the inliers, M >= 3.
+    fallback : numpy.ndarray
+        (3,) model normal to keep where the mean normal vanishes.
+
+    Returns
+    -------
+    plane : numpy.ndarray
+        (4,) float64 ``(n, d)``, ``|n| = 1``, ``d >= 0``.
+    model_normal : numpy.ndarray
+        (3,) float64 unit mean normal of the inliers.
+    """
+    members = np.ascontiguousarray(members, dtype=np.int64)
+    if members.shape[0] < 3:
+        raise InvalidInput(f"a plane needs at least 3 inliers, got {members.shape[0]}")
+    centroid, scatter, model = _member_moments(points, normals, members,
+                                               np.asarray(fallback, dtype=np.float64))
+    normal = np.linalg.eigh(scatter)[1][:, 0]
+    d = -float(normal @ centroid)
+    if d < 0:
+        normal, d = -normal, -d
+    return np.concatenate([normal, [d]]), model
+
+
+@kernel
+def _member_moments(points: np.ndarray, normals: np.ndarray, members: np.ndarray,
+                    fallback: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Centroid (3,) and scatter matrix (3, 3) about it of ``points[members]`` (two passes,
+    centroid first, as stable as numpy's centred product), and the normalised mean of
+    ``normals[members]`` (``fallback`` where it vanishes)."""
+    m = members.shape[0]
+    centroid = np.zeros(3)
+    mean = np.zeros(3)
+    for i in range(m):
+        for c in range(3):
+            centroid[c] += points[members[i], c]
+            mean[c] += normals[members[i], c]
+    centroid /= m
+    mean /= m
+    scatter = np.zeros((3, 3))
+    for i in range(m):
+        x = points[members[i], 0] - centroid[0]
+        y = points[members[i], 1] - centroid[1]
+        z = points[members[i], 2] - centroid[2]
+        scatter[0, 0] += x * x
+        scatter[0, 1] += x * y
+        scatter[0, 2] += x * z
+        scatter[1, 1] += y * y
+        scatter[1, 2] += y * z
+        scatter[2, 2] += z * z
+    scatter[1, 0], scatter[2, 0], scatter[2, 1] = scatter[0, 1], scatter[0, 2], scatter[1, 2]
+    norm = np.sqrt(mean[0] * mean[0] + mean[1] * mean[1] + mean[2] * mean[2])
+    model = np.empty(3)
+    for c in range(3):
+        model[c] = mean[c] / max(norm, 1e-300) if norm > 1e-9 else fallback[c]
+    return centroid, scatter, model
 
 
 @inline

@@ -55,61 +55,6 @@ def fit_plane(points: np.ndarray, weights: np.ndarray | None = None) -> tuple[np
     return np.concatenate([normal, [d]]), rmse
 
 
-def fit_plane_of(points: np.ndarray, members: np.ndarray) -> np.ndarray:
-    """:func:`fit_plane` of ``points[members]``, without gathering them.
-
-    The RANSAC's local optimisation refits every plane on its inliers; on thousands of points
-    numpy's passes over the gathered copy cost about ten times this one kernel. The scatter's
-    sums run in another order than numpy's matrix product, so the plane can differ from
-    :func:`fit_plane`'s in the last bits.
-
-    Parameters
-    ----------
-    points : numpy.ndarray
-        (N, 3) float64 points, any frame and unit.
-    members : numpy.ndarray
-        (M,) int64 indices of the points to fit, M >= 3.
-
-    Returns
-    -------
-    numpy.ndarray
-        (4,) float64 ``(nx, ny, nz, d)`` with ``|n| = 1`` and ``d >= 0``.
-    """
-    members = np.ascontiguousarray(members, dtype=np.int64)
-    if members.shape[0] < 3:
-        raise InvalidInput(f"fit_plane_of needs at least 3 points, got {members.shape[0]}")
-    centroid, scatter = _centred_scatter(points, members)
-    normal = np.linalg.eigh(scatter)[1][:, 0]
-    d = -float(normal @ centroid)
-    if d < 0:
-        normal, d = -normal, -d
-    return np.concatenate([normal, [d]])
-
-
-@kernel
-def _centred_scatter(points: np.ndarray, members: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Centroid (3,) and scatter matrix (3, 3) about it of ``points[members]``; two passes
-    (centroid first), as stable as numpy's centred product."""
-    centroid = np.zeros(3)
-    for i in range(members.shape[0]):
-        for c in range(3):
-            centroid[c] += points[members[i], c]
-    centroid /= members.shape[0]
-    scatter = np.zeros((3, 3))
-    for i in range(members.shape[0]):
-        x = points[members[i], 0] - centroid[0]
-        y = points[members[i], 1] - centroid[1]
-        z = points[members[i], 2] - centroid[2]
-        scatter[0, 0] += x * x
-        scatter[0, 1] += x * y
-        scatter[0, 2] += x * z
-        scatter[1, 1] += y * y
-        scatter[1, 2] += y * z
-        scatter[2, 2] += z * z
-    scatter[1, 0], scatter[2, 0], scatter[2, 1] = scatter[0, 1], scatter[0, 2], scatter[1, 2]
-    return centroid, scatter
-
-
 def planes_from_triplets(triplets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Exact planes through many 3-point samples at once.
 

@@ -3,10 +3,8 @@
 import numpy as np
 import pytest
 
-from monoplane.errors import InvalidInput
 from monoplane.geometry.planes import (
     fit_plane,
-    fit_plane_of,
     fit_planes_per_label,
     planes_from_triplets,
     point_plane_distances,
@@ -32,17 +30,6 @@ def test_fit_plane_rmse_of_symmetric_offsets():
     pts = np.vstack([np.c_[xy, np.full(4, 2.1)], np.c_[xy, np.full(4, 1.9)]])
     plane, rmse = fit_plane(pts)
     assert np.allclose(plane, [0, 0, -1, 2]) and np.isclose(rmse, 0.1)
-
-
-def test_fit_plane_of_members_without_gathering():
-    pts, n = on_plane([0.2, -1.0, 0.1], 1.5, 60)
-    members = np.arange(5, 55, 2)
-    assert np.allclose(fit_plane_of(pts, members), [*n, 1.5], atol=1e-12)
-    noisy = pts + 0.01 * np.random.default_rng(1).normal(size=pts.shape)
-    np.testing.assert_allclose(fit_plane_of(noisy, members), fit_plane(noisy[members])[0],
-                               rtol=0, atol=1e-12)
-    with pytest.raises(InvalidInput, match="at least 3"):
-        fit_plane_of(pts, members[:2])
 
 
 def test_triplets_and_distances():
