@@ -62,6 +62,7 @@ from monoplane.stages.base import (
     KINDS,
     STAGE_KINDS,
     Adjuster,
+    BinnedPoints,
     CueProvider,
     Fuser,
     Labeler,
@@ -78,18 +79,19 @@ from monoplane.stages.base import (
     Scorer,
     Stage,
     StageKind,
+    TripletDraws,
     param,
 )
 
 __all__ = [
     "CALL_TIMING", "IMAGENET_MEAN", "IMAGENET_STD", "KINDS", "STAGE_KINDS", "Adjuster",
-    "Baseline", "Camera", "ConfigError", "CueNetwork", "CueProvider", "Frame", "Fuser",
-    "InvalidInput", "Labeler", "Labeling", "LabelingContext", "Matcher", "ModelSpec",
+    "Baseline", "BinnedPoints", "Camera", "ConfigError", "CueNetwork", "CueProvider", "Frame",
+    "Fuser", "InvalidInput", "Labeler", "Labeling", "LabelingContext", "Matcher", "ModelSpec",
     "MonoplaneError",
     "NeighbourGraph", "NetworkCues", "NoConfig", "OnnxProfile", "PlaneCloud", "PluginError",
     "ProximityAffinities", "RansacBaselineSettings", "RansacParams", "Reconstruction",
     "Refiner", "Registrar", "Sampler", "ScaleAlignment", "Scene", "Scorer", "SfmResult",
-    "Stage", "StageError", "StageKind", "baseline_config", "baseline_names",
+    "Stage", "StageError", "StageKind", "TripletDraws", "baseline_config", "baseline_names",
     "default_intrinsics", "fit_plane", "get_baseline", "get_plugin_manager", "get_registry",
     "hookimpl", "param", "plan_letterbox", "run_baseline",
 ]

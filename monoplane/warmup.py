@@ -116,24 +116,6 @@ def _render_triangle_and_line() -> None:
                  Shot("warmup", K, np.eye(4), {0: None}, [0]), 16, 16)
 
 
-def _paths_no_preset_takes() -> None:
-    """The public planes_from_triplets (the RANSAC builds its hypotheses without gathering
-    the samples' points), and the msac-normal scorer called batch by batch (the presets
-    that use it search in one compiled call)."""
-    import numpy as np
-
-    from monoplane.geometry.cloud import PlaneCloud
-    from monoplane.geometry.planes import planes_from_triplets
-    from monoplane.stages.base import RansacParams
-    from monoplane.stages.scorers import MsacNormalScorer
-
-    corners = np.eye(3)
-    planes, _ = planes_from_triplets(corners[None])
-    cloud = PlaneCloud.from_points(corners, np.tile(planes[:, :3], (3, 1)), None, np.zeros(3),
-                                   1.0)
-    MsacNormalScorer().score(cloud, np.arange(3), planes, planes[:, :3], RansacParams())
-
-
 def _workloads(report: bool = True) -> Iterator[tuple[str, Callable[[], Any]]]:
     """Labelled calls that together reach every kernel.
 
@@ -146,6 +128,7 @@ def _workloads(report: bool = True) -> Iterator[tuple[str, Callable[[], Any]]]:
     from monoplane import config
     from monoplane.detect import detect_planes
     from monoplane.fileio import save_reconstruction
+    from monoplane.geometry.planes import planes_from_triplets
     from monoplane.pipeline import Pipeline
     from monoplane.report.frame import write_frame_report
     from monoplane.synth import generate
@@ -167,7 +150,12 @@ def _workloads(report: bool = True) -> Iterator[tuple[str, Callable[[], Any]]]:
     # The frame report draws no lines, and --no-report skips it: the rasterizer's kernels get
     # a shot of their own.
     yield "3D rasterizer", _render_triangle_and_line
-    yield "paths no preset takes", _paths_no_preset_takes
+    # The RANSAC builds its hypotheses without gathering the samples' points, which the public
+    # planes_from_triplets takes; and the presets' samplers let it search in one compiled
+    # call, so a sampler that does not (napsac) makes it call the scorer batch by batch.
+    yield "triplet planes", lambda: planes_from_triplets(np.eye(3)[None])
+    yield "scorer batch by batch", lambda: Pipeline.from_preset(
+        "monoplane", overrides=["sampler.plugin=napsac", "refiner.plugin=none"]).run(frame)
     depth, normals, rgb, K = frame.depth, frame.normals, frame.rgb, frame.K
     assert depth is not None and normals is not None and rgb is not None
     valid = depth > 0
