@@ -4,7 +4,9 @@ One plane at a time, on the points not yet assigned (the *pool*):
 
 1. the sampler draws minimal samples in batches and the scorer scores the exact 3-point planes
    on the pool, vectorised; the number of batches adapts to the best inlier ratio w so far,
-   ``log(1 - confidence) / log(1 - w³)``, between ``min_iterations`` and ``max_iterations``;
+   ``log(1 - confidence) / log(1 - w³)``, between ``min_iterations`` and ``max_iterations``
+   (when the sampler and scorer describe themselves, the whole search is one compiled call,
+   :func:`monoplane.geometry.hypotheses.search_batches`, with the same result);
 2. the labeler labels the pool for the best hypothesis (threshold or graph cut on the kNN
    subgraph of the pool);
 3. local optimisation: least-squares refit on the inliers (model normal θ_n = mean predicted
