@@ -180,11 +180,29 @@ def run_threaded(tasks: Sequence[Callable[[], T]]) -> list[T]:
     -------
     list
         ``[task() for task in tasks]``.
+
+    Notes
+    -----
+    A task may call this again (a chunk of pixels querying the point index, say): the nested
+    call runs its tasks on the calling worker, one after the other. Handing them to the same
+    workers would leave every worker waiting for tasks queued behind itself.
     """
     threads = min(len(tasks), thread_budget())
-    if threads < 2:
+    if threads < 2 or getattr(_worker, "busy", False):
         return [task() for task in tasks]
-    return list(_executor(threads).map(lambda task: task(), tasks))
+    return list(_executor(threads).map(_as_worker, tasks))
+
+
+#: Per-thread flag: set while a thread runs a task of :func:`run_threaded`.
+_worker = threading.local()
+
+
+def _as_worker(task: Callable[[], T]) -> T:
+    _worker.busy = True
+    try:
+        return task()
+    finally:
+        _worker.busy = False
 
 
 def in_background(task: Callable[[], T], role: str = "background") -> Callable[[], T]:

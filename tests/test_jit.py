@@ -45,14 +45,21 @@ def test_kernels_inline_the_helpers_of_their_module(tmp_path, monkeypatch):
         "@inline\n"
         "def twice(x):\n"
         "    return 2 * x\n"
+        "@inline\n"
+        "def four_times(x):\n"
+        "    return twice(twice(x))\n"
         "@kernel\n"
         "def plus_one_twice(x):\n"
-        "    return twice(x) + 1\n")
+        "    return twice(x) + 1\n"
+        "@kernel\n"
+        "def plus_one_four_times(x):\n"
+        "    return four_times(x) + 1\n")
     monkeypatch.syspath_prepend(str(tmp_path))
     import helper_module
 
     assert helper_module.plus_one_twice(3) == 7 == helper_module.plus_one_twice.py_func(3)
     assert helper_module.twice(3) == 6  # still a plain function outside kernels
+    assert helper_module.plus_one_four_times(3) == 13  # a helper calling a helper
 
 
 def test_background_roles_run_their_tasks_on_separate_threads(monkeypatch):
@@ -73,3 +80,23 @@ def test_background_roles_run_their_tasks_on_separate_threads(monkeypatch):
     ran = []
     get = in_background(lambda: ran.append(threading.current_thread().name) or 7, role="pool")
     assert ran == [threading.current_thread().name] and get() == 7
+
+
+def test_run_threaded_inside_run_threaded_runs_on_the_worker(monkeypatch):
+    # Two workers, each running a task that asks for two more: handed to the same two
+    # workers they would wait for each other forever; nested calls run where they are.
+    import threading
+
+    from monoplane.jit import run_threaded
+
+    monkeypatch.setenv("OMP_NUM_THREADS", "2")
+    both = threading.Barrier(2, timeout=5.0)  # both outer tasks run at the same time
+
+    def outer(k):
+        both.wait()
+        me = threading.current_thread().name
+        return run_threaded([lambda j=j: (k, j, threading.current_thread().name == me)
+                             for j in range(2)])
+
+    result = run_threaded([lambda k=k: outer(k) for k in range(2)])
+    assert result == [[(k, j, True) for j in range(2)] for k in range(2)]
