@@ -32,9 +32,11 @@ class UniformSampler(Sampler):
             return np.zeros((0, 3), dtype=np.int64)
         return draw_triplets(rng, pool, count, count, count)
 
-    def triplet_draws(self, count: int, params: RansacParams) -> TripletDraws:
+    def triplet_draws(self, count: int, params: RansacParams) -> TripletDraws | None:
         """See :meth:`monoplane.stages.base.Sampler.triplet_draws`: ``count`` candidates, all
-        kept."""
+        kept (None for a subclass that draws otherwise)."""
+        if type(self).sample is not UniformSampler.sample:
+            return None
         return TripletDraws(count, count, None)
 
 
@@ -62,12 +64,19 @@ class NormalConsistentSampler(Sampler):
         """
         if pool.size < 3 or count <= 0:
             return np.zeros((0, 3), dtype=np.int64)
-        draws = self.triplet_draws(count, params)
+        draws = self._draws(count, params)
         return draw_triplets(rng, pool, draws.first, draws.budget, count, cloud.normals,
                              draws.cos_min)
 
-    def triplet_draws(self, count: int, params: RansacParams) -> TripletDraws:
-        """See :meth:`monoplane.stages.base.Sampler.triplet_draws`."""
+    def triplet_draws(self, count: int, params: RansacParams) -> TripletDraws | None:
+        """See :meth:`monoplane.stages.base.Sampler.triplet_draws` (None for a subclass that
+        draws otherwise)."""
+        if type(self).sample is not NormalConsistentSampler.sample:
+            return None
+        return self._draws(count, params)
+
+    def _draws(self, count: int, params: RansacParams) -> TripletDraws:
+        """``2 * count`` candidates first, ``max_draw_factor * count`` at most."""
         budget = self.config.max_draw_factor * count
         return TripletDraws(min(2 * count, budget), budget, float(np.cos(params.epsilon_n)))
 

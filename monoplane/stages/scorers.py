@@ -87,18 +87,23 @@ class MsacNormalScorer(_KernelScorer):
     def score(self, cloud: PlaneCloud, pool: np.ndarray, planes: np.ndarray,
               model_normals: np.ndarray, params: RansacParams) -> np.ndarray:
         """See :meth:`monoplane.stages.base.Scorer.score`; (H,) float64 costs."""
-        binned = self.binned_points(cloud, pool, params)
+        binned = self._binned(cloud, pool, params)
         return binned_costs(*binned, np.ascontiguousarray(planes, dtype=np.float64),
                             np.ascontiguousarray(model_normals, dtype=np.float64),
                             float(params.epsilon), float(params.epsilon_n))
 
     def binned_points(self, cloud: PlaneCloud, pool: np.ndarray, params: RansacParams
-                      ) -> BinnedPoints:
-        """See :meth:`monoplane.stages.base.Scorer.binned_points`.
+                      ) -> BinnedPoints | None:
+        """See :meth:`monoplane.stages.base.Scorer.binned_points` (None for a subclass that
+        scores otherwise)."""
+        if type(self).score is not MsacNormalScorer.score:
+            return None
+        return self._binned(cloud, pool, params)
 
-        They are kept for the next call with the same pool (the RANSAC scores every batch of
-        a search on one subset of the pool).
-        """
+    def _binned(self, cloud: PlaneCloud, pool: np.ndarray, params: RansacParams
+                ) -> BinnedPoints:
+        """The pool's points binned by normal direction, kept for the next call with the same
+        pool (the RANSAC scores every batch of a search on one subset of the pool)."""
         last = self._last  # one read: a search ahead on another thread may replace it
         if (last is None or last[0] is not pool or last[1] is not cloud.points
                 or last[2] != params.epsilon_n):
