@@ -29,7 +29,7 @@ distance keeps creases sharp, and the 3D radius stops labels leaking across dept
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cached_property, partial
 
 import numpy as np
 
@@ -335,7 +335,7 @@ class PlaneCloud:
             return part
 
         # Pixels are labelled independently: contiguous chunks run on parallel threads.
-        parts = run_threaded([lambda a=a, b=b: label_chunk(a, b)
+        parts = run_threaded([partial(label_chunk, a, b)
                               for a, b in chunks(near.shape[0], THREADED_PIXELS)])
         out[all_pixels] = np.concatenate(parts) if len(parts) > 1 else parts[0]
         # Sampled pixels keep their own label even if a closer duplicate point exists.

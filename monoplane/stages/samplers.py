@@ -64,9 +64,9 @@ class NormalConsistentSampler(Sampler):
         """
         if pool.size < 3 or count <= 0:
             return np.zeros((0, 3), dtype=np.int64)
-        draws = self._draws(count, params)
-        return draw_triplets(rng, pool, draws.first, draws.budget, count, cloud.normals,
-                             draws.cos_min)
+        first, budget, cos_min = self._draws(count, params)
+        return draw_triplets(rng, pool, first, budget, count, cloud.normals,
+                             -2.0 if cos_min is None else cos_min)
 
     def triplet_draws(self, count: int, params: RansacParams) -> TripletDraws | None:
         """See :meth:`monoplane.stages.base.Sampler.triplet_draws` (None for a subclass that
