@@ -20,7 +20,7 @@ can depend on it. Writing outputs lives in :mod:`monoplane.fileio`
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -569,6 +569,10 @@ class SfmResult:
         ``"reference"``, the view it was placed against, and its evidence) or ``"none"`` (not
         registered: the camera is a placeholder and must not be used). Empty means every
         camera came from the matcher's model.
+    correspondences : monoplane.features.Correspondences or None
+        The ``[features]`` stage's keypoints and (unverified) matches of every pair of these
+        views, computed on demand, for the registrar; None when the views were subset or the
+        result came from elsewhere.
     """
 
     cameras: list[Camera]
@@ -579,6 +583,7 @@ class SfmResult:
     colors: np.ndarray | None = None
     notes: list[str] = field(default_factory=list)
     registration: list[dict] = field(default_factory=list)
+    correspondences: Any = None
 
     @property
     def registered(self) -> list[bool]:

@@ -43,6 +43,7 @@ from monoplane.cues import (
 )
 from monoplane.datamodel import Camera, Frame, Reconstruction, Scene, SfmResult, default_intrinsics
 from monoplane.errors import ConfigError, InvalidInput, MonoplaneError, PluginError, StageError
+from monoplane.features import Correspondences, Keypoints, PairMatches
 from monoplane.evaluation.baselines import (
     CALL_TIMING,
     Baseline,
@@ -64,6 +65,7 @@ from monoplane.stages.base import (
     Adjuster,
     BinnedPoints,
     CueProvider,
+    FeatureMatcher,
     Fuser,
     Labeler,
     Labeling,
@@ -85,10 +87,11 @@ from monoplane.stages.base import (
 
 __all__ = [
     "CALL_TIMING", "IMAGENET_MEAN", "IMAGENET_STD", "KINDS", "STAGE_KINDS", "Adjuster",
-    "Baseline", "BinnedPoints", "Camera", "ConfigError", "CueNetwork", "CueProvider", "Frame",
-    "Fuser", "InvalidInput", "Labeler", "Labeling", "LabelingContext", "Matcher", "ModelSpec",
+    "Baseline", "BinnedPoints", "Camera", "ConfigError", "Correspondences", "CueNetwork",
+    "CueProvider", "FeatureMatcher", "Frame", "Fuser", "Keypoints", "InvalidInput", "Labeler", "Labeling", "LabelingContext", "Matcher", "ModelSpec",
     "MonoplaneError",
-    "NeighbourGraph", "NetworkCues", "NoConfig", "OnnxProfile", "PlaneCloud", "PluginError",
+    "NeighbourGraph", "NetworkCues", "NoConfig", "OnnxProfile", "PairMatches", "PlaneCloud",
+    "PluginError",
     "ProximityAffinities", "RansacBaselineSettings", "RansacParams", "Reconstruction",
     "Refiner", "Registrar", "Sampler", "ScaleAlignment", "Scene", "Scorer", "SfmResult",
     "Stage", "StageError", "StageKind", "TripletDraws", "baseline_config", "baseline_names",

@@ -32,6 +32,7 @@ DEFAULT_PLUGINS: tuple[str, ...] = (
     "monoplane.stages.labelers",
     "monoplane.stages.refiners",
     "monoplane.stages.graph_refiner",
+    "monoplane.stages.features",
     "monoplane.stages.matchers",
     "monoplane.stages.registrars",
     "monoplane.stages.fusers",

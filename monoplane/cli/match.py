@@ -37,7 +37,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from monoplane.errors import InvalidInput
     from monoplane.multiview import hold_intrinsics_fixed, save_sfm
-    from monoplane.stages.base import Matcher
+    from monoplane.multiview.registration import feature_correspondences, match_views
 
     check_output_dir(args.out, args.overwrite)  # fail before any work
     if len(args.images) < 2:
@@ -47,9 +47,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"monoplane: note: matcher '{pipe.config.stages['matcher'][0]}' cannot hold "
               "intrinsics fixed; --intrinsics is its starting guess", file=sys.stderr)
     frames = [load_frame(img, intrinsics=args.intrinsics) for img in args.images]
-    matcher = pipe.stage("matcher", Matcher)
     timings: dict[str, float] = {}
-    sfm = pipe.call("matcher", matcher.name, lambda: matcher.match(frames), "match", timings)
+    sfm = match_views(pipe, frames, feature_correspondences(pipe, frames), "match", timings)
     out = save_sfm(sfm, args.out, overwrite=args.overwrite)
     if not args.quiet:
         pairs = ", ".join(f"{sfm.cameras[i].name}-{sfm.cameras[j].name}: {len(m)}"

@@ -21,13 +21,15 @@ from monoplane.geometry.alignment import ScaleAlignment
 from monoplane.multiview.fusion import fuse_and_adjust
 from monoplane.multiview.registration import (
     align_to_sfm,
+    feature_correspondences,
+    match_views,
     matcher_keeps_intrinsics,
     origin_sfm,
     rescale_reconstruction,
     scale_sfm,
     subset_sfm,
 )
-from monoplane.stages.base import Matcher, Registrar
+from monoplane.stages.base import Registrar
 
 if TYPE_CHECKING:
     from monoplane.pipeline import Pipeline
@@ -145,18 +147,19 @@ def reconstruct_multiview(frames: list[Frame], pipe: Pipeline, progress: bool = 
         # views are segmented while SfM runs, and only scaled once it is done.
         early = (views_pool.submit(process_view, frames)
                  if sfm is None and matcher_keeps_intrinsics(pipe) else None)
+        correspondences = feature_correspondences(pipe, frames)
         if sfm is None:
-            matcher = pipe.stage("matcher", Matcher)
             try:
-                sfm = pipe.call("matcher", matcher.name, lambda: matcher.match(frames), "multiview",
-                                timings)
+                sfm = match_views(pipe, frames, correspondences, "multiview", timings)
             except StageError as exc:
+                if exc.kind != "matcher":
+                    raise
                 # No model at all: view 0 becomes the world frame and the registrar places
                 # the other views.
                 sfm_failure = str(exc)
                 print(f"monoplane: warning: {exc}; placing the views with the registrar",
                       file=sys.stderr)
-                sfm = origin_sfm(frames, sfm_failure)
+                sfm = replace(origin_sfm(frames, sfm_failure), correspondences=correspondences)
         elif sfm.num_views != len(frames):
             raise InvalidInput(f"{len(frames)} frames but the SfM result has {sfm.num_views} views")
         registration = [dict(r) for r in sfm.registration] or [{"method": "sfm"} for _ in frames]
@@ -203,7 +206,7 @@ def reconstruct_multiview(frames: list[Frame], pipe: Pipeline, progress: bool = 
             # places the rest.
             reasons = "; ".join(r.get("reason", "") for r in registration if r.get("reason"))
             sfm_failure = f"no registered view could be scale-aligned ({reasons})"
-            sfm = origin_sfm(prepared, sfm_failure)
+            sfm = replace(origin_sfm(prepared, sfm_failure), correspondences=correspondences)
             registration = [dict(r) for r in sfm.registration]
             found = align_to_sfm(prepared, sfm, registration, strict)
         timings["alignment"] = time.perf_counter() - t0

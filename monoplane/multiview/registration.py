@@ -14,10 +14,57 @@ import numpy as np
 
 from monoplane.datamodel import Camera, Frame, Reconstruction, SfmResult
 from monoplane.errors import InvalidInput
+from monoplane.features import Correspondences
 from monoplane.geometry.alignment import ScaleAlignment, align_scale
+from monoplane.stages.base import FeatureMatcher, Matcher
 
 if TYPE_CHECKING:
     from monoplane.pipeline import Pipeline
+
+
+def feature_correspondences(pipe: Pipeline, frames: list[Frame]) -> Correspondences:
+    """The ``[features]`` stage's keypoints and matches of ``frames``, computed on demand."""
+    return Correspondences(pipe.stage("features", FeatureMatcher), frames)
+
+
+def match_views(pipe: Pipeline, frames: list[Frame], found: Correspondences, label: str,
+                timings: dict[str, float]) -> SfmResult:
+    """Run the ``[matcher]`` (SfM) on ``frames`` with the features stage's correspondences.
+
+    They go to a matcher that declares ``uses_correspondences`` and, whatever the matcher did
+    with them, ride along in the result (``SfmResult.correspondences``) for the registrar.
+    When the matcher imports them (a stage without an SfM-native counterpart, e.g. XFeat),
+    every pair is matched first, under the ``features`` stage's name, so that a features
+    failure (a missing model file) is reported as such and not taken for an SfM failure.
+
+    Parameters
+    ----------
+    pipe : Pipeline
+        Configured pipeline.
+    frames : list of Frame
+        The views, with ``rgb``.
+    found : Correspondences
+        From :func:`feature_correspondences` on the same frames.
+    label : str
+        Name for the stage timings hook (``"multiview"``, ``"match"``).
+    timings : dict
+        Wall seconds per stage kind, added to.
+
+    Raises
+    ------
+    monoplane.errors.StageError
+        From either stage (``kind`` says which); the multi-view driver treats the matcher's
+        as "no model" and places the views with the registrar.
+    """
+    matcher = pipe.stage("matcher", Matcher)
+    if matcher.uses_correspondences and found.sfm_native is None:
+        pipe.call("features", found.name, found.all_matches, label, timings)
+    if matcher.uses_correspondences:
+        sfm = pipe.call("matcher", matcher.name, lambda: matcher.match(frames, found), label,
+                        timings)
+    else:
+        sfm = pipe.call("matcher", matcher.name, lambda: matcher.match(frames), label, timings)
+    return replace(sfm, correspondences=found)
 
 
 def scale_sfm(sfm: SfmResult, factor: float) -> SfmResult:
@@ -37,7 +84,7 @@ def subset_sfm(sfm: SfmResult, views: list[int]) -> SfmResult:
     matches = {(pos[i], pos[j]): m for (i, j), m in sfm.matches.items()
                if i in pos and j in pos}
     registration = [sfm.registration[v] for v in views] if sfm.registration else []
-    return replace(sfm, cameras=[sfm.cameras[v] for v in views],
+    return replace(sfm, correspondences=None, cameras=[sfm.cameras[v] for v in views],
                    keypoints=[sfm.keypoints[v] for v in views],
                    point_ids=[sfm.point_ids[v] for v in views], matches=matches,
                    registration=registration)

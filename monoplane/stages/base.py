@@ -30,6 +30,7 @@ import numpy as np
 if TYPE_CHECKING:
     from monoplane.cues.network import CueNetwork
     from monoplane.datamodel import Frame, Reconstruction, Scene, SfmResult
+    from monoplane.features import Correspondences, Keypoints, PairMatches
     from monoplane.geometry.alignment import ScaleAlignment
     from monoplane.geometry.cloud import PlaneCloud
     from monoplane.geometry.graph import NeighbourGraph
@@ -448,17 +449,65 @@ class Refiner(Stage):
         raise NotImplementedError(f"refiner '{self.name}' works on images only")
 
 
+class FeatureMatcher(Stage):
+    """Keypoints and correspondences between images, for SfM, the registrar and fusion.
+
+    Two shapes plug in here. A **local feature** (SIFT, XFeat, ALIKED, ...) describes each image
+    on its own: implement :meth:`detect` and :meth:`match`. A **pairwise network** (LoFTR,
+    LightGlue run on two images, ...) sees both images at once: set ``pairwise = True`` and
+    implement :meth:`match_pair`; the host gathers its matched pixels into one keypoint list
+    per view (:class:`monoplane.features.Correspondences`), so either shape feeds COLMAP's
+    database, the registrar and plane matching alike.
+    """
+
+    kind = "features"
+    #: True for networks that match two images at once (:meth:`match_pair`).
+    pairwise: ClassVar[bool] = False
+    #: Names an SfM matcher's own implementation of the same features (``"sift"``: COLMAP's
+    #: SIFT extraction, matching and verification), which such a matcher runs instead of
+    #: importing these correspondences; None when there is none.
+    sfm_native: ClassVar[str | None] = None
+
+    def detect(self, frame: Frame) -> Keypoints | None:
+        """Keypoints and descriptors of one frame (None for a pairwise network).
+
+        Parameters
+        ----------
+        frame : Frame
+            A frame with ``rgb`` (H, W, 3) uint8.
+
+        Returns
+        -------
+        Keypoints or None
+            Pixels ``(u, v)`` at the frame's native resolution, pixel centres at integers.
+        """
+        return None
+
+    def match(self, a: Keypoints, b: Keypoints) -> PairMatches:
+        """Matches of two images' keypoints (``index`` set), for stages that :meth:`detect`."""
+        raise NotImplementedError(f"features stage '{self.name}' does not match descriptors")
+
+    def match_pair(self, frame_i: Frame, frame_j: Frame) -> PairMatches:
+        """Matched pixels of two frames (``pixels_i``, ``pixels_j`` set): pairwise networks."""
+        raise NotImplementedError(f"features stage '{self.name}' does not match image pairs")
+
+
 class Matcher(Stage):
     """Structure from motion over several frames."""
 
     kind = "matcher"
+    #: True when :meth:`match` takes the ``[features]`` stage's correspondences.
+    uses_correspondences: ClassVar[bool] = False
 
-    def match(self, frames: list[Frame]) -> SfmResult:
+    def match(self, frames: list[Frame], correspondences: Correspondences | None = None
+              ) -> SfmResult:
         """Cameras, sparse points and pairwise keypoint matches for ``frames``.
 
         A matcher that cannot register every frame may mark those frames ``{"method": "none"}``
         in the result's ``registration`` (their cameras are then placeholders); the registrar
-        stage then tries to place them.
+        stage then tries to place them. A matcher that declares ``uses_correspondences`` is
+        handed the ``[features]`` stage's keypoints and matches (computed on demand) and builds
+        its model on them; the host passes nothing to the others.
         """
         raise NotImplementedError
 
@@ -596,6 +645,9 @@ KINDS: dict[str, StageKind] = {k.name: k for k in (
               "Binary inlier labelers for one plane hypothesis (threshold, graph cuts)."),
     StageKind(Refiner, "monoplane_register_refiners",
               "Refiners of the multi-plane labelling (dense CRF on images, graph CRF)."),
+    StageKind(FeatureMatcher, "monoplane_register_feature_matchers",
+              "Feature matchers: keypoints and correspondences between images (local features "
+              "or pairwise networks)."),
     StageKind(Matcher, "monoplane_register_matchers",
               "Multi-view matchers giving cameras, sparse points and keypoint matches (SfM)."),
     StageKind(Registrar, "monoplane_register_registrars",

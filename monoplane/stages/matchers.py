@@ -1,7 +1,9 @@
 """Built-in matchers: structure from motion over a few frames.
 
 ``colmap`` runs pycolmap on the CPU (no colmap binary): SIFT extraction, exhaustive matching
-with geometric verification, then incremental mapping. It returns an
+with geometric verification, then incremental mapping. With another ``[features]`` stage (XFeat,
+a pairwise network) it writes that stage's keypoints and matches into COLMAP's database
+instead, and COLMAP verifies and maps them. It returns an
 :class:`~monoplane.datamodel.SfmResult` in the frames' native pixel coordinates (pixel centres at
 integers, OpenCV camera axes), whatever resolution SIFT ran at internally.
 """
@@ -20,6 +22,7 @@ import numpy as np
 
 from monoplane.datamodel import Camera, Frame, SfmResult, intrinsics_matrix
 from monoplane.errors import InvalidInput, MonoplaneError
+from monoplane.features import Correspondences
 from monoplane.hookspecs import hookimpl
 from monoplane.stages.base import Matcher, Stage, param
 
@@ -87,19 +90,25 @@ class ColmapMatcher(Matcher):
 
     name = "colmap"
     Config = ColmapConfig
+    uses_correspondences = True
 
     @classmethod
     def fixed_intrinsics_config(cls, config: ColmapConfig) -> ColmapConfig:
         """``config`` with ``fixed_intrinsics`` set: COLMAP holds PINHOLE cameras fixed."""
         return replace(config, fixed_intrinsics=True)
 
-    def match(self, frames: list[Frame]) -> SfmResult:
+    def match(self, frames: list[Frame], correspondences: Correspondences | None = None
+              ) -> SfmResult:
         """Reconstruct cameras and sparse points of ``frames``.
 
         Parameters
         ----------
         frames : list of Frame
             Two or more frames with ``rgb`` set; ``K`` is the fixed or initial intrinsics.
+        correspondences : Correspondences, optional
+            The ``[features]`` stage's keypoints and matches. They are written into COLMAP's
+            database and verified there, unless the stage is SIFT (``sfm_native == "sift"``)
+            or none is given: then COLMAP extracts and matches its own SIFT.
 
         Returns
         -------
@@ -119,12 +128,15 @@ class ColmapMatcher(Matcher):
                 raise InvalidInput(f"{f.name}: structure from motion needs a colour image")
         work = Path(tempfile.mkdtemp(prefix="monoplane-sfm-"))
         try:
+            imported = (correspondences if correspondences is not None
+                        and correspondences.sfm_native != "sift" else None)
             with _quiet_colmap():
-                return self._run(frames, work)
+                return self._run(frames, work, imported)
         finally:
             shutil.rmtree(work, ignore_errors=True)
 
-    def _run(self, frames: list[Frame], work: Path) -> SfmResult:
+    def _run(self, frames: list[Frame], work: Path,
+             imported: Correspondences | None) -> SfmResult:
         import pycolmap
 
         cfg = self.config
@@ -136,24 +148,12 @@ class ColmapMatcher(Matcher):
             # about 20 ms per 640x480 image on the critical path of a multi-view run.
             cv2.imwrite(str(images / name), f.rgb[..., ::-1])
         database = work / "database.db"
-
-        extraction = pycolmap.FeatureExtractionOptions()
-        extraction.use_gpu = False
-        extraction.max_image_size = int(cfg.max_image_size)
-        extraction.num_threads = int(cfg.num_threads)
-        extraction.sift.max_num_features = int(cfg.max_num_features)
-        for group, model, params in self._camera_groups(frames):
-            side = min(max(frames[group[0]].shape), int(cfg.max_image_size))
-            extraction.sift.first_octave = -1 if side < cfg.upsample_below else 0
-            reader = pycolmap.ImageReaderOptions()
-            reader.camera_model = model
-            reader.camera_params = params
-            mode = pycolmap.CameraMode.SINGLE if len(group) > 1 else pycolmap.CameraMode.PER_IMAGE
-            pycolmap.extract_features(
-                database, images, image_names=[names[i] for i in group], camera_mode=mode,
-                reader_options=reader, extraction_options=extraction,
-                device=pycolmap.Device.cpu,
-            )
+        if imported is None:
+            self._extract_and_match(frames, names, images, database)
+            what = "SIFT features"
+        else:
+            self._import(frames, names, images, database, imported)
+            what = f"{imported.name} keypoints"
 
         db = pycolmap.Database.open(database)
         try:
@@ -166,16 +166,12 @@ class ColmapMatcher(Matcher):
             if len(frames) - len(poor) < 2:
                 name, k = poor[0]
                 raise SfmError(
-                    f"{name}: only {k} SIFT features found (need {cfg.min_num_features}); "
+                    f"{name}: only {k} {what} found (need {cfg.min_num_features}); "
                     "the image is too small, blurred or textureless"
                 )
         finally:
             db.close()
 
-        matching = pycolmap.FeatureMatchingOptions()
-        matching.use_gpu = False
-        matching.num_threads = int(cfg.num_threads)
-        pycolmap.match_exhaustive(database, matching_options=matching, device=pycolmap.Device.cpu)
         matches = self._read_matches(database, names, ids)
         if not any(len(m) >= cfg.min_num_matches for m in matches.values()):
             counts = ", ".join(f"{frames[i].name}-{frames[j].name}: {len(p)}"
@@ -192,10 +188,13 @@ class ColmapMatcher(Matcher):
                 "little for the scene depth) or too few inliers; use overlapping views taken "
                 "further apart"
             )
-        result = self._to_result(model, frames, names, matches)
+        result = self._to_result(model, frames, names, matches, imported)
         for name, k in poor:
-            result.notes.append(f"{name}: only {k} SIFT features (need {cfg.min_num_features}); "
+            result.notes.append(f"{name}: only {k} {what} (need {cfg.min_num_features}); "
                                 "left out of the model")
+        if imported is not None:
+            result.notes.append(f"keypoints and matches from the '{imported.name}' features "
+                                "stage, verified by COLMAP")
         result.notes.append(
             "intrinsics fixed to the given K" if cfg.fixed_intrinsics
             else "focal length estimated by bundle adjustment"
@@ -211,6 +210,67 @@ class ColmapMatcher(Matcher):
             why = f" ({', '.join(apart)} share too few matches with the rest)" if apart else ""
             result.notes.append(f"COLMAP could not register {', '.join(missing)}{why}")
         return result
+
+    def _readers(self, frames: list[Frame]) -> Iterator[tuple[list[int], object, object]]:
+        """Per camera group: its frames, the image reader options and the camera mode."""
+        import pycolmap
+
+        for group, model, params in self._camera_groups(frames):
+            reader = pycolmap.ImageReaderOptions()
+            reader.camera_model = model
+            reader.camera_params = params
+            mode = pycolmap.CameraMode.SINGLE if len(group) > 1 else pycolmap.CameraMode.PER_IMAGE
+            yield group, reader, mode
+
+    def _extract_and_match(self, frames: list[Frame], names: list[str], images: Path,
+                           database: Path) -> None:
+        """COLMAP's own SIFT: extraction, exhaustive matching and geometric verification."""
+        import pycolmap
+
+        cfg = self.config
+        extraction = pycolmap.FeatureExtractionOptions()
+        extraction.use_gpu = False
+        extraction.max_image_size = int(cfg.max_image_size)
+        extraction.num_threads = int(cfg.num_threads)
+        extraction.sift.max_num_features = int(cfg.max_num_features)
+        for group, reader, mode in self._readers(frames):
+            side = min(max(frames[group[0]].shape), int(cfg.max_image_size))
+            extraction.sift.first_octave = -1 if side < cfg.upsample_below else 0
+            pycolmap.extract_features(
+                database, images, image_names=[names[i] for i in group], camera_mode=mode,
+                reader_options=reader, extraction_options=extraction,
+                device=pycolmap.Device.cpu,
+            )
+        matching = pycolmap.FeatureMatchingOptions()
+        matching.use_gpu = False
+        matching.num_threads = int(cfg.num_threads)
+        pycolmap.match_exhaustive(database, matching_options=matching, device=pycolmap.Device.cpu)
+
+    def _import(self, frames: list[Frame], names: list[str], images: Path, database: Path,
+                found: Correspondences) -> None:
+        """Write a features stage's keypoints and matches into COLMAP's database and let COLMAP
+        verify every pair geometrically (the same verification its own matches get)."""
+        import pycolmap
+
+        pycolmap.Database.open(database).close()  # import_images needs the file to exist
+        for group, reader, mode in self._readers(frames):
+            pycolmap.import_images(database, images, camera_mode=mode,
+                                   image_names=[names[i] for i in group], options=reader)
+        matches = found.all_matches()
+        db = pycolmap.Database.open(database)
+        try:
+            ids = {img.name: img.image_id for img in db.read_all_images()}
+            for v, name in enumerate(names):
+                pixels = found.keypoints(v).pixels + _COLMAP_PIXEL_OFFSET
+                db.write_keypoints(ids[name], np.ascontiguousarray(pixels, np.float32))
+            for (i, j), m in matches.items():
+                db.write_matches(ids[names[i]], ids[names[j]],
+                                 np.ascontiguousarray(m, np.uint32).reshape(-1, 2))
+        finally:
+            db.close()
+        verification = pycolmap.TwoViewGeometryOptions()
+        verification.compute_relative_pose = True
+        pycolmap.geometric_verification(database, two_view_geometry_options=verification)
 
     def _options(self, relaxed: bool) -> object:
         """Incremental-mapping options; ``relaxed`` lowers the image-registration thresholds."""
@@ -368,8 +428,14 @@ class ColmapMatcher(Matcher):
 
     @staticmethod
     def _to_result(model: object, frames: list[Frame], names: list[str],
-                   matches: dict[tuple[int, int], np.ndarray]) -> SfmResult:
-        """Convert a pycolmap reconstruction to an :class:`SfmResult` in input order."""
+                   matches: dict[tuple[int, int], np.ndarray],
+                   imported: Correspondences | None) -> SfmResult:
+        """Convert a pycolmap reconstruction to an :class:`SfmResult` in input order.
+
+        With imported correspondences every view keeps its keypoints and verified matches,
+        registered or not (they are the features stage's own); with COLMAP's SIFT an
+        unregistered view's keypoints are not in the model and its matches are dropped.
+        """
         by_name = {img.name: img for img in model.images.values() if img.has_pose}
         point_rows: dict[int, int] = {}
         xyz, rgb = [], []
@@ -385,8 +451,10 @@ class ColmapMatcher(Matcher):
                 # Placeholder camera (identity pose, the frame's K), marked unregistered.
                 cameras.append(Camera(K=f.K, R=np.eye(3), t=np.zeros(3), width=f.width,
                                       height=f.height, name=f.name))
-                keypoints.append(np.zeros((0, 2)))
-                point_ids.append(np.zeros(0, np.int64))
+                own = (imported.keypoints(len(keypoints)).pixels if imported is not None
+                       else np.zeros((0, 2)))
+                keypoints.append(own)
+                point_ids.append(np.full(len(own), -1, np.int64))
                 registration.append({"method": "none"})
                 continue
             registration.append({"method": "sfm"})
@@ -403,8 +471,8 @@ class ColmapMatcher(Matcher):
             point_ids.append(np.array(
                 [point_rows.get(p.point3D_id, -1) if p.has_point3D() else -1 for p in pts2d],
                 dtype=np.int64))
-        # Keypoints of unregistered views are not in the model: drop their matches.
-        usable = [r["method"] != "none" for r in registration]
+        # COLMAP's SIFT keypoints of unregistered views are not in the model: drop their matches.
+        usable = [imported is not None or r["method"] != "none" for r in registration]
         matches = {(i, j): (m if usable[i] and usable[j] else np.zeros((0, 2), np.int64))
                    for (i, j), m in matches.items()}
         return SfmResult(

@@ -249,26 +249,38 @@ class PlaneAwareRegistrar(Registrar):
     def _matches(self, views: list[Reconstruction], sfm: SfmResult,
                  features: dict[int, Features], r: int, v: int
                  ) -> tuple[np.ndarray, np.ndarray]:
-        """Keypoint matches of the pair: the matcher's own (a learned matcher's land here),
-        else SIFT's."""
+        """Keypoint matches of the pair: the matcher's verified ones, else the features stage's
+        (``sfm.correspondences``), else SIFT's."""
         key, flip = ((r, v), False) if r < v else ((v, r), True)
         given = sfm.matches.get(key)
         if given is not None and len(given):
             a, b = (1, 0) if flip else (0, 1)
             return (sfm.keypoints[r][given[:, a]], sfm.keypoints[v][given[:, b]])
-        for u in (r, v):
-            if u not in features:
-                features[u] = sift_features(views[u].frame.rgb)
-        return match_features(features[r], features[v])
+        if sfm.correspondences is not None:
+            return sfm.correspondences.pixels(r, v)
+        return match_features(self._features(views, sfm, features, r),
+                              self._features(views, sfm, features, v))
 
-    def _guided(self, views: list[Reconstruction], features: dict[int, Features],
+    @staticmethod
+    def _features(views: list[Reconstruction], sfm: SfmResult, features: dict[int, Features],
+                  u: int) -> Features:
+        """View ``u``'s keypoints and descriptors: the features stage's when it describes
+        each image, else SIFT's (computed once)."""
+        if u not in features:
+            own = sfm.correspondences.keypoints(u) if sfm.correspondences is not None else None
+            if own is not None and own.descriptors is not None:
+                features[u] = Features(own.pixels, own.descriptors)
+            else:
+                features[u] = sift_features(views[u].frame.rgb)
+        return features[u]
+
+    def _guided(self, views: list[Reconstruction], sfm: SfmResult,
+                features: dict[int, Features],
                 ref: ViewGeometry, other: ViewGeometry, r: int, v: int, hyp: Hypothesis,
                 fixed: float | None) -> Hypothesis | None:
         """Essential-matrix pose of the matches found near where ``hyp`` predicts them."""
-        for u in (r, v):
-            if u not in features:
-                features[u] = sift_features(views[u].frame.rgb)
-        fr, fv = features[r], features[v]
+        fr = self._features(views, sfm, features, r)
+        fv = self._features(views, sfm, features, v)
         x = _lift(fr.pixels, ref)
         q = x @ hyp.R.T + hyp.t
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -335,7 +347,7 @@ class PlaneAwareRegistrar(Registrar):
             # image does not warp: the best pose predicts where each keypoint of the
             # reference lands in the other view, matching near there finds many more
             # correct matches, and their essential matrix gives the rotation and direction.
-            found = self._guided(views, features, ref, other, r, v, hyp, fixed)
+            found = self._guided(views, sfm, features, ref, other, r, v, hyp, fixed)
             if found is not None:
                 after = agreement(ref, other, found, tol)
                 if (_rotation_deg(found.R, hyp.R) < cfg.guided_max_change_deg
