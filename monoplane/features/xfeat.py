@@ -120,7 +120,7 @@ class XFeatNetwork:
         valid[2:size[1] - 2, 2:size[0] - 2] = True
         peaks = (heat == cv2.dilate(heat, np.ones((5, 5), np.uint8))) & (heat > threshold) & valid
         rows, cols = np.nonzero(peaks)
-        net = np.c_[cols, rows].astype(np.float64)
+        net = np.c_[cols, rows] + _subpixel(heat, rows, cols)
         rel = _bilinear(reliability[0], _cell_coords(net))[0]
         scores = heat[rows, cols] * rel
         order = np.argsort(-scores, kind="stable")[:max_keypoints]
@@ -143,6 +143,26 @@ def _heatmap(logits: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(
         p[:CELL * CELL].reshape(CELL, CELL, g, g).transpose(2, 0, 3, 1).reshape(g * CELL,
                                                                                 g * CELL))
+
+
+def _subpixel(heat: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    """(n, 2) sub-pixel offsets ``(du, dv)`` of heatmap peaks, from a parabola through each
+    peak and its two neighbours along each axis (clipped to half a pixel).
+
+    The heatmap's pixel grid alone leaves up to half a pixel of error on each keypoint, which
+    the essential matrix of a wide pair turns into degrees of rotation.
+    """
+    h, w = heat.shape
+    r = np.clip(rows, 1, h - 2)
+    c = np.clip(cols, 1, w - 2)
+    centre = heat[r, c].astype(np.float64)
+    offsets = []
+    for lo, hi in ((heat[r, c - 1], heat[r, c + 1]), (heat[r - 1, c], heat[r + 1, c])):
+        curvature = 2.0 * centre - lo - hi
+        with np.errstate(divide="ignore", invalid="ignore"):
+            d = np.where(curvature > 0, 0.5 * (hi - lo) / curvature, 0.0)
+        offsets.append(np.clip(d, -0.5, 0.5))
+    return np.stack(offsets, axis=1)
 
 
 def _cell_coords(net: np.ndarray) -> np.ndarray:
