@@ -212,8 +212,8 @@ def profile_from_table(table: dict[str, Any], where: str, *,
                           f"outputs (see docs/cues.md, 'Your own model')")
 
     def network(key: str, values: dict[str, Any]) -> tuple[ModelSpec, Path | None]:
-        net = build_dataclass(NetworkTable, values, f"{where} [{key}]")
         try:
+            net = build_dataclass(NetworkTable, values, key)
             spec = _spec(net, key, normals_network=key == "normals_model")
         except ConfigError as exc:
             raise ConfigError(f"{where}: {exc}") from None

@@ -128,7 +128,11 @@ class OnnxModel:
         c_ax, h_ax, w_ax = (1, 2, 3) if spec.layout == "NCHW" else (3, 1, 2)
         if len(img.shape) != 4 or _static(img.shape[c_ax]) not in (None, 3):
             box = "(N, 3, H, W)" if spec.layout == "NCHW" else "(N, H, W, 3)"
-            raise self._mismatch(f"input {img.name!r} is not {box} (layout {spec.layout})")
+            other, o_ax = ("NHWC", 3) if spec.layout == "NCHW" else ("NCHW", 1)
+            hint = (f", it looks like layout {other}" if len(img.shape) == 4
+                    and _static(img.shape[o_ax]) == 3 else "")
+            raise self._mismatch(f"input {img.name!r} is not {box} (layout {spec.layout}"
+                                 f"{hint})")
         if "float" not in img.type:
             raise self._mismatch(f"input {img.name!r} has type {img.type}, not float")
         h, w = _static(img.shape[h_ax]), _static(img.shape[w_ax])

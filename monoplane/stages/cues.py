@@ -19,6 +19,12 @@
       depth_model = "models/omnidata_dpt_depth.onnx"
       normal_model = "models/omnidata_dpt_normal.onnx"
 
+  or describe any ONNX network in a profile file (see :mod:`monoplane.cues.profile_files`)::
+
+      [cues]
+      plugin = "onnx"
+      profile = "models/fastdepth-224.toml"
+
 Both keep cues the user already gave, orient normals towards the camera and record what they
 did in ``frame.notes`` (written to ``planes.json``).
 """
