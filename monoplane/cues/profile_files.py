@@ -9,8 +9,8 @@ outputs mean (``depth``, ``normals``). The same tables come from a profile file
 against the model file itself happens when the model loads
 (:class:`~monoplane.cues.session.OnnxModel`).
 
-The built-in profiles are the same structure (:func:`profile_to_table` writes any profile as
-such tables, the starting point ``monoplane models profile NAME`` prints).
+The built-in profiles are such files too (``builtin_profiles/*.toml``); :func:`profile_to_table`
+writes any profile as these tables (what ``monoplane models profile NAME`` prints).
 
 Example (the FastDepth export described in ``docs/cues.md``)::
 
@@ -32,6 +32,7 @@ from __future__ import annotations
 import json
 import tomllib
 from dataclasses import dataclass
+from importlib import resources
 from pathlib import Path
 from typing import Any, Literal
 
@@ -252,6 +253,28 @@ def load_profile_file(path: str | Path) -> DeclaredProfile:
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ConfigError(f"{p}: invalid TOML: {exc}") from None
     return profile_from_table(table, str(p), base_dir=p.parent, default_name=p.stem)
+
+
+def load_builtin_profiles() -> dict[str, OnnxProfile]:
+    """The profiles shipped in ``monoplane/cues/builtin_profiles/*.toml``, by name.
+
+    Raises
+    ------
+    ConfigError
+        When a shipped file is invalid or its ``name`` is not its file name.
+    """
+    folder = resources.files(__package__) / "builtin_profiles"
+    profiles = {}
+    for entry in sorted(folder.iterdir(), key=lambda e: e.name):
+        if not entry.name.endswith(".toml"):
+            continue
+        stem, where = entry.name[:-5], f"built-in profile {entry.name}"
+        profile = profile_from_table(tomllib.loads(entry.read_text("utf-8")), where,
+                                     default_name=stem).profile
+        if profile.name != stem:
+            raise ConfigError(f"{where}: name {profile.name!r} is not the file name")
+        profiles[stem] = profile
+    return profiles
 
 
 def _network_table(spec: ModelSpec) -> dict[str, Any]:

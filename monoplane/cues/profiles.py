@@ -8,6 +8,7 @@ network. Profiles carry no weights and no file paths: users export their own mod
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, replace
 from typing import Any, Literal
 
@@ -266,87 +267,29 @@ class OnnxProfile:
         return replace(self, depth=depth, normals=normals)
 
 
-OMNIDATA = OnnxProfile(
-    name="omnidata",
-    depth=ModelSpec(output="relative_depth", size=(384, 384), multiple_of=32),
-    # 2D3DS convention, as documented by the Omnidata authors: x right, y down, z towards the
-    # viewer, stored as (n + 1) / 2. OpenCV's z points away from the viewer.
-    normals=ModelSpec(output="normals", size=(384, 384), multiple_of=32, mean=(0.0, 0.0, 0.0),
-                      std=(1.0, 1.0, 1.0), normal_encoding="unsigned", normal_axes="x,y,-z"),
-    summary="Omnidata v2 DPT: relative depth and surface normals (two models)",
-)
+@functools.cache
+def _builtin_profiles() -> dict[str, OnnxProfile]:
+    """The built-in profiles: data, not code, in ``builtin_profiles/*.toml``, read by the code
+    that reads a user's profile file (imported here, late, because it builds on this module)."""
+    from monoplane.cues.profile_files import load_builtin_profiles
 
-ZERODEPTH = OnnxProfile(
-    name="zerodepth",
-    depth=ModelSpec(output="metric_depth", size=(480, 640), multiple_of=32,
-                    mean=(0.0, 0.0, 0.0), std=(1.0, 1.0, 1.0), image_input="rgb",
-                    intrinsics_input="intrinsics"),
-    normals=ModelSpec(output="normals", size=(480, 640), multiple_of=32),
-    summary="ZeroDepth: camera-aware metric depth (image + intrinsics); normals from depth "
-            "or a second OpenCV-frame normals model",
-)
+    return load_builtin_profiles()
 
-MIDAS = OnnxProfile(
-    name="midas",
-    depth=ModelSpec(output="inverse_depth", size=(384, 384), multiple_of=32),
-    summary="MiDaS v3 DPT: relative inverse depth; normals from depth",
-)
 
-# The three profiles below describe published ONNX exports that ``monoplane models fetch`` can
-# download (see monoplane.models.catalogue and docs/cues.md, "From a photo").
-
-DEPTH_ANYTHING_V2 = OnnxProfile(
-    name="depth-anything-v2",
-    # Transformers-style export: input pixel_values (ImageNet-normalised RGB, sides multiples of
-    # 14 for the DINOv2 ViT-14 backbone, 518 in training), output predicted_depth (N, H, W),
-    # affine-invariant inverse depth.
-    depth=ModelSpec(output="inverse_depth", size=(518, 518), multiple_of=14,
-                    mean=IMAGENET_MEAN, std=IMAGENET_STD, image_input="pixel_values",
-                    output_name="predicted_depth"),
-    summary="Depth Anything V2 (Transformers ONNX export): relative inverse depth; normals "
-            "from depth",
-)
-
-METRIC3D_V2 = OnnxProfile(
-    name="metric3d-v2",
-    # onnx-community export: input pixel_values holds raw 0-255 RGB (the ImageNet normalisation
-    # is inside the graph; its preprocessor_config.json turns rescaling and normalisation off),
-    # outputs predicted_depth (depth for a canonical 1000 px focal length) and predicted_normal
-    # (unit normals, OpenCV camera axes). 616x1064 is the upstream canonical input size.
-    depth=ModelSpec(output="metric_depth", size=(616, 1064), multiple_of=14,
-                    value_range=(0.0, 255.0), mean=(0.0, 0.0, 0.0), std=(1.0, 1.0, 1.0),
-                    image_input="pixel_values", output_name="predicted_depth",
-                    normals_output="predicted_normal", canonical_focal=1000.0),
-    summary="Metric3D v2 (ViT): metric depth (scaled by the focal length) and surface normals "
-            "from one network",
-)
-
-MOGE_2 = OnnxProfile(
-    name="moge-2",
-    # MoGe-2 export (its docs/onnx.md): inputs image (RGB in [0, 1], normalised inside) and
-    # num_tokens (int64 scalar, 1200-3600; more is finer and slower); outputs points (affine
-    # point map, OpenCV axes), normal, mask (probability) and metric_scale. The network resizes
-    # internally, so the image is fed unpadded (multiple_of 1): its point map assumes the
-    # principal point at the centre of what it sees.
-    depth=ModelSpec(output="point_map", size=(768, 768), multiple_of=1, mean=(0.0, 0.0, 0.0),
-                    std=(1.0, 1.0, 1.0), image_input="image", output_name="points",
-                    normals_output="normal", mask_output="mask", scale_output="metric_scale",
-                    constant_inputs=(("num_tokens", 1800),)),
-    summary="MoGe-2 with normals: metric point map, normals and the field of view from one "
-            "network",
-)
-
-#: Profiles shipped with monoplane, by name.
-BUILTIN_PROFILES: dict[str, OnnxProfile] = {
-    p.name: p for p in (OMNIDATA, ZERODEPTH, MIDAS, DEPTH_ANYTHING_V2, METRIC3D_V2, MOGE_2)}
+def __getattr__(name: str) -> Any:
+    """``BUILTIN_PROFILES``: the profiles shipped with monoplane, by name, read on first use."""
+    if name == "BUILTIN_PROFILES":
+        return _builtin_profiles()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def get_profile(name: str) -> OnnxProfile:
     """Look up a built-in profile; unknown names raise :class:`ConfigError` listing the valid."""
+    builtin = _builtin_profiles()
     try:
-        return BUILTIN_PROFILES[name]
+        return builtin[name]
     except KeyError:
         raise ConfigError(
-            f"unknown cue profile {name!r}; valid profiles: {', '.join(sorted(BUILTIN_PROFILES))}"
+            f"unknown cue profile {name!r}; valid profiles: {', '.join(sorted(builtin))}"
             f", or a profile file ending in .toml (see docs/cues.md)"
         ) from None

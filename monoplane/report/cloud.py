@@ -22,8 +22,8 @@ from monoplane.report.frame import (
     views_3d_body,
 )
 from monoplane.report.render3d import Mesh, RenderResult, Shot, render
-from monoplane.report.viewer import install_viewer, viewer_section
 from monoplane.report.room import RoomFrame, estimate_room_frame, section_below
+from monoplane.report.viewer import install_viewer, viewer_section
 from monoplane.report.viewpoints import (
     facing_triangles,
     inside_viewpoints,

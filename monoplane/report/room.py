@@ -111,7 +111,7 @@ def estimate_room_frame(points: np.ndarray, planes: np.ndarray, num_points: np.n
     large = num_points >= MIN_SHARE * max(num_points.sum(), 1.0)
     for i in np.flatnonzero(large):
         s = pts @ planes[i, :3] + planes[i, 3]
-        above, below = np.count_nonzero(s > tol), np.count_nonzero(s < -tol)
+        above, below = int(np.count_nonzero(s > tol)), int(np.count_nonzero(s < -tol))
         if below > above:
             oriented[i] = -planes[i]
             above, below = below, above

@@ -18,8 +18,8 @@ import pytest
 from monoplane.detect import CloudPlaneResult
 from monoplane.report.cloud import CAMERA_UP, CUT_SHARE, cloud_views, room_frame
 from monoplane.report.colors import plane_palette, shade
-from monoplane.report.room import estimate_room_frame, section_below
 from monoplane.report.render3d import Mesh
+from monoplane.report.room import estimate_room_frame, section_below
 
 FLOOR_Y, CEILING_Y = 1.2, -1.3          # y is down: the floor is below the sensor
 X0, X1, Z0, Z1 = -4.0, 4.0, 1.0, 3.0
