@@ -228,8 +228,9 @@ class OnnxCues(NetworkCues):
 
     @classmethod
     def catalogue_config(cls, model: str) -> dict[str, Any] | None:
-        """``{"model": model}``: the catalogue entry sets the profile and the depth model."""
-        return {"model": model}
+        """``{"model": model}``: the catalogue entry sets the profile and the depth model; a
+        profile file (``--cues my_model.toml``) is ``{"profile": model}``."""
+        return {"profile": model} if is_profile_file(model) else {"model": model}
 
     def catalogue_model(self, missing_depth: bool, missing_normals: bool) -> str | None:
         """``cues.model`` when a frame lacking these cues needs the network: always without
