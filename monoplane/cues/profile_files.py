@@ -133,14 +133,11 @@ class DeclaredProfile:
     depth_model, normal_model : pathlib.Path or None
         ``file`` of ``[model]`` and ``[normals_model]``, resolved against the profile file's
         folder; ``None`` when not given.
-    source : str
-        Where the tables came from (a file path or ``[cues.custom]``), for messages.
     """
 
     profile: OnnxProfile
     depth_model: Path | None = None
     normal_model: Path | None = None
-    source: str = ""
 
 
 def is_profile_file(value: str) -> bool:
@@ -233,7 +230,7 @@ def profile_from_table(table: dict[str, Any], where: str, *,
                               hfov_deg=top.hfov_deg or None, summary=top.summary)
     except ConfigError as exc:
         raise ConfigError(f"{where}: {exc}") from None
-    return DeclaredProfile(profile, depth_path, normal_path, where)
+    return DeclaredProfile(profile, depth_path, normal_path)
 
 
 def load_profile_file(path: str | Path) -> DeclaredProfile:
@@ -252,6 +249,8 @@ def load_profile_file(path: str | Path) -> DeclaredProfile:
         table = tomllib.loads(p.read_text())
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ConfigError(f"{p}: invalid TOML: {exc}") from None
+    except OSError as exc:
+        raise ConfigError(f"cannot read cue profile file {p}: {exc.strerror}") from None
     return profile_from_table(table, str(p), base_dir=p.parent, default_name=p.stem)
 
 
