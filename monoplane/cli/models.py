@@ -5,8 +5,13 @@ from __future__ import annotations
 import argparse
 import json
 
-from monoplane.cues.profile_files import is_profile_file, load_profile_file, profile_to_toml
-from monoplane.cues.profiles import BUILTIN_PROFILES, get_profile
+from monoplane.cues.profile_files import (
+    BUILTIN_PROFILES,
+    get_profile,
+    is_profile_file,
+    load_profile_file,
+    profile_to_toml,
+)
 from monoplane.errors import InvalidInput
 from monoplane.models import (
     CATALOGUE,

@@ -25,19 +25,19 @@ from monoplane.cues.intrinsics import (
 )
 from monoplane.cues.network import CueNetwork
 from monoplane.cues.profile_files import (
+    BUILTIN_PROFILES,
     DeclaredProfile,
+    get_profile,
     load_profile_file,
     profile_from_table,
     profile_to_toml,
 )
 from monoplane.cues.profiles import (
-    BUILTIN_PROFILES,
     IMAGENET_MEAN,
     IMAGENET_STD,
     OUTPUT_KINDS,
     ModelSpec,
     OnnxProfile,
-    get_profile,
     parse_axes,
 )
 from monoplane.cues.session import OnnxModel

@@ -276,6 +276,21 @@ def load_builtin_profiles() -> dict[str, OnnxProfile]:
     return profiles
 
 
+#: Profiles shipped with monoplane, by name.
+BUILTIN_PROFILES: dict[str, OnnxProfile] = load_builtin_profiles()
+
+
+def get_profile(name: str) -> OnnxProfile:
+    """Look up a built-in profile; unknown names raise :class:`ConfigError` listing the valid."""
+    try:
+        return BUILTIN_PROFILES[name]
+    except KeyError:
+        raise ConfigError(
+            f"unknown cue profile {name!r}; valid profiles: {', '.join(sorted(BUILTIN_PROFILES))}"
+            f", or a profile file ending in .toml (see docs/cues.md)"
+        ) from None
+
+
 def _network_table(spec: ModelSpec) -> dict[str, Any]:
     inp: dict[str, Any] = {"name": spec.image_input} if spec.image_input else {}
     inp |= {

@@ -8,7 +8,6 @@ network. Profiles carry no weights and no file paths: users export their own mod
 
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass, replace
 from typing import Any, Literal
 
@@ -265,31 +264,3 @@ class OnnxProfile:
             if normal_axes:
                 normals = replace(normals, normal_axes=normal_axes)
         return replace(self, depth=depth, normals=normals)
-
-
-@functools.cache
-def _builtin_profiles() -> dict[str, OnnxProfile]:
-    """The built-in profiles: data, not code, in ``builtin_profiles/*.toml``, read by the code
-    that reads a user's profile file (imported here, late, because it builds on this module)."""
-    from monoplane.cues.profile_files import load_builtin_profiles
-
-    return load_builtin_profiles()
-
-
-def __getattr__(name: str) -> Any:
-    """``BUILTIN_PROFILES``: the profiles shipped with monoplane, by name, read on first use."""
-    if name == "BUILTIN_PROFILES":
-        return _builtin_profiles()
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def get_profile(name: str) -> OnnxProfile:
-    """Look up a built-in profile; unknown names raise :class:`ConfigError` listing the valid."""
-    builtin = _builtin_profiles()
-    try:
-        return builtin[name]
-    except KeyError:
-        raise ConfigError(
-            f"unknown cue profile {name!r}; valid profiles: {', '.join(sorted(builtin))}"
-            f", or a profile file ending in .toml (see docs/cues.md)"
-        ) from None

@@ -4,8 +4,9 @@
   normals are estimated from depth with edge-aware fits
   (:func:`monoplane.geometry.normals.normals_from_depth`).
 * ``onnx``: monocular networks run with onnxruntime on the CPU, described by a profile
-  (see :mod:`monoplane.cues.profiles`). Either name a catalogue model, fetched once with
-  ``monoplane models fetch NAME`` (see :mod:`monoplane.models`)::
+  (see :mod:`monoplane.cues.profiles` and :mod:`monoplane.cues.profile_files`). Either name
+  a catalogue model, fetched once with ``monoplane models fetch NAME`` (see
+  :mod:`monoplane.models`)::
 
       [cues]
       plugin = "onnx"
@@ -39,13 +40,15 @@ import numpy as np
 from monoplane.cues.given import use_given_cues
 from monoplane.cues.network import CueNetwork
 from monoplane.cues.profile_files import (
+    BUILTIN_PROFILES,
     CUSTOM_PROFILE,
     DeclaredProfile,
+    get_profile,
     is_profile_file,
     load_profile_file,
     profile_from_table,
 )
-from monoplane.cues.profiles import BUILTIN_PROFILES, OnnxProfile, get_profile
+from monoplane.cues.profiles import OnnxProfile
 from monoplane.datamodel import Frame
 from monoplane.errors import ConfigError, InvalidInput
 from monoplane.geometry.normals import normals_from_depth
