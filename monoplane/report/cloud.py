@@ -85,6 +85,7 @@ def cloud_views(result: CloudPlaneResult, out_dir: Path, frame: RoomFrame | None
     the mesh below :data:`CUT_SHARE` of the room's height, so that neither the ceiling nor the
     tops of the walls hide the room; the outside and inside views also leave out planes seen
     from behind (a cloud's planes face the side their points' normals face, the scanner's).
+    The inside views are drawn only when a plane was found to be the floor.
     """
     mesh = result.plane_mesh()
     if len(mesh.triangles) == 0:
@@ -115,8 +116,10 @@ def cloud_views(result: CloudPlaneResult, out_dir: Path, frame: RoomFrame | None
                 "ceiling cut away, planes seen from behind left out")
         figures.append(html.Figure(f"cloud3d_{vp.name}.png",
                                    f"{vp.title}, planes coloured by id ({what})"))
-    for vp in inside_viewpoints(mesh.vertices, up, forward, frame.floor_height,
-                                frame.top_height, width, height):
+    # Inside views need a room: without a floor, nothing says where one could stand.
+    inside = [] if frame.floor is None else inside_viewpoints(
+        mesh.vertices, up, forward, frame.floor_height, frame.top_height, width, height)
+    for vp in inside:
         keep = facing_triangles(face_plane, result.planes, vp.eye)
         shots.append(Shot(f"cloud3d_{vp.name}", vp.K, vp.world_to_cam, {0: keep}, []))
         figures.append(html.Figure(f"cloud3d_{vp.name}.png",
