@@ -48,6 +48,12 @@ def _coerce(value: Any, tp: Any, where: str) -> Any:
         item_tp = args[0] if args else Any
         items = [_coerce(v, item_tp, f"{where}[{i}]") for i, v in enumerate(value)]
         return items if origin is list else tuple(items)
+    if origin is dict:
+        if not isinstance(value, dict):
+            raise ConfigError(f"{where} must be a table, got {value!r}")
+        args = typing.get_args(tp)
+        value_tp = args[1] if args else Any
+        return {str(k): _coerce(v, value_tp, f"{where}.{k}") for k, v in value.items()}
     if tp is Any:
         return value
     if tp is bool:

@@ -31,6 +31,7 @@ origin: right for a single scan whose sensor sat there); for fused scans or samp
 EPILOG = """examples:
   monoplane cloud scan.ply --out out/scan
   monoplane cloud room.pcd --out out/room --set cloud.orient=consistent --report
+  monoplane cloud lidar_room.ply --out out/room --report --up 0,0,1
   monoplane cloud lidar.xyz --out out/lidar --set ransac.epsilon=0.01"""
 
 
@@ -46,10 +47,27 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--report", action="store_true",
                    help="also write report.html: the planes in an interactive 3D view, 3D "
                         "renders and a plane table")
+    p.add_argument("--up", default="0,-1,0", metavar="X,Y,Z|none", type=_up_hint,
+                   help="the report's prior for 'up' in the cloud's frame (default 0,-1,0: a "
+                        "camera frame, y down; 0,0,1 for z-up clouds, 0,1,0 for y-up; none: "
+                        "the planes alone decide); the floor plane itself sets 'up'")
     add_rerun_arg(p)
     p.add_argument("--overwrite", action="store_true", help="replace a non-empty --out")
     p.add_argument("--quiet", action="store_true", help="print nothing on success")
     p.set_defaults(func=run)
+
+
+def _up_hint(text: str) -> tuple[float, float, float] | None:
+    """``--up``: three numbers, not all zero, or ``none``."""
+    if text.strip().lower() == "none":
+        return None
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != 3 or not np.all(np.isfinite(values)) or not any(values):
+        raise argparse.ArgumentTypeError(f"expected X,Y,Z (not all zero) or none, got {text!r}")
+    return values  # type: ignore[return-value]
 
 
 def run(args: argparse.Namespace) -> int:
@@ -79,7 +97,8 @@ def run(args: argparse.Namespace) -> int:
         write_plane_mesh_ply(tmp / "planes.ply", mesh, colors)
         (tmp / "planes.glb").write_bytes(cloud_glb(result, mesh))
         if args.report:
-            write_cloud_report(result, tmp, source=str(args.cloud), progress=not args.quiet)
+            write_cloud_report(result, tmp, source=str(args.cloud), progress=not args.quiet,
+                               up_hint=args.up)
     write_rerun_arg(args, result)
     if not args.quiet:
         for note in result.notes:

@@ -5,6 +5,13 @@ from __future__ import annotations
 import argparse
 import json
 
+from monoplane.cues.profile_files import (
+    BUILTIN_PROFILES,
+    get_profile,
+    is_profile_file,
+    load_profile_file,
+    profile_to_toml,
+)
 from monoplane.errors import InvalidInput
 from monoplane.models import (
     CATALOGUE,
@@ -23,7 +30,16 @@ DESCRIPTION = """Monocular depth/normal networks monoplane can download on reque
 published on Hugging Face, pinned to a revision where one is known, checked by size and SHA-256).
 Nothing is ever downloaded by 'monoplane run' unless you pass --fetch.
 
-Cache: $MONOPLANE_CACHE, or ~/.cache/monoplane."""
+Cache: $MONOPLANE_CACHE, or ~/.cache/monoplane.
+
+Your own ONNX file needs no catalogue entry: describe its input and outputs in a profile file
+and run it with --set cues.profile=my_model.toml (docs/cues.md, 'Your own model');
+'monoplane models profile NAME' prints a built-in profile in that form, to start from."""
+
+BRING_YOUR_OWN = """your own ONNX depth/normals network: write a profile file (input name, layout, \
+size, scaling; output name and kind) and run it with --set cues.profile=my_model.toml; \
+'monoplane models profile NAME' prints a built-in profile ({names}) as a starting point \
+(docs/cues.md, 'Your own model')"""
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -40,6 +56,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     pa = msub.add_parser("path", help="print where a downloaded model is")
     pa.add_argument("name", metavar="NAME", help="catalogue name")
     pa.set_defaults(func=run_path)
+    pr = msub.add_parser("profile", help="print a profile as a profile file (TOML), the "
+                                         "starting point for your own model's")
+    pr.add_argument("name", metavar="NAME",
+                    help="built-in profile, catalogue name, or a profile file to check")
+    pr.set_defaults(func=run_profile)
 
 
 def _status(record: ModelRecord) -> str:
@@ -72,6 +93,7 @@ def run_list(args: argparse.Namespace) -> int:
     print(f"\ncache: {cache_dir()}")
     for r in records:
         print(f"  {r.name}: {r.summary}; licence {r.licence}")
+    print("\n" + BRING_YOUR_OWN.format(names=", ".join(sorted(BUILTIN_PROFILES))))
     return 0
 
 
@@ -91,6 +113,19 @@ def run_fetch(args: argparse.Namespace) -> int:
 
 def run_path(args: argparse.Namespace) -> int:
     print(require_model(args.name))
+    return 0
+
+
+def run_profile(args: argparse.Namespace) -> int:
+    """Print a built-in, catalogue or file profile as profile-file TOML (files are checked)."""
+    name = args.name
+    if is_profile_file(name):
+        profile = load_profile_file(name).profile
+    elif name in CATALOGUE:
+        profile = get_profile(CATALOGUE[name].profile)
+    else:
+        profile = get_profile(name)
+    print(profile_to_toml(profile), end="")
     return 0
 
 

@@ -45,7 +45,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     group = p.add_argument_group("monocular models")
     group.add_argument("--cues", metavar="NAME",
                        help="predict depth/normals with a catalogue model (the configured cue "
-                            "provider sets its own keys for it; onnx: cues.model=NAME)")
+                            "provider sets its own keys for it; onnx: cues.model=NAME) or, "
+                            "with onnx, your own model's profile file NAME.toml "
+                            "(cues.profile=NAME.toml, see docs/cues.md)")
     group.add_argument("--fetch", action="store_true",
                        help="download the configured catalogue model first if it is not "
                             "cached (nothing is downloaded without this flag)")

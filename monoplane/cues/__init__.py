@@ -11,7 +11,9 @@ loading, letterboxing, inference and conversion::
                                                          size=(518, 518), multiple_of=14))
     frame = CueNetwork(PROFILE, depth_model="my-net.onnx").provide(frame)
 
-See ``docs/cues.md`` for exporting networks to ONNX.
+A profile can also be declared in TOML, with no Python at all (:mod:`monoplane.cues.profile_files`,
+``cues.profile = "my_model.toml"``). See ``docs/cues.md`` for profile files and for exporting
+networks to ONNX.
 """
 
 from monoplane.cues.intrinsics import (
@@ -22,14 +24,20 @@ from monoplane.cues.intrinsics import (
     reassume_intrinsics,
 )
 from monoplane.cues.network import CueNetwork
-from monoplane.cues.profiles import (
+from monoplane.cues.profile_files import (
     BUILTIN_PROFILES,
+    DeclaredProfile,
+    get_profile,
+    load_profile_file,
+    profile_from_table,
+    profile_to_toml,
+)
+from monoplane.cues.profiles import (
     IMAGENET_MEAN,
     IMAGENET_STD,
     OUTPUT_KINDS,
     ModelSpec,
     OnnxProfile,
-    get_profile,
     parse_axes,
 )
 from monoplane.cues.session import OnnxModel
@@ -47,6 +55,7 @@ from monoplane.cues.transforms import (
 
 __all__ = [
     "ASSUMED_INTRINSICS_NOTE", "BUILTIN_PROFILES", "CueNetwork", "DEFAULT_HFOV_DEG",
+    "DeclaredProfile", "load_profile_file", "profile_from_table", "profile_to_toml",
     "IMAGENET_MEAN", "IMAGENET_STD", "Letterbox", "ModelSpec", "OUTPUT_KINDS", "OnnxModel",
     "OnnxProfile", "assume_intrinsics", "decode_normals", "depth_from_disparity",
     "get_profile", "intrinsics_assumed", "orient_normals", "parse_axes", "plan_letterbox",

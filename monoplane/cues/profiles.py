@@ -28,6 +28,8 @@ OUTPUT_KINDS: tuple[str, ...] = ("metric_depth", "relative_depth", "inverse_dept
                                  "normals")
 RESIZE_POLICIES: tuple[str, ...] = ("keep_aspect", "stretch")
 NORMAL_ENCODINGS: tuple[str, ...] = ("signed", "unsigned")
+LAYOUTS: tuple[str, ...] = ("NCHW", "NHWC")
+COLOUR_ORDERS: tuple[str, ...] = ("RGB", "BGR")
 
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
@@ -79,8 +81,17 @@ class ModelSpec:
     multiple_of : int
         The padded input height and width are multiples of this (32 for DPT/CNN decoders,
         14 for ViT-14 backbones such as DINOv2).
+    layout : str
+        Axis order of the image input: ``"NCHW"`` (channels first, PyTorch exports) or
+        ``"NHWC"`` (channels last, TensorFlow/TFLite exports).
+    colour_order : str
+        Channel order the network expects: ``"RGB"`` or ``"BGR"`` (OpenCV/Caffe-trained).
+    value_range : tuple of float
+        ``(low, high)``: pixel values 0..255 are mapped linearly onto this range before the
+        normalisation, e.g. ``(0, 1)`` or ``(0, 255)``.
     mean, std : tuple of float
-        Per-channel RGB normalisation applied to values scaled to [0, 1].
+        Per-channel normalisation ``(x - mean) / std`` applied to values in ``value_range``, in
+        the network's channel order.
     normal_encoding : str
         ``"signed"`` (components in [-1, 1]) or ``"unsigned"`` (``(n + 1) / 2`` in [0, 1]).
     normal_axes : str
@@ -112,6 +123,9 @@ class ModelSpec:
     size: tuple[int, int] = (384, 384)
     resize: str = "keep_aspect"
     multiple_of: int = 32
+    layout: str = "NCHW"
+    colour_order: str = "RGB"
+    value_range: tuple[float, float] = (0.0, 1.0)
     mean: tuple[float, float, float] = (0.5, 0.5, 0.5)
     std: tuple[float, float, float] = (0.5, 0.5, 0.5)
     normal_encoding: str = "signed"
@@ -136,6 +150,14 @@ class ModelSpec:
         if self.normal_encoding not in NORMAL_ENCODINGS:
             raise ConfigError(f"normal_encoding must be one of {', '.join(NORMAL_ENCODINGS)}, "
                               f"got {self.normal_encoding!r}")
+        if self.layout not in LAYOUTS:
+            raise ConfigError(f"layout must be one of {', '.join(LAYOUTS)}, got {self.layout!r}")
+        if self.colour_order not in COLOUR_ORDERS:
+            raise ConfigError(f"colour_order must be one of {', '.join(COLOUR_ORDERS)}, got "
+                              f"{self.colour_order!r}")
+        if len(self.value_range) != 2 or not self.value_range[0] < self.value_range[1]:
+            raise ConfigError(f"value_range must be [low, high] with low < high, got "
+                              f"{list(self.value_range)}")
         if len(self.size) != 2 or min(self.size) < 1:
             raise ConfigError(f"input size must be (height, width) > 0, got {self.size}")
         if self.multiple_of < 1:
@@ -164,7 +186,8 @@ class ModelSpec:
 
     def describe(self) -> str:
         """One line naming the expected signature, used in error messages."""
-        inputs = f"image input (1, 3, H, W) float32 named {self.image_input or '<any>'}"
+        box = "(1, 3, H, W)" if self.layout == "NCHW" else "(1, H, W, 3)"
+        inputs = f"image input {box} float32 named {self.image_input or '<any>'}"
         if self.intrinsics_input:
             inputs += f" and intrinsics input (1, 3, 3) float32 named {self.intrinsics_input}"
         for name, _ in self.constant_inputs:
@@ -241,88 +264,3 @@ class OnnxProfile:
             if normal_axes:
                 normals = replace(normals, normal_axes=normal_axes)
         return replace(self, depth=depth, normals=normals)
-
-
-OMNIDATA = OnnxProfile(
-    name="omnidata",
-    depth=ModelSpec(output="relative_depth", size=(384, 384), multiple_of=32),
-    # 2D3DS convention, as documented by the Omnidata authors: x right, y down, z towards the
-    # viewer, stored as (n + 1) / 2. OpenCV's z points away from the viewer.
-    normals=ModelSpec(output="normals", size=(384, 384), multiple_of=32, mean=(0.0, 0.0, 0.0),
-                      std=(1.0, 1.0, 1.0), normal_encoding="unsigned", normal_axes="x,y,-z"),
-    summary="Omnidata v2 DPT: relative depth and surface normals (two models)",
-)
-
-ZERODEPTH = OnnxProfile(
-    name="zerodepth",
-    depth=ModelSpec(output="metric_depth", size=(480, 640), multiple_of=32,
-                    mean=(0.0, 0.0, 0.0), std=(1.0, 1.0, 1.0), image_input="rgb",
-                    intrinsics_input="intrinsics"),
-    normals=ModelSpec(output="normals", size=(480, 640), multiple_of=32),
-    summary="ZeroDepth: camera-aware metric depth (image + intrinsics); normals from depth "
-            "or a second OpenCV-frame normals model",
-)
-
-MIDAS = OnnxProfile(
-    name="midas",
-    depth=ModelSpec(output="inverse_depth", size=(384, 384), multiple_of=32),
-    summary="MiDaS v3 DPT: relative inverse depth; normals from depth",
-)
-
-# The three profiles below describe published ONNX exports that ``monoplane models fetch`` can
-# download (see monoplane.models.catalogue and docs/cues.md, "From a photo").
-
-DEPTH_ANYTHING_V2 = OnnxProfile(
-    name="depth-anything-v2",
-    # Transformers-style export: input pixel_values (ImageNet-normalised RGB, sides multiples of
-    # 14 for the DINOv2 ViT-14 backbone, 518 in training), output predicted_depth (N, H, W),
-    # affine-invariant inverse depth.
-    depth=ModelSpec(output="inverse_depth", size=(518, 518), multiple_of=14,
-                    mean=IMAGENET_MEAN, std=IMAGENET_STD, image_input="pixel_values",
-                    output_name="predicted_depth"),
-    summary="Depth Anything V2 (Transformers ONNX export): relative inverse depth; normals "
-            "from depth",
-)
-
-METRIC3D_V2 = OnnxProfile(
-    name="metric3d-v2",
-    # onnx-community export: input pixel_values holds raw 0-255 RGB (the ImageNet normalisation
-    # is inside the graph; its preprocessor_config.json turns rescaling and normalisation off),
-    # outputs predicted_depth (depth for a canonical 1000 px focal length) and predicted_normal
-    # (unit normals, OpenCV camera axes). 616x1064 is the upstream canonical input size.
-    depth=ModelSpec(output="metric_depth", size=(616, 1064), multiple_of=14,
-                    mean=(0.0, 0.0, 0.0), std=(1 / 255, 1 / 255, 1 / 255),
-                    image_input="pixel_values", output_name="predicted_depth",
-                    normals_output="predicted_normal", canonical_focal=1000.0),
-    summary="Metric3D v2 (ViT): metric depth (scaled by the focal length) and surface normals "
-            "from one network",
-)
-
-MOGE_2 = OnnxProfile(
-    name="moge-2",
-    # MoGe-2 export (its docs/onnx.md): inputs image (RGB in [0, 1], normalised inside) and
-    # num_tokens (int64 scalar, 1200-3600; more is finer and slower); outputs points (affine
-    # point map, OpenCV axes), normal, mask (probability) and metric_scale. The network resizes
-    # internally, so the image is fed unpadded (multiple_of 1): its point map assumes the
-    # principal point at the centre of what it sees.
-    depth=ModelSpec(output="point_map", size=(768, 768), multiple_of=1, mean=(0.0, 0.0, 0.0),
-                    std=(1.0, 1.0, 1.0), image_input="image", output_name="points",
-                    normals_output="normal", mask_output="mask", scale_output="metric_scale",
-                    constant_inputs=(("num_tokens", 1800),)),
-    summary="MoGe-2 with normals: metric point map, normals and the field of view from one "
-            "network",
-)
-
-#: Profiles shipped with monoplane, by name.
-BUILTIN_PROFILES: dict[str, OnnxProfile] = {
-    p.name: p for p in (OMNIDATA, ZERODEPTH, MIDAS, DEPTH_ANYTHING_V2, METRIC3D_V2, MOGE_2)}
-
-
-def get_profile(name: str) -> OnnxProfile:
-    """Look up a built-in profile; unknown names raise :class:`ConfigError` listing the valid."""
-    try:
-        return BUILTIN_PROFILES[name]
-    except KeyError:
-        raise ConfigError(
-            f"unknown cue profile {name!r}; valid profiles: {', '.join(sorted(BUILTIN_PROFILES))}"
-        ) from None

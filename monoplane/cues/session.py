@@ -26,6 +26,18 @@ def _shape_text(shape: list) -> str:
     return "(" + ", ".join(str(d) if d is not None else "?" for d in shape) + ")"
 
 
+#: onnxruntime's tensor type names, spelled as numpy dtypes in messages.
+_DTYPES = {"tensor(float)": "float32", "tensor(float16)": "float16", "tensor(double)": "float64",
+           "tensor(int64)": "int64", "tensor(int32)": "int32", "tensor(uint8)": "uint8",
+           "tensor(int8)": "int8", "tensor(bool)": "bool"}
+
+
+def _tensor_text(arg: object) -> str:
+    """``name(1, 224, 224, 3) float32`` for an onnxruntime input or output description."""
+    dtype = _DTYPES.get(arg.type, arg.type)  # type: ignore[attr-defined]
+    return f"{arg.name}{_shape_text(arg.shape)} {dtype}"  # type: ignore[attr-defined]
+
+
 def _static(dim: object) -> int | None:
     """A fixed dimension as an int; symbolic or unknown dimensions as ``None``."""
     return dim if isinstance(dim, int) and dim > 0 else None
@@ -76,8 +88,8 @@ class OnnxModel:
         self._bind()
 
     def _mismatch(self, what: str) -> InvalidInput:
-        ins = ", ".join(f"{i.name}{_shape_text(i.shape)}" for i in self.session.get_inputs())
-        outs = ", ".join(f"{o.name}{_shape_text(o.shape)}" for o in self.session.get_outputs())
+        ins = ", ".join(_tensor_text(i) for i in self.session.get_inputs())
+        outs = ", ".join(_tensor_text(o) for o in self.session.get_outputs())
         return InvalidInput(
             f"{self.path}: {self.label} does not match its profile: {what}; expected "
             f"{self.spec.describe()}; the model has inputs [{ins}] and outputs [{outs}]"
@@ -112,11 +124,18 @@ class OnnxModel:
         if extra:
             raise self._mismatch(f"unexpected inputs {sorted(extra)}")
         img = inputs[self.image_input]
-        if len(img.shape) != 4 or _static(img.shape[1]) not in (None, 3):
-            raise self._mismatch(f"input {img.name!r} is not (N, 3, H, W)")
+        # Axis positions of channels, height and width in the declared layout.
+        c_ax, h_ax, w_ax = (1, 2, 3) if spec.layout == "NCHW" else (3, 1, 2)
+        if len(img.shape) != 4 or _static(img.shape[c_ax]) not in (None, 3):
+            box = "(N, 3, H, W)" if spec.layout == "NCHW" else "(N, H, W, 3)"
+            other, o_ax = ("NHWC", 3) if spec.layout == "NCHW" else ("NCHW", 1)
+            hint = (f", it looks like layout {other}" if len(img.shape) == 4
+                    and _static(img.shape[o_ax]) == 3 else "")
+            raise self._mismatch(f"input {img.name!r} is not {box} (layout {spec.layout}"
+                                 f"{hint})")
         if "float" not in img.type:
             raise self._mismatch(f"input {img.name!r} has type {img.type}, not float")
-        h, w = _static(img.shape[2]), _static(img.shape[3])
+        h, w = _static(img.shape[h_ax]), _static(img.shape[w_ax])
         self.fixed_size = (h, w) if h and w else None
 
         outputs = {o.name: o for o in self.session.get_outputs()}

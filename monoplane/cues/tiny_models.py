@@ -28,18 +28,21 @@ def _save(nodes: list, inputs: list, output, initializers: list, path: str | Pat
     return path
 
 
-def _image_input(name: str, size: tuple[int, int] | None, channels: int = 3):
+def _image_input(name: str, size: tuple[int, int] | None, channels: int = 3,
+                 layout: str = "NCHW"):
     from onnx import TensorProto, helper
 
     h, w = size if size is not None else ("height", "width")
-    return helper.make_tensor_value_info(name, TensorProto.FLOAT, ["batch", channels, h, w])
+    dims = ["batch", channels, h, w] if layout == "NCHW" else ["batch", h, w, channels]
+    return helper.make_tensor_value_info(name, TensorProto.FLOAT, dims)
 
 
 def tiny_depth_model(path: str | Path, *, scale: float = 1.0, offset: float = 0.0,
                      image_input: str = "image", output_name: str = "depth",
                      intrinsics_input: str | None = None, fx_coefficient: float = 0.0,
                      size: tuple[int, int] | None = None, channels: int = 3,
-                     squeeze_channel: bool = False) -> Path:
+                     squeeze_channel: bool = False, layout: str = "NCHW",
+                     channel_weights: tuple[float, float, float] | None = None) -> Path:
     """Save a depth-like network: ``out = scale * mean_c(x) + offset [+ fx_coefficient * fx]``.
 
     Parameters
@@ -59,6 +62,11 @@ def tiny_depth_model(path: str | Path, *, scale: float = 1.0, offset: float = 0.
         Input channels (3 for real images; other values make a mismatching model).
     squeeze_channel : bool
         Output (N, H, W) instead of (N, 1, H, W).
+    layout : str
+        ``"NCHW"`` or ``"NHWC"`` (channels last) input; the output is (N, 1, H, W) either way.
+    channel_weights : tuple of float or None
+        Replace the channel mean by ``sum_c w_c x_c`` (input channel order), so a test can tell
+        the channels apart (colour order).
 
     Returns
     -------
@@ -67,11 +75,26 @@ def tiny_depth_model(path: str | Path, *, scale: float = 1.0, offset: float = 0.
     """
     from onnx import TensorProto, helper, numpy_helper
 
-    inputs = [_image_input(image_input, size, channels)]
+    inputs = [_image_input(image_input, size, channels, layout)]
     inits = [numpy_helper.from_array(np.array(scale, np.float32), "scale"),
              numpy_helper.from_array(np.array(offset, np.float32), "offset")]
-    nodes = [helper.make_node("ReduceMean", [image_input], ["mean"], axes=[1], keepdims=1),
-             helper.make_node("Mul", ["mean", "scale"], ["scaled"]),
+    axis = 1 if layout == "NCHW" else 3
+    if channel_weights is None:
+        nodes = [helper.make_node("ReduceMean", [image_input], ["reduced"], axes=[axis],
+                                  keepdims=1)]
+    else:
+        shape = (1, 3, 1, 1) if layout == "NCHW" else (1, 1, 1, 3)
+        inits += [numpy_helper.from_array(np.asarray(channel_weights, np.float32).reshape(shape),
+                                          "weights"),
+                  numpy_helper.from_array(np.array([axis], np.int64), "channel_axis")]
+        nodes = [helper.make_node("Mul", [image_input, "weights"], ["weighted"]),
+                 helper.make_node("ReduceSum", ["weighted", "channel_axis"], ["reduced"],
+                                  keepdims=1)]
+    if layout == "NCHW":
+        nodes.append(helper.make_node("Identity", ["reduced"], ["mean"]))
+    else:
+        nodes.append(helper.make_node("Transpose", ["reduced"], ["mean"], perm=[0, 3, 1, 2]))
+    nodes += [helper.make_node("Mul", ["mean", "scale"], ["scaled"]),
              helper.make_node("Add", ["scaled", "offset"], ["affine"])]
     last = "affine"
     if intrinsics_input is not None:

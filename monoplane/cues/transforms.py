@@ -79,23 +79,30 @@ def prepare_image(rgb: np.ndarray, spec: ModelSpec, box: Letterbox) -> np.ndarra
     rgb : numpy.ndarray
         (H, W, 3) uint8 RGB image.
     spec : ModelSpec
-        Normalisation (``mean``, ``std`` on [0, 1] values).
+        Channel order, value range, normalisation (``mean``, ``std`` on values in
+        ``value_range``) and layout.
     box : Letterbox
         From :func:`plan_letterbox`.
 
     Returns
     -------
     numpy.ndarray
-        (1, 3, h_in, w_in) float32, NCHW.
+        (1, 3, h_in, w_in) float32 for ``layout = "NCHW"``, (1, h_in, w_in, 3) for ``"NHWC"``.
     """
-    img: np.ndarray = rgb.astype(np.float32) / 255.0
+    low, high = spec.value_range
+    img: np.ndarray = rgb.astype(np.float32) * np.float32((high - low) / 255.0) + np.float32(low)
+    if spec.colour_order == "BGR":
+        img = img[..., ::-1]
     rh, rw = box.resized
     shrink = rh * rw < rgb.shape[0] * rgb.shape[1]
-    img = cv2.resize(img, (rw, rh), interpolation=cv2.INTER_AREA if shrink else cv2.INTER_LINEAR)
+    img = cv2.resize(np.ascontiguousarray(img), (rw, rh),
+                     interpolation=cv2.INTER_AREA if shrink else cv2.INTER_LINEAR)
     ph, pw = box.padded
     img = cv2.copyMakeBorder(img, 0, ph - rh, 0, pw - rw, cv2.BORDER_REPLICATE)
     x = (img - np.asarray(spec.mean, np.float32)) / np.asarray(spec.std, np.float32)
-    return np.ascontiguousarray(x.transpose(2, 0, 1)[None]).astype(np.float32)
+    if spec.layout == "NCHW":
+        x = x.transpose(2, 0, 1)
+    return np.ascontiguousarray(x[None]).astype(np.float32)
 
 
 def scaled_intrinsics(K: np.ndarray, box: Letterbox) -> np.ndarray:

@@ -20,7 +20,7 @@ from dataclasses import asdict, dataclass
 from importlib import resources
 from typing import Any
 
-from monoplane.cues.profiles import get_profile
+from monoplane.cues.profile_files import get_profile
 from monoplane.errors import ConfigError
 
 TASKS: tuple[str, ...] = ("depth", "normals", "both")

@@ -19,6 +19,8 @@ from monoplane.geometry.camera import look_at
 
 #: Horizontal field of view of the virtual cameras, degrees.
 VIRTUAL_HFOV = 60.0
+#: Wider field of view of the cameras that stand inside a room, degrees.
+INSIDE_HFOV = 75.0
 
 
 @dataclass
@@ -118,6 +120,56 @@ def orbit_viewpoints(
         at("oblique", "oblique view from the left", 30.0, -40.0),
         at("oblique_right", "oblique view from the right", 30.0, 40.0),
     ]
+
+
+def inside_viewpoints(vertices: np.ndarray, up: np.ndarray, forward: np.ndarray,
+                      floor_height: float, top_height: float, width: int, height: int
+                      ) -> list[Viewpoint]:
+    """Two cameras standing inside a room, in its back corners, looking across it and down.
+
+    Parameters
+    ----------
+    vertices : numpy.ndarray
+        (V, 3) model points, world frame.
+    up, forward : numpy.ndarray
+        (3,) up direction and main viewing direction (made horizontal here), as for
+        :func:`orbit_viewpoints`; "back" is ``-forward``.
+    floor_height, top_height : float
+        ``up · x`` of the floor and of the ceiling (or the model's top).
+    width, height : int
+        Render size in pixels.
+
+    Returns
+    -------
+    list of Viewpoint
+        ``inside_left`` and ``inside_right``: eyes at 65 % of the room height, 15 % of the
+        room's depth in from its back and a quarter of its width out from the middle, looking
+        at a point 15 % of the height above the floor, 70 % of the way in, on the other side
+        of the middle. The room's extent is the 5th-95th percentile of the vertices.
+    """
+    up = np.asarray(up, dtype=np.float64)
+    up /= np.linalg.norm(up)
+    fwd = np.asarray(forward, dtype=np.float64)
+    fwd = fwd - (fwd @ up) * up
+    fwd /= np.linalg.norm(fwd)
+    right = np.cross(fwd, up)
+    f0, f1 = np.percentile(vertices @ fwd, [5.0, 95.0])
+    r0, r1 = np.percentile(vertices @ right, [5.0, 95.0])
+    r_mid, room = 0.5 * (r0 + r1), top_height - floor_height
+    K = virtual_K(width, height, INSIDE_HFOV)
+
+    def at(name: str, title: str, side: float) -> Viewpoint:
+        eye = ((f0 + 0.15 * (f1 - f0)) * fwd + (r_mid + side * 0.25 * (r1 - r0)) * right
+               + (floor_height + 0.65 * room) * up)
+        target = ((f0 + 0.7 * (f1 - f0)) * fwd + (r_mid - side * 0.15 * (r1 - r0)) * right
+                  + (floor_height + 0.15 * room) * up)
+        R, t = look_at(eye, target, up)
+        extrinsics = np.eye(4)
+        extrinsics[:3, :3], extrinsics[:3, 3] = R, t
+        return Viewpoint(name, title, K, extrinsics, eye)
+
+    return [at("inside_left", "inside the room from the back left", -1.0),
+            at("inside_right", "inside the room from the back right", 1.0)]
 
 
 def facing_triangles(

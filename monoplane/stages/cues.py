@@ -4,8 +4,9 @@
   normals are estimated from depth with edge-aware fits
   (:func:`monoplane.geometry.normals.normals_from_depth`).
 * ``onnx``: monocular networks run with onnxruntime on the CPU, described by a profile
-  (see :mod:`monoplane.cues.profiles`). Either name a catalogue model, fetched once with
-  ``monoplane models fetch NAME`` (see :mod:`monoplane.models`)::
+  (see :mod:`monoplane.cues.profiles` and :mod:`monoplane.cues.profile_files`). Either name
+  a catalogue model, fetched once with ``monoplane models fetch NAME`` (see
+  :mod:`monoplane.models`)::
 
       [cues]
       plugin = "onnx"
@@ -18,6 +19,12 @@
       profile = "omnidata"
       depth_model = "models/omnidata_dpt_depth.onnx"
       normal_model = "models/omnidata_dpt_normal.onnx"
+
+  or describe any ONNX network in a profile file (see :mod:`monoplane.cues.profile_files`)::
+
+      [cues]
+      plugin = "onnx"
+      profile = "models/fastdepth-224.toml"
 
 Both keep cues the user already gave, orient normals towards the camera and record what they
 did in ``frame.notes`` (written to ``planes.json``).
@@ -32,7 +39,16 @@ import numpy as np
 
 from monoplane.cues.given import use_given_cues
 from monoplane.cues.network import CueNetwork
-from monoplane.cues.profiles import BUILTIN_PROFILES, OnnxProfile, get_profile
+from monoplane.cues.profile_files import (
+    BUILTIN_PROFILES,
+    CUSTOM_PROFILE,
+    DeclaredProfile,
+    get_profile,
+    is_profile_file,
+    load_profile_file,
+    profile_from_table,
+)
+from monoplane.cues.profiles import OnnxProfile
 from monoplane.datamodel import Frame
 from monoplane.errors import ConfigError, InvalidInput
 from monoplane.geometry.normals import normals_from_depth
@@ -121,11 +137,17 @@ class OnnxCuesConfig(NormalsFromDepthOptions):
         "", "catalogue model name (see 'monoplane models list'); sets the profile and the "
             "depth model file, downloaded once with 'monoplane models fetch NAME'")
     profile: str = param(
-        "omnidata", f"network profile: {', '.join(sorted(BUILTIN_PROFILES))} (ignored when "
-                    f"'model' is set)")
-    depth_model: str = param("", "path to the depth network's .onnx file")
+        "omnidata", f"network profile: {', '.join(sorted(BUILTIN_PROFILES))}, a profile file "
+                    f"'path/to/model.toml', or '{CUSTOM_PROFILE}' for the [cues.custom] table "
+                    f"(ignored when 'model' is set; see docs/cues.md)")
+    custom: dict[str, Any] = param(
+        {}, f"an inline profile, the tables of a profile file (used when profile = "
+            f"'{CUSTOM_PROFILE}')")
+    depth_model: str = param(
+        "", "path to the depth network's .onnx file (default: the profile file's [model] file)")
     normal_model: str = param(
-        "", "path to the normals network's .onnx file (empty: normals estimated from depth)")
+        "", "path to the normals network's .onnx file (default: the profile file's "
+            "[normals_model] file; none: normals estimated from depth)")
     threads: int = param(2, "onnxruntime CPU threads per network")
     input_size: list[int] = param(
         [], "override the profile's network input box [height, width] in pixels")
@@ -140,7 +162,9 @@ class OnnxCuesConfig(NormalsFromDepthOptions):
               "invalid")
 
     def __post_init__(self) -> None:
-        get_profile(self.profile)
+        if self.custom and self.profile != CUSTOM_PROFILE:
+            raise ConfigError(f"[cues.custom] is set but cues.profile is {self.profile!r}; set "
+                              f"profile = \"{CUSTOM_PROFILE}\" to use it")
         if self.model:
             get_model(self.model)
             if self.depth_model:
@@ -161,14 +185,30 @@ class OnnxCuesConfig(NormalsFromDepthOptions):
         # Validates the overrides (axes, sizes) now, at config time.
         self.resolved_profile()
 
+    def declared_profile(self) -> DeclaredProfile:
+        """The chosen profile before overrides, with the model files its tables name.
+
+        A catalogue model's profile, a built-in profile, a profile file (read now, model paths
+        relative to it) or the inline ``[cues.custom]`` table.
+        """
+        if self.model:
+            return DeclaredProfile(get_profile(get_model(self.model).profile))
+        if is_profile_file(self.profile):
+            return load_profile_file(self.profile)
+        if self.profile == CUSTOM_PROFILE:
+            if not self.custom:
+                raise ConfigError(f"cues.profile = \"{CUSTOM_PROFILE}\" needs a [cues.custom] "
+                                  f"table (the tables of a profile file, see docs/cues.md)")
+            return profile_from_table(self.custom, "[cues.custom]")
+        return DeclaredProfile(get_profile(self.profile))
+
     def resolved_profile(self) -> OnnxProfile:
         """The chosen profile with this config's overrides applied."""
         def triple(v: list[float]) -> tuple[float, float, float] | None:
             return (v[0], v[1], v[2]) if v else None
 
         size = (self.input_size[0], self.input_size[1]) if self.input_size else None
-        name = get_model(self.model).profile if self.model else self.profile
-        return get_profile(name).with_overrides(
+        return self.declared_profile().profile.with_overrides(
             size=size, mean=triple(self.mean), std=triple(self.std),
             normal_axes=self.normal_axes or None)
 
@@ -180,16 +220,20 @@ class OnnxCues(NetworkCues):
     Config = OnnxCuesConfig
 
     def build_network(self, config: OnnxCuesConfig) -> CueNetwork:
-        """The profile's networks, with the config's files and options."""
+        """The profile's networks, with the config's files (else the profile file's) and
+        options."""
+        declared = config.declared_profile()
         return CueNetwork(
-            config.resolved_profile(), config.depth_model or None, config.normal_model or None,
+            config.resolved_profile(), config.depth_model or declared.depth_model,
+            config.normal_model or declared.normal_model,
             threads=config.threads, disparity_floor=config.disparity_floor,
             hfov_deg=config.hfov_deg or None, normals_options=config.normals_options())
 
     @classmethod
     def catalogue_config(cls, model: str) -> dict[str, Any] | None:
-        """``{"model": model}``: the catalogue entry sets the profile and the depth model."""
-        return {"model": model}
+        """``{"model": model}``: the catalogue entry sets the profile and the depth model; a
+        profile file (``--cues my_model.toml``) is ``{"profile": model}``."""
+        return {"profile": model} if is_profile_file(model) else {"model": model}
 
     def catalogue_model(self, missing_depth: bool, missing_normals: bool) -> str | None:
         """``cues.model`` when a frame lacking these cues needs the network: always without

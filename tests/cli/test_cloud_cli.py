@@ -59,6 +59,19 @@ def test_cloud_report_is_an_html_page(tmp_path: Path) -> None:
         assert (out / "cloud3d_birdseye.png").is_file()
 
 
+def test_cloud_report_up_hint(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    write_cloud(tmp_path / "box.ply")
+    out = tmp_path / "out"
+    assert main(["cloud", str(tmp_path / "box.ply"), "--out", str(out), "--report", "--quiet",
+                 "--up", "none"]) == 0
+    text = (out / "report.html").read_text()
+    assert "3D views are missing" in text or "3D views: up is" in text
+    for bad in ("1,2", "0,0,0", "up"):
+        with pytest.raises(SystemExit):
+            main(["cloud", str(tmp_path / "box.ply"), "--out", str(tmp_path / "o"), "--up", bad])
+        assert "--up: expected X,Y,Z" in capsys.readouterr().err
+
+
 def test_cloud_errors_are_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["cloud", str(tmp_path / "missing.ply"), "--out", str(tmp_path / "o")]) == 2
     assert "not found" in capsys.readouterr().err

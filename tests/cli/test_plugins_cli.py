@@ -12,7 +12,10 @@ from monoplane.cli import main
 
 
 def _toml_literal(value: object) -> str:
-    """``value`` written as a TOML value, the way a user types it after ``--set key=``."""
+    """``value`` written as a TOML value, the way a user types it after ``--set key=``
+    (tables as inline tables)."""
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{k} = {_toml_literal(v)}" for k, v in value.items()) + "}"
     return tomli_w.dumps({"v": value}).split("=", 1)[1].strip()
 
 
