@@ -122,7 +122,11 @@ def run_profile(args: argparse.Namespace) -> int:
     if is_profile_file(name):
         profile = load_profile_file(name).profile
     elif name in CATALOGUE:
-        profile = get_profile(CATALOGUE[name].profile)
+        record = CATALOGUE[name]
+        if record.task == "features":
+            raise InvalidInput(f"{name} is a features model (the '{record.profile}' features "
+                               "stage runs it); only depth and normals models have a profile")
+        profile = get_profile(record.profile)
     else:
         profile = get_profile(name)
     print(profile_to_toml(profile), end="")

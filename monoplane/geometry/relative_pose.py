@@ -119,14 +119,20 @@ def pnp_pose(pi: np.ndarray, pj: np.ndarray, K_i: np.ndarray, depth_i: np.ndarra
 
 
 def essential_pose(pi: np.ndarray, pj: np.ndarray, K_i: np.ndarray, depth_i: np.ndarray,
-                    K_j: np.ndarray, depth_j: np.ndarray, min_inliers: int
-                    ) -> FallbackPose | None:
-    """Essential matrix (USAC MAGSAC++) rotation and direction, baseline from the depth."""
+                    K_j: np.ndarray, depth_j: np.ndarray, min_inliers: int,
+                    threshold_px: float = 1.0, estimator: str = "magsac") -> FallbackPose | None:
+    """Essential matrix rotation and direction, baseline from the depth.
+
+    ``estimator`` is the robust fit: ``"magsac"`` (OpenCV's USAC MAGSAC++), ``"accurate"``
+    (USAC with local optimisation) or ``"ransac"``; ``threshold_px`` its inlier threshold.
+    """
     ni = cv2.undistortPoints(pi.reshape(-1, 1, 2), K_i, None).reshape(-1, 2)
     nj = cv2.undistortPoints(pj.reshape(-1, 1, 2), K_j, None).reshape(-1, 2)
     focal = 0.5 * (K_i[0, 0] + K_j[0, 0])
-    E, mask = cv2.findEssentialMat(ni, nj, np.eye(3), method=cv2.USAC_MAGSAC, prob=0.999,
-                                   threshold=1.0 / focal)
+    method = {"magsac": cv2.USAC_MAGSAC, "accurate": cv2.USAC_ACCURATE,
+              "ransac": cv2.RANSAC}[estimator]
+    E, mask = cv2.findEssentialMat(ni, nj, np.eye(3), method=method, prob=0.999,
+                                   threshold=threshold_px / focal)
     if E is None or E.shape != (3, 3):
         return None
     _, R, t, mask = cv2.recoverPose(E, ni, nj, np.eye(3), mask=mask)

@@ -130,6 +130,17 @@ def _hf_download(repo_id: str, filename: str, revision: str, local_dir: Path) ->
         hub_logger.setLevel(level)
 
 
+def _github_download(repo: str, filename: str, revision: str, local_dir: Path) -> Path:
+    """Download one file of a GitHub repository at a revision into ``local_dir``."""
+    import urllib.request
+
+    url = f"https://raw.githubusercontent.com/{repo}/{revision}/{filename}"
+    target = local_dir / Path(filename).name
+    with urllib.request.urlopen(url, timeout=60) as response, open(target, "wb") as out:
+        shutil.copyfileobj(response, out)
+    return target
+
+
 @dataclass(frozen=True)
 class FetchResult:
     """What :func:`fetch` did.
@@ -157,7 +168,7 @@ def fetch(name: str, *, downloader: Downloader | None = None) -> FetchResult:
     name : str
         Catalogue name.
     downloader : callable, optional
-        Replaces the huggingface_hub download (tests).
+        Replaces the download from the record's host (tests).
 
     Raises
     ------
@@ -176,8 +187,9 @@ def fetch(name: str, *, downloader: Downloader | None = None) -> FetchResult:
     tmp = Path(tempfile.mkdtemp(prefix=".fetch-", dir=final.parent))
     try:
         try:
-            got = (downloader or _hf_download)(record.repo, record.filename, record.revision,
-                                               tmp)
+            download = downloader or (_github_download if record.host == "github"
+                                      else _hf_download)
+            got = download(record.repo, record.filename, record.revision, tmp)
         except Exception as exc:  # offline, DNS, HTTP errors: huggingface_hub raises many types
             first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
             # Library messages run on; keep their first sentence so the line stays readable.

@@ -23,7 +23,11 @@ from typing import Any
 from monoplane.cues.profile_files import get_profile
 from monoplane.errors import ConfigError
 
-TASKS: tuple[str, ...] = ("depth", "normals", "both")
+TASKS: tuple[str, ...] = ("depth", "normals", "both", "features")
+#: Tasks of cue networks (run by a cue profile); ``features`` models run in a features stage.
+CUE_TASKS: tuple[str, ...] = ("depth", "normals", "both")
+#: Where a record's file is published.
+HOSTS: tuple[str, ...] = ("huggingface", "github")
 _HEX = re.compile(r"[0-9a-f]+")
 
 
@@ -36,15 +40,17 @@ class ModelRecord:
     name : str
         Catalogue name used on the command line and in ``cues.model``.
     task : str
-        ``"depth"``, ``"normals"`` or ``"both"``.
+        ``"depth"``, ``"normals"`` or ``"both"`` for cue networks; ``"features"`` for a
+        keypoint network (run by the ``[features]`` stage named by ``profile``).
     licence : str
         SPDX identifier(s) and where the claim comes from.
     size : int or None
         File size in bytes; ``None`` when unknown (then only the hash, if any, is checked).
     profile : str
-        The :mod:`~monoplane.cues.profiles` profile that runs the file.
+        The :mod:`~monoplane.cues.profiles` profile that runs the file; for a ``features``
+        model, the features stage that runs it.
     repo : str
-        Hugging Face model repository, ``owner/name``.
+        Repository on ``host``, ``owner/name``.
     revision : str
         A 40-digit commit hash (pinned) or a branch name such as ``"main"`` (not pinned).
     filename : str
@@ -69,11 +75,15 @@ class ModelRecord:
     sha256: str | None
     summary: str
     provenance: str
+    host: str = "huggingface"
 
     def __post_init__(self) -> None:
         if self.task not in TASKS:
             raise ConfigError(f"model {self.name!r}: task must be one of {', '.join(TASKS)}")
-        get_profile(self.profile)
+        if self.host not in HOSTS:
+            raise ConfigError(f"model {self.name!r}: host must be one of {', '.join(HOSTS)}")
+        if self.task in CUE_TASKS:
+            get_profile(self.profile)
         if self.sha256 is not None and (len(self.sha256) < 16 or len(self.sha256) > 64
                                         or not _HEX.fullmatch(self.sha256)):
             raise ConfigError(f"model {self.name!r}: sha256 must be 16-64 lower-case hex digits")
@@ -88,6 +98,9 @@ class ModelRecord:
     @property
     def url(self) -> str:
         """Direct download URL of the file at the revision."""
+        if self.host == "github":
+            return (f"https://raw.githubusercontent.com/{self.repo}/{self.revision}/"
+                    f"{self.filename}")
         return f"https://huggingface.co/{self.repo}/resolve/{self.revision}/{self.filename}"
 
     def to_dict(self) -> dict[str, Any]:

@@ -166,7 +166,9 @@ class OnnxCuesConfig(NormalsFromDepthOptions):
             raise ConfigError(f"[cues.custom] is set but cues.profile is {self.profile!r}; set "
                               f"profile = \"{CUSTOM_PROFILE}\" to use it")
         if self.model:
-            get_model(self.model)
+            if get_model(self.model).task == "features":
+                raise ConfigError(f"cues.model {self.model!r} is a features model, not a depth "
+                                  f"or normals network; use it as [features] model")
             if self.depth_model:
                 raise ConfigError("set either cues.model (a catalogue name) or "
                                   "cues.depth_model (a file), not both")

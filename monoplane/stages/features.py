@@ -115,7 +115,71 @@ class XFeatFeatures(FeatureMatcher):
         return PairMatches(index, None, None, scores)
 
 
+#: SIFT's descriptor length; the first block of ``sift+xfeat``'s descriptors.
+_SIFT_DIM = 128
+
+
+class SiftXFeatFeatures(FeatureMatcher):
+    """SIFT's and XFeat's keypoints together, each matched with its own rule.
+
+    SIFT localises its keypoints to a fraction of a pixel but finds few matches across wide
+    baselines; XFeat finds many times more, about a pixel and a half off (its keypoints come
+    from an 8 x 8-pixel cell head). COLMAP and the registrar get both. A keypoint's
+    descriptor is its own, unit-normalised, in its own block of a 192-vector (SIFT's 128
+    first, XFeat's 64 last, zeros elsewhere), so descriptors of the two kinds never resemble
+    each other (guided matching compares whole vectors).
+    """
+
+    name = "sift+xfeat"
+
+    @dataclass
+    class Config:
+        model: str = param(
+            "xfeat", "the XFeat ONNX backbone: a file path, or a catalogue name "
+                     "('monoplane models fetch xfeat' downloads it)")
+        max_keypoints: int = param(4096, "most XFeat keypoints per image, strongest first")
+        threshold: float = param(0.05, "smallest XFeat keypoint heatmap value (0-1)")
+        min_similarity: float = param(0.82, "smallest cosine similarity of an XFeat match")
+        threads: int = param(2, "onnxruntime threads")
+        sift_max_keypoints: int = param(4000, "most SIFT keypoints per image")
+        ratio: float = param(0.8, "Lowe's ratio of a SIFT match")
+
+        def __post_init__(self) -> None:
+            XFeatFeatures.Config(self.model, self.max_keypoints, self.threshold,
+                                 self.min_similarity, self.threads)
+            SiftFeatures.Config(self.sift_max_keypoints, self.ratio)
+
+    def __init__(self, config: Config | None = None) -> None:
+        super().__init__(config)
+        cfg = self.config
+        self.sift = SiftFeatures(SiftFeatures.Config(cfg.sift_max_keypoints, cfg.ratio))
+        self.xfeat = XFeatFeatures(XFeatFeatures.Config(
+            cfg.model, cfg.max_keypoints, cfg.threshold, cfg.min_similarity, cfg.threads))
+
+    def detect(self, frame: Frame) -> Keypoints:
+        a, b = self.sift.detect(frame), self.xfeat.detect(frame)
+        desc = np.zeros((len(a) + len(b), _SIFT_DIM + b.descriptors.shape[1]), np.float32)
+        norms = np.maximum(np.linalg.norm(a.descriptors, axis=1, keepdims=True), 1e-12)
+        desc[:len(a), :_SIFT_DIM] = a.descriptors / norms
+        desc[len(a):, _SIFT_DIM:] = b.descriptors
+        return Keypoints(np.concatenate([a.pixels, b.pixels]), desc,
+                         np.concatenate([a.scores, b.scores]))
+
+    def match(self, a: Keypoints, b: Keypoints) -> PairMatches:
+        found, scores = [], []
+        for part, rule in ((slice(0, _SIFT_DIM), self.sift), (slice(_SIFT_DIM, None),
+                                                                self.xfeat)):
+            ia = np.flatnonzero(np.any(a.descriptors[:, part] != 0, axis=1))
+            ib = np.flatnonzero(np.any(b.descriptors[:, part] != 0, axis=1))
+            m = rule.match(Keypoints(a.pixels[ia], a.descriptors[ia, part], a.scores[ia]),
+                           Keypoints(b.pixels[ib], b.descriptors[ib, part], b.scores[ib]))
+            found.append(np.c_[ia[m.index[:, 0]], ib[m.index[:, 1]]])
+            scores.append(m.scores)
+        return PairMatches(np.concatenate(found).astype(np.int64), None, None,
+                           np.concatenate(scores))
+
+
 @hookimpl
 def monoplane_register_feature_matchers() -> list[type[Stage]]:
     """Register the built-in feature matchers."""
-    return [SiftFeatures, XFeatFeatures]
+    return [SiftFeatures, XFeatFeatures, SiftXFeatFeatures]

@@ -34,8 +34,10 @@ from monoplane.geometry.view_registration import (
     ViewGeometry,
     _rotation_deg,
     agreement,
+    depth_disagreement,
     feature_hypotheses,
     fpfh_hypothesis,
+    refine_epipolar,
     refine_icp,
     rotation_hypotheses,
     translation_from_matches,
@@ -44,6 +46,15 @@ from monoplane.geometry.view_registration import (
 )
 from monoplane.hookspecs import hookimpl
 from monoplane.stages.base import Registrar, Stage, param
+
+#: Relative depth: how many of the densely best hypotheses are refined epipolarly.
+_RELATIVE_STARTS = 8
+
+#: Relative depth: the robust essential-matrix fits tried, (estimator, threshold in pixels);
+#: on a near-planar wide pair each lands on another pose of the same epipolar support.
+_ESSENTIAL_FITS: tuple[tuple[str, float], ...] = (
+    ("magsac", 0.5), ("magsac", 1.0), ("accurate", 1.0), ("accurate", 2.0), ("ransac", 0.5),
+    ("ransac", 1.0), ("ransac", 2.0))
 
 #: Hypothesis sources, in the order they are tried; what ``cameras.json`` names them.
 METHODS: dict[str, str] = {
@@ -100,12 +111,26 @@ class PlaneAwareRegistrar(Registrar):
             200, "check an SfM placement densely when its view observes fewer model points "
                  "than this, and replace it when a hypothesis of the registrar's verifies "
                  "better (a two-view model on a few dozen points can be degrees off)")
+        verify_sfm_below_relative: int = param(
+            1000, "relative depth: check an SfM placement whose view observes fewer model "
+                  "points than this against the registrar's relative-pose candidates")
         guided_radius: float = param(
             0.03, "relative depth: search radius of guided matching, a share of the image "
                   "width")
         guided_max_change_deg: float = param(
             10.0, "relative depth: largest rotation change the guided essential matrix may "
                   "make to the hypothesis it started from")
+        epipolar_threshold_px: float = param(
+            2.0, "relative depth: Sampson distance (px) within which a match supports a pose's "
+                 "epipolar geometry")
+        support_share: float = param(
+            0.85, "relative depth: poses supported by at least this share of the best "
+                  "epipolar support compete on how well their triangulated depths agree with "
+                  "the views' own")
+        min_epipolar_support: int = param(
+            20, "relative depth: fewest supporting matches for the pose to be chosen by its "
+                "epipolar support (rotation and direction from the matches, which do not "
+                "warp); below it, by the dense agreement of the depths")
         rotations: int = param(12, "plane-pair rotations tried per view pair (heaviest first)")
         icp: bool = param(True, "refine the best hypothesis by ICP (Open3D) when both depths "
                                 "are metric")
@@ -207,16 +232,22 @@ class PlaneAwareRegistrar(Registrar):
             return
         r = max(in_sfm, key=lambda v: registration[v].get("observations", 0))
         for v in in_sfm:
-            if v == r or registration[v].get("observations", 0) >= cfg.verify_sfm_below:
-                continue
             metric = self._metric(views, r, v)
+            below = cfg.verify_sfm_below if metric else cfg.verify_sfm_below_relative
+            if v == r or registration[v].get("observations", 0) >= below:
+                continue
             tol = cfg.tolerance_metric if metric else cfg.tolerance_relative
             R = cameras[v].R @ cameras[r].R.T
             own = Hypothesis(R, cameras[v].t - R @ cameras[r].t, aligns[v].scale, "sfm")
             check = agreement(scaled_view(r), raw(v), own, tol)
+            # On relative depth the SfM pose competes among the registrar's candidates on
+            # the same epipolar and depth evidence, and is replaced when another wins.
             found = self._pair(views, sfm, features, scaled_view(r), raw(v), r, v,
-                               aligns[r].scale)
-            if found is not None and found.accepted and found.check.score > check.score:
+                               aligns[r].scale, extra=None if metric else own)
+            better = found is not None and found.accepted and (
+                found.check.score > check.score if metric
+                else found.refined and found.hyp.source != "sfm")
+            if better:
                 observations = registration[v].get("observations", 0)
                 place(v, r, found)
                 registration[v].update(replaced="sfm", sfm_observations=observations,
@@ -277,8 +308,10 @@ class PlaneAwareRegistrar(Registrar):
     def _guided(self, views: list[Reconstruction], sfm: SfmResult,
                 features: dict[int, Features],
                 ref: ViewGeometry, other: ViewGeometry, r: int, v: int, hyp: Hypothesis,
-                fixed: float | None) -> Hypothesis | None:
-        """Essential-matrix pose of the matches found near where ``hyp`` predicts them."""
+                fixed: float | None
+                ) -> tuple[Hypothesis | None, tuple[np.ndarray, np.ndarray]]:
+        """Essential-matrix pose of the matches found near where ``hyp`` predicts them, and
+        those matches ((m, 2) pixels in ``r`` and in ``v``)."""
         fr = self._features(views, sfm, features, r)
         fv = self._features(views, sfm, features, v)
         x = _lift(fr.pixels, ref)
@@ -290,16 +323,16 @@ class PlaneAwareRegistrar(Registrar):
         radius = self.config.guided_radius * other.shape[1]
         pr, pv = guided_matches(fr, fv, pred, radius)
         if len(pr) < 15:
-            return None
+            return None, (pr, pv)
         found = essential_pose(pr, pv, ref.K, ref.depth, other.K, other.depth, 15)
         if found is None:
-            return None
+            return None, (pr, pv)
         return Hypothesis(found.R, found.t, fixed if fixed is not None else found.depth_scale_j,
-                          hyp.source + "+guided", found.inliers)
+                          hyp.source + "+guided", found.inliers), (pr, pv)
 
     def _pair(self, views: list[Reconstruction], sfm: SfmResult, features: dict[int, Features],
-              ref: ViewGeometry, other: ViewGeometry, r: int, v: int, scale_r: float
-              ) -> _Candidate | None:
+              ref: ViewGeometry, other: ViewGeometry, r: int, v: int, scale_r: float,
+              extra: Hypothesis | None = None) -> _Candidate | None:
         cfg = self.config
         metric = self._metric(views, r, v)
         fixed = scale_r if metric else None
@@ -325,7 +358,7 @@ class PlaneAwareRegistrar(Registrar):
             found = fpfh_hypothesis(ref, other, scale_r, seed=cfg.seed)
             if found is not None:
                 hyps.append(found)
-        if not hyps:
+        if not hyps and extra is None:
             return None
         checked = sorted(((agreement(ref, other, h, tol), h) for h in hyps),
                          key=lambda e: -e[0].score)
@@ -342,20 +375,76 @@ class PlaneAwareRegistrar(Registrar):
                 if after.agree >= 0.98 * check.agree and (not refined or after.score > check.score):
                     check, hyp, refined = after, better, True
         elif "essential" in cfg.methods:
-            # Relative depth warps (several percent), so every pose fitted on lifted points or
-            # on normals inherits degrees of error (ICP made it worse, docs/multiview.md). The
-            # image does not warp: the best pose predicts where each keypoint of the
-            # reference lands in the other view, matching near there finds many more
-            # correct matches, and their essential matrix gives the rotation and direction.
-            found = self._guided(views, sfm, features, ref, other, r, v, hyp, fixed)
-            if found is not None:
-                after = agreement(ref, other, found, tol)
-                if (_rotation_deg(found.R, hyp.R) < cfg.guided_max_change_deg
-                        and after.agree >= 0.8 * check.agree):
-                    check, hyp, refined = after, found, True
-        accepted = (check.overlap >= cfg.min_overlap and check.violation <= cfg.max_violation
-                    and check.colour >= cfg.min_colour)
-        return _Candidate(hyp, check, len(pr), refined, accepted)
+            check, hyp, refined = self._relative_pose(views, sfm, features, ref, other, r, v,
+                                                      checked, pr, pv, tol, extra)
+        return _Candidate(hyp, check, len(pr), refined, _accepted(check, cfg))
+
+    def _relative_pose(self, views: list[Reconstruction], sfm: SfmResult,
+                       features: dict[int, Features], ref: ViewGeometry, other: ViewGeometry,
+                       r: int, v: int, checked: list[tuple[Agreement, Hypothesis]],
+                       pr: np.ndarray, pv: np.ndarray, tol: float,
+                       extra: Hypothesis | None = None
+                       ) -> tuple[Agreement, Hypothesis, bool]:
+        """The pose of a pair with relative depth: rotation and direction from the matches.
+
+        Relative depth warps (several percent), so every pose fitted on lifted points or on
+        normals inherits degrees of error (ICP made it worse, docs/multiview.md); the
+        epipolar geometry of the matches does not warp. Candidates are the sources'
+        hypotheses, essential matrices of the matches from several robust estimators and
+        thresholds, and the one of the matches found near where the densely best hypothesis
+        predicts them (guided matching); each is refined on the Sampson distances of its
+        epipolar inliers. Of those the dense check accepts and that explain nearly as many
+        matches as the best (``support_share``), the one whose triangulated depths agree
+        best with the views' own (:func:`depth_disagreement`) wins: near-planar scenes let a
+        pose trade degrees of rotation against its translation at almost the same epipolar
+        support, but not at the same depths. With fewer than ``min_epipolar_support``
+        supporting matches (low texture), the densely best verified hypothesis is kept.
+        ``extra`` (an SfM pose being checked) competes as one more candidate.
+        """
+        cfg = self.config
+        check, hyp = checked[0] if checked else (None, None)
+        # The densely best few, and every essential matrix however it ranks densely.
+        candidates = [h for k, (_, h) in enumerate(checked)
+                      if k < _RELATIVE_STARTS or h.source == "essential"]
+        if extra is not None:
+            candidates.append(extra)
+        if hyp is not None:
+            guided, (gr, gv) = self._guided(views, sfm, features, ref, other, r, v, hyp, None)
+            if guided is not None and _rotation_deg(guided.R, hyp.R) < cfg.guided_max_change_deg:
+                candidates.append(guided)
+            # Guided matching finds correct matches the unguided search missed (a few of them
+            # twice): every hypothesis is judged on both.
+            pr, pv = np.concatenate([pr, gr]), np.concatenate([pv, gv])
+        if len(pr) >= cfg.min_epipolar_support:
+            for estimator, threshold in _ESSENTIAL_FITS:
+                found = essential_pose(pr, pv, ref.K, ref.depth, other.K, other.depth, 8,
+                                       threshold, estimator)
+                if found is not None:
+                    candidates.append(Hypothesis(found.R, found.t, found.depth_scale_j,
+                                                 "essential", found.inliers))
+        thr = cfg.epipolar_threshold_px
+        refined: list[tuple[int, Agreement, Hypothesis]] = []
+        for start in candidates:
+            found = refine_epipolar(start, pr, pv, ref.K, other.K, thr)
+            if found is None:
+                continue
+            moved, support = found
+            after = agreement(ref, other, moved, tol)
+            if _accepted(after, cfg):
+                refined.append((support, after, moved))
+        most = max((c[0] for c in refined), default=0)
+        if most < cfg.min_epipolar_support:
+            if check is None:
+                return agreement(ref, other, extra, tol), extra, False
+            return check, hyp, False
+        close = [c for c in refined if c[0] >= cfg.support_share * most]
+        best = min(close, key=lambda c: depth_disagreement(c[2], pr, pv, ref, other, thr))
+        return best[1], best[2], True
+
+
+def _accepted(check: Agreement, cfg: PlaneAwareRegistrar.Config) -> bool:
+    return (check.overlap >= cfg.min_overlap and check.violation <= cfg.max_violation
+            and check.colour >= cfg.min_colour)
 
 
 def _lift(pixels: np.ndarray, g: ViewGeometry) -> np.ndarray:

@@ -128,3 +128,31 @@ def test_real_backbone_matches_follow_a_known_homography() -> None:
     assert np.mean(err < 3.0) > 0.8
     assert np.mean(err < 1.0) > 0.3
     assert np.median(err) < 1.6
+
+
+@pytest.mark.skipif(not REAL.is_file(), reason="the shared XFeat model is not present")
+def test_the_catalogue_entry_is_the_shared_file(tmp_path: Path,
+                                                monkeypatch: pytest.MonkeyPatch) -> None:
+    """The catalogue's size and SHA-256 are the real file's, and the ``xfeat`` features stage
+    finds it in the cache by its catalogue name (as after 'monoplane models fetch xfeat')."""
+    import shutil
+
+    from monoplane.datamodel import Frame, intrinsics_matrix
+    from monoplane.models import get_model, model_path, require_model
+    from monoplane.models.cache import check_file
+    from monoplane.pipeline import Pipeline
+    from monoplane.stages.base import FeatureMatcher
+
+    monkeypatch.setenv("MONOPLANE_CACHE", str(tmp_path))
+    record = get_model("xfeat")
+    assert check_file(record, REAL, full=True) is None
+    pipe = Pipeline.from_preset("monoplane", ["features.plugin=xfeat"])
+    stage = pipe.stage("features", FeatureMatcher)
+    frame = Frame(rgb=np.zeros((48, 64, 3), np.uint8), K=intrinsics_matrix(50, 50, 31.5, 23.5),
+                  name="blank")
+    with pytest.raises(InvalidInput, match="monoplane models fetch xfeat"):
+        stage.detect(frame)
+    model_path(record).parent.mkdir(parents=True, exist_ok=True)
+    shutil.copy(REAL, model_path(record))
+    assert require_model("xfeat") == model_path(record)
+    assert len(stage.detect(frame)) == 0  # a blank image has no keypoints, but it ran

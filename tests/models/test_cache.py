@@ -166,9 +166,11 @@ def test_default_downloader_uses_huggingface_hub(cache: Path, tiny: ModelRecord,
 
 def test_catalogue_records_are_well_formed() -> None:
     assert set(CATALOGUE) == {"depth-anything-v2-small", "metric3d-v2-small",
-                              "moge-2-vits-normal"}
+                              "moge-2-vits-normal", "xfeat"}
     for rec in CATALOGUE.values():
-        assert rec.url.startswith(f"https://huggingface.co/{rec.repo}/resolve/")
+        host = ("https://raw.githubusercontent.com/" if rec.host == "github"
+                else "https://huggingface.co/")
+        assert rec.url.startswith(f"{host}{rec.repo}/")
         assert rec.size and rec.sha256 and rec.licence and rec.provenance
         assert "NC" not in rec.licence.split(" ")[0]  # no non-commercial defaults
     assert not get_model("moge-2-vits-normal").pinned  # honest: no commit hash known
@@ -179,6 +181,8 @@ def test_catalogue_records_are_well_formed() -> None:
         record(sha256="XYZ")
     with pytest.raises(ConfigError, match="task"):
         record(task="segmentation")
+    with pytest.raises(ConfigError, match="host"):
+        record(host="ftp")
 
 
 def test_models_cli_list_fetch_path(cache: Path, tiny: ModelRecord,

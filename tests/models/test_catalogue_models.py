@@ -144,5 +144,6 @@ def test_moge_2_vits_normal(cache: Path, tmp_path: Path,
 
 
 def test_every_catalogue_entry_has_an_end_to_end_test() -> None:
-    tested = {"depth-anything-v2-small", "metric3d-v2-small", "moge-2-vits-normal"}
+    # xfeat: tests/features/test_xfeat.py::test_the_catalogue_entry_is_the_shared_file
+    tested = {"depth-anything-v2-small", "metric3d-v2-small", "moge-2-vits-normal", "xfeat"}
     assert set(CATALOGUE) == tested
