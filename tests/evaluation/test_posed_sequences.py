@@ -528,3 +528,33 @@ def test_livingroom_splits_hold_ten_pairs_each() -> None:
             assert 20 <= angles[i, j] <= 40 and overlap[i, j] >= 0.4
         frames[split] = {f for s in sets for f in s}
     assert not frames["tune"] & frames["report"]
+
+
+@pytest.mark.skipif(not LIVINGROOM.is_dir(), reason="living-room sequence not available")
+def test_livingroom_frame_with_holes_is_corrupted_repeatably() -> None:
+    seq = load_posed_sequence(LIVINGROOM, "525,525,319.5,239.5")
+    sensor = sequence_frame(seq, 0, "rgbd").depth
+    holes = sensor == 0
+    assert holes.mean() > 0.01  # frame 0 has holes: they must stay holes
+    mono = sequence_frame(seq, 0, "mono", seed=7)
+    assert np.array_equal(mono.depth == 0, holes)
+    assert not mono.normals[holes].any()
+    np.testing.assert_array_equal(mono.depth, sequence_frame(seq, 0, "mono-depth", seed=7).depth)
+    ratio = mono.depth[~holes] / sensor[~holes]
+    p = LEVEL_PARAMS["mild"]
+    assert p.scale_range[0] <= np.median(ratio) <= p.scale_range[1]
+    # Mild: within 10 % of one scale almost everywhere (warp, range distortion, noise; the
+    # blurred occlusion edges are the exceptions).
+    assert np.mean(np.abs(ratio / np.median(ratio) - 1) < 0.1) > 0.97
+
+
+@pytest.mark.skipif(not LIVINGROOM.is_dir(), reason="living-room sequence not available")
+def test_livingroom_pair_registers_with_monocular_cues() -> None:
+    pytest.importorskip("pycolmap")
+    from monoplane.evaluation.posed_sequences import evaluate_posed_sequence
+
+    res = evaluate_posed_sequence(LIVINGROOM, "525,525,319.5,239.5", mode="mono",
+                                  pairs="55-100")
+    mono = res["modes"]["mono"]
+    assert (mono["pairs_registered"], mono["pairs_correct"]) == (1, 1)
+    assert res["settings"]["level"] == "mild"
