@@ -31,9 +31,12 @@ EPILOG = """examples:
   monoplane eval --data abw-dev/ --as-cloud --preset cloud
   monoplane eval --multiview --views 5 --path walk --n 10
   monoplane eval --multiview --data livingroom/ --intrinsics 525,525,319.5,239.5 \
-      --n 10 --split tune --mode both
+      --n 10 --split tune --mode all
   monoplane eval --multiview --data livingroom/ --views 5 --mode rgbd --json views5.json
-  monoplane eval --multiview --data livingroom/ --pairs 0-32,53-102 --mode mono
+  monoplane eval --multiview --data livingroom/ --pairs 0-32,53-102 --mode mono \
+      --level strong
+  monoplane eval --multiview --data livingroom/ --n 3 --mode network \
+      --set cues.plugin=onnx --set cues.model=depth-anything-v2-small
 
 Scene i uses seed SEED+i, so equal arguments give equal tables (timings aside). Baselines come
 registered through the 'monoplane_register_baselines' plugin hook: open3d-ransac is built in,
@@ -41,6 +44,12 @@ installed plugins add more (--all scores every one); --baseline-set NAME.FIELD=V
 fields of a baseline's settings, so peers are compared tuned. 's/frame' is the whole call,
 'core s' a baseline's own call without data conversion when it reports one. See
 docs/evaluation.md."""
+
+
+# The names of monoplane.evaluation.posed_sequences.MODES and MODE_GROUPS, spelled out so that
+# building the parser does not import the evaluation (tests check that they agree).
+POSED_MODES = ("rgbd", "mono", "mono-depth", "network")
+POSED_MODE_GROUPS = ("all", "both")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -62,12 +71,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_set_arg(what, "override one parameter of every preset (repeatable)")
     data = p.add_argument_group("data")
     data.add_argument("--level", default="mild", choices=("clean", "mild", "strong"),
-                      help="cue corruption: exact cues, or monocular-like errors (default: mild)")
+                      help="cue corruption: exact cues, or monocular-like errors (default: "
+                           "mild); with --multiview --data, the level of the mono and "
+                           "mono-depth modes (mild or strong)")
     data.add_argument("--n", type=int,
                       help="number of scenes or pairs (default: 50; 10 with --multiview --data)")
     data.add_argument("--seed", type=int, default=0,
-                      help="seed of the first scene, or of the mono depth of --multiview --data "
-                           "(default: 0)")
+                      help="seed of the first scene, or of the monocular-like cues of "
+                           "--multiview --data (default: 0)")
     data.add_argument("--size", default="256x192", metavar="WxH",
                       help="image size (default: 256x192, the paper's)")
     data.add_argument("--multiview", action="store_true",
@@ -94,9 +105,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        help="pinhole intrinsics of the sequence (default: DIR/intrinsics.json)")
     posed.add_argument("--depth-scale", type=float, default=1000.0, metavar="S",
                        help="divide the depth files' values by S (default: 1000, millimetres)")
-    posed.add_argument("--mode", default="both", choices=("rgbd", "mono", "both"),
-                       help="views get their metric depth (rgbd), a scaled and warped relative "
-                            "depth (mono), or one run of each (default: both)")
+    posed.add_argument("--mode", default="all",
+                       choices=(*POSED_MODES, *POSED_MODE_GROUPS),
+                       help="what each view gets: its sensor depth (rgbd); depth corrupted as "
+                            "a network errs at --level, with the network's normals (mono) or "
+                            "alone (mono-depth); nothing, the cue provider predicting from the "
+                            "image (network, needs --set cues.plugin=...); all = rgbd, mono "
+                            "and mono-depth (default: all; 'both' is a deprecated name of "
+                            "rgbd + mono)")
     posed.add_argument("--split", default="all", choices=("tune", "report", "all"),
                        help="frames the view sets may use: tune = the first half of the "
                             "trajectory, report = the second half (default: all)")
@@ -190,6 +206,9 @@ def _run_posed_sequence(args: argparse.Namespace) -> int:
         raise InvalidInput(f"--views must be at least 2, got {args.views}")
     if args.pairs and args.views > 2:
         raise InvalidInput("give --pairs or --views, not both")
+    if args.mode == "both":
+        print("monoplane: note: --mode both is deprecated (it runs rgbd and mono); use --mode "
+              "all for rgbd, mono and mono-depth", file=sys.stderr)
     results = evaluate_posed_sequence(
         args.data, args.intrinsics, mode=args.mode, split=args.split,
         n=10 if args.n is None else args.n, views=args.views if args.views > 2 else None,
@@ -197,7 +216,7 @@ def _run_posed_sequence(args: argparse.Namespace) -> int:
         overrides=args.overrides, depth_scale=args.depth_scale, min_angle=args.min_angle,
         max_angle=args.max_angle, min_overlap=args.min_overlap,
         rotation_threshold=args.rotation_threshold,
-        translation_threshold=args.translation_threshold, seed=args.seed,
+        translation_threshold=args.translation_threshold, seed=args.seed, level=args.level,
         progress=not args.no_progress)
     print(format_posed_sequence(results))
     if args.json:

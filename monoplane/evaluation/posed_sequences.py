@@ -21,10 +21,16 @@ Protocol (see ``docs/multiview.md``, "Evaluating on a posed RGB-D sequence"):
    overlap graph (:func:`select_views`), and every pair in it is scored.
 2. **Splits.** ``tune`` holds the first ``ceil(N / 2)`` frames of the trajectory, ``report``
    the others; a pair or set belongs to a split when all its frames do (``all``: no limit).
-3. **Modes.** ``rgbd`` gives each view its metric depth; ``mono`` a monocular-like depth: an
-   unknown scale (log-uniform in 0.3-3) times a smooth warp of at most ±10 %, seeded per frame,
-   marked relative. Normals are always left to the pipeline's cue provider, which estimates
-   them from the depth it is given (the ``given`` provider by default).
+3. **Modes.** ``rgbd`` gives each view its metric depth. The monocular modes corrupt it as
+   a network errs, with the synthetic scenes' corruption levels (``mild``, ``strong``;
+   :mod:`monoplane.synth.corrupt`): an unknown scale, a range distortion, a smooth warp,
+   blurred occlusion edges and pixel noise, drawn per frame from ``(seed, frame id)`` and
+   marked relative. ``mono`` also gives the network's normals: the project's normal
+   estimator on the true depth, then blurred across creases, turned by a few degrees and
+   noisy as the same level says; ``mono-depth`` gives the corrupted depth alone (as a
+   depth-only network does). ``network`` gives no depth at all: the pipeline's cue provider
+   predicts the cues from the image. Missing normals are left to the cue provider, which
+   estimates them from the depth it is given (the ``given`` provider by default).
 4. **The product path.** Each set runs through
    :func:`monoplane.multiview.reconstruct_multiview` with the intrinsics held fixed; a run
    that raises a :class:`~monoplane.errors.MonoplaneError` registers none of its views.
@@ -52,13 +58,22 @@ from monoplane.datamodel import Frame
 from monoplane.errors import InvalidInput, MonoplaneError
 from monoplane.evaluation.twoview import relative_pose_error
 from monoplane.fileio import load_frame, read_depth, read_intrinsics, read_redwood_log
-from monoplane.synth.corrupt import smooth_warp
+from monoplane.geometry.normals import normals_from_depth
+from monoplane.synth.corrupt import LEVEL_PARAMS, corrupt_depth, corrupt_normals
 
 if TYPE_CHECKING:
     from monoplane.multiview import MultiviewResult
     from monoplane.pipeline import Pipeline
 
-MODES: tuple[str, ...] = ("rgbd", "mono")
+#: What each view gets (module docstring, step 3).
+MODES: tuple[str, ...] = ("rgbd", "mono", "mono-depth", "network")
+#: ``--mode`` values that run several modes; ``both`` is the deprecated name of rgbd + mono.
+MODE_GROUPS: dict[str, tuple[str, ...]] = {"all": ("rgbd", "mono", "mono-depth"),
+                                           "both": ("rgbd", "mono")}
+#: Corruption levels of the monocular modes (:data:`monoplane.synth.corrupt.LEVEL_PARAMS`).
+LEVELS: tuple[str, ...] = ("mild", "strong")
+#: Modes whose depth is the corrupted sensor depth.
+MONOCULAR_MODES: tuple[str, ...] = ("mono", "mono-depth")
 SPLITS: tuple[str, ...] = ("tune", "report", "all")
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png")
 DEPTH_SUFFIXES = (".png", ".npy")
@@ -66,10 +81,6 @@ DEPTH_SUFFIXES = (".png", ".npy")
 OVERLAP_STRIDE = 8
 #: Relative depth difference within which a lifted pixel is visible in the other view.
 VISIBILITY_TOLERANCE = 0.05
-#: Monocular-like depth: range of the unknown scale (log-uniform) and the warp's peak factor.
-MONO_SCALE_RANGE = (0.3, 3.0)
-MONO_WARP = 1.10
-MONO_WARP_BUMPS = 2
 #: Method recorded for a view without a pose.
 UNREGISTERED = "none"
 
@@ -382,54 +393,102 @@ def select_views(positions: Sequence[int], k: int, angles: np.ndarray, overlap: 
 # Frames as the product sees them
 
 
-def monocular_like_depth(depth: np.ndarray, rng: np.random.Generator
-                         ) -> tuple[np.ndarray, float]:
-    """Depth as a monocular network might give it: right only up to scale, and warped.
+def mode_list(mode: str) -> list[str]:
+    """The modes ``--mode`` runs: one of :data:`MODES` or a group of :data:`MODE_GROUPS`.
 
-    The depth is multiplied by an unknown scale, log-uniform in :data:`MONO_SCALE_RANGE`, and
-    by a smooth field ``exp(w)`` with ``max |w| = log(MONO_WARP)`` (about ±10 %; the
-    low-frequency field of :func:`monoplane.synth.corrupt.smooth_warp`).
+    Raises
+    ------
+    InvalidInput
+        On an unknown name, listing the valid ones.
+    """
+    if mode in MODE_GROUPS:
+        return list(MODE_GROUPS[mode])
+    if mode not in MODES:
+        raise InvalidInput(f"unknown mode {mode!r}; choose one of {', '.join(MODES)}, all")
+    return [mode]
+
+
+def check_level(level: str) -> None:
+    """Raise :class:`InvalidInput` unless ``level`` is one of :data:`LEVELS`."""
+    if level not in LEVELS:
+        raise InvalidInput(f"unknown corruption level {level!r} for a posed sequence; choose "
+                           f"one of {', '.join(LEVELS)} (the sensor depth itself is --mode rgbd)")
+
+
+def monocular_cues(depth: np.ndarray, K: np.ndarray, level: str, rng: np.random.Generator,
+                   with_normals: bool) -> tuple[np.ndarray, np.ndarray | None, float]:
+    """Cues as a monocular network might give them, from a view's sensor depth.
+
+    The depth goes through :func:`monoplane.synth.corrupt.corrupt_depth` at ``level``. With
+    ``with_normals`` the network's normals are the project's estimator
+    (:func:`~monoplane.geometry.normals.normals_from_depth`, default window) on the *true*
+    depth, then :func:`~monoplane.synth.corrupt.corrupt_normals`: a network's normals do not
+    inherit its depth's warp, but are blurred across creases, a few degrees off and noisy.
 
     Parameters
     ----------
     depth : numpy.ndarray
-        (H, W) metric z-depth, 0 = no measurement (stays 0).
+        (H, W) metric z-depth, 0 = no measurement (stays 0, and has no normal).
+    K : numpy.ndarray
+        (3, 3) intrinsics in pixels.
+    level : {"mild", "strong"}
+        Corruption level (:data:`monoplane.synth.corrupt.LEVEL_PARAMS`).
     rng : numpy.random.Generator
-        Source of the scale and the warp.
+        Source of every draw: the depth's first, then the normals', so a frame's depth is the
+        same with and without normals.
+    with_normals : bool
+        Also return the network's normals.
 
     Returns
     -------
-    (numpy.ndarray, float)
-        (H, W) float32 warped depth, and the scale drawn.
+    (numpy.ndarray, numpy.ndarray or None, float)
+        (H, W) float32 relative depth, (H, W, 3) float32 unit normals in the camera frame
+        (OpenCV axes, facing the camera, zero where there is none) or None, and the unknown
+        scale drawn.
     """
-    lo, hi = np.log(MONO_SCALE_RANGE)
-    scale = float(np.exp(rng.uniform(lo, hi)))
-    h, w = depth.shape
-    warp = np.exp(smooth_warp(h, w, MONO_WARP_BUMPS, float(np.log(MONO_WARP)), rng))
-    return (depth * scale * warp).astype(np.float32), scale
+    check_level(level)
+    params = LEVEL_PARAMS[level]
+    corrupted, scale = corrupt_depth(depth, params, rng)
+    if not with_normals:
+        return corrupted, None, scale
+    clean = normals_from_depth(depth, K)
+    normals = corrupt_normals(np.where((depth > 0)[..., None], clean, 0.0), K, params, rng)
+    return corrupted, normals, scale
 
 
-def sequence_frame(seq: PosedSequence, k: int, mode: str, seed: int = 0) -> Frame:
+def sequence_frame(seq: PosedSequence, k: int, mode: str, seed: int = 0,
+                   level: str = "mild") -> Frame:
     """Trajectory entry ``k`` as the ``monoplane multiview`` command line would load it.
 
-    ``rgbd``: its metric depth; ``mono``: :func:`monocular_like_depth` drawn from the
-    generator seeded by ``(seed, frame id)`` (so a frame looks the same in every set), marked
-    relative. No normals: the cue provider estimates them from the depth given.
+    ``rgbd``: its metric depth; ``mono`` / ``mono-depth``: :func:`monocular_cues` at
+    ``level`` with / without the network's normals, drawn from the generator seeded by
+    ``(seed, frame id)`` (so a frame looks the same in every set, and has the same depth in
+    both modes), marked relative; ``network``: the image alone. Normals not given are left to
+    the cue provider.
     """
     if mode not in MODES:
         raise InvalidInput(f"unknown mode {mode!r}; choose one of {', '.join(MODES)}")
     # As --intrinsics text; repr() of a float reads back to the same float.
     spec = ",".join(repr(float(x)) for x in (seq.K[0, 0], seq.K[1, 1], seq.K[0, 2], seq.K[1, 2]))
+    if mode == "network":
+        return load_frame(seq.images[k], intrinsics=spec)
+    monocular = mode in MONOCULAR_MODES
     frame = load_frame(seq.images[k], depth=seq.depths[k], intrinsics=spec,
                        depth_scale=seq.depth_scale,
-                       depth_kind="relative" if mode == "mono" else "metric")
-    if mode == "mono":
-        rng = np.random.default_rng([seed, int(seq.ids[k])])
-        depth, scale = monocular_like_depth(frame.depth, rng)  # type: ignore[arg-type]
-        frame = frame.with_(depth=depth, notes=[
-            *frame.notes, f"evaluation: depth times an unknown scale ({scale:.3g}) and a smooth "
-                          f"warp of at most {100 * (MONO_WARP - 1):.0f} %"])
-    return frame
+                       depth_kind="relative" if monocular else "metric")
+    if not monocular:
+        return frame
+    rng = np.random.default_rng([seed, int(seq.ids[k])])
+    depth, normals, scale = monocular_cues(frame.depth, frame.K, level,  # type: ignore[arg-type]
+                                           rng, with_normals=mode == "mono")
+    p = LEVEL_PARAMS[level]
+    notes = [*frame.notes, f"evaluation: {level} monocular-like depth (unknown scale "
+                           f"{scale:.3g}, warp up to {100 * p.warp:.0f} % in log-depth, edges "
+                           f"blurred, {100 * p.depth_noise:.1f} % noise)"]
+    if normals is not None:
+        notes.append(f"evaluation: {level} network-like normals (from the true depth, blurred, "
+                     f"turned by up to {p.normal_rotation_deg:g} deg, noisy)")
+    return frame.with_(depth=depth, normals=normals, notes=notes)
 
 
 # --------------------------------------------------------------------------------------------
@@ -513,7 +572,8 @@ def score_view_set(seq: PosedSequence, members: Sequence[int], result: Multiview
 
 
 def run_view_set(seq: PosedSequence, members: Sequence[int], mode: str, pipe: Pipeline,
-                 seed: int = 0) -> tuple[MultiviewResult | None, str | None, float]:
+                 seed: int = 0, level: str = "mild"
+                 ) -> tuple[MultiviewResult | None, str | None, float]:
     """Reconstruct one view set with the product's multi-view driver (one process).
 
     Returns
@@ -524,7 +584,7 @@ def run_view_set(seq: PosedSequence, members: Sequence[int], mode: str, pipe: Pi
     """
     from monoplane.multiview import reconstruct_multiview
 
-    frames = [sequence_frame(seq, k, mode, seed) for k in members]
+    frames = [sequence_frame(seq, k, mode, seed, level) for k in members]
     start = time.perf_counter()
     try:
         result = reconstruct_multiview(frames, pipe, workers=1)
@@ -674,7 +734,7 @@ def choose_view_sets(seq: PosedSequence, split: str = "all", n: int = 10,
 
 def evaluate_posed_sequence(data_dir: str | Path,
                             intrinsics: str | Path | np.ndarray | None = None,
-                            mode: str = "both", split: str = "all", n: int = 10,
+                            mode: str = "all", split: str = "all", n: int = 10,
                             views: int | None = None,
                             pairs: str | Sequence[tuple[int, int]] | None = None,
                             preset: str = "monoplane", overrides: list[str] | None = None,
@@ -682,7 +742,7 @@ def evaluate_posed_sequence(data_dir: str | Path,
                             max_angle: float = 40.0, min_overlap: float = 0.4,
                             rotation_threshold: float = 5.0,
                             translation_threshold: float = 10.0, seed: int = 0,
-                            progress: bool = False) -> dict[str, Any]:
+                            level: str = "mild", progress: bool = False) -> dict[str, Any]:
     """Score sparse-view registration on a posed RGB-D sequence.
 
     Parameters
@@ -691,8 +751,9 @@ def evaluate_posed_sequence(data_dir: str | Path,
         The sequence folder (module docstring).
     intrinsics : str, Path or numpy.ndarray, optional
         ``"fx,fy,cx,cy"``, a JSON file or a (3, 3) matrix; default ``data_dir/intrinsics.json``.
-    mode : {"rgbd", "mono", "both"}
-        Which depth the views get (module docstring).
+    mode : {"rgbd", "mono", "mono-depth", "network", "all"}
+        Which cues the views get (module docstring); ``all`` runs rgbd, mono and mono-depth
+        (``both``, deprecated: rgbd and mono).
     split : {"tune", "report", "all"}
         Which frames the sets may use.
     n : int
@@ -702,7 +763,8 @@ def evaluate_posed_sequence(data_dir: str | Path,
     pairs : str or sequence of (int, int), optional
         Evaluate these frame-id pairs (``"i-j,k-l"``) instead of choosing.
     preset, overrides : str, list of str
-        Pipeline; ``cues.plugin=given`` comes first, so overrides may replace it.
+        Pipeline; ``cues.plugin=given`` comes first, so overrides may replace it (``network``
+        mode needs a provider that predicts depth from the image, e.g. ``cues.plugin=onnx``).
     depth_scale : float
         Divisor of the depth files' values.
     min_angle, max_angle : float
@@ -713,9 +775,17 @@ def evaluate_posed_sequence(data_dir: str | Path,
         A pair is correct when its rotation and translation-direction errors are below these
         (degrees).
     seed : int
-        Seed of the monocular-like depth.
+        Seed of the monocular-like cues (with the frame id).
+    level : {"mild", "strong"}
+        Corruption level of the monocular modes (ignored by ``rgbd`` and ``network``).
     progress : bool
         Progress bar on stderr.
+
+    Raises
+    ------
+    InvalidInput
+        On a bad argument, or in ``network`` mode when the cue provider cannot give the first
+        view its cues (e.g. ``given`` without depth, or a missing model file).
 
     Returns
     -------
@@ -729,9 +799,9 @@ def evaluate_posed_sequence(data_dir: str | Path,
     from monoplane.multiview import hold_intrinsics_fixed
     from monoplane.pipeline import Pipeline
 
-    modes = list(MODES) if mode == "both" else [mode]
-    if any(m not in MODES for m in modes):
-        raise InvalidInput(f"unknown mode {mode!r}; choose rgbd, mono or both")
+    modes = mode_list(mode)
+    if any(m in MONOCULAR_MODES for m in modes):
+        check_level(level)
     if n < 1:
         raise InvalidInput(f"--n must be at least 1, got {n}")
     for name, value in (("--rotation-threshold", rotation_threshold),
@@ -752,20 +822,45 @@ def evaluate_posed_sequence(data_dir: str | Path,
                      "intrinsics_fixed": fixed, "depth_scale": seq.depth_scale,
                      "min_angle": min_angle, "max_angle": max_angle, "min_overlap": min_overlap,
                      "rotation_threshold": rotation_threshold,
-                     "translation_threshold": translation_threshold, "seed": seed},
+                     "translation_threshold": translation_threshold, "seed": seed,
+                     "level": level, "modes": modes},
         "selection": {**selection, "sets": [[int(seq.ids[k]) for k in s] for s in sets]},
         "modes": {},
     }
+    if "network" in modes:
+        probe_network_cues(seq, sets[0][0], pipe)
     for m in modes:
         rows = []
         for members in tqdm(sets, desc=f"{m} view sets", disable=not progress):
-            result, error, seconds = run_view_set(seq, members, m, pipe, seed)
+            result, error, seconds = run_view_set(seq, members, m, pipe, seed, level)
             row = score_view_set(seq, members, result, error, overlap, angles,
                                  rotation_threshold, translation_threshold)
             row["time_s"] = seconds
             rows.append(row)
         out["modes"][m] = {**summarise(rows), "rows": rows}
     return out
+
+
+def probe_network_cues(seq: PosedSequence, k: int, pipe: Pipeline) -> None:
+    """Give trajectory entry ``k``, image only, its cues once, so that a cue provider which
+    cannot predict them fails the evaluation at once with its own message, not every set.
+
+    Raises
+    ------
+    InvalidInput
+        Naming ``--mode network``, the provider and its error.
+    """
+    from monoplane.stages.base import CueProvider
+
+    frame = sequence_frame(seq, k, "network")
+    try:
+        pipe.prepare(frame)
+    except MonoplaneError as exc:
+        name = pipe.stage("cues", CueProvider).name
+        message = (str(exc).splitlines() or [type(exc).__name__])[0]
+        raise InvalidInput(f"--mode network: cue provider {name!r} cannot predict cues from the "
+                           f"image {seq.images[k]}: {message}; choose a predicting provider with "
+                           f"--set cues.plugin=...") from exc
 
 
 def _deg(x: float) -> str:
@@ -780,7 +875,9 @@ def format_posed_sequence(r: dict[str, Any]) -> str:
              f"{len(sel['sets'])} view sets ({sel['rule']}"
              + (f", {sel['candidates']} candidate pairs" if "candidates" in sel else "") + ")",
              f"correct pair: rotation < {s['rotation_threshold']:g} deg and translation "
-             f"direction < {s['translation_threshold']:g} deg; preset {s['preset']}"]
+             f"direction < {s['translation_threshold']:g} deg; preset {s['preset']}"
+             + (f"; monocular cues at level {s['level']}, seed {s['seed']}"
+                if any(m in MONOCULAR_MODES for m in s["modes"]) else "")]
     for mode, res in r["modes"].items():
         rot, trans = res["rotation_error_deg"], res["translation_error_deg"]
         methods = ", ".join(f"{k} {v}" for k, v in res["methods"].items())

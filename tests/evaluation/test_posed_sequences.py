@@ -15,7 +15,8 @@ from monoplane.errors import InvalidInput
 from monoplane.evaluation.posed_sequences import (
     choose_view_sets,
     load_posed_sequence,
-    monocular_like_depth,
+    mode_list,
+    monocular_cues,
     parse_pairs,
     rotation_angles,
     score_view_set,
@@ -27,6 +28,7 @@ from monoplane.evaluation.posed_sequences import (
     view_overlap,
 )
 from monoplane.fileio import read_redwood_log
+from monoplane.synth.corrupt import LEVEL_PARAMS
 
 LIVINGROOM = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "icl-livingroom-dev"
 K_SMALL = intrinsics_matrix(100.0, 100.0, 31.5, 23.5)  # 64x48, 35.5 degrees across
@@ -173,16 +175,39 @@ def test_pairs_option_parses_and_rejects() -> None:
             parse_pairs(bad)
 
 
-def test_monocular_like_depth_is_scaled_and_smoothly_warped() -> None:
+def test_monocular_cues_are_scaled_warped_noisy_and_repeatable() -> None:
+    # A wall facing the camera: the range distortion leaves a constant depth alone, so the
+    # depth over scale is the warp times the noise.
     depth = np.full((48, 64), 2.0, np.float32)
     depth[0, 0] = 0.0
-    warped, scale = monocular_like_depth(depth, np.random.default_rng(3))
-    again, _ = monocular_like_depth(depth, np.random.default_rng(3))
-    np.testing.assert_array_equal(warped, again)
-    assert 0.3 <= scale <= 3.0 and warped[0, 0] == 0
-    ratio = warped[1:, 1:] / (depth[1:, 1:] * scale)
-    assert ratio.min() >= 1 / 1.1 - 1e-4 and ratio.max() <= 1.1 + 1e-4
-    assert ratio.max() - ratio.min() > 0.05  # a warp, not a second scale
+    for level in ("mild", "strong"):
+        p = LEVEL_PARAMS[level]
+        mono, normals, scale = monocular_cues(depth, K_SMALL, level, np.random.default_rng(3),
+                                              with_normals=True)
+        again, _, _ = monocular_cues(depth, K_SMALL, level, np.random.default_rng(3),
+                                     with_normals=False)
+        np.testing.assert_array_equal(mono, again)   # the same depth with or without normals
+        assert p.scale_range[0] <= scale <= p.scale_range[1] and mono[0, 0] == 0
+        ratio = mono[1:, 1:] / (depth[1:, 1:] * scale)
+        bound = np.exp(p.warp) + 5 * p.depth_noise
+        assert 1 / bound <= ratio.min() and ratio.max() <= bound
+        assert np.ptp(ratio) > p.warp / 2                   # a warp, not a second scale
+        assert not normals[0, 0].any()                      # no depth, no normal
+        facing = np.degrees(np.arccos(-normals[1:, 1:, 2]))
+        assert np.median(facing) <= p.normal_rotation_deg + 1.0
+    with pytest.raises(InvalidInput, match="choose one of mild, strong"):
+        monocular_cues(depth, K_SMALL, "clean", np.random.default_rng(3), with_normals=False)
+
+
+def test_mode_names() -> None:
+    from monoplane.cli.eval import POSED_MODE_GROUPS, POSED_MODES
+    from monoplane.evaluation.posed_sequences import MODE_GROUPS, MODES
+
+    assert (POSED_MODES, POSED_MODE_GROUPS) == (MODES, tuple(MODE_GROUPS))
+    assert mode_list("all") == ["rgbd", "mono", "mono-depth"]
+    assert mode_list("both") == ["rgbd", "mono"] and mode_list("network") == ["network"]
+    with pytest.raises(InvalidInput, match="choose one of rgbd, mono, mono-depth, network, all"):
+        mode_list("monocular")
 
 
 # --------------------------------------------------------------------------------------------
@@ -288,16 +313,56 @@ def test_sequence_layout_and_frames(walk: Path) -> None:
     assert len(seq) == 3 and seq.images[2].name == "00002.jpg"
     rgbd = sequence_frame(seq, 1, "rgbd")
     mono = sequence_frame(seq, 1, "mono", seed=5)
-    assert rgbd.depth_kind == "metric" and mono.depth_kind == "relative"
-    assert rgbd.normals is None  # left to the cue provider
+    mono_depth = sequence_frame(seq, 1, "mono-depth", seed=5)
+    image_only = sequence_frame(seq, 1, "network")
+    assert rgbd.depth_kind == "metric" and mono.depth_kind == mono_depth.depth_kind == "relative"
+    assert rgbd.normals is None and mono_depth.normals is None  # left to the cue provider
+    assert mono.normals is not None and not mono.normals_from_depth
+    assert image_only.depth is None and image_only.normals is None
+    np.testing.assert_array_equal(image_only.rgb, rgbd.rgb)
     valid = rgbd.depth > 0
     ratio = mono.depth[valid] / rgbd.depth[valid]
     assert ratio.max() / ratio.min() > 1.01  # warped
-    np.testing.assert_array_equal(mono.depth, sequence_frame(seq, 1, "mono", seed=5).depth)
+    # Drawn from (seed, frame id) alone: the same in every call and in both monocular modes.
+    np.testing.assert_array_equal(mono.depth, mono_depth.depth)
+    again = sequence_frame(seq, 1, "mono", seed=5)
+    np.testing.assert_array_equal(mono.depth, again.depth)
+    np.testing.assert_array_equal(mono.normals, again.normals)
+    assert not np.array_equal(mono.depth, sequence_frame(seq, 1, "mono", seed=6).depth)
+    strong = sequence_frame(seq, 1, "mono", seed=5, level="strong")
+    assert not np.array_equal(mono.depth, strong.depth)
+    assert any("mild monocular-like depth" in n for n in mono.notes)
+    with pytest.raises(InvalidInput, match="unknown mode 'both'"):
+        sequence_frame(seq, 1, "both")
     sets, selection, _, overlap = choose_view_sets(seq, views=3, min_overlap=0.2)
     assert sets == [[0, 1, 2]] and np.all(np.isfinite(overlap))
     with pytest.raises(InvalidInput, match="no pair of split"):
         choose_view_sets(seq, min_angle=80, max_angle=90)
+
+
+def _angles_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Angles between the unit normals both (H, W, 3) maps have, degrees."""
+    both = np.any(a != 0, axis=-1) & np.any(b != 0, axis=-1)
+    return np.degrees(np.arccos(np.clip(np.sum(a * b, axis=-1)[both], -1, 1)))
+
+
+def test_network_normals_are_given_and_differ_from_normals_of_the_depth(walk: Path) -> None:
+    from monoplane.geometry.normals import normals_from_depth
+    from monoplane.pipeline import Pipeline
+
+    seq = load_posed_sequence(walk)
+    pipe = Pipeline.from_preset("monoplane", overrides=["cues.plugin=given"])
+    clean = normals_from_depth(sequence_frame(seq, 0, "rgbd").depth, seq.K)
+    errors = {}
+    for level in ("mild", "strong"):
+        given = pipe.prepare(sequence_frame(seq, 0, "mono", level=level))
+        estimated = pipe.prepare(sequence_frame(seq, 0, "mono-depth", level=level))
+        assert not given.normals_from_depth and estimated.normals_from_depth
+        # The network's normals: the clean estimate a few degrees off (blur, turn, noise) ...
+        errors[level] = float(np.median(_angles_deg(given.normals, clean)))
+        # ... and not what the pipeline estimates from the corrupted depth.
+        assert np.median(_angles_deg(given.normals, estimated.normals)) > errors[level]
+    assert 1.0 < errors["mild"] < 3.5 < errors["strong"] < 10.0
 
 
 def test_missing_intrinsics_is_one_line(tmp_path: Path, walk: Path) -> None:
@@ -358,6 +423,95 @@ def test_cli_rejects_other_methods(walk: Path, capsys: pytest.CaptureFixture[str
     assert "add --multiview --data DIR" in err[1]
 
 
+def test_cli_rejects_bad_modes_and_levels(walk: Path, capsys: pytest.CaptureFixture[str]
+                                          ) -> None:
+    from monoplane.cli import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(["eval", "--multiview", "--data", str(walk), "--mode", "monocular"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.replace("'", "")   # quoting differs across Pythons
+    assert "invalid choice: monocular (choose from rgbd, mono, mono-depth, network, all" in err
+    assert main(["eval", "--multiview", "--data", str(walk), "--mode", "mono-depth",
+                 "--level", "clean"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["monoplane: error: unknown corruption level 'clean' for a posed sequence; "
+                   "choose one of mild, strong (the sensor depth itself is --mode rgbd)"]
+
+
+def test_cli_network_mode_needs_a_predicting_cue_provider(
+        walk: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from monoplane.cli import main
+
+    # The default provider ('given') cannot predict depth: one line, before any set runs.
+    assert main(["eval", "--multiview", "--data", str(walk), "--pairs", "0-2", "--mode",
+                 "network", "--no-progress"]) == 2
+    captured = capsys.readouterr()
+    err = captured.err.strip().splitlines()
+    assert len(err) == 1 and "--mode network: cue provider 'given' cannot predict" in err[0]
+    assert "00000.jpg" in err[0] and "[network]" not in captured.out
+
+
+def test_cli_network_mode_runs_an_onnx_network_set_on_the_command_line(
+        walk: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    pytest.importorskip("onnx")
+    pytest.importorskip("onnxruntime")
+    from monoplane.cli import main
+    from monoplane.cues.tiny_models import tiny_depth_model
+
+    # A stand-in MiDaS-like network: disparity from the image's brightness (wrong geometry,
+    # real loading, inference and post-processing).
+    model = tiny_depth_model(tmp_path / "tiny.onnx", offset=2.0)
+    out = tmp_path / "network.json"
+    assert main(["eval", "--multiview", "--data", str(walk), "--pairs", "0-1,1-2", "--mode",
+                 "network", "--set", "cues.plugin=onnx", "--set", "cues.profile=midas",
+                 "--set", f"cues.depth_model={model}", "--set", "cues.input_size=[48,64]",
+                 "--no-progress", "--json", str(out)]) == 0
+    assert "[network] pairs registered" in capsys.readouterr().out
+    data = json.loads(out.read_text())
+    assert list(data["modes"]) == ["network"] and data["settings"]["modes"] == ["network"]
+    assert len(data["modes"]["network"]["rows"]) == 2
+
+
+def test_network_mode_scores_the_cue_providers_prediction(walk: Path,
+                                                          monkeypatch: pytest.MonkeyPatch
+                                                          ) -> None:
+    pytest.importorskip("pycolmap")
+    import monoplane.pipeline
+    from monoplane.evaluation.posed_sequences import evaluate_posed_sequence
+    from monoplane.geometry.normals import normals_from_depth
+    from monoplane.plugin_manager import get_plugin_manager
+    from monoplane.stages.base import CueProvider
+    from monoplane.testing import stage_plugin
+
+    seq = load_posed_sequence(walk)
+    truth = {p.stem: seq.depth(k) for k, p in enumerate(seq.images)}
+    calls = []
+
+    class TrueDepth(CueProvider):
+        """'Predicts' each image's true depth, read from the sequence."""
+
+        name = "true-depth"
+
+        def provide(self, frame):  # type: ignore[no-untyped-def]
+            calls.append(frame.name)
+            assert frame.depth is None
+            depth = truth[frame.name]
+            return frame.with_(depth=depth, normals=normals_from_depth(depth, frame.K),
+                               normals_from_depth=True)
+
+    plugin = stage_plugin(monoplane_register_cue_providers=[TrueDepth])
+    monkeypatch.setattr(monoplane.pipeline, "get_plugin_manager",
+                        lambda: get_plugin_manager(autoload=False, extra_plugins=(plugin,)))
+    res = evaluate_posed_sequence(walk, mode="network", pairs="0-1,1-2",
+                                  overrides=["cues.plugin=true-depth"])
+    net = res["modes"]["network"]
+    assert (net["pairs_registered"], net["pairs_correct"]) == (2, 2)
+    assert net["rotation_error_deg"]["median"] < 1.0
+    # The probe, then every view of every set.
+    assert calls == ["00000", "00000", "00001", "00001", "00002"]
+
+
 # --------------------------------------------------------------------------------------------
 # The living-room development sequence
 
@@ -374,3 +528,33 @@ def test_livingroom_splits_hold_ten_pairs_each() -> None:
             assert 20 <= angles[i, j] <= 40 and overlap[i, j] >= 0.4
         frames[split] = {f for s in sets for f in s}
     assert not frames["tune"] & frames["report"]
+
+
+@pytest.mark.skipif(not LIVINGROOM.is_dir(), reason="living-room sequence not available")
+def test_livingroom_frame_with_holes_is_corrupted_repeatably() -> None:
+    seq = load_posed_sequence(LIVINGROOM, "525,525,319.5,239.5")
+    sensor = sequence_frame(seq, 0, "rgbd").depth
+    holes = sensor == 0
+    assert holes.mean() > 0.01  # frame 0 has holes: they must stay holes
+    mono = sequence_frame(seq, 0, "mono", seed=7)
+    assert np.array_equal(mono.depth == 0, holes)
+    assert not mono.normals[holes].any()
+    np.testing.assert_array_equal(mono.depth, sequence_frame(seq, 0, "mono-depth", seed=7).depth)
+    ratio = mono.depth[~holes] / sensor[~holes]
+    p = LEVEL_PARAMS["mild"]
+    assert p.scale_range[0] <= np.median(ratio) <= p.scale_range[1]
+    # Mild: within 10 % of one scale almost everywhere (warp, range distortion, noise; the
+    # blurred occlusion edges are the exceptions).
+    assert np.mean(np.abs(ratio / np.median(ratio) - 1) < 0.1) > 0.97
+
+
+@pytest.mark.skipif(not LIVINGROOM.is_dir(), reason="living-room sequence not available")
+def test_livingroom_pair_registers_with_monocular_cues() -> None:
+    pytest.importorskip("pycolmap")
+    from monoplane.evaluation.posed_sequences import evaluate_posed_sequence
+
+    res = evaluate_posed_sequence(LIVINGROOM, "525,525,319.5,239.5", mode="mono",
+                                  pairs="55-100")
+    mono = res["modes"]["mono"]
+    assert (mono["pairs_registered"], mono["pairs_correct"]) == (1, 1)
+    assert res["settings"]["level"] == "mild"
