@@ -5,6 +5,7 @@ Pixel coordinates: ``(u, v)`` with pixel centres at integers, at each frame's na
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -17,7 +18,7 @@ from monoplane.features import Keypoints, PairMatches
 from monoplane.features.matching import mutual_nearest, mutual_ratio
 from monoplane.features.xfeat import XFeatNetwork
 from monoplane.hookspecs import hookimpl
-from monoplane.models import get_model, require_model
+from monoplane.models import cached_model, get_model, require_model
 from monoplane.stages.base import FeatureMatcher, Stage, param
 
 
@@ -25,6 +26,16 @@ def _rgb(frame: Frame) -> np.ndarray:
     if frame.rgb is None:
         raise InvalidInput(f"{frame.name}: feature matching needs a colour image")
     return frame.rgb
+
+
+def _model_file(model: str) -> Path | None:
+    """The XFeat file a ``model`` setting names (a path, or a catalogue name), or None when a
+    catalogue model is not downloaded yet."""
+    path = Path(model).expanduser()
+    if path.suffix == ".onnx" or path.exists():
+        return path
+    get_model(model)  # an unknown name lists the catalogue
+    return cached_model(model)
 
 
 class SiftFeatures(FeatureMatcher):
@@ -98,11 +109,7 @@ class XFeatFeatures(FeatureMatcher):
     def _net(self) -> XFeatNetwork:
         """The network, loaded on first use (a catalogue name resolves to its cached file)."""
         if self._network is None:
-            model = self.config.model
-            path = Path(model).expanduser()
-            if path.suffix != ".onnx" and not path.exists():
-                get_model(model)  # an unknown name lists the catalogue
-                path = require_model(model)
+            path = _model_file(self.config.model) or require_model(self.config.model)
             self._network = XFeatNetwork(path, threads=self.config.threads)
         return self._network
 
@@ -143,8 +150,15 @@ class SiftXFeatFeatures(FeatureMatcher):
         threads: int = param(2, "onnxruntime threads")
         sift_max_keypoints: int = param(4000, "most SIFT keypoints per image")
         ratio: float = param(0.8, "Lowe's ratio of a SIFT match")
+        when_missing: str = param(
+            "sift", "when the XFeat model is not downloaded: 'sift' warns once and matches "
+                    "with SIFT alone (COLMAP's own, as the 'sift' stage), 'error' stops with "
+                    "the fetch command")
 
         def __post_init__(self) -> None:
+            if self.when_missing not in ("sift", "error"):
+                raise ConfigError(f"when_missing must be 'sift' or 'error', got "
+                                  f"{self.when_missing!r}")
             XFeatFeatures.Config(self.model, self.max_keypoints, self.threshold,
                                  self.min_similarity, self.threads)
             SiftFeatures.Config(self.sift_max_keypoints, self.ratio)
@@ -153,10 +167,18 @@ class SiftXFeatFeatures(FeatureMatcher):
         super().__init__(config)
         cfg = self.config
         self.sift = SiftFeatures(SiftFeatures.Config(cfg.sift_max_keypoints, cfg.ratio))
-        self.xfeat = XFeatFeatures(XFeatFeatures.Config(
+        self.xfeat: XFeatFeatures | None = XFeatFeatures(XFeatFeatures.Config(
             cfg.model, cfg.max_keypoints, cfg.threshold, cfg.min_similarity, cfg.threads))
+        if cfg.when_missing == "sift" and _model_file(cfg.model) is None:
+            print(f"monoplane: warning: the XFeat model '{cfg.model}' is not downloaded; "
+                  f"matching with SIFT alone (run 'monoplane models fetch {cfg.model}' for "
+                  "XFeat's matches too)", file=sys.stderr)
+            self.xfeat = None
+            self.sfm_native = "sift"  # type: ignore[misc]  # this instance is SIFT's
 
     def detect(self, frame: Frame) -> Keypoints:
+        if self.xfeat is None:
+            return self.sift.detect(frame)
         a, b = self.sift.detect(frame), self.xfeat.detect(frame)
         desc = np.zeros((len(a) + len(b), _SIFT_DIM + b.descriptors.shape[1]), np.float32)
         norms = np.maximum(np.linalg.norm(a.descriptors, axis=1, keepdims=True), 1e-12)
@@ -166,6 +188,8 @@ class SiftXFeatFeatures(FeatureMatcher):
                          np.concatenate([a.scores, b.scores]))
 
     def match(self, a: Keypoints, b: Keypoints) -> PairMatches:
+        if self.xfeat is None:
+            return self.sift.match(a, b)
         found, scores = [], []
         for part, rule in ((slice(0, _SIFT_DIM), self.sift), (slice(_SIFT_DIM, None),
                                                                 self.xfeat)):

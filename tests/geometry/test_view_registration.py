@@ -17,6 +17,8 @@ from monoplane.geometry.relative_pose import (
 from monoplane.geometry.view_registration import (
     Hypothesis,
     agreement,
+    depth_disagreement,
+    epipolar_support,
     feature_hypotheses,
     refine_epipolar,
     rotation_hypotheses,
@@ -177,3 +179,64 @@ def test_guided_matching_finds_more_correct_matches_than_the_ratio_test() -> Non
     err = np.linalg.norm((qi @ v1.frame.K.T)[:, :2] / qi[:, 2:] - pj, axis=1)
     # More correct guided matches than unguided matches of any kind.
     assert np.sum(err < 3.0) > 1.2 * len(plain)
+
+
+def _projected_pair(n: int = 200, seed: int = 5):
+    """Exact matches of random 3D points in two pinhole views, with their depth maps."""
+    from monoplane.datamodel import intrinsics_matrix
+
+    K = intrinsics_matrix(500.0, 500.0, 319.5, 239.5)
+    x_ref = _points(n, seed)
+    x_oth = x_ref @ R_TRUE.T + T_TRUE
+    keep = x_oth[:, 2] > 0.5
+    x_ref, x_oth = x_ref[keep], x_oth[keep]
+    p_ref = x_ref[:, :2] / x_ref[:, 2:] * 500.0 + [319.5, 239.5]
+    p_oth = x_oth[:, :2] / x_oth[:, 2:] * 500.0 + [319.5, 239.5]
+    inside = np.all((p_ref > 0) & (p_ref < [639, 479]) & (p_oth > 0) & (p_oth < [639, 479]),
+                    axis=1)
+    x_ref, x_oth, p_ref, p_oth = x_ref[inside], x_oth[inside], p_ref[inside], p_oth[inside]
+
+    def depth_map(p: np.ndarray, z: np.ndarray) -> np.ndarray:
+        d = np.zeros((480, 640), np.float32)
+        d[np.rint(p[:, 1]).astype(int), np.rint(p[:, 0]).astype(int)] = z
+        return d
+
+    class _G:  # what depth_disagreement reads of a ViewGeometry
+        def __init__(self, depth: np.ndarray) -> None:
+            self.K, self.depth = K, depth
+
+    # Keypoints sit on integer pixels so that the depth lookup is exact.
+    p_ref, p_oth = np.rint(p_ref), np.rint(p_oth)
+    return K, p_ref, p_oth, _G(depth_map(p_ref, x_ref[:, 2])), _G(depth_map(p_oth, x_oth[:, 2]))
+
+
+def test_epipolar_support_counts_the_matches_within_the_threshold() -> None:
+    K, p_ref, p_oth, _, _ = _projected_pair()
+    true = Hypothesis(R_TRUE, 3.0 * T_TRUE, 1.0, "test")  # the length does not matter
+    assert epipolar_support(true, p_ref, p_oth, K, K, 1.0) == len(p_ref)
+    # Every other match moved 40 px off its epipolar line (F = K^-T [t]x R K^-1).
+    tx = np.array([[0, -T_TRUE[2], T_TRUE[1]], [T_TRUE[2], 0, -T_TRUE[0]],
+                   [-T_TRUE[1], T_TRUE[0], 0]])
+    F = np.linalg.inv(K).T @ tx @ R_TRUE @ np.linalg.inv(K)
+    lines = np.c_[p_ref, np.ones(len(p_ref))] @ F.T
+    off = lines[:, :2] / np.linalg.norm(lines[:, :2], axis=1, keepdims=True)
+    shifted = p_oth + 40.0 * off
+    shifted[::2] = p_oth[::2]
+    assert epipolar_support(true, p_ref, shifted, K, K, 1.0) == len(p_ref[::2])
+    turned = Rotation.from_euler("x", 3, degrees=True).as_matrix() @ R_TRUE
+    assert epipolar_support(Hypothesis(turned, T_TRUE, 1.0, "t"), p_ref, p_oth, K, K, 1.0) == 0
+
+
+def test_depth_disagreement_is_zero_for_the_true_pose_and_any_scale() -> None:
+    K, p_ref, p_oth, ref, other = _projected_pair()
+    true = Hypothesis(R_TRUE, T_TRUE, 1.0, "test")
+    # Rounding the keypoints to pixels leaves a little: the ratio is constant to 1 %.
+    assert depth_disagreement(true, p_ref, p_oth, ref, other, 2.0) < 0.02
+    other.depth = other.depth * 7.0  # relative depth: the view's scale is free
+    assert depth_disagreement(true, p_ref, p_oth, ref, other, 2.0) < 0.02
+    # A pose 2 degrees off, all matches taken as its inliers: the triangulated depths bend
+    # away from the views' own (0.14 here against 0.007).
+    turned = Rotation.from_euler("y", 2.0, degrees=True).as_matrix() @ R_TRUE
+    assert depth_disagreement(Hypothesis(turned, T_TRUE, 1.0, "t"), p_ref, p_oth, ref, other,
+                              1e9) > 0.1
+    assert depth_disagreement(true, p_ref[:5], p_oth[:5], ref, other, 2.0) == float("inf")

@@ -8,7 +8,9 @@ import pytest
 
 from monoplane.datamodel import Frame, intrinsics_matrix
 from monoplane.errors import InvalidInput
+from monoplane.features import Correspondences
 from monoplane.geometry.camera import look_at
+from monoplane.stages.features import SiftFeatures
 from monoplane.stages.matchers import ColmapMatcher, SfmError, monoplane_register_matchers
 
 W, H, F = 480, 360, 380.0
@@ -128,3 +130,45 @@ def test_a_textureless_image_among_others_is_left_out(pair) -> None:
 def test_needs_two_images(pair) -> None:
     with pytest.raises(InvalidInput, match="at least 2 images"):
         ColmapMatcher().match(pair[0][:1])
+
+
+class _ImportedSift(SiftFeatures):
+    """OpenCV's SIFT, written into COLMAP's database instead of COLMAP extracting its own."""
+
+    name = "imported-sift"
+    sfm_native = None
+
+
+def test_imported_correspondences_recover_the_known_pose(pair) -> None:
+    frames, poses = pair
+    stage = _ImportedSift()
+    found = Correspondences(stage, frames)
+    sfm = ColmapMatcher(ColmapMatcher.Config(fixed_intrinsics=True)).match(frames, found)
+    rot, trans = relative_errors(sfm.cameras, poses)
+    assert rot < 0.5 and trans < 2.0
+    assert any("'imported-sift' features stage" in n for n in sfm.notes)
+    # The model's keypoints are the stage's own, in order, and its verified matches a subset
+    # of the stage's matches.
+    for v in range(2):
+        np.testing.assert_allclose(sfm.keypoints[v], found.keypoints(v).pixels, atol=1e-3)
+    raw = {tuple(m) for m in found.matches(0, 1)}
+    verified = sfm.matches[(0, 1)]
+    assert 0.5 * len(raw) < len(verified) <= len(raw)
+    assert {tuple(m) for m in verified} <= raw
+
+
+def test_sift_stage_lets_colmap_extract_its_own(pair) -> None:
+    frames, poses = pair
+    found = Correspondences(SiftFeatures(), frames)
+    sfm = ColmapMatcher(ColmapMatcher.Config(fixed_intrinsics=True)).match(frames, found)
+    assert not any("features stage" in n for n in sfm.notes)
+    assert not found._keypoints  # nothing was detected: COLMAP ran its own SIFT
+    assert relative_errors(sfm.cameras, poses)[0] < 0.5
+
+
+def test_imported_features_of_a_textureless_image_are_named(pair) -> None:
+    frames, _ = pair
+    flat = Frame(rgb=np.full((H, W, 3), 127, np.uint8), K=K, name="flat")
+    found = Correspondences(_ImportedSift(), [frames[0], flat])
+    with pytest.raises(SfmError, match="flat: only 0 imported-sift keypoints"):
+        ColmapMatcher().match([frames[0], flat], found)
