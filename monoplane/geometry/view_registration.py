@@ -425,13 +425,16 @@ def _procrustes(a1: np.ndarray, a2: np.ndarray, b1: np.ndarray, b2: np.ndarray) 
 
 
 def translation_from_matches(R: np.ndarray, x_ref: np.ndarray, x_other: np.ndarray,
-                             fixed_scale: float | None, tol: float
-                             ) -> tuple[np.ndarray, float, int] | None:
-    """Translation (and scale) of a known rotation from lifted matches, by exhaustive minimal
-    samples: one match when the scale is fixed, two otherwise.
+                             fixed_scale: float | None, tol: float, max_samples: int = 2000,
+                             seed: int = 0) -> tuple[np.ndarray, float, int] | None:
+    """Translation (and scale) of a known rotation from lifted matches, by minimal samples:
+    one match when the scale is fixed, two otherwise.
 
-    ``s·x_other = R·x_ref + t``. Returns ``(t, s, inliers)`` of the sample with most inliers
-    (re-fitted on them), or None without a consistent pair.
+    ``s·x_other = R·x_ref + t``. Every minimal sample is tried while there are at most
+    ``max_samples`` of them; beyond that (learned features give hundreds of matches, and
+    every pair of them scored on every match grows with the cube of their number) that many
+    pairs are drawn at random (``seed``). Returns ``(t, s, inliers)`` of the sample with most
+    inliers (re-fitted on them), or None without a consistent pair.
     """
     m = len(x_ref)
     if m < (1 if fixed_scale is not None else 2):
@@ -442,6 +445,9 @@ def translation_from_matches(R: np.ndarray, x_ref: np.ndarray, x_other: np.ndarr
         s_all = np.full(m, float(fixed_scale))
     else:
         i, j = np.triu_indices(m, 1)
+        if len(i) > max_samples:
+            pick = np.random.default_rng(seed).choice(len(i), max_samples, replace=False)
+            i, j = i[np.sort(pick)], j[np.sort(pick)]
         a = x_other[i] - x_other[j]
         b = rx[i] - rx[j]
         s_all = np.einsum("ij,ij->i", a, b) / np.maximum(np.einsum("ij,ij->i", a, a), 1e-300)
