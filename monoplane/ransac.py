@@ -106,6 +106,10 @@ class RansacConfig:
     score_points: int = param(
         5000, "score hypotheses on a random subset of at most this many pool points (0 = all)")
     seed: int = param(0, "seed of the random generator; equal seeds give equal results")
+    max_rejections: int = param(
+        0, "a search that finds no hypothesis, or a plane below min_support (its points are "
+        "then set aside as non-planar), is passed over up to this many times before the "
+        "search stops (0: it stops at the first)")
     noise_factor: float = param(
         0.0, "if > 0, a frame whose planes show depth noise σ well below ε is searched again "
         "with ε = noise_factor × σ (a depth sensor; monoplane.geometry.sensor_noise)")
@@ -127,6 +131,7 @@ class RansacConfig:
             (self.max_points >= 3, "max_points must be at least 3"),
             (self.lo_iterations >= 0, "lo_iterations must be non-negative"),
             (self.noise_factor >= 0, "noise_factor must be non-negative"),
+            (self.max_rejections >= 0, "max_rejections must be non-negative"),
             (self.score_points == 0 or self.score_points >= 3,
              "score_points must be 0 (all) or at least 3"),
         ])
@@ -304,26 +309,40 @@ class SequentialRansac:
         found: list[np.ndarray] = []
         context = self.labeler.new_context()  # the labeler's memory of this frame
         prepared: Callable[[], None] | None = None
+        rejections = 0
         while len(found) < cfg.max_planes and pool.size >= min_support:
             t = time.perf_counter()
             best = self._search(cloud, pool, rng, params)
             timings["ransac.search"] += time.perf_counter() - t
             if best is None:
-                break
+                # No sample passed the sampler's test in a whole batch (a pool of scattered
+                # crease points): another draw may, within the same allowance.
+                if rejections >= cfg.max_rejections:
+                    break
+                rejections += 1
+                continue
             graph = get_graph()
             t = time.perf_counter()
             if prepared is not None:
                 prepared()  # the labeler's per-pool work, done while the search ran
             plane, inliers = self._label(cloud, graph, pool, best[0], best[1], params,
                                          context)
+            labelled = inliers.copy()
             if cfg.split_components and inliers.any():
                 members = np.flatnonzero(inliers)
                 inliers[members[~graph.largest_component_within(pool, inliers)]] = False
             timings["ransac.label"] += time.perf_counter() - t
             if inliers.sum() < min_support:
-                break
-            found.append(plane)
-            point_labels[pool[inliers]] = len(found)
+                # The best plane left is too small, or falls apart into pieces that each are:
+                # its points leave the pool (non-planar), and the smaller faces elsewhere in
+                # the pool, which a hypothesis through these points outscored, get their turn.
+                if rejections >= cfg.max_rejections or not labelled.any():
+                    break
+                rejections += 1
+                inliers = labelled
+            else:
+                found.append(plane)
+                point_labels[pool[inliers]] = len(found)
             pool = pool[~inliers]
             # The next pool's hypothesis-independent work (its subgraph, ...) runs on the
             # second core while this thread searches its next plane.
