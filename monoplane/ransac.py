@@ -15,14 +15,19 @@ One plane at a time, on the points not yet assigned (the *pool*):
    of the inliers is kept; the other components return to the pool and can become planes of
    their own later (two table tops at the same height are two planes);
 5. the plane is accepted if its support reaches ``min_support``, otherwise the search stops;
-   its inliers leave the pool.
+   its inliers leave the pool. With ``max_rejections`` > 0 a too-small plane (its labelled
+   points leave the pool as non-planar), or a search that found no hypothesis, is passed over
+   that many times before the search stops.
 
 Steps 1-5 form the cloud-level core, :meth:`SequentialRansac.run_cloud`, which needs no pixel
 grid (a cloud and its kNN graph). :meth:`SequentialRansac.run` wraps it for a frame: the cloud
 and its neighbour graph are built once per frame, and afterwards labels are carried to
 every valid pixel (:meth:`PlaneCloud.propagate`), each plane is refit by least squares on all
 its pixels in the camera frame and the depth's units, and normals are turned towards the
-camera. All randomness comes from one generator seeded with ``seed``.
+camera. With ``noise_factor`` > 0, :meth:`SequentialRansac.run` measures the depth noise on
+the planes of the first search and, when it is well below ε, searches again with ε set by it
+(:mod:`monoplane.geometry.sensor_noise`); the later stages get those thresholds
+(``params_used``). All randomness comes from one generator seeded with ``seed``.
 """
 
 from __future__ import annotations
