@@ -1,5 +1,6 @@
-"""The pipeline on real sensor-like RGB-D (../shared/data/rgbd-livingroom): an RGB-D frame and
-the same depth as a depth-only range image."""
+"""The pipeline on real RGB-D: the living room (../shared/data/rgbd-livingroom) as an RGB-D
+frame and as a depth-only range image, and one frame each of TUM, SUN RGB-D and NYU v2
+(../shared/data/rgbd-real-frames) scored per surface against hand-drawn polygons."""
 
 from pathlib import Path
 
