@@ -140,12 +140,13 @@ class Pipeline:
         rec = self.call("ransac", label,
                         lambda: driver.run(frame, meanwhile=lambda: refiner.prepare(frame)),
                         frame.name, timings)
-        params = self.config.host["ransac"].params
+        # The thresholds the RANSAC used (ε may have been lowered to the sensor's noise).
+        params = driver.params_used
         rec = self.call("refiner", refiner.name, lambda: refiner.refine(rec, params),
                         frame.name, timings)
         planarity = self.config.host["planarity"]
-        rec = self.call("planarity", "planarity test", lambda: check_image(rec, planarity),
-                        frame.name, timings)
+        rec = self.call("planarity", "planarity test",
+                        lambda: check_image(rec, planarity, params.epsilon), frame.name, timings)
         rec.config = self.config.to_dict()
         rec.timings = {**rec.timings, **timings}
         return rec

@@ -51,6 +51,7 @@ from monoplane.geometry.planarity import (
     quadric_ratio,
     spread_of_groups,
 )
+from monoplane.regions import scene_radius
 from monoplane.stages.base import param
 
 
@@ -71,6 +72,10 @@ class PlanarityConfig:
         2, "image pixels this close to another label are left out of the test (at 256 px "
         "wide, scaled with the width)")
     max_samples: int = param(400, "points sampled per plane for the test")
+    inlier_band: float = param(
+        0.0, "if > 0, images: the quadric test sees only a plane's pixels within this many ε "
+        "of it (ε the RANSAC's, as lowered to the depth noise), not objects a refiner painted "
+        "into it (0: all its pixels)")
     max_points: int = param(
         20000, "image pixels sampled for the test, on a regular grid (its speed at any size)")
 
@@ -82,12 +87,14 @@ class PlanarityConfig:
              "quadric_ratio must be 0 (off) or above 1"),
             (self.border_px >= 0, "border_px must be non-negative"),
             (self.max_samples >= 30, "max_samples must be at least 30"),
+            (self.inlier_band >= 0, "inlier_band must be non-negative"),
             (self.max_points >= 1000, "max_points must be at least 1000"),
         ])
 
 
 def curved_planes(points: np.ndarray, normals: np.ndarray | None, labels: np.ndarray,
-                  num_planes: int, cfg: PlanarityConfig) -> np.ndarray:
+                  num_planes: int, cfg: PlanarityConfig,
+                  quadric_labels: np.ndarray | None = None) -> np.ndarray:
     """Which planes show curvature, from their points and normals.
 
     Parameters
@@ -103,6 +110,9 @@ def curved_planes(points: np.ndarray, normals: np.ndarray | None, labels: np.nda
     num_planes : int
         P, the largest label.
     cfg : PlanarityConfig
+    quadric_labels : numpy.ndarray, optional
+        (M,) int labels the quadric test uses instead of ``labels`` (e.g. without the points
+        far from their plane).
 
     Returns
     -------
@@ -118,7 +128,8 @@ def curved_planes(points: np.ndarray, normals: np.ndarray | None, labels: np.nda
         if np.isfinite(floor):
             curved |= spread > max(floor, cfg.min_floor_deg) + cfg.max_extra_spread_deg
     if cfg.quadric_ratio > 0:
-        curved |= quadric_ratio(points, labels, num_planes, cfg.max_samples) > cfg.quadric_ratio
+        quadric = labels if quadric_labels is None else quadric_labels
+        curved |= quadric_ratio(points, quadric, num_planes, cfg.max_samples) > cfg.quadric_ratio
     return curved
 
 
@@ -145,7 +156,8 @@ def drop_planes(rec: Reconstruction, drop: np.ndarray) -> Reconstruction:
                           timings=rec.timings)
 
 
-def check_image(rec: Reconstruction, cfg: PlanarityConfig) -> Reconstruction:
+def check_image(rec: Reconstruction, cfg: PlanarityConfig,
+                epsilon: float | None = None) -> Reconstruction:
     """The planarity test on a refined image reconstruction.
 
     Parameters
@@ -154,6 +166,9 @@ def check_image(rec: Reconstruction, cfg: PlanarityConfig) -> Reconstruction:
         Final planes of one frame; its frame needs depth (and normals, else only the quadric
         test runs).
     cfg : PlanarityConfig
+    epsilon : float, optional
+        The RANSAC's inlier threshold in unit-sphere units (fraction of the scene radius),
+        which ``cfg.inlier_band`` multiplies; without it all of a plane's pixels are tested.
 
     Returns
     -------
@@ -173,13 +188,46 @@ def check_image(rec: Reconstruction, cfg: PlanarityConfig) -> Reconstruction:
     points = rays * frame.depth[::step, ::step].reshape(-1, 1).astype(np.float64)
     normals = (None if frame.normals is None or frame.normals_from_depth
                else frame.normals[::step, ::step].reshape(-1, 3))
-    curved = curved_planes(points, normals, inner, rec.num_planes, cfg)
+    shape_points = inner
+    if cfg.inlier_band > 0 and epsilon is not None:
+        shape_points = _near_their_plane(points, inner, rec.params,
+                                         cfg.inlier_band * epsilon * scene_radius(
+                                             frame.points(), frame.depth > 0))
+    curved = curved_planes(points, normals, inner, rec.num_planes, cfg,
+                           quadric_labels=shape_points)
     if not curved.any():
         return rec
     out = drop_planes(rec, curved)
     out.frame.notes.append(f"planarity: {int(curved.sum())} plane(s) on curved surfaces set "
                            "non-planar")
     return out
+
+
+def _near_their_plane(points: np.ndarray, labels: np.ndarray, planes: np.ndarray,
+                      tolerance: float) -> np.ndarray:
+    """``labels`` with every point farther than ``tolerance`` from its plane set to 0.
+
+    Parameters
+    ----------
+    points : numpy.ndarray
+        (M, 3) camera-frame points, depth units.
+    labels : numpy.ndarray
+        (M,) int labels 0..P.
+    planes : numpy.ndarray
+        (P, 4) planes ``n · X + d = 0`` (unit normals) of labels 1..P, same frame and units.
+    tolerance : float
+        Distance in depth units.
+
+    Returns
+    -------
+    numpy.ndarray
+        (M,) int labels.
+    """
+    on = labels > 0
+    p = np.asarray(planes, dtype=np.float64)[labels[on] - 1]
+    near = np.zeros(len(labels), dtype=bool)
+    near[on] = np.abs(np.einsum("ij,ij->i", points[on], p[:, :3]) + p[:, 3]) <= tolerance
+    return np.where(near, labels, 0)
 
 
 def check_cloud(points: np.ndarray, normals: np.ndarray | None, labels: np.ndarray,

@@ -15,14 +15,19 @@ One plane at a time, on the points not yet assigned (the *pool*):
    of the inliers is kept; the other components return to the pool and can become planes of
    their own later (two table tops at the same height are two planes);
 5. the plane is accepted if its support reaches ``min_support``, otherwise the search stops;
-   its inliers leave the pool.
+   its inliers leave the pool. With ``max_rejections`` > 0 a too-small plane (its labelled
+   points leave the pool as non-planar), or a search that found no hypothesis, is passed over
+   that many times before the search stops.
 
 Steps 1-5 form the cloud-level core, :meth:`SequentialRansac.run_cloud`, which needs no pixel
 grid (a cloud and its kNN graph). :meth:`SequentialRansac.run` wraps it for a frame: the cloud
 and its neighbour graph are built once per frame, and afterwards labels are carried to
 every valid pixel (:meth:`PlaneCloud.propagate`), each plane is refit by least squares on all
 its pixels in the camera frame and the depth's units, and normals are turned towards the
-camera. All randomness comes from one generator seeded with ``seed``.
+camera. With ``noise_factor`` > 0, :meth:`SequentialRansac.run` measures the depth noise on
+the planes of the first search and, when it is well below ε, searches again with ε set by it
+(:mod:`monoplane.geometry.sensor_noise`); the later stages get those thresholds
+(``params_used``). All randomness comes from one generator seeded with ``seed``.
 """
 
 from __future__ import annotations
@@ -47,6 +52,7 @@ from monoplane.geometry.hypotheses import (
     search_batches,
 )
 from monoplane.geometry.planes import fit_planes_per_label
+from monoplane.geometry.sensor_noise import noise_limited_epsilon, plane_residual_sigma
 from monoplane.jit import in_background
 from monoplane.stages.base import (
     Labeler,
@@ -60,6 +66,10 @@ from monoplane.stages.base import (
 )
 
 T = TypeVar("T")
+
+#: The search is repeated with the noise-limited ε only when it is below this fraction of ε:
+#: a threshold barely tighter would find the same planes at twice the cost.
+RESEARCH_BELOW = 0.6
 
 
 class CloudPlanes(NamedTuple):
@@ -101,6 +111,13 @@ class RansacConfig:
     score_points: int = param(
         5000, "score hypotheses on a random subset of at most this many pool points (0 = all)")
     seed: int = param(0, "seed of the random generator; equal seeds give equal results")
+    max_rejections: int = param(
+        0, "a search that finds no hypothesis, or a plane below min_support (its points are "
+        "then set aside as non-planar), is passed over up to this many times before the "
+        "search stops (0: it stops at the first)")
+    noise_factor: float = param(
+        0.0, "if > 0, a frame whose planes show depth noise σ well below ε is searched again "
+        "with ε = noise_factor × σ (a depth sensor; monoplane.geometry.sensor_noise)")
 
     def __post_init__(self) -> None:
         # No table name: the config loader says which table (and a direct caller knows which
@@ -118,6 +135,8 @@ class RansacConfig:
             (self.knn >= 1, "knn must be at least 1"),
             (self.max_points >= 3, "max_points must be at least 3"),
             (self.lo_iterations >= 0, "lo_iterations must be non-negative"),
+            (self.noise_factor >= 0, "noise_factor must be non-negative"),
+            (self.max_rejections >= 0, "max_rejections must be non-negative"),
             (self.score_points == 0 or self.score_points >= 3,
              "score_points must be 0 (all) or at least 3"),
         ])
@@ -155,6 +174,9 @@ class SequentialRansac:
         self.scorer = scorer
         self.labeler = labeler
         self.config = RansacConfig() if config is None else config
+        #: The thresholds the last :meth:`run` labelled with: the configured ones, or ε lowered
+        #: to the frame's depth noise (``noise_factor``); later stages use these.
+        self.params_used = self.config.params
 
     def run(self, frame: Frame, meanwhile: Callable[[], None] | None = None) -> Reconstruction:
         """Detect planes in a frame.
@@ -204,10 +226,18 @@ class SequentialRansac:
         if meanwhile is not None:
             meanwhile()
         result = self._run(cloud, graph, rng)
+        params = cfg.params
+        if cfg.noise_factor > 0:
+            result, params = self._noise_limited(cloud, graph, rng, result)
+            if params.epsilon < cfg.epsilon:
+                sigma = params.epsilon / cfg.noise_factor * cloud.scale
+                frame.notes.append(f"ransac: depth noise {sigma:.3g} {frame.depth_units} on the "
+                                   f"planes, searched again with epsilon {params.epsilon:.3g}")
+        self.params_used = params
 
         t = time.perf_counter()
         # Pixels within ε/4 of their nearest sample's plane keep its label outright.
-        labels = cloud.propagate(result.labels, result.planes, tolerance=0.25 * cfg.epsilon,
+        labels = cloud.propagate(result.labels, result.planes, tolerance=0.25 * params.epsilon,
                                  graph=graph())
         rec = self._finalize(frame, cloud, labels)
         t_final = time.perf_counter() - t
@@ -249,12 +279,34 @@ class SequentialRansac:
                                f"{cloud.size} points")
         return self._run(cloud, lambda: graph, rng)
 
-    def _run(self, cloud: PlaneCloud, get_graph: Callable[[], NeighbourGraph],
-             rng: np.random.Generator) -> CloudPlanes:
-        """:meth:`run_cloud` with the graph asked for only when the first plane is labelled
-        (``get_graph`` may wait for it to be built)."""
+    def _noise_limited(self, cloud: PlaneCloud, get_graph: Callable[[], NeighbourGraph],
+                       rng: np.random.Generator, found: CloudPlanes
+                       ) -> tuple[CloudPlanes, RansacParams]:
+        """The search again with ε = ``noise_factor`` × the noise its planes show, when that
+        is below :data:`RESEARCH_BELOW` × ε (:mod:`monoplane.geometry.sensor_noise`); else
+        ``found`` and the configured thresholds. The search time of both passes is counted."""
         cfg = self.config
-        params = cfg.params
+        # Depth along the optical axis of the normalised points (the cloud is centred).
+        depth = cloud.points[:, 2] * cloud.scale + cloud.center[2]
+        # Least-squares planes of the labels: the search's own planes are fitted to its
+        # inlier bands, which a loose ε tilts towards the objects it let in.
+        planes = fit_planes_per_label(cloud.points, found.labels, len(found.planes))[0]
+        sigma = plane_residual_sigma(cloud.points, depth, found.labels, planes)
+        epsilon = noise_limited_epsilon(cfg.epsilon, sigma, cfg.noise_factor)
+        if not epsilon < RESEARCH_BELOW * cfg.epsilon:
+            return found, cfg.params
+        params = RansacParams(epsilon=epsilon, epsilon_n_deg=cfg.epsilon_n_deg)
+        again = self._run(cloud, get_graph, rng, params)
+        timings = {k: found.timings[k] + again.timings[k] for k in found.timings}
+        return again._replace(timings=timings), params
+
+    def _run(self, cloud: PlaneCloud, get_graph: Callable[[], NeighbourGraph],
+             rng: np.random.Generator, params: RansacParams | None = None) -> CloudPlanes:
+        """:meth:`run_cloud` with the graph asked for only when the first plane is labelled
+        (``get_graph`` may wait for it to be built); ``params`` replace the configured
+        thresholds."""
+        cfg = self.config
+        params = cfg.params if params is None else params
         timings = {"ransac.search": 0.0, "ransac.label": 0.0}
         min_support = max(cfg.min_support_points, math.ceil(cfg.min_support * cloud.size))
         point_labels = np.zeros(cloud.size, dtype=np.int32)
@@ -262,26 +314,40 @@ class SequentialRansac:
         found: list[np.ndarray] = []
         context = self.labeler.new_context()  # the labeler's memory of this frame
         prepared: Callable[[], None] | None = None
+        rejections = 0
         while len(found) < cfg.max_planes and pool.size >= min_support:
             t = time.perf_counter()
             best = self._search(cloud, pool, rng, params)
             timings["ransac.search"] += time.perf_counter() - t
             if best is None:
-                break
+                # No sample passed the sampler's test in a whole batch (a pool of scattered
+                # crease points): another draw may, within the same allowance.
+                if rejections >= cfg.max_rejections:
+                    break
+                rejections += 1
+                continue
             graph = get_graph()
             t = time.perf_counter()
             if prepared is not None:
                 prepared()  # the labeler's per-pool work, done while the search ran
             plane, inliers = self._label(cloud, graph, pool, best[0], best[1], params,
                                          context)
+            labelled = inliers.copy()
             if cfg.split_components and inliers.any():
                 members = np.flatnonzero(inliers)
                 inliers[members[~graph.largest_component_within(pool, inliers)]] = False
             timings["ransac.label"] += time.perf_counter() - t
             if inliers.sum() < min_support:
-                break
-            found.append(plane)
-            point_labels[pool[inliers]] = len(found)
+                # The best plane left is too small, or falls apart into pieces that each are:
+                # its points leave the pool (non-planar), and the smaller faces elsewhere in
+                # the pool, which a hypothesis through these points outscored, get their turn.
+                if rejections >= cfg.max_rejections or not labelled.any():
+                    break
+                rejections += 1
+                inliers = labelled
+            else:
+                found.append(plane)
+                point_labels[pool[inliers]] = len(found)
             pool = pool[~inliers]
             # The next pool's hypothesis-independent work (its subgraph, ...) runs on the
             # second core while this thread searches its next plane.

@@ -277,3 +277,47 @@ def test_the_compiled_search_equals_the_batch_by_batch_loop(sampler):
         np.testing.assert_array_equal(a[0], b[0])
         np.testing.assert_array_equal(a[1], b[1])
         assert rng_a.bit_generator.state == rng_b.bit_generator.state
+
+
+@pytest.mark.parametrize("rejections", [0, 1])
+def test_max_rejections_passes_over_a_plane_that_falls_apart(rejections):
+    # Plane z = 3 seen as 4x4-pixel tiles (768 px, no tile reaches the 10 % minimum support)
+    # and one compact patch of plane z = 2 (384 px): the tiled plane has more inliers, so it
+    # is found first and falls apart into its tiles. Stopping there loses the patch; passing
+    # over the tiles once finds it.
+    h, w = 48, 96
+    depth = np.zeros((h, w), dtype=np.float32)
+    for r in range(0, h, 8):
+        for c in range(0, 64, 8):
+            depth[r:r + 4, c:c + 4] = 3.0
+    depth[:24, 80:] = 2.0
+    normals = np.tile(np.array([0, 0, -1], dtype=np.float32), (h, w, 1))
+    frame = Frame(rgb=None, K=default_intrinsics(w, h, 60.0), depth=depth, normals=normals)
+    rec = make("monoplane-nocrf", split_components=True, min_support=0.1,
+               max_rejections=rejections).run(frame)
+    assert rec.num_planes == rejections
+    if rejections:
+        assert np.all(rec.labels[:24, 80:] == 1) and np.all(rec.labels[:, :64] == 0)
+        np.testing.assert_allclose(rec.params[0, 3], 2.0, rtol=1e-6)
+
+
+def test_noise_factor_lowers_epsilon_to_the_depth_noise():
+    # A wall 2 m away under 1 mm depth noise with a flat box 5 cm in front of it, in a scene
+    # that a few pixels make 10 m deep: ε = 0.02 of the radius (about 15 cm) takes the box
+    # into the wall; ε from the noise measured on the wall keeps it apart.
+    h, w = 60, 80
+    rng = np.random.default_rng(0)
+    depth = np.full((h, w), 2.0) + rng.normal(0, 0.001, (h, w))
+    depth[20:40, 30:50] -= 0.05
+    depth[:2, :2] = 10.0
+    normals = np.tile(np.array([0, 0, -1], dtype=np.float32), (h, w, 1))
+    frame = Frame(rgb=None, K=default_intrinsics(w, h, 60.0), depth=depth.astype(np.float32),
+                  normals=normals)
+    loose = make("monoplane-nocrf", split_components=True).run(frame)
+    assert loose.labels[30, 40] == loose.labels[10, 10]
+    tight = make("monoplane-nocrf", split_components=True, noise_factor=3.0)
+    rec = tight.run(frame)
+    assert tight.params_used.epsilon < 0.2 * tight.config.epsilon
+    box, wall = rec.labels[21:39, 31:49], rec.labels[45:, 5:75]
+    assert np.all(box == box[0, 0]) and np.all(wall == wall[0, 0]) and box[0, 0] != wall[0, 0]
+    np.testing.assert_allclose(rec.params[box[0, 0] - 1, 3], 1.95, atol=2e-3)

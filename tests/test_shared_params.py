@@ -54,9 +54,11 @@ class SpyRefiner(GraphCrfRefiner):
         return super().refine_cloud(cloud, graph, labels, planes, params)
 
 
+# The range preset lowers ε to the measured depth noise (ransac.noise_factor), which the
+# exact box frame has none of: off here, tested on its own below.
 SPY_OVERRIDES = ["sampler.plugin=spy-sampler", "scorer.plugin=spy-scorer",
                  "labeler.plugin=spy-labeler", "refiner.plugin=spy-refiner",
-                 "ransac.epsilon=0.03", "ransac.epsilon_n_deg=12.5"]
+                 "ransac.epsilon=0.03", "ransac.epsilon_n_deg=12.5", "ransac.noise_factor=0"]
 
 
 @pytest.fixture
@@ -74,6 +76,18 @@ def test_set_ransac_epsilon_reaches_every_stage_on_frames(spies, preset: str) ->
     Pipeline.from_preset(preset, overrides=SPY_OVERRIDES, pm=spies).run(frame)
     assert SEEN == {kind: {(0.03, 12.5)}
                     for kind in ("sampler", "scorer", "labeler", "refiner")}
+
+
+def test_the_noise_limited_epsilon_reaches_every_stage_after_the_first_search(spies) -> None:
+    # Exact depth: the first search's planes show no noise, so the search runs again with ε at
+    # its floor (a tenth), and the refiner gets the thresholds of that second search.
+    frame, _ = box_frame()
+    Pipeline.from_preset("range", overrides=[*SPY_OVERRIDES, "ransac.noise_factor=3"],
+                         pm=spies).run(frame)
+    rounded = {kind: {(round(e, 6), n) for e, n in seen} for kind, seen in SEEN.items()}
+    for kind in ("sampler", "scorer", "labeler"):
+        assert rounded[kind] == {(0.03, 12.5), (0.003, 12.5)}
+    assert rounded["refiner"] == {(0.003, 12.5)}
 
 
 def test_set_ransac_epsilon_reaches_every_stage_on_clouds(spies) -> None:

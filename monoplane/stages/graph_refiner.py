@@ -69,6 +69,9 @@ class GraphCrfConfig(ProximityAffinities):
     merge_angle_deg: float = param(5.0, "touching regions merge when normals agree this well")
     merge_distance: float = param(
         0.5, "... and each region's RMS distance to the other's plane is below this times ε")
+    rounds: int = param(
+        1, "mean-field rounds; each later one starts from the labels and least-squares planes "
+        "of the one before (a crease band a plane took in the search is given back)")
 
     def __post_init__(self) -> None:
         check_config([
@@ -77,6 +80,7 @@ class GraphCrfConfig(ProximityAffinities):
             (self.normal_weight >= 0, "normal_weight must be >= 0"),
             (self.temperature > 0, "temperature must be positive"),
             (self.iterations >= 0, "iterations must be >= 0"),
+            (self.rounds >= 1, "rounds must be >= 1"),
             (self.max_jump > 0, "max_jump must be positive"),
             (min(self.alpha_p2, self.alpha_c2, self.alpha_n2) > 0, "bandwidths must be > 0"),
             (0 <= self.min_support < 1, "min_support must lie in [0, 1)"),
@@ -262,6 +266,22 @@ class GraphCrfRefiner(Refiner):
         # labels are dense in the order of their first region.
         return graph_components(num + 1, pairs[agree]).astype(np.int32)[labels]
 
+    def _refit_round(self, cloud: PlaneCloud, adj: csr_matrix, graph: NeighbourGraph,
+                     labels: np.ndarray, planes: np.ndarray, params: RansacParams,
+                     epsilon: float) -> tuple[np.ndarray, np.ndarray]:
+        """One more mean-field round on planes refit by least squares to the labels so far.
+
+        The search's planes were fitted to their inlier bands, which along a crease include a
+        strip of the neighbouring face; after one round most of that strip has gone back, so
+        the refit planes sit on their own faces and the next round's distances separate the
+        crease better. Labels that lost all their points keep their old plane (unused).
+        """
+        refit, _, support = fit_planes_per_label(cloud.points, labels, planes.shape[0])
+        planes = np.where((support >= 3)[:, None] & np.isfinite(refit), refit, planes)
+        labels = self._mean_field(self.unary(cloud, planes, params, epsilon), adj, labels,
+                                  graph.mean_degree)
+        return labels, planes
+
     def refine_cloud(self, cloud: PlaneCloud, graph: NeighbourGraph, labels: np.ndarray,
                      planes: np.ndarray, params: RansacParams) -> tuple[np.ndarray, np.ndarray]:
         """See :meth:`monoplane.stages.base.Refiner.refine_cloud`."""
@@ -276,6 +296,9 @@ class GraphCrfRefiner(Refiner):
         epsilon = self.distance_scale(cloud, labels, planes, params)
         labels = self._mean_field(self.unary(cloud, planes, params, epsilon), adj, labels,
                                   graph.mean_degree)
+        for _ in range(c.rounds - 1):
+            labels, planes = self._refit_round(cloud, adj, graph, labels, planes, params,
+                                               epsilon)
         min_size = max(c.min_support_points, math.ceil(c.min_support * cloud.size))
         for _ in range(2):
             labels = self._components(graph, labels, min_size)

@@ -98,3 +98,42 @@ def test_noise_based_distance_scale_is_three_sigma():
     assert GraphCrfRefiner(GraphCrfConfig(noise_factor=1e3)).distance_scale(
         noisy, truth, planes, PARAMS) == 0.02
     assert GraphCrfRefiner().distance_scale(noisy, truth, planes, PARAMS) == 0.02
+
+
+def test_refit_rounds_give_a_shallow_crease_strip_back():
+    # A floor (z = 0, x < 0) meets a ramp rising at 30 deg (x > 0). The search gave the floor
+    # a 0.2-wide strip of the ramp and fitted the floor's plane to both, tilted towards the
+    # ramp. One mean-field round on those planes returns under half the strip; each later
+    # round starts from planes refit to the labels so far and returns more.
+    s = np.arange(0.0, 0.5, 0.01)
+    a, b = (m.ravel() for m in np.meshgrid(s, s))
+    tilt = np.radians(30)
+    floor = np.stack([-a - 0.005, b, np.zeros(a.size)], axis=1)
+    ramp = np.stack([a + 0.005, b, (a + 0.005) * np.tan(tilt)], axis=1)
+    points = np.vstack([floor, ramp])
+    normals = np.vstack([np.tile([0, 0, 1.0], (a.size, 1)),
+                         np.tile([-np.sin(tilt), 0, np.cos(tilt)], (a.size, 1))])
+    n = len(points)
+    cloud = PlaneCloud(points=points, normals=normals, colors=None, pixels=np.arange(n),
+                       center=np.zeros(3), scale=1.0, shape=(1, n), all_points=points,
+                       all_pixels=np.arange(n))
+    truth = np.repeat([1, 2], a.size).astype(np.int32)
+    start = truth.copy()
+    strip = (truth == 2) & (points[:, 0] < 0.2)
+    start[strip] = 1
+    from monoplane.geometry.planes import fit_planes_per_label
+
+    planes = fit_planes_per_label(points, start, 2)[0]
+    graph = NeighbourGraph.build(points, 8)
+    returned = []
+    for rounds in (1, 3):
+        refiner = GraphCrfRefiner(GraphCrfConfig(rounds=rounds, normal_weight=0.0))
+        labels, _ = refiner.refine_cloud(cloud, graph, start, planes, PARAMS)
+        ramp_label = np.bincount(labels[truth == 2]).argmax()
+        returned.append(np.mean(labels[strip] == ramp_label))
+    assert returned[0] < 0.5 and returned[1] >= 0.75
+
+
+def test_rounds_must_be_positive():
+    with pytest.raises(ConfigError, match="rounds"):
+        Pipeline.from_preset("range", overrides=["refiner.rounds=0"])
