@@ -154,11 +154,17 @@ class SiftXFeatFeatures(FeatureMatcher):
             "sift", "when the XFeat model is not downloaded: 'sift' warns once and matches "
                     "with SIFT alone (COLMAP's own, as the 'sift' stage), 'error' stops with "
                     "the fetch command")
+        sfm: str = param(
+            "sift", "what SfM maps: 'sift' (COLMAP's own SIFT, the most precise where it "
+                    "connects the views; XFeat's matches then serve the registrar) or 'both' "
+                    "(both keypoint sets written into COLMAP's database)")
 
         def __post_init__(self) -> None:
             if self.when_missing not in ("sift", "error"):
                 raise ConfigError(f"when_missing must be 'sift' or 'error', got "
                                   f"{self.when_missing!r}")
+            if self.sfm not in ("sift", "both"):
+                raise ConfigError(f"sfm must be 'sift' or 'both', got {self.sfm!r}")
             XFeatFeatures.Config(self.model, self.max_keypoints, self.threshold,
                                  self.min_similarity, self.threads)
             SiftFeatures.Config(self.sift_max_keypoints, self.ratio)
@@ -174,7 +180,8 @@ class SiftXFeatFeatures(FeatureMatcher):
                   f"matching with SIFT alone (run 'monoplane models fetch {cfg.model}' for "
                   "XFeat's matches too)", file=sys.stderr)
             self.xfeat = None
-            self.sfm_native = "sift"  # type: ignore[misc]  # this instance is SIFT's
+        if self.xfeat is None or cfg.sfm == "sift":
+            self.sfm_native = "sift"  # type: ignore[misc]  # COLMAP maps its own SIFT
 
     def detect(self, frame: Frame) -> Keypoints:
         if self.xfeat is None:

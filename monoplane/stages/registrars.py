@@ -127,6 +127,10 @@ class PlaneAwareRegistrar(Registrar):
             0.85, "relative depth: poses supported by at least this share of the best "
                   "epipolar support compete on how well their triangulated depths agree with "
                   "the views' own")
+        sfm_margin: float = param(
+            1.5, "relative depth: an SfM pose under check is replaced only by a candidate whose "
+                 "depth disagreement is this many times lower (or when it explains too few "
+                 "matches)")
         min_epipolar_support: int = param(
             20, "relative depth: fewest supporting matches for the pose to be chosen by its "
                 "epipolar support (rotation and direction from the matches, which do not "
@@ -280,15 +284,18 @@ class PlaneAwareRegistrar(Registrar):
     def _matches(self, views: list[Reconstruction], sfm: SfmResult,
                  features: dict[int, Features], r: int, v: int
                  ) -> tuple[np.ndarray, np.ndarray]:
-        """Keypoint matches of the pair: the matcher's verified ones, else the features stage's
-        (``sfm.correspondences``), else SIFT's."""
+        """Keypoint matches of the pair: the matcher's verified ones or the features stage's
+        (``sfm.correspondences``), whichever are more (a learned feature's hundreds against
+        the few SIFT matches SfM verified), else SIFT's."""
         key, flip = ((r, v), False) if r < v else ((v, r), True)
         given = sfm.matches.get(key)
-        if given is not None and len(given):
+        found = (sfm.correspondences.pixels(r, v) if sfm.correspondences is not None
+                 else None)
+        if given is not None and len(given) and (found is None or len(given) >= len(found[0])):
             a, b = (1, 0) if flip else (0, 1)
             return (sfm.keypoints[r][given[:, a]], sfm.keypoints[v][given[:, b]])
-        if sfm.correspondences is not None:
-            return sfm.correspondences.pixels(r, v)
+        if found is not None:
+            return found
         return match_features(self._features(views, sfm, features, r),
                               self._features(views, sfm, features, v))
 
@@ -437,8 +444,14 @@ class PlaneAwareRegistrar(Registrar):
             if check is None:
                 return agreement(ref, other, extra, tol), extra, False
             return check, hyp, False
-        close = [c for c in refined if c[0] >= cfg.support_share * most]
-        best = min(close, key=lambda c: depth_disagreement(c[2], pr, pv, ref, other, thr))
+        close = [(depth_disagreement(c[2], pr, pv, ref, other, thr), c) for c in refined
+                 if c[0] >= cfg.support_share * most]
+        spread, best = min(close, key=lambda e: e[0])
+        # An SfM pose was fitted by bundle adjustment on its verified matches: it stays unless
+        # another candidate's depths agree clearly better, not by a hair.
+        own = [e for e in close if e[1][2].source == "sfm"]
+        if own and best[2].source != "sfm" and spread * cfg.sfm_margin >= own[0][0]:
+            spread, best = own[0]
         return best[1], best[2], True
 
 

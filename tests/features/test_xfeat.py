@@ -156,3 +156,26 @@ def test_the_catalogue_entry_is_the_shared_file(tmp_path: Path,
     shutil.copy(REAL, model_path(record))
     assert require_model("xfeat") == model_path(record)
     assert len(stage.detect(frame)) == 0  # a blank image has no keypoints, but it ran
+
+
+def test_sift_plus_xfeat_says_what_colmap_maps(tmp_path: Path,
+                                               monkeypatch: pytest.MonkeyPatch,
+                                               capsys: pytest.CaptureFixture) -> None:
+    from monoplane.errors import ConfigError
+    from monoplane.pipeline import Pipeline
+    from monoplane.stages.base import FeatureMatcher
+
+    monkeypatch.setenv("MONOPLANE_CACHE", str(tmp_path))  # an empty cache: no XFeat file
+    pipe = Pipeline.from_preset("monoplane", ["features.plugin=sift+xfeat"])
+    stage = pipe.stage("features", FeatureMatcher)
+    assert stage.xfeat is None and stage.sfm_native == "sift"
+    assert "monoplane models fetch xfeat" in capsys.readouterr().err
+    with pytest.raises(ConfigError, match="sfm must be 'sift' or 'both'"):
+        Pipeline.from_preset("monoplane", ["features.plugin=sift+xfeat", "features.sfm=all"])
+    if REAL.is_file():
+        for sfm, native in (("sift", "sift"), ("both", None)):
+            pipe = Pipeline.from_preset("monoplane", ["features.plugin=sift+xfeat",
+                                                      f"features.model={REAL}",
+                                                      f"features.sfm={sfm}"])
+            stage = pipe.stage("features", FeatureMatcher)
+            assert stage.xfeat is not None and stage.sfm_native == native
