@@ -43,6 +43,43 @@ def _static(dim: object) -> int | None:
     return dim if isinstance(dim, int) and dim > 0 else None
 
 
+def open_session(path: Path, threads: int, label: str, expected: str) -> object:
+    """An onnxruntime CPU session of an ONNX file, or a one-line error naming the file.
+
+    Parameters
+    ----------
+    path : pathlib.Path
+        The ``.onnx`` file.
+    threads : int
+        Intra-op threads (at least 1).
+    label : str
+        How to name the model in messages, e.g. ``"xfeat model"``.
+    expected : str
+        What the file should hold, for the missing-file message.
+
+    Raises
+    ------
+    InvalidInput
+        When the file is missing or onnxruntime cannot load it, or ``threads`` < 1.
+    """
+    import onnxruntime as ort
+
+    if not path.is_file():
+        raise InvalidInput(f"{label} file not found: {path} (expected {expected})")
+    if threads < 1:
+        raise InvalidInput(f"threads must be >= 1, got {threads}")
+    opts = ort.SessionOptions()
+    opts.intra_op_num_threads = threads
+    opts.inter_op_num_threads = 1
+    opts.log_severity_level = 3
+    try:
+        return ort.InferenceSession(str(path), sess_options=opts,
+                                    providers=["CPUExecutionProvider"])
+    except Exception as exc:  # onnxruntime raises several unrelated types for bad files
+        first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+        raise InvalidInput(f"{path}: cannot load {label} as ONNX ({first})") from None
+
+
 class OnnxModel:
     """One ONNX network, loaded once and run on many images.
 
@@ -65,26 +102,11 @@ class OnnxModel:
 
     def __init__(self, path: str | Path, spec: ModelSpec, *, threads: int = 2,
                  label: str = "model") -> None:
-        import onnxruntime as ort
-
         self.path = Path(path).expanduser()
         self.spec = spec
         self.label = label
-        if not self.path.is_file():
-            raise InvalidInput(f"{label} file not found: {self.path} (expected an ONNX file "
-                               f"with {spec.describe()})")
-        if threads < 1:
-            raise InvalidInput(f"threads must be >= 1, got {threads}")
-        opts = ort.SessionOptions()
-        opts.intra_op_num_threads = threads
-        opts.inter_op_num_threads = 1
-        opts.log_severity_level = 3
-        try:
-            self.session = ort.InferenceSession(str(self.path), sess_options=opts,
-                                                providers=["CPUExecutionProvider"])
-        except Exception as exc:  # onnxruntime raises several unrelated types for bad files
-            first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
-            raise InvalidInput(f"{self.path}: cannot load {label} as ONNX ({first})") from None
+        self.session = open_session(self.path, threads, label,
+                                    f"an ONNX file with {spec.describe()}")
         self._bind()
 
     def _mismatch(self, what: str) -> InvalidInput:

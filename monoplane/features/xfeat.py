@@ -22,6 +22,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from monoplane.cues.session import open_session
 from monoplane.errors import InvalidInput
 from monoplane.features.correspondences import Keypoints
 
@@ -54,24 +55,12 @@ class XFeatNetwork:
     """
 
     def __init__(self, path: str | Path, threads: int = 2) -> None:
-        import onnxruntime as ort
-
         self.path = Path(path).expanduser()
         expected = ("one float input (1, 3, 640, 640) and outputs (1, 64, 80, 80) descriptors, "
                     "(1, 65, 80, 80) keypoint logits and (1, 1, 80, 80) reliability")
-        if not self.path.is_file():
-            raise InvalidInput(f"xfeat model file not found: {self.path} (expected the XFeat "
-                               f"ONNX backbone with {expected}; see docs/multiview.md)")
-        opts = ort.SessionOptions()
-        opts.intra_op_num_threads = max(1, int(threads))
-        opts.inter_op_num_threads = 1
-        opts.log_severity_level = 3
-        try:
-            self.session = ort.InferenceSession(str(self.path), sess_options=opts,
-                                                providers=["CPUExecutionProvider"])
-        except Exception as exc:  # onnxruntime raises several unrelated types for bad files
-            raise InvalidInput(f"{self.path}: cannot load the xfeat model as ONNX "
-                               f"({_first_line(exc)})") from None
+        self.session = open_session(self.path, max(1, int(threads)), "xfeat model",
+                                    f"the XFeat ONNX backbone with {expected}; see "
+                                    "docs/multiview.md")
         inputs, outputs = self.session.get_inputs(), self.session.get_outputs()
         by_channels = {tuple(o.shape[1:2]): o.name for o in outputs if len(o.shape) == 4}
         shape_ok = (len(inputs) == 1 and list(inputs[0].shape)[1:] == [3, INPUT_SIDE, INPUT_SIDE]

@@ -140,14 +140,7 @@ class SiftXFeatFeatures(FeatureMatcher):
     name = "sift+xfeat"
 
     @dataclass
-    class Config:
-        model: str = param(
-            "xfeat", "the XFeat ONNX backbone: a file path, or a catalogue name "
-                     "('monoplane models fetch xfeat' downloads it)")
-        max_keypoints: int = param(4096, "most XFeat keypoints per image, strongest first")
-        threshold: float = param(0.05, "smallest XFeat keypoint heatmap value (0-1)")
-        min_similarity: float = param(0.82, "smallest cosine similarity of an XFeat match")
-        threads: int = param(2, "onnxruntime threads")
+    class Config(XFeatFeatures.Config):
         sift_max_keypoints: int = param(4000, "most SIFT keypoints per image")
         ratio: float = param(0.8, "Lowe's ratio of a SIFT match")
         when_missing: str = param(
@@ -160,13 +153,12 @@ class SiftXFeatFeatures(FeatureMatcher):
                     "(both keypoint sets written into COLMAP's database)")
 
         def __post_init__(self) -> None:
+            super().__post_init__()
             if self.when_missing not in ("sift", "error"):
                 raise ConfigError(f"when_missing must be 'sift' or 'error', got "
                                   f"{self.when_missing!r}")
             if self.sfm not in ("sift", "both"):
                 raise ConfigError(f"sfm must be 'sift' or 'both', got {self.sfm!r}")
-            XFeatFeatures.Config(self.model, self.max_keypoints, self.threshold,
-                                 self.min_similarity, self.threads)
             SiftFeatures.Config(self.sift_max_keypoints, self.ratio)
 
     def __init__(self, config: Config | None = None) -> None:

@@ -100,7 +100,7 @@ def test_missing_and_mismatched_models_are_one_line_errors(tmp_path: Path) -> No
     with pytest.raises(InvalidInput, match=r"not an XFeat backbone.*descriptors\(1, 32, 80, 80\)"):
         XFeatNetwork(wrong)
     (tmp_path / "junk.onnx").write_bytes(b"not a model")
-    with pytest.raises(InvalidInput, match="cannot load the xfeat model"):
+    with pytest.raises(InvalidInput, match="cannot load xfeat model"):
         XFeatNetwork(tmp_path / "junk.onnx")
 
 
