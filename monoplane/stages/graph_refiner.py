@@ -124,7 +124,9 @@ def pixel_graph(cloud: PlaneCloud, max_jump: float) -> NeighbourGraph:
     edges, gap, indptr, indices = _pixel_graph(index.reshape(h, w), cloud.points,
                                                cloud.center / cloud.scale, float(max_jump))
     spacing = float(np.median(gap)) if gap.size else 0.0
-    return NeighbourGraph(cloud.size, edges, indptr, indices, cloud.tree, spacing)
+    # No point index: the grid gave the neighbours, and building one over every pixel would
+    # cost more than the graph.
+    return NeighbourGraph(cloud.size, edges, indptr, indices, None, spacing)
 
 
 @kernel
