@@ -23,9 +23,9 @@ Windows that provably see one surface (no rim, one component, small depth range)
 from window sums of the masked moments, taken for the whole image at once with separable
 filters; only the band near depth edges goes through the per-neighbour gating above. The
 discontinuities, the slopes and the fits are compiled kernels (:mod:`monoplane.jit`), the fits
-split by rows over the frame's threads: at 640x480 with the defaults it takes about 15 ms of CPU
-time, against 125-140 ms for the NumPy version it replaced (same decisions; normals equal to
-float rounding, docs/evaluation.md).
+split by rows over the frame's threads: at 640x480 with the defaults they take about a quarter
+of the CPU time of the NumPy version they replaced (same decisions, normals equal to float
+rounding; docs/evaluation.md).
 
 Holes (depth 0, NaN or inf) contribute nothing and get a zero normal. Pixels without enough
 well-spread support (fewer than ``min_support`` accepted neighbours, or all on a line) get a
