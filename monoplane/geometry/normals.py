@@ -227,7 +227,7 @@ def normals_from_depth(depth: np.ndarray, K: np.ndarray, *, radius: int | None =
     support = max(min_support, 3)
 
     def fit(a: int, b: int) -> None:
-        _fit_interior(inv, interior, sums, params, r, stride, support, a, b, normals)
+        _fit_interior(inv, labels, interior, sums, params, r, stride, support, a, b, normals)
         _fit_band(inv, labels, rim, slope, band, params, r, stride, support, a, b, normals)
 
     run_threaded([functools.partial(fit, a, b) for a, b in chunks(z.shape[0], _THREADED_ROWS)])
@@ -282,19 +282,63 @@ def _store_normal(out: np.ndarray, v: int, u: int, grad_u: float, grad_v: float,
         out[v, u, 2] = nz / norm
 
 
+@inline
+def _window_sums(inv: np.ndarray, labels: np.ndarray, v: int, u: int, r: int, stride: int,
+                 lab: int, on_rim: bool, ungated: bool, tol: float, max_jump: float
+                 ) -> tuple[float, float, float, float, float, float, float, float, float]:
+    """Window sums of the accepted samples around pixel ``(v, u)``, in the order of
+    :func:`_line_fit`, the fitted value being the sample's inverse depth relative to the
+    centre's, ``e = w / w_p - 1`` (so the fit's gradients are relative and one tolerance fits
+    every depth range).
+
+    ``ungated``: every valid sample is accepted. Otherwise a rim pixel (``on_rim``) accepts
+    samples within ``max_jump`` of its own inverse depth, any other pixel samples of its own
+    component ``lab`` whose ``|e|`` stays within ``tol`` per pixel of offset (Chebyshev).
+    """
+    h, w = inv.shape
+    c = inv[v, u]
+    cnt = su = sv = suu = suv = svv = ru = rv = r1 = 0.0
+    for dv in range(-r, r + 1, stride):
+        y = v + dv
+        if y < 0 or y >= h:
+            continue
+        for du in range(-r, r + 1, stride):
+            x = u + du
+            if x < 0 or x >= w:
+                continue
+            q = inv[y, x]
+            e = q / c - 1.0
+            if ungated or on_rim:
+                if not (q > 0 and (ungated or abs(e) <= max_jump)):
+                    continue
+            elif labels[y, x] != lab or not abs(e) <= tol * max(abs(du), abs(dv), 1):
+                continue
+            fu, fv = float(du), float(dv)
+            cnt += 1.0
+            su += fu
+            sv += fv
+            suu += fu * fu
+            suv += fu * fv
+            svv += fv * fv
+            ru += e * fu
+            rv += e * fv
+            r1 += e
+    return cnt, su, sv, suu, suv, svv, ru, rv, r1
+
+
 @kernel
-def _fit_interior(inv: np.ndarray, interior: np.ndarray, sums: np.ndarray, params: np.ndarray,
-                  r: int, stride: int, min_support: int, row0: int, row1: int,
-                  out: np.ndarray) -> None:
+def _fit_interior(inv: np.ndarray, labels: np.ndarray, interior: np.ndarray, sums: np.ndarray,
+                  params: np.ndarray, r: int, stride: int, min_support: int, row0: int,
+                  row1: int, out: np.ndarray) -> None:
     """Normals of the ``interior`` pixels of rows ``row0:row1`` into ``out`` ((H, W, 3)
     float32), each from the fit of absolute inverse depth over its whole window.
 
     ``sums`` is (4, H, W) float32: per window, the count of valid samples and ``Σdu w``,
     ``Σdv w``, ``Σw``. A window with every sample valid has the same sums of offsets
-    everywhere; one with holes gets them from its samples. ``params`` is ``[max_jump, K
-    (row-major)]``.
+    everywhere; one with holes gets them from its samples (:func:`_window_sums` ungated, so
+    ``labels`` is not read). ``params`` is ``[max_jump, K (row-major)]``.
     """
-    h, w = inv.shape
+    w = inv.shape[1]
     side = (2 * r) // stride + 1
     full = float(side * side)
     spread = 0.0  # Σdu² over a full window (= Σdv²)
@@ -307,20 +351,9 @@ def _fit_interior(inv: np.ndarray, interior: np.ndarray, sums: np.ndarray, param
             cnt = float(sums[0, v, u])
             su = sv = suv = 0.0
             suu = svv = spread
-            if cnt < full:
-                suu = svv = 0.0
-                for dv in range(-r, r + 1, stride):
-                    y = v + dv
-                    if y < 0 or y >= h:
-                        continue
-                    for du in range(-r, r + 1, stride):
-                        x = u + du
-                        if 0 <= x < w and inv[y, x] > 0:
-                            su += du
-                            sv += dv
-                            suu += du * du
-                            suv += du * dv
-                            svv += dv * dv
+            if cnt < full:  # holes: the offsets of the valid samples, ungated
+                cnt, su, sv, suu, suv, svv, _, _, _ = _window_sums(
+                    inv, labels, v, u, r, stride, 0, False, True, 0.0, 0.0)
             a, b, c, good = _line_fit(cnt, su, sv, suu, suv, svv, float(sums[1, v, u]),
                                       float(sums[2, v, u]), float(sums[3, v, u]),
                                       min_support, stride)
@@ -337,46 +370,18 @@ def _fit_band(inv: np.ndarray, labels: np.ndarray, rim: np.ndarray, slope: np.nd
     Each window sample is gated: a rim pixel accepts samples within ``max_jump`` of its own
     inverse depth, any other pixel samples of its own component within ``max_jump`` plus its
     own relative ``slope`` per pixel of offset (Chebyshev). The fit is of inverse depth
-    relative to the centre's. ``params`` is ``[max_jump, K (row-major)]``.
+    relative to the centre's (:func:`_window_sums`). ``params`` is ``[max_jump, K
+    (row-major)]``.
     """
-    h, w = inv.shape
+    w = inv.shape[1]
     max_jump = params[0]
     for v in range(row0, row1):
         for u in range(w):
             if not band[v, u]:
                 continue
-            c = inv[v, u]
-            lab = labels[v, u]
-            on_rim = rim[v, u]
-            tol = max_jump + slope[v, u]
-            cnt = su = sv = suu = suv = svv = ru = rv = r1 = 0.0
-            for dv in range(-r, r + 1, stride):
-                y = v + dv
-                if y < 0 or y >= h:
-                    continue
-                for du in range(-r, r + 1, stride):
-                    x = u + du
-                    if x < 0 or x >= w:
-                        continue
-                    q = inv[y, x]
-                    # e is the sample's inverse depth relative to the centre's, so the fit's
-                    # gradients are relative and one tolerance fits every depth range.
-                    e = q / c - 1.0
-                    if on_rim:
-                        if not (abs(e) <= max_jump and q > 0):
-                            continue
-                    elif labels[y, x] != lab or not abs(e) <= tol * max(abs(du), abs(dv), 1):
-                        continue
-                    fu, fv = float(du), float(dv)
-                    cnt += 1.0
-                    su += fu
-                    sv += fv
-                    suu += fu * fu
-                    suv += fu * fv
-                    svv += fv * fv
-                    ru += e * fu
-                    rv += e * fv
-                    r1 += e
+            cnt, su, sv, suu, suv, svv, ru, rv, r1 = _window_sums(
+                inv, labels, v, u, r, stride, labels[v, u], rim[v, u], False,
+                max_jump + slope[v, u], max_jump)
             a, b, c0, good = _line_fit(cnt, su, sv, suu, suv, svv, ru, rv, r1, min_support,
                                        stride)
             if good:  # near the centre w = w_p (1 + c0 + a du + b dv); w_p > 0 drops out
