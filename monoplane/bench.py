@@ -13,6 +13,15 @@ Scene complexity
     (size, range) is one result with the mean ground-truth and found plane counts beside its
     times, and per-frame medians in :attr:`BenchResult.per_frame`: time against plane count.
 
+Your own frames
+    With ``data`` (:class:`monoplane.bench_data.DataSource`, ``monoplane bench --data DIR``) the
+    frames are read from a folder instead (the layouts ``monoplane batch`` reads, or a
+    Redwood-style ``depth/`` + ``image/`` sequence; see :mod:`monoplane.bench_data`), and the
+    sizes and objects ranges do not apply: one result, whose size is that of the first frame.
+    Frames without normals (depth-only) have them estimated by the preset's cue stage, inside
+    the timed call; a baseline needs normals, so it gets the ones the preset estimated and its
+    time does not include them.
+
 Time
     Every entry of ``Reconstruction.timings``: the stage kinds the pipeline times (``cues``,
     ``ransac``, ``refiner``), their sub-steps (``ransac.graph``, ``refiner.crf``, ...) and the
@@ -51,12 +60,17 @@ import tracemalloc
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, field
-from typing import Any
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from monoplane.bench_data import DataSource, load_data_frames
 from monoplane.errors import InvalidInput
 from monoplane.hookspecs import hookimpl
+
+if TYPE_CHECKING:
+    from monoplane.datamodel import Frame
 
 #: Sizes benchmarked by default: the paper's working resolution and VGA.
 DEFAULT_SIZES: tuple[tuple[int, int], ...] = ((256, 192), (640, 480))
@@ -135,11 +149,11 @@ class FrameBench:
     Attributes
     ----------
     seed : int
-        Seed of the synthetic scene.
+        Seed of the synthetic scene; with ``--data``, the frame's index in the run.
     objects : int or None
         Objects in the scene; ``None`` for the usual furnishing.
-    gt_planes : int
-        Ground-truth planes in view.
+    gt_planes : int or None
+        Ground-truth planes in view; ``None`` for a user's frame (``--data``).
     planes : float
         Planes the preset found (mean over the runs; runs of one frame agree).
     total_s : float
@@ -150,10 +164,11 @@ class FrameBench:
 
     seed: int
     objects: int | None
-    gt_planes: int
+    gt_planes: int | None
     planes: float
     total_s: float
     baseline_call_s: dict[str, float] = field(default_factory=dict)
+    name: str | None = None
 
 
 @dataclass
@@ -173,11 +188,14 @@ class BenchResult:
     objects: tuple[int, int] | None = None
     gt_planes: float = float("nan")
     per_frame: list[FrameBench] = field(default_factory=list)
+    data: str | None = None
 
     @property
     def column(self) -> str:
-        """Column title of this result: the size, and the objects range if any."""
+        """Column title of this result: the size, and the objects range or data folder."""
         size = f"{self.width}x{self.height}"
+        if self.data is not None:
+            return f"{Path(self.data).name} {size}"
         if self.objects is None:
             return size
         lo, hi = self.objects
@@ -207,7 +225,7 @@ class BenchResult:
                 "fps": self.fps,
                 "stages": [asdict(s) for s in self.stages],
                 "baselines": [{**asdict(b), "ratio": self.ratio(b)} for b in self.baselines],
-                "per_frame": [asdict(f) for f in self.per_frame]}
+                "per_frame": [asdict(f) for f in self.per_frame], "data": self.data}
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> BenchResult:
@@ -222,7 +240,7 @@ class BenchResult:
                     for b in data.get("baselines", [])],
                    None if objects is None else (int(objects[0]), int(objects[1])),
                    float("nan") if gt_planes is None else float(gt_planes),
-                   [FrameBench(**f) for f in data.get("per_frame", [])])
+                   [FrameBench(**f) for f in data.get("per_frame", [])], data.get("data"))
 
 
 def _order(key: str) -> tuple[int, str, int]:
@@ -252,8 +270,8 @@ def bench(preset: str = "monoplane", sizes: Sequence[tuple[int, int]] = DEFAULT_
           repeat: int = 3, seed: int = 0, level: str = "mild",
           overrides: list[str] | None = None, progress: bool = True, frames: int = 5,
           baselines: Sequence[str] | None = None, plugins: Sequence[str] = (),
-          isolate: bool = True, objects: Sequence[tuple[int, int]] | None = None
-          ) -> list[BenchResult]:
+          isolate: bool = True, objects: Sequence[tuple[int, int]] | None = None,
+          data: DataSource | None = None) -> list[BenchResult]:
     """Time and profile a preset, and the baselines on the same frames, at several sizes.
 
     Parameters
@@ -284,12 +302,15 @@ def bench(preset: str = "monoplane", sizes: Sequence[tuple[int, int]] = DEFAULT_
     objects : sequence of (int, int), optional
         Scene-complexity ranges ``(min, max)`` of objects per scene (e.g.
         :data:`COMPLEXITY_LEVELS`); ``None``: the usual scenes. See the module docstring.
+    data : DataSource, optional
+        Time on these frames instead of synthetic ones (``sizes``, ``frames``, ``seed``,
+        ``level`` and ``objects`` then do not apply; the source has its own frame cap).
 
     Returns
     -------
     list of BenchResult
         One per size, in the given order; with ``objects``, one per size and range, ranges
-        varying fastest.
+        varying fastest; with ``data``, one.
     """
     from tqdm import tqdm
 
@@ -300,6 +321,11 @@ def bench(preset: str = "monoplane", sizes: Sequence[tuple[int, int]] = DEFAULT_
     if not sizes:
         raise InvalidInput("no image size to benchmark")
     ranges: list[tuple[int, int] | None] = [None]
+    if data is not None:
+        if objects is not None:
+            raise InvalidInput("--objects and --complexity apply to synthetic frames, not --data")
+        sizes = [(0, 0)]  # the frames' own
+        load_data_frames(data)  # bad input fails here, before any child starts
     if objects is not None:
         ranges = [(int(lo), int(hi)) for lo, hi in objects]
         if not ranges:
@@ -319,7 +345,7 @@ def bench(preset: str = "monoplane", sizes: Sequence[tuple[int, int]] = DEFAULT_
         raise InvalidInput(f"unknown baseline '{unknown[0]}'; valid choices: "
                            f"{', '.join(names) or '(none)'}")
     args = [(preset, list(overrides or []), size, seed, frames, level, repeat, chosen,
-             list(plugins), span) for size in sizes for span in ranges]
+             list(plugins), span, data) for size in sizes for span in ranges]
     results = []
     for arg in tqdm(args, disable=not progress, unit="run", desc="bench"):
         if isolate:
@@ -343,8 +369,10 @@ def _plugin_manager(plugins: Sequence[str], *extra: object) -> Any:
 
 def _bench_size(preset: str, overrides: list[str], size: tuple[int, int], seed: int,
                 frames: int, level: str, repeat: int, baselines: list[str],
-                plugins: list[str], objects: tuple[int, int] | None = None) -> BenchResult:
-    """One size (and objects range) of :func:`bench` (in a child process when isolated)."""
+                plugins: list[str], objects: tuple[int, int] | None = None,
+                data: DataSource | None = None) -> BenchResult:
+    """One size (and objects range), or the data frames, of :func:`bench` (in a child process
+    when isolated)."""
     from monoplane.evaluation.baselines import CALL_TIMING, get_baseline
     from monoplane.pipeline import Pipeline
     from monoplane.synth import generate
@@ -355,10 +383,16 @@ def _bench_size(preset: str, overrides: list[str], size: tuple[int, int], seed: 
     width, height = size
     counts = [None if objects is None else objects[0] + i % (objects[1] - objects[0] + 1)
               for i in range(frames)]
-    views, gt_planes = [], []
-    for i in range(frames):  # only the frames and plane counts: the peak RSS is the preset's
-        view = generate(seed + i, level, width=width, height=height, n_views=1,
-                        objects=counts[i]).views[0]
+    views: list[Frame] = []
+    gt_planes: list[int | None] = []
+    if data is not None:
+        views = load_data_frames(data)
+        frames, seed = len(views), 0
+        counts, gt_planes = [None] * frames, [None] * frames
+        height, width = views[0].shape
+    for i in range(frames if data is None else 0):  # only the frames and plane counts: the
+        view = generate(seed + i, level, width=width, height=height, n_views=1,  # peak RSS is
+                        objects=counts[i]).views[0]                             # the preset's
         views.append(view.frame)
         gt_planes.append(len(view.gt_params))
     start = time.perf_counter()
@@ -372,8 +406,11 @@ def _bench_size(preset: str, overrides: list[str], size: tuple[int, int], seed: 
     finally:
         tracemalloc.stop()
     peaks = {**tracker.peaks, "total": total_peak}
+    # Baselines need normals: a depth-only frame's are the ones the preset estimated.
+    base_views = [views[0] if views[0].normals is not None else pipe.run(views[0]).frame]
     for frame in views[1:]:  # every frame once before the RSS is read
-        pipe.run(frame)
+        rec = pipe.run(frame)
+        base_views.append(frame if frame.normals is not None else rec.frame)
     rss = _max_rss_mib()  # before any baseline runs: the preset's own peak
     fns = [get_baseline(name, pm) for name in baselines]
     runs: list[dict[str, float]] = []
@@ -390,7 +427,7 @@ def _bench_size(preset: str, overrides: list[str], size: tuple[int, int], seed: 
             planes.append(rec.num_planes)
             for b, fn in enumerate(fns):  # right after, on the same frame (see "Baselines")
                 start = time.perf_counter()
-                base = fn(frame, seed=seed + i)
+                base = fn(base_views[i], seed=seed + i)
                 totals[b].append(time.perf_counter() - start)
                 calls[b].append(base.timings.get(CALL_TIMING, totals[b][-1]))
     keys = _ordered([k for r in runs for k in r])
@@ -404,10 +441,13 @@ def _bench_size(preset: str, overrides: list[str], size: tuple[int, int], seed: 
         per_frame.append(FrameBench(
             seed + i, counts[i], gt_planes[i], float(np.mean(planes[rows])),
             float(np.median([r["total"] for r in runs[rows]])),
-            {name: float(np.median(c[rows])) for name, c in zip(baselines, calls, strict=True)}))
+            {name: float(np.median(c[rows])) for name, c in zip(baselines, calls, strict=True)},
+            views[i].name if data is not None else None))
+    known = [f.gt_planes for f in per_frame if f.gt_planes is not None]
     return BenchResult(preset, width, height, repeat, stages, float(np.mean(planes)), rss,
                        frames, first_call, timed, objects,
-                       float(np.mean([f.gt_planes for f in per_frame])), per_frame)
+                       float(np.mean(known)) if known else float("nan"), per_frame,
+                       None if data is None else data.path)
 
 
 def parse_sizes(text: str) -> list[tuple[int, int]]:
@@ -463,7 +503,7 @@ def format_bench(results: Sequence[BenchResult], markdown: bool = False) -> str:
              f"MiB = traced peak above the stage's start (tracemalloc); mean planes "
              + ", ".join(f"{r.planes:.1f}" for r in results))
     text = "\n".join([title, *([""] if markdown else []), _render(header, rows, markdown)])
-    if any(r.objects is not None for r in results):
+    if any(r.objects is not None or r.data is not None for r in results):
         text += "\n\n" + format_complexity(results, markdown)
     return text
 
@@ -478,17 +518,19 @@ def format_complexity(results: Sequence[BenchResult], markdown: bool = False) ->
         header += [f"{name} call ms", f"ratio / {name}"]
     rows = []
     for r in results:
-        span = "usual" if r.objects is None else f"{r.objects[0]}-{r.objects[1]}"
+        span = ("usual" if r.data is None else "-") if r.objects is None \
+            else f"{r.objects[0]}-{r.objects[1]}"
         row = [f"{r.width}x{r.height}", span, _number(r.gt_planes), f"{r.planes:.1f}",
                f"{1000 * r.total_s:.1f}"]
         for name in names:
             b = next((b for b in r.baselines if b.name == name), None)
             row += [f"{1000 * b.call_s:.1f}", f"{r.ratio(b):.2f}x"] if b else ["-", "-"]
         rows.append(row)
-    frame_header = ["size", "seed", "objects", "GT planes", "planes found", "total ms",
+    frame_header = ["size", "frame", "objects", "GT planes", "planes found", "total ms",
                     *[f"{name} call ms" for name in names]]
-    frame_rows = [[f"{r.width}x{r.height}", str(f.seed), "-" if f.objects is None
-                   else str(f.objects), str(f.gt_planes), f"{f.planes:.1f}",
+    frame_rows = [[f"{r.width}x{r.height}", f.name or str(f.seed), "-" if f.objects is None
+                   else str(f.objects), "-" if f.gt_planes is None else str(f.gt_planes),
+                   f"{f.planes:.1f}",
                    f"{1000 * f.total_s:.1f}",
                    *[f"{1000 * f.baseline_call_s[n]:.1f}" if n in f.baseline_call_s else "-"
                      for n in names]]

@@ -25,6 +25,12 @@ cameras furnished with that many objects in view, and a second table gives time 
 count: the ground-truth and found planes, the preset's time, each baseline's call and the
 ratio, per range and per frame.
 
+--data DIR times your own frames instead (the layouts 'monoplane batch' reads, or a sequence
+folder with depth/ and image/ such as a Redwood-format capture), at their own size; with
+--depth-only the colour images are left out, so the preset estimates normals from the depth as
+for a range sensor. A second table gives each frame's planes and times. Baselines need normals:
+on depth-only frames they get the ones the preset estimated, outside their timed call.
+
 With --batch it times the 'monoplane batch' command instead, on a folder of synthetic frames of
 one size (default 640x480, 20 frames), for each --workers count and --engine in alternation:
 the whole command's wall time, the batch's own time (summary.json's seconds: the command less
@@ -42,6 +48,9 @@ EPILOG = """examples:
   monoplane bench --from-json bench.json --markdown     # re-render a saved run for the docs
   monoplane bench --preset monoplane-nocrf --baseline cgal --complexity   # time vs. planes
   monoplane bench --objects 1-2,8-12 --sizes 256x192 --json levels.json
+  monoplane bench --data livingroom/ --depth-only --depth-scale 1000 \
+      --intrinsics 525,525,319.5,239.5 --frames 7 --baseline cgal  # a Redwood-style sequence
+  monoplane bench --data frames.jsonl --preset range --no-baselines  # what 'batch' reads
   monoplane bench --batch --workers 1,2 --repeat 5      # batch throughput, 20 frames 640x480
   monoplane bench --batch --engine local --engine ray --json batch.json
   monoplane bench --batch --frames 1000 --sizes 128x96 --workers 2 --repeat 1   # soak"""
@@ -80,6 +89,20 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="print the table of a saved --json run instead of running")
     p.add_argument("--markdown", action="store_true", help="print the table as Markdown")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    own = p.add_argument_group("your own frames (--data)")
+    own.add_argument("--data", metavar="DIR",
+                     help="time on these frames instead of synthetic ones: a folder of frame "
+                          "folders or a .jsonl/.csv manifest (what 'monoplane batch' reads), "
+                          "or a sequence folder with depth/ (and image/) sorted by name; "
+                          "--frames N takes N frames spread over it (default: all)")
+    own.add_argument("--depth-scale", type=float, metavar="S",
+                     help="divisor of 16-bit depth PNGs (1000 for millimetres, 5000 for TUM)")
+    own.add_argument("--intrinsics", metavar="FX,FY,CX,CY|JSON",
+                     help="intrinsics of every frame (default: each frame's intrinsics.json, "
+                          "else a 60 degree field of view)")
+    own.add_argument("--depth-only", action="store_true",
+                     help="do not read colour images: depth in, normals estimated by the "
+                          "preset, as from a range sensor")
     batch = p.add_argument_group("batch throughput (--batch)")
     batch.add_argument("--batch", action="store_true",
                        help="time the 'monoplane batch' command instead of single frames")
@@ -153,6 +176,7 @@ def _from_json(path: str, markdown: bool) -> str:
 
 def run(args: argparse.Namespace) -> int:
     from monoplane.bench import bench, format_bench, parse_sizes
+    from monoplane.bench_data import DataSource
 
     if args.from_json:
         print(_from_json(args.from_json, args.markdown))
@@ -163,6 +187,9 @@ def run(args: argparse.Namespace) -> int:
                 "overrides": args.overrides,
                 "objects": None if objects is None else [list(r) for r in objects]}
     if args.batch:
+        if args.data is not None:
+            raise InvalidInput("--data applies to the frame bench; 'monoplane batch' itself "
+                               "reads a folder: time it with --batch on synthetic frames")
         if objects is not None:
             raise InvalidInput("--objects and --complexity apply to the frame bench, not "
                                "--batch")
@@ -184,11 +211,23 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if args.workers is not None or args.engines is not None:
         raise InvalidInput("--workers and --engine apply to --batch only")
+    data = None
+    if args.data is not None:
+        if args.sizes is not None:
+            raise InvalidInput("--sizes applies to synthetic frames; --data times the frames "
+                               "at their own size")
+        data = DataSource(args.data, args.depth_scale, args.intrinsics, args.depth_only,
+                          args.frames)
+        settings.update(data=args.data, depth_scale=args.depth_scale,
+                        intrinsics=args.intrinsics, depth_only=args.depth_only)
+    elif (args.depth_scale, args.intrinsics, args.depth_only) != (None, None, False):
+        raise InvalidInput("--depth-scale, --intrinsics and --depth-only apply to --data only")
     results = bench(args.preset, parse_sizes(args.sizes or "256x192,640x480"),
                     repeat=args.repeat, seed=args.seed, level=args.level,
                     overrides=args.overrides, progress=not args.no_progress,
                     frames=5 if args.frames is None else args.frames,
-                    baselines=[] if args.no_baselines else args.baselines, objects=objects)
+                    baselines=[] if args.no_baselines else args.baselines, objects=objects,
+                    data=data)
     print(format_bench(results, markdown=args.markdown))
     if args.json:
         _write_json(args.json, {"settings": settings,

@@ -37,8 +37,9 @@ class NeighbourGraph:
         ``indices[indptr[i]:indptr[i + 1]]`` (int64, ascending). Given to the constructor, or
         ``None`` there: then built from ``edges`` when first asked for (the graph cuts need
         only the edge list; the RANSAC builds these on its background thread).
-    tree : PointIndex
-        Nearest-neighbour index over the points the graph was built on.
+    tree : PointIndex or None
+        Nearest-neighbour index over the points the graph was built on; None for a graph
+        that needed none (the pixel-grid graph of :mod:`monoplane.stages.graph_refiner`).
     spacing : float
         Median distance from a point to its nearest other point, in the points' unit.
     """
@@ -47,7 +48,7 @@ class NeighbourGraph:
     edges: np.ndarray
     _indptr: np.ndarray | None
     _indices: np.ndarray | None
-    tree: PointIndex
+    tree: PointIndex | None
     spacing: float
     _last_subgraph: tuple[np.ndarray, np.ndarray, np.ndarray] | None = field(
         default=None, init=False, repr=False, compare=False)

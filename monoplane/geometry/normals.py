@@ -20,9 +20,12 @@ hypotheses. Each pixel's fit only uses neighbours on its own side of every depth
    ``max_jump`` of its own depth, which excludes the nearer (occluding) side.
 
 Windows that provably see one surface (no rim, one component, small depth range) are fitted
-for the whole image at once with separable filters of the masked moments; only the band near
-depth edges goes through the per-neighbour gating above. At 640x480 with the defaults this
-takes about 0.1 s of CPU time.
+from window sums of the masked moments, taken for the whole image at once with separable
+filters; only the band near depth edges goes through the per-neighbour gating above. The
+discontinuities, the slopes and the fits are compiled kernels (:mod:`monoplane.jit`), the fits
+split by rows over the frame's threads: at 640x480 with the defaults they take about a quarter
+of the CPU time of the NumPy version they replaced (same decisions, normals equal to float
+rounding; docs/evaluation.md).
 
 Holes (depth 0, NaN or inf) contribute nothing and get a zero normal. Pixels without enough
 well-spread support (fewer than ``min_support`` accepted neighbours, or all on a line) get a
@@ -31,73 +34,98 @@ zero normal too, which downstream code treats as invalid.
 
 from __future__ import annotations
 
+import functools
+
 import cv2
 import numpy as np
 
 from monoplane.errors import InvalidInput
-from monoplane.geometry.components import label_regions
+from monoplane.jit import chunks, inline, kernel, run_threaded
+
+#: Rows of the image per threaded piece of the fit below which one thread does it all.
+_THREADED_ROWS = 64
 
 
-def _rim_and_components(depth: np.ndarray, valid: np.ndarray,
-                        max_jump: float) -> tuple[np.ndarray, np.ndarray]:
-    """Rim mask (far side of each discontinuity) and component labels of the other pixels.
+@kernel
+def _discontinuities(z: np.ndarray, max_jump: float) -> tuple[np.ndarray, np.ndarray]:
+    """Inverse depth and rim mask (far side of each discontinuity) of a (H, W) float32 depth.
 
     Along a row or column, the inverse depth of a plane changes by the same step from pixel
     to pixel, however steep the plane (a floor near the horizon). So a discontinuity is a
     step that differs from *both* neighbouring steps by more than ``max_jump`` relative to the
     inverse depth; a step whose neighbours are missing (holes, image border) is compared with
-    zero instead.
+    zero instead. Arithmetic is float32, like the inputs.
 
     Returns
     -------
+    inv : numpy.ndarray
+        (H, W) float32 ``1 / z``, 0 on holes (``z <= 0``).
     rim : numpy.ndarray
         (H, W) bool.
-    labels : numpy.ndarray
-        (H, W) int32, 0 on invalid and rim pixels.
     """
-    inv = np.zeros(depth.shape, dtype=np.float32)
-    inv[valid] = 1.0 / depth[valid]
-    rim = np.zeros(depth.shape, dtype=bool)
-    for axis in (1, 0):
-        w = np.moveaxis(inv, axis, -1)
-        ok = np.moveaxis(valid, axis, -1)
-        step = w[..., 1:] - w[..., :-1]
-        step_ok = ok[..., 1:] & ok[..., :-1]
-        inf = np.float32(np.inf)
-        before = np.full_like(step, inf)
-        before[..., 1:] = np.where(step_ok[..., :-1], np.abs(step[..., 1:] - step[..., :-1]), inf)
-        after = np.full_like(step, inf)
-        after[..., :-1] = np.where(step_ok[..., 1:], np.abs(step[..., :-1] - step[..., 1:]), inf)
-        deviation = np.minimum(before, after)
-        deviation = np.where(np.isinf(deviation), np.abs(step), deviation)
-        near = np.maximum(w[..., 1:], w[..., :-1])
-        jump = step_ok & (deviation > max_jump * near)
-        r = np.moveaxis(rim, axis, -1)
-        r[..., :-1] |= jump & (step < 0)         # first pixel farther (smaller inverse depth)
-        r[..., 1:] |= jump & (step > 0)
-    labels, _ = label_regions(valid & ~rim, connectivity=4)
-    return rim, labels
+    h, w = z.shape
+    inv = np.zeros((h, w), dtype=np.float32)
+    for v in range(h):
+        for u in range(w):
+            if z[v, u] > 0:
+                inv[v, u] = np.float32(1.0) / z[v, u]
+    rim = np.zeros((h, w), dtype=np.bool_)
+    jump = np.float32(max_jump)
+    for axis in range(2):
+        lines, n = (h, w) if axis == 0 else (w, h)
+        for line in range(lines):
+            for i in range(n - 1):
+                a = inv[line, i] if axis == 0 else inv[i, line]
+                b = inv[line, i + 1] if axis == 0 else inv[i + 1, line]
+                if a <= 0 or b <= 0:
+                    continue
+                step = b - a
+                deviation = np.float32(np.inf)
+                if i > 0:
+                    prev = inv[line, i - 1] if axis == 0 else inv[i - 1, line]
+                    if prev > 0:
+                        deviation = min(deviation, abs(step - (a - prev)))
+                if i + 2 < n:
+                    nxt = inv[line, i + 2] if axis == 0 else inv[i + 2, line]
+                    if nxt > 0:
+                        deviation = min(deviation, abs(step - (nxt - b)))
+                if deviation == np.inf:
+                    deviation = abs(step)
+                if step == 0 or not deviation > jump * max(a, b):
+                    continue
+                far = i if step < 0 else i + 1  # the smaller inverse depth
+                if axis == 0:
+                    rim[line, far] = True
+                else:
+                    rim[far, line] = True
+    return inv, rim
 
 
+@kernel
 def _relative_slope(inv: np.ndarray, labels: np.ndarray) -> np.ndarray:
     """(H, W) float32 per-pixel step of inverse depth relative to its value, per pixel.
 
     Per axis, the smaller of the two one-sided steps to neighbours of the same component (so a
     step across an edge does not count); the larger of the two axes. 0 where unknown.
     """
-    slope = np.zeros(inv.shape, dtype=np.float32)
-    for axis in (1, 0):
-        w = np.moveaxis(inv, axis, -1)
-        lab = np.moveaxis(labels, axis, -1)
-        same = (lab[..., 1:] == lab[..., :-1]) & (lab[..., 1:] > 0)
-        step = np.where(same, np.abs(w[..., 1:] - w[..., :-1]), np.float32(np.inf))
-        side = np.full(w.shape[:-1] + (w.shape[-1] + 1,), np.inf, dtype=np.float32)
-        side[..., 1:-1] = step
-        smaller = np.minimum(side[..., :-1], side[..., 1:])
-        smaller = np.where(np.isinf(smaller), 0, smaller)
-        out = np.moveaxis(slope, axis, -1)
-        np.maximum(out, smaller, out=out)
-    return np.where(inv > 0, slope / np.where(inv > 0, inv, 1), 0).astype(np.float32)
+    h, w = inv.shape
+    slope = np.zeros((h, w), dtype=np.float32)
+    for v in range(h):
+        for u in range(w):
+            if not inv[v, u] > 0:
+                continue
+            lab = labels[v, u]
+            best = np.float32(0.0)
+            for dv, du in ((0, 1), (1, 0)):
+                smaller = np.float32(np.inf)
+                for sign in (-1, 1):
+                    y, x = v + sign * dv, u + sign * du
+                    if 0 <= y < h and 0 <= x < w and lab > 0 and labels[y, x] == lab:
+                        smaller = min(smaller, abs(inv[y, x] - inv[v, u]))
+                if smaller != np.inf:
+                    best = max(best, smaller)
+            slope[v, u] = best / inv[v, u]
+    return slope
 
 
 def auto_window(height: int, width: int) -> tuple[int, int]:
@@ -161,12 +189,12 @@ def normals_from_depth(depth: np.ndarray, K: np.ndarray, *, radius: int | None =
     if max_jump <= 0:
         raise InvalidInput(f"max_jump must be positive, got {max_jump}")
     z = np.where(np.isfinite(depth), depth, 0).astype(np.float32)
+    inv, rim = _discontinuities(z, float(max_jump))
     valid = z > 0
-    rim, labels = _rim_and_components(z, valid, max_jump)
-    inv = np.zeros_like(z)
-    inv[valid] = 1.0 / z[valid]
+    # 4-connected components of the valid non-rim pixels; only equality of labels matters.
+    labels = cv2.connectedComponents((valid & ~rim).view(np.uint8), connectivity=4,
+                                     ltype=cv2.CV_32S)[1]
     r = radius - radius % stride
-    steps = np.arange(-r, r + 1, stride)
     win = np.ones((2 * r + 1, 2 * r + 1), np.uint8)
 
     # A window without rims, with a single component and a small depth range cannot mix
@@ -175,55 +203,45 @@ def normals_from_depth(depth: np.ndarray, K: np.ndarray, *, radius: int | None =
     big = np.float32(np.inf)
     lab_f = labels.astype(np.float32)
     one_surface = (
-        (cv2.dilate(rim.astype(np.uint8), win) == 0)
+        (cv2.dilate(rim.view(np.uint8), win) == 0)
         & (cv2.dilate(lab_f, win) == cv2.erode(np.where(labels > 0, lab_f, big), win))
         & (cv2.dilate(z, win) / (1.0 + max_jump * r) <= cv2.erode(np.where(valid, z, big), win))
     )
     interior = valid & one_surface
-    band = valid & ~interior
-    min_support = max(min_support, 3)
-
+    # Window sums: full-footprint kernels with zero taps between the strided samples; zero
+    # padding outside the image acts like holes.
+    steps = np.arange(-r, r + 1, stride)
+    one = np.zeros(2 * r + 1, dtype=np.float32)
+    one[steps + r] = 1.0
+    ramp = one * np.arange(-r, r + 1, dtype=np.float32)
+    sums = np.empty((4,) + z.shape, dtype=np.float32)
+    filters: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = [
+        (valid.astype(np.float32), one, one), (inv, ramp, one), (inv, one, ramp), (inv, one, one)]
+    for k, (img, kx, ky) in enumerate(filters):
+        cv2.sepFilter2D(img, cv2.CV_32F, kx, ky, dst=sums[k], borderType=cv2.BORDER_CONSTANT)
+    slope = _relative_slope(inv, labels)
     normals = np.zeros(z.shape + (3,), dtype=np.float32)
-    vv, uu = np.nonzero(interior)
-    if vv.size:
-        # Full-footprint kernels with zero taps between the strided samples; zero padding
-        # outside the image acts like holes.
-        one = np.zeros(2 * r + 1, dtype=np.float32)
-        one[steps + r] = 1.0
-        ramp = one * np.arange(-r, r + 1, dtype=np.float32)
-        ramp2 = ramp * ramp
-        m = valid.astype(np.float32)
+    params = np.array([max_jump, K[0, 0], K[0, 1], K[0, 2], K[1, 0], K[1, 1], K[1, 2],
+                       K[2, 0], K[2, 1], K[2, 2]], dtype=np.float64)
+    band = valid & ~interior
+    support = max(min_support, 3)
 
-        def corr(img: np.ndarray, kx: np.ndarray, ky: np.ndarray) -> np.ndarray:
-            out = cv2.sepFilter2D(img, cv2.CV_32F, kx, ky, borderType=cv2.BORDER_CONSTANT)
-            return out[interior].astype(np.float64)
+    def fit(a: int, b: int) -> None:
+        _fit_interior(inv, labels, interior, sums, params, r, stride, support, a, b, normals)
+        _fit_band(inv, labels, rim, slope, band, params, r, stride, support, a, b, normals)
 
-        moments = [corr(m, one, one), corr(m, ramp, one), corr(m, one, ramp),
-                   corr(m, ramp2, one), corr(m, ramp, ramp), corr(m, one, ramp2),
-                   corr(inv, ramp, one), corr(inv, one, ramp), corr(inv, one, one)]
-        a, b, c, good = _solve_line_fits(*moments, min_support=min_support, stride=stride)
-        # Here the fitted line is absolute inverse depth, so its value at the centre is c.
-        normals[interior] = _normals_from_inverse_depth_line(a, b, c, uu, vv, K, good)
-    vv, uu = np.nonzero(band)
-    if vv.size:
-        slope = _relative_slope(inv, labels)[vv, uu]
-        normals[band] = _gated_fit(inv, labels, rim, slope, vv, uu, steps, r, K, max_jump,
-                                   min_support, stride)
+    run_threaded([functools.partial(fit, a, b) for a, b in chunks(z.shape[0], _THREADED_ROWS)])
     return normals
 
 
-def _solve_line_fits(cnt: np.ndarray, su: np.ndarray, sv: np.ndarray, suu: np.ndarray,
-                     suv: np.ndarray, svv: np.ndarray, ru: np.ndarray, rv: np.ndarray,
-                     r1: np.ndarray, *, min_support: int,
-                     stride: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Solve many least-squares fits ``y ≈ a du + b dv + c`` from their moments.
-
-    Each argument is an (N,) float64 array of window sums: sample count, ``Σdu``, ``Σdv``,
-    ``Σdu²``, ``Σdu dv``, ``Σdv²``, ``Σdu y``, ``Σdv y`` and ``Σy``. Returns ``a, b, c`` and a
-    bool mask of the well-posed fits (enough samples, not all on one line); the others are 0.
-    """
-    # Cramer's rule on the symmetric 3x3 normal equations, written out because batched
-    # LAPACK calls are slower for 3x3 systems.
+@inline
+def _line_fit(cnt: float, su: float, sv: float, suu: float, suv: float, svv: float,
+              ru: float, rv: float, r1: float, min_support: int,
+              stride: int) -> tuple[float, float, float, bool]:
+    """Least-squares fit ``y ≈ a du + b dv + c`` from its window sums: sample count, ``Σdu``,
+    ``Σdv``, ``Σdu²``, ``Σdu dv``, ``Σdv²``, ``Σdu y``, ``Σdv y`` and ``Σy``. Returns ``a, b,
+    c`` and whether the fit is well posed (enough samples, not all on one line)."""
+    # Cramer's rule on the symmetric 3x3 normal equations.
     c00 = svv * cnt - sv * sv
     c01 = su * sv - suv * cnt
     c02 = suv * sv - svv * su
@@ -232,67 +250,139 @@ def _solve_line_fits(cnt: np.ndarray, su: np.ndarray, sv: np.ndarray, suu: np.nd
     c22 = suu * svv - suv * suv
     det = suu * c00 + suv * c01 + su * c02
     # Samples on (nearly) one line give a singular system: no plane is defined there.
-    good = (cnt >= min_support) & (det > 1e-2 * stride**4 * np.maximum(cnt, 1) ** 3)
-    inv_det = np.where(good, 1.0 / np.where(good, det, 1.0), 0.0)
-    a = (c00 * ru + c01 * rv + c02 * r1) * inv_det
-    b = (c01 * ru + c11 * rv + c12 * r1) * inv_det
-    c = (c02 * ru + c12 * rv + c22 * r1) * inv_det
-    return a, b, c, good
+    n = max(cnt, 1.0)
+    if not (cnt >= min_support and det > 1e-2 * (stride * stride) ** 2 * (n * n * n)):
+        return 0.0, 0.0, 0.0, False
+    inv_det = 1.0 / det
+    return ((c00 * ru + c01 * rv + c02 * r1) * inv_det,
+            (c01 * ru + c11 * rv + c12 * r1) * inv_det,
+            (c02 * ru + c12 * rv + c22 * r1) * inv_det, True)
 
 
-def _gated_fit(inv: np.ndarray, labels: np.ndarray, rim: np.ndarray, slope: np.ndarray,
-               vv: np.ndarray, uu: np.ndarray, steps: np.ndarray, r: int, K: np.ndarray,
-               max_jump: float, min_support: int, stride: int) -> np.ndarray:
-    """Edge-aware least-squares fits for the pixels ``(vv, uu)``; returns (N, 3) normals."""
-    dv, du = (a.ravel() for a in np.meshgrid(steps, steps, indexing="ij"))
-    inv_p = np.pad(inv, r).ravel()
-    lab_p = np.pad(labels, r).ravel()
-    width_p = inv.shape[1] + 2 * r
-    flat = ((vv + r) * width_p + (uu + r))[:, None] + (dv * width_p + du)[None, :]
-    q_inv = inv_p.take(flat)
-    c_inv = inv[vv, uu][:, None]
-    # e is the neighbour's inverse depth relative to the centre's, so a and b below are
-    # relative gradients and one tolerance fits every depth range.
-    e = q_inv / c_inv - 1.0
-    abs_e = np.abs(e)
-    chebyshev = np.maximum(np.maximum(np.abs(du), np.abs(dv)), 1).astype(np.float32)
-    on_rim = rim[vv, uu]
-    ok = lab_p.take(flat) == labels[vv, uu][:, None]
-    # Steep planes change inverse depth fast: scale the tolerance with the pixel's own step.
-    ok &= abs_e <= (max_jump + slope[:, None]) * chebyshev[None, :]
-    ok[on_rim] = (abs_e[on_rim] <= max_jump) & (q_inv[on_rim] > 0)
-    # Moments of the accepted samples. einsum keeps this single-threaded: a BLAS product this
-    # skinny is no faster and thrashes when other processes share the cores.
-    fu, fv = du.astype(np.float32), dv.astype(np.float32)
-    basis = np.stack([np.ones_like(fu), fu, fv, fu * fu, fu * fv, fv * fv], axis=1)
-    m = ok.astype(np.float32)
-    moments = np.einsum("nk,kj->jn", m, basis).astype(np.float64)
-    rhs = np.einsum("nk,kj->jn", e * m, basis[:, [1, 2, 0]]).astype(np.float64)
-    a, b, c, good = _solve_line_fits(*moments, *rhs, min_support=min_support, stride=stride)
-    # Near the centre, w = w_p (1 + c + a du + b dv); the positive factor w_p drops out.
-    return _normals_from_inverse_depth_line(a, b, 1.0 + c, uu, vv, K, good)
-
-
-def _normals_from_inverse_depth_line(grad_u: np.ndarray, grad_v: np.ndarray,
-                                     value: np.ndarray, uu: np.ndarray, vv: np.ndarray,
-                                     K: np.ndarray, good: np.ndarray) -> np.ndarray:
-    """Normals from local linear models of inverse depth at pixels ``(uu, vv)``.
+@inline
+def _store_normal(out: np.ndarray, v: int, u: int, grad_u: float, grad_v: float, value: float,
+                  params: np.ndarray) -> None:
+    """Write the normal of the local linear model of inverse depth at pixel ``(v, u)``.
 
     ``w(u', v') ≈ value + grad_u (u' - u) + grad_v (v' - v)`` (any positive scale) gives
-    ``g = [grad_u, grad_v, value - grad_u u - grad_v v]`` and ``n ∝ -K^T g``; rows where
-    ``good`` is False come back as zeros. Returns (N, 3) float32, facing the camera.
+    ``g = [grad_u, grad_v, value - grad_u u - grad_v v]`` and ``n ∝ -K^T g``. Since
+    ``n · K^-1 [u, v, 1] = -g · [u, v, 1] = -value``, a positive value already means the normal
+    faces the camera, and a non-positive one that the fit is unusable (left zero).
     """
-    gu = np.asarray(grad_u, dtype=np.float64)
-    gv = np.asarray(grad_v, dtype=np.float64)
-    val = np.asarray(value, dtype=np.float64)
-    g2 = val - gu * uu - gv * vv
-    # n = -K^T g, written per component: (N, 3) x (3, 3) products are slow through BLAS.
-    n = np.empty((gu.size, 3), dtype=np.float64)
-    for i in range(3):
-        n[:, i] = -(gu * K[0, i] + gv * K[1, i] + g2 * K[2, i])
-    # n · K^-1 [u, v, 1] = -g · [u, v, 1] = -value: a positive inverse depth already means the
-    # normal faces the camera, and a non-positive one means the fit is unusable.
-    norm = np.sqrt(np.einsum("ij,ij->i", n, n))
-    good = good & (val > 0) & (norm > 0)
-    n *= (good / np.where(good, norm, 1.0))[:, None]
-    return n.astype(np.float32)
+    if not value > 0:
+        return
+    g2 = value - grad_u * u - grad_v * v
+    nx = -(grad_u * params[1] + grad_v * params[4] + g2 * params[7])
+    ny = -(grad_u * params[2] + grad_v * params[5] + g2 * params[8])
+    nz = -(grad_u * params[3] + grad_v * params[6] + g2 * params[9])
+    norm = np.sqrt(nx * nx + ny * ny + nz * nz)
+    if norm > 0:
+        out[v, u, 0] = nx / norm
+        out[v, u, 1] = ny / norm
+        out[v, u, 2] = nz / norm
+
+
+@inline
+def _window_sums(inv: np.ndarray, labels: np.ndarray, v: int, u: int, r: int, stride: int,
+                 lab: int, on_rim: bool, ungated: bool, tol: float, max_jump: float
+                 ) -> tuple[float, float, float, float, float, float, float, float, float]:
+    """Window sums of the accepted samples around pixel ``(v, u)``, in the order of
+    :func:`_line_fit`, the fitted value being the sample's inverse depth relative to the
+    centre's, ``e = w / w_p - 1`` (so the fit's gradients are relative and one tolerance fits
+    every depth range).
+
+    ``ungated``: every valid sample is accepted. Otherwise a rim pixel (``on_rim``) accepts
+    samples within ``max_jump`` of its own inverse depth, any other pixel samples of its own
+    component ``lab`` whose ``|e|`` stays within ``tol`` per pixel of offset (Chebyshev).
+    """
+    h, w = inv.shape
+    c = inv[v, u]
+    cnt = su = sv = suu = suv = svv = ru = rv = r1 = 0.0
+    for dv in range(-r, r + 1, stride):
+        y = v + dv
+        if y < 0 or y >= h:
+            continue
+        for du in range(-r, r + 1, stride):
+            x = u + du
+            if x < 0 or x >= w:
+                continue
+            q = inv[y, x]
+            e = q / c - 1.0
+            if ungated or on_rim:
+                if not (q > 0 and (ungated or abs(e) <= max_jump)):
+                    continue
+            elif labels[y, x] != lab or not abs(e) <= tol * max(abs(du), abs(dv), 1):
+                continue
+            fu, fv = float(du), float(dv)
+            cnt += 1.0
+            su += fu
+            sv += fv
+            suu += fu * fu
+            suv += fu * fv
+            svv += fv * fv
+            ru += e * fu
+            rv += e * fv
+            r1 += e
+    return cnt, su, sv, suu, suv, svv, ru, rv, r1
+
+
+@kernel
+def _fit_interior(inv: np.ndarray, labels: np.ndarray, interior: np.ndarray, sums: np.ndarray,
+                  params: np.ndarray, r: int, stride: int, min_support: int, row0: int,
+                  row1: int, out: np.ndarray) -> None:
+    """Normals of the ``interior`` pixels of rows ``row0:row1`` into ``out`` ((H, W, 3)
+    float32), each from the fit of absolute inverse depth over its whole window.
+
+    ``sums`` is (4, H, W) float32: per window, the count of valid samples and ``Σdu w``,
+    ``Σdv w``, ``Σw``. A window with every sample valid has the same sums of offsets
+    everywhere; one with holes gets them from its samples (:func:`_window_sums` ungated, so
+    ``labels`` is not read). ``params`` is ``[max_jump, K (row-major)]``.
+    """
+    w = inv.shape[1]
+    side = (2 * r) // stride + 1
+    full = float(side * side)
+    spread = 0.0  # Σdu² over a full window (= Σdv²)
+    for d in range(-r, r + 1, stride):
+        spread += float(d * d) * side
+    for v in range(row0, row1):
+        for u in range(w):
+            if not interior[v, u]:
+                continue
+            cnt = float(sums[0, v, u])
+            su = sv = suv = 0.0
+            suu = svv = spread
+            if cnt < full:  # holes: the offsets of the valid samples, ungated
+                cnt, su, sv, suu, suv, svv, _, _, _ = _window_sums(
+                    inv, labels, v, u, r, stride, 0, False, True, 0.0, 0.0)
+            a, b, c, good = _line_fit(cnt, su, sv, suu, suv, svv, float(sums[1, v, u]),
+                                      float(sums[2, v, u]), float(sums[3, v, u]),
+                                      min_support, stride)
+            if good:  # the line is absolute inverse depth: its centre value is c
+                _store_normal(out, v, u, a, b, c, params)
+
+
+@kernel
+def _fit_band(inv: np.ndarray, labels: np.ndarray, rim: np.ndarray, slope: np.ndarray,
+              band: np.ndarray, params: np.ndarray, r: int, stride: int, min_support: int,
+              row0: int, row1: int, out: np.ndarray) -> None:
+    """Edge-aware normals of the ``band`` pixels of rows ``row0:row1`` into ``out``.
+
+    Each window sample is gated: a rim pixel accepts samples within ``max_jump`` of its own
+    inverse depth, any other pixel samples of its own component within ``max_jump`` plus its
+    own relative ``slope`` per pixel of offset (Chebyshev). The fit is of inverse depth
+    relative to the centre's (:func:`_window_sums`). ``params`` is ``[max_jump, K
+    (row-major)]``.
+    """
+    w = inv.shape[1]
+    max_jump = params[0]
+    for v in range(row0, row1):
+        for u in range(w):
+            if not band[v, u]:
+                continue
+            cnt, su, sv, suu, suv, svv, ru, rv, r1 = _window_sums(
+                inv, labels, v, u, r, stride, labels[v, u], rim[v, u], False,
+                max_jump + slope[v, u], max_jump)
+            a, b, c0, good = _line_fit(cnt, su, sv, suu, suv, svv, ru, rv, r1, min_support,
+                                       stride)
+            if good:  # near the centre w = w_p (1 + c0 + a du + b dv); w_p > 0 drops out
+                _store_normal(out, v, u, a, b, 1.0 + c0, params)

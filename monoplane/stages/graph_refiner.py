@@ -27,6 +27,7 @@ subsampling), so it can serve ``monoplane run`` on range data as well.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -41,10 +42,14 @@ from monoplane.geometry.graph import NeighbourGraph
 from monoplane.geometry.planes import fit_planes_per_label
 from monoplane.graphcut import normal_costs, proximity_weights
 from monoplane.hookspecs import hookimpl
+from monoplane.jit import chunks, kernel, run_threaded
 from monoplane.stages.base import ProximityAffinities, RansacParams, Refiner, Stage, param
 
 if TYPE_CHECKING:
     from scipy.sparse import csr_matrix
+
+#: Nodes per thread below which a mean-field iteration runs on one thread.
+_THREADED_NODES = 4096
 
 
 @dataclass
@@ -119,27 +124,115 @@ def pixel_graph(cloud: PlaneCloud, max_jump: float) -> NeighbourGraph:
     pixels, (h, w), _ = cloud.pixel_grid()
     index = np.full(h * w, -1, dtype=np.int64)
     index[pixels] = np.arange(cloud.size)
-    index = index.reshape(h, w)
-    pairs = []
-    for dv, du in ((0, 1), (1, 0), (1, 1), (1, -1)):
-        c0, c1 = max(0, -du), w - max(0, du)
-        a, b = index[:h - dv, c0:c1], index[dv:, c0 + du:c1 + du]
-        ok = (a >= 0) & (b >= 0)
-        pairs.append(np.stack([a[ok], b[ok]], axis=1))
-    edges = np.concatenate(pairs)
     # The cloud is centred on the scene; points are compared at their own depth scale.
-    p = cloud.points
-    gap = np.linalg.norm(p[edges[:, 0]] - p[edges[:, 1]], axis=1)
-    reach = max_jump * np.maximum(np.linalg.norm(p[edges[:, 0]] + cloud.center / cloud.scale,
-                                                 axis=1), 1e-12)
-    edges = np.sort(edges[gap <= reach], axis=1)
-    edges = edges[np.lexsort((edges[:, 1], edges[:, 0]))]
-    both = np.concatenate([edges, edges[:, ::-1]])
-    both = both[np.argsort(both[:, 0], kind="stable")]
-    indptr = np.zeros(cloud.size + 1, dtype=np.int64)
-    np.cumsum(np.bincount(both[:, 0], minlength=cloud.size), out=indptr[1:])
+    edges, gap, indptr, indices = _pixel_graph(index.reshape(h, w), cloud.points,
+                                               cloud.center / cloud.scale, float(max_jump))
     spacing = float(np.median(gap)) if gap.size else 0.0
-    return NeighbourGraph(cloud.size, edges, indptr, both[:, 1].copy(), cloud.tree, spacing)
+    # No point index: the grid gave the neighbours, and building one over every pixel would
+    # cost more than the graph.
+    return NeighbourGraph(cloud.size, edges, indptr, indices, None, spacing)
+
+
+@kernel
+def _shifted_energy(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, q: np.ndarray,
+                    unary: np.ndarray, weight: np.float32, scale: np.float32, row0: int,
+                    row1: int, out: np.ndarray) -> None:
+    """One mean-field step's exponent for rows ``row0:row1`` into ``out`` ((row1 - row0, L)
+    float32): ``scale (e - min_l e)`` with ``e = weight (W Q) + U``.
+
+    ``W`` is the CSR matrix ``(indptr, indices, data)`` (float32 weights), ``Q`` and ``U`` are
+    (N, L) float32. Every operation is float32 in the order of the NumPy/SciPy expression it
+    replaces (``W @ Q`` accumulates each row's entries in storage order), so the result is
+    the same to the bit.
+    """
+    labels = q.shape[1]
+    for i in range(row0, row1):
+        row = out[i - row0]
+        row[:] = 0
+        for jj in range(indptr[i], indptr[i + 1]):
+            j = indices[jj]
+            a = data[jj]
+            for k in range(labels):
+                row[k] += a * q[j, k]
+        low = np.float32(np.inf)
+        for k in range(labels):
+            row[k] = row[k] * weight + unary[i, k]
+            low = min(low, row[k])
+        for k in range(labels):
+            row[k] = (row[k] - low) * scale
+
+
+@kernel
+def _pixel_graph(index: np.ndarray, points: np.ndarray, shift: np.ndarray, max_jump: float
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`pixel_graph` of the (H, W) int64 node ``index`` of each pixel (-1: none).
+
+    Nodes number the valid pixels in raster order, so the four forward neighbours of a
+    pixel, taken in raster order (right, below left, below, below right), are larger nodes
+    in ascending order: scanning the pixels gives the edges sorted by ``(i, j)``.
+
+    Returns
+    -------
+    edges : numpy.ndarray
+        (E, 2) int64 kept edges, ``i < j``, sorted.
+    gap : numpy.ndarray
+        (M,) float64 3D distance of every candidate pair, kept or not.
+    indptr, indices : numpy.ndarray
+        Adjacency: the neighbours of node ``i`` are its larger ones, ascending, then its
+        smaller ones, ascending.
+    """
+    h, w = index.shape
+    n = points.shape[0]
+    edges = np.empty((4 * n, 2), dtype=np.int64)
+    gap = np.empty(4 * n, dtype=np.float64)
+    kept = pairs = 0
+    for v in range(h):
+        for u in range(w):
+            a = index[v, u]
+            if a < 0:
+                continue
+            # sqrt of the squares summed in order, as numpy's norm over an axis of 3.
+            x = points[a, 0] + shift[0]
+            y = points[a, 1] + shift[1]
+            z = points[a, 2] + shift[2]
+            reach = max_jump * max(np.sqrt(x * x + y * y + z * z), 1e-12)
+            for dv, du in ((0, 1), (1, -1), (1, 0), (1, 1)):
+                vv, uu = v + dv, u + du
+                if vv >= h or not 0 <= uu < w:
+                    continue
+                b = index[vv, uu]
+                if b < 0:
+                    continue
+                dx = points[a, 0] - points[b, 0]
+                dy = points[a, 1] - points[b, 1]
+                dz = points[a, 2] - points[b, 2]
+                g = np.sqrt(dx * dx + dy * dy + dz * dz)
+                gap[pairs] = g
+                pairs += 1
+                if g <= reach:
+                    edges[kept, 0] = a
+                    edges[kept, 1] = b
+                    kept += 1
+    edges = edges[:kept].copy()
+    larger = np.zeros(n, dtype=np.int64)
+    degree = np.zeros(n, dtype=np.int64)
+    for e in range(kept):
+        larger[edges[e, 0]] += 1
+        degree[edges[e, 0]] += 1
+        degree[edges[e, 1]] += 1
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    for i in range(n):
+        indptr[i + 1] = indptr[i] + degree[i]
+    first = indptr[:-1].copy()  # next free slot of each node's larger neighbours
+    second = indptr[:-1] + larger  # ... and of its smaller ones
+    indices = np.empty(2 * kept, dtype=np.int64)
+    for e in range(kept):
+        a, b = edges[e, 0], edges[e, 1]
+        indices[first[a]] = b
+        first[a] += 1
+        indices[second[b]] = a
+        second[b] += 1
+    return edges, gap[:pairs].copy(), indptr, indices
 
 
 class GraphCrfRefiner(Refiner):
@@ -206,17 +299,25 @@ class GraphCrfRefiner(Refiner):
             e = unary[free] - unary[free].min(axis=1, keepdims=True)
             q[free] = np.exp(-e * inv_t)
             q[free] /= q[free].sum(axis=1, keepdims=True)
-        for _ in range(c.iterations):
+        unary = np.ascontiguousarray(unary, dtype=np.float32)
+        weight = np.float32(-beta)
+        spans = chunks(labels.size, _THREADED_NODES)
+        nxt = np.empty_like(q)
+
+        def update(a: int, b: int) -> None:
             # Expected Potts cost of label l at i: Σ_j w_ij (1 - Q_j(l)) = deg_i - (W Q)_i(l);
-            # deg_i is the same for every label and cancels in the softmax. In place: these
-            # (N, P + 1) arrays are the refiner's largest.
-            energy = adj @ q
-            energy *= np.float32(-beta)
-            energy += unary
-            energy -= energy.min(axis=1, keepdims=True)
-            energy *= -inv_t
-            q = np.exp(energy, out=energy)
-            q /= q.sum(axis=1, keepdims=True)
+            # deg_i is the same for every label and cancels in the softmax.
+            part = nxt[a:b]
+            _shifted_energy(adj.indptr, adj.indices, adj.data, q, unary, weight, -inv_t, a, b,
+                            part)
+            np.exp(part, out=part)
+            part /= part.sum(axis=1, keepdims=True)
+
+        # Rows are independent within an iteration: contiguous row ranges run on parallel
+        # threads, each reading the last iteration's Q and writing its rows of the next.
+        for _ in range(c.iterations):
+            run_threaded([functools.partial(update, a, b) for a, b in spans])
+            q, nxt = nxt, q
         return np.argmax(q, axis=1).astype(np.int32)
 
     def _components(self, graph: NeighbourGraph, labels: np.ndarray, min_size: int

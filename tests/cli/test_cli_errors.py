@@ -129,3 +129,15 @@ def test_help_is_useful(capsys):
         main(["run", "--help"])
     out = capsys.readouterr().out
     assert "--depth-scale" in out and "--set" in out and "labels.png" in out
+
+
+@pytest.mark.parametrize("argv,words", [
+    (["--depth-only"], "apply to --data only"),
+    (["--data", "{tmp}/nope"], "nope"),
+    (["--data", "{tmp}", "--sizes", "64x48"], "--sizes applies to synthetic frames"),
+    (["--data", "{tmp}", "--batch"], "--data applies to the frame bench"),
+])
+def test_bench_data_arguments(capsys, tmp_path, argv, words):
+    err = one_line_error(capsys, ["bench", "--no-progress",
+                                  *[a.format(tmp=tmp_path) for a in argv]])
+    assert words in err

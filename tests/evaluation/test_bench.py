@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import tracemalloc
+from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -16,6 +18,7 @@ from monoplane.bench import (
     format_bench,
     parse_sizes,
 )
+from monoplane.bench_data import DataSource, load_data_frames
 from monoplane.errors import InvalidInput
 
 
@@ -124,3 +127,63 @@ def test_bench_json_before_the_complexity_axis_still_reads() -> None:
 def test_bench_rejects_bad_objects_ranges(objects: list[tuple[int, int]]) -> None:
     with pytest.raises(InvalidInput, match="objects range"):
         bench("seq-ransac", [(96, 72)], objects=objects, progress=False)
+
+
+def _write_sequence(root: Path, count: int) -> list[np.ndarray]:
+    """A Redwood-style sequence of synthetic 96x72 frames: depth/ in millimetres, image/."""
+    from monoplane.synth import generate
+
+    (root / "depth").mkdir(parents=True)
+    (root / "image").mkdir()
+    depths = []
+    for i in range(count):
+        frame = generate(i, "clean", width=96, height=72, n_views=1).views[0].frame
+        mm = np.round(frame.depth * 1000).astype(np.uint16)
+        cv2.imwrite(str(root / "depth" / f"{i:05d}.png"), mm)
+        cv2.imwrite(str(root / "image" / f"{i:05d}.jpg"), frame.rgb[..., ::-1])
+        depths.append(mm / 1000.0)
+    return depths
+
+
+def test_data_frames_of_a_sequence_are_spread_and_depth_only(tmp_path: Path) -> None:
+    depths = _write_sequence(tmp_path / "seq", 5)
+    source = DataSource(str(tmp_path / "seq"), depth_scale=1000.0,
+                        intrinsics="80,80,47.5,35.5", depth_only=True, frames=3)
+    frames = load_data_frames(source)
+    # Three of five, spread: the first, the middle and the last.
+    assert [f.name for f in frames] == ["00000", "00002", "00004"]
+    for f, i in zip(frames, (0, 2, 4), strict=True):
+        assert f.rgb is None and f.normals is None
+        np.testing.assert_allclose(f.depth, depths[i], atol=1e-6)
+        assert f.K[0, 0] == 80.0
+    with_colour = load_data_frames(DataSource(str(tmp_path / "seq"), depth_scale=1000.0))
+    assert len(with_colour) == 5 and with_colour[0].rgb is not None
+
+
+def test_data_frames_reject_what_they_cannot_read(tmp_path: Path) -> None:
+    _write_sequence(tmp_path / "seq", 2)
+    with pytest.raises(InvalidInput, match="depth-scale"):
+        load_data_frames(DataSource(str(tmp_path / "seq")))
+    (tmp_path / "seq" / "image" / "00001.jpg").unlink()
+    with pytest.raises(InvalidInput, match="1 images in image/ but 2 depth maps"):
+        load_data_frames(DataSource(str(tmp_path / "seq"), depth_scale=1000.0))
+    with pytest.raises(InvalidInput, match="not found"):
+        load_data_frames(DataSource(str(tmp_path / "nowhere")))
+
+
+def test_bench_on_data_times_each_frame_with_the_baseline(tmp_path: Path) -> None:
+    _write_sequence(tmp_path / "seq", 2)
+    source = DataSource(str(tmp_path / "seq"), depth_scale=1000.0, depth_only=True,
+                        intrinsics="80,80,47.5,35.5")
+    (r,) = bench("seq-ransac", repeat=1, progress=False, baselines=["open3d-ransac"],
+                 isolate=False, data=source, overrides=["cues.plugin=given"])
+    assert (r.width, r.height, r.frames, r.data) == (96, 72, 2, source.path)
+    assert [f.name for f in r.per_frame] == ["00000", "00001"]
+    assert all(f.gt_planes is None and f.baseline_call_s["open3d-ransac"] > 0
+               for f in r.per_frame)
+    assert r.planes > 0 and np.isnan(r.gt_planes)
+    text = format_bench([r])
+    assert "seq 96x72 ms" in text and "00001" in text
+    assert format_bench([BenchResult.from_dict(r.to_dict())]) == text
+    with pytest.raises(InvalidInput, match="--data"):
+        bench("seq-ransac", data=source, objects=[(1, 2)], progress=False)

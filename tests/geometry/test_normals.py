@@ -169,3 +169,18 @@ def test_small_images_keep_creases_sharp() -> None:
     own = CORNER_PLANES[labels - 1, :3]
     ang = np.degrees(np.arccos(np.clip(np.sum(normals * own, axis=-1), -1, 1)))
     assert np.mean(ang < 10) > 0.88
+
+
+def test_the_threaded_row_pieces_give_the_same_normals(monkeypatch: pytest.MonkeyPatch) -> None:
+    # Two planes meeting at a depth jump, with holes: interior, band and rim pixels in every
+    # piece of rows, and windows cut by the pieces' boundaries.
+    h, w = 200, 160
+    K = default_intrinsics(w, h)
+    depth = plane_depth(K, h, w, np.r_[unit([0.2, -0.7, -0.6]), 2.0])
+    depth[:, 80:] = plane_depth(K, h, w, np.r_[unit([-0.3, 0.1, -0.9]), 3.5])[:, 80:]
+    depth[90:110, 20:40] = 0.0
+    monkeypatch.setenv("OMP_NUM_THREADS", "1")
+    one = normals_from_depth(depth, K)
+    monkeypatch.setenv("OMP_NUM_THREADS", "2")
+    np.testing.assert_array_equal(normals_from_depth(depth, K), one)
+    assert (np.abs(one).sum(-1) > 0).mean() > 0.95

@@ -11,7 +11,7 @@ from monoplane.evaluation.segcomp import segcomp
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.stages.base import RansacParams
-from monoplane.stages.graph_refiner import GraphCrfConfig, GraphCrfRefiner
+from monoplane.stages.graph_refiner import GraphCrfConfig, GraphCrfRefiner, pixel_graph
 from monoplane.testing import box_frame
 
 #: The pipeline's shared thresholds at their defaults.
@@ -137,3 +137,49 @@ def test_refit_rounds_give_a_shallow_crease_strip_back():
 def test_rounds_must_be_positive():
     with pytest.raises(ConfigError, match="rounds"):
         Pipeline.from_preset("range", overrides=["refiner.rounds=0"])
+
+
+def test_pixel_graph_links_the_8_neighbours_within_the_jump():
+    # A 6x7 frame: two fronto-parallel planes at 2 m and 3 m side by side, two holes.
+    depth = np.full((6, 7), 2.0, dtype=np.float32)
+    depth[:, 4:] = 3.0
+    depth[1, 1] = depth[4, 5] = 0.0
+    normals = np.zeros((6, 7, 3), dtype=np.float32)
+    normals[..., 2] = -1.0
+    frame = box_frame()[0].with_(depth=depth, normals=normals, rgb=None,
+                                 K=np.array([[5.0, 0, 3], [0, 5.0, 2.5], [0, 0, 1]]))
+    cloud = PlaneCloud.from_frame(frame)
+    graph = pixel_graph(cloud, 0.05)
+    # Brute force: every pair of 8-neighbouring valid pixels closer in 3D than 5 % of the
+    # first pixel's (in raster order) distance from the camera.
+    node = {int(p): i for i, p in enumerate(cloud.pixels)}
+    pts = cloud.points * cloud.scale + cloud.center
+    expected = set()
+    for p, i in node.items():
+        v, u = divmod(p, 7)
+        for dv, du in ((0, 1), (1, -1), (1, 0), (1, 1)):
+            q = (v + dv) * 7 + u + du
+            if v + dv < 6 and 0 <= u + du < 7 and q in node:
+                j = node[q]
+                if np.linalg.norm(pts[i] - pts[j]) <= 0.05 * np.linalg.norm(pts[i]):
+                    expected.add((i, j))
+    assert [tuple(e) for e in graph.edges] == sorted(expected)
+    # Nothing links the 2 m plane to the 3 m one.
+    far = cloud.points[:, 2] * cloud.scale + cloud.center[2] > 2.5
+    assert not np.any(far[graph.edges[:, 0]] != far[graph.edges[:, 1]])
+    for i in range(cloud.size):  # the adjacency lists each edge at both ends
+        row = graph.indices[graph.indptr[i]:graph.indptr[i + 1]]
+        assert sorted(row) == sorted({b for a, b in expected if a == i}
+                                     | {a for a, b in expected if b == i})
+
+
+def test_the_threaded_mean_field_does_not_depend_on_the_threads(monkeypatch):
+    frame, _ = box_frame(width=160, height=120)
+    rec = Pipeline.from_preset("range", overrides=["refiner.plugin=none"]).run(frame)
+    refiner = GraphCrfRefiner(GraphCrfConfig())
+    monkeypatch.setenv("OMP_NUM_THREADS", "1")
+    one = refiner.refine(rec, PARAMS)
+    monkeypatch.setenv("OMP_NUM_THREADS", "2")
+    two = refiner.refine(rec, PARAMS)
+    np.testing.assert_array_equal(one.labels, two.labels)
+    np.testing.assert_array_equal(one.params, two.params)
