@@ -167,16 +167,23 @@ class SiftXFeatFeatures(FeatureMatcher):
         self.sift = SiftFeatures(SiftFeatures.Config(cfg.sift_max_keypoints, cfg.ratio))
         self.xfeat: XFeatFeatures | None = XFeatFeatures(XFeatFeatures.Config(
             cfg.model, cfg.max_keypoints, cfg.threshold, cfg.min_similarity, cfg.threads))
+        # Said when XFeat's keypoints are first wanted (not by a run that maps COLMAP's SIFT
+        # and nothing else, such as 'monoplane match').
+        self._missing_note: str | None = None
         if cfg.when_missing == "sift" and _model_file(cfg.model) is None:
-            print(f"monoplane: warning: the XFeat model '{cfg.model}' is not downloaded; "
-                  f"matching with SIFT alone (run 'monoplane models fetch {cfg.model}' for "
-                  "XFeat's matches too)", file=sys.stderr)
+            self._missing_note = (
+                f"monoplane: warning: the XFeat model '{cfg.model}' is not downloaded; "
+                f"matching with SIFT alone (run 'monoplane models fetch {cfg.model}' for "
+                "XFeat's matches too)")
             self.xfeat = None
         if self.xfeat is None or cfg.sfm == "sift":
             self.sfm_native = "sift"  # type: ignore[misc]  # COLMAP maps its own SIFT
 
     def detect(self, frame: Frame) -> Keypoints:
         if self.xfeat is None:
+            if self._missing_note is not None:
+                print(self._missing_note, file=sys.stderr)
+                self._missing_note = None
             return self.sift.detect(frame)
         a, b = self.sift.detect(frame), self.xfeat.detect(frame)
         desc = np.zeros((len(a) + len(b), _SIFT_DIM + b.descriptors.shape[1]), np.float32)
