@@ -128,7 +128,7 @@ class PlaneAwareRegistrar(Registrar):
                   "epipolar support compete on how well their triangulated depths agree with "
                   "the views' own")
         sfm_margin: float = param(
-            1.5, "relative depth: an SfM pose under check is replaced only by a candidate whose "
+            1.25, "relative depth: an SfM pose under check is replaced only by a candidate whose "
                  "depth disagreement is this many times lower (or when it explains too few "
                  "matches)")
         min_epipolar_support: int = param(
