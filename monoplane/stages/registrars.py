@@ -111,9 +111,6 @@ class PlaneAwareRegistrar(Registrar):
             200, "check an SfM placement densely when its view observes fewer model points "
                  "than this, and replace it when a hypothesis of the registrar's verifies "
                  "better (a two-view model on a few dozen points can be degrees off)")
-        verify_sfm_below_relative: int = param(
-            1000, "relative depth: check an SfM placement whose view observes fewer model "
-                  "points than this against the registrar's relative-pose candidates")
         guided_radius: float = param(
             0.03, "relative depth: search radius of guided matching, a share of the image "
                   "width")
@@ -236,10 +233,9 @@ class PlaneAwareRegistrar(Registrar):
             return
         r = max(in_sfm, key=lambda v: registration[v].get("observations", 0))
         for v in in_sfm:
-            metric = self._metric(views, r, v)
-            below = cfg.verify_sfm_below if metric else cfg.verify_sfm_below_relative
-            if v == r or registration[v].get("observations", 0) >= below:
+            if v == r or registration[v].get("observations", 0) >= cfg.verify_sfm_below:
                 continue
+            metric = self._metric(views, r, v)
             tol = cfg.tolerance_metric if metric else cfg.tolerance_relative
             R = cameras[v].R @ cameras[r].R.T
             own = Hypothesis(R, cameras[v].t - R @ cameras[r].t, aligns[v].scale, "sfm")
