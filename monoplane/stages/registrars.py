@@ -447,7 +447,7 @@ class PlaneAwareRegistrar(Registrar):
         # another candidate's depths agree clearly better, not by a hair.
         own = [e for e in close if e[1][2].source == "sfm"]
         if own and best[2].source != "sfm" and spread * cfg.sfm_margin >= own[0][0]:
-            spread, best = own[0]
+            best = own[0][1]
         return best[1], best[2], True
 
 
