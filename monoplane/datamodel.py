@@ -160,6 +160,10 @@ class Frame:
         True when ``normals`` were estimated from this frame's own ``depth`` (no normal cue of
         their own): they then carry no evidence that the depth does not, and the planarity
         test (:mod:`monoplane.planarity`) judges curvature by the depth alone.
+    depth_predicted : bool
+        True when a network predicted ``depth`` from the image. Even a metric network's depth
+        warps by several percent, so registration treats its scale and shape as estimates, as
+        it does relative depth, and takes poses from feature matches instead.
     """
 
     rgb: np.ndarray | None
@@ -172,6 +176,7 @@ class Frame:
     name: str = "frame"
     notes: list[str] = field(default_factory=list)
     normals_from_depth: bool = False
+    depth_predicted: bool = False
     _shape: tuple[int, int] = field(init=False, repr=False, default=(0, 0))
 
     def __post_init__(self) -> None:

@@ -223,7 +223,8 @@ class CueNetwork:
             else:
                 depth, kind, units, note = self._depth_from_raw(
                     outputs[model.output_name], model, frame.K, (frame.height, frame.width))
-            changes.update(depth=depth, depth_kind=kind, depth_units=units)
+            changes.update(depth=depth, depth_kind=kind, depth_units=units,
+                           depth_predicted=True)
             notes_before.append(note)
         notes = [*frame.notes, *notes_before]
         if frame.normals is None:

@@ -257,10 +257,12 @@ class PlaneAwareRegistrar(Registrar):
 
     @staticmethod
     def _metric(views: list[Reconstruction], r: int, v: int) -> bool:
-        """Whether both views' depths are metric in the same units (then they share a scale)."""
+        """Whether both views' depths are measured, metric and in the same units (then they
+        share a scale and their shapes can be trusted); a network's metric depth is not."""
         fr, fv = views[r].frame, views[v].frame
         return (fr.depth_kind == "metric" and fv.depth_kind == "metric"
-                and fr.depth_units == fv.depth_units)
+                and fr.depth_units == fv.depth_units
+                and not (fr.depth_predicted or fv.depth_predicted))
 
     def _geometry(self, rec: Reconstruction, scale: float) -> ViewGeometry:
         f = rec.frame
