@@ -171,6 +171,8 @@ def test_zerodepth_profile_metric_depth_uses_intrinsics(tmp_path: Path) -> None:
     rgb, _ = ramp_image()
     out = stage.provide(Frame(rgb=rgb, K=K))
     assert out.depth_kind == "metric" and out.depth_units == "m"
+    # Metric, but a network's: registration takes it as an estimate (Frame.depth_predicted).
+    assert out.depth_predicted
     np.testing.assert_allclose(out.depth, 0.5, rtol=1e-5)   # 0.001 * fx at input resolution
     # A fronto-parallel constant depth: normals from depth face straight at the camera.
     assert max_angle_deg(out.normals, np.array([0.0, 0.0, -1.0])) < 0.5
@@ -180,6 +182,7 @@ def test_given_cues_are_kept_and_no_model_is_needed() -> None:
     frame, n = plane_frame()
     out = OnnxCues(OnnxCuesConfig(profile="midas")).provide(frame)
     np.testing.assert_array_equal(out.depth, frame.depth)
+    assert not out.depth_predicted  # a sensor's depth stays a measurement
     assert max_angle_deg(out.normals, n) < 0.5
 
 
