@@ -43,7 +43,6 @@ from monoplane.cues import (
 )
 from monoplane.datamodel import Camera, Frame, Reconstruction, Scene, SfmResult, default_intrinsics
 from monoplane.errors import ConfigError, InvalidInput, MonoplaneError, PluginError, StageError
-from monoplane.features import Correspondences, Keypoints, PairMatches
 from monoplane.evaluation.baselines import (
     CALL_TIMING,
     Baseline,
@@ -53,6 +52,7 @@ from monoplane.evaluation.baselines import (
     get_baseline,
     run_baseline,
 )
+from monoplane.features import Correspondences, Keypoints, PairMatches
 from monoplane.geometry.alignment import ScaleAlignment
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
@@ -88,10 +88,9 @@ from monoplane.stages.base import (
 __all__ = [
     "CALL_TIMING", "IMAGENET_MEAN", "IMAGENET_STD", "KINDS", "STAGE_KINDS", "Adjuster",
     "Baseline", "BinnedPoints", "Camera", "ConfigError", "Correspondences", "CueNetwork",
-    "CueProvider", "FeatureMatcher", "Frame", "Fuser", "Keypoints", "InvalidInput", "Labeler", "Labeling", "LabelingContext", "Matcher", "ModelSpec",
-    "MonoplaneError",
-    "NeighbourGraph", "NetworkCues", "NoConfig", "OnnxProfile", "PairMatches", "PlaneCloud",
-    "PluginError",
+    "CueProvider", "FeatureMatcher", "Frame", "Fuser", "Keypoints", "InvalidInput", "Labeler",
+    "Labeling", "LabelingContext", "Matcher", "ModelSpec", "MonoplaneError", "NeighbourGraph",
+    "NetworkCues", "NoConfig", "OnnxProfile", "PairMatches", "PlaneCloud", "PluginError",
     "ProximityAffinities", "RansacBaselineSettings", "RansacParams", "Reconstruction",
     "Refiner", "Registrar", "Sampler", "ScaleAlignment", "Scene", "Scorer", "SfmResult",
     "Stage", "StageError", "StageKind", "TripletDraws", "baseline_config", "baseline_names",

@@ -8,6 +8,7 @@ and what was expected.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -20,6 +21,9 @@ from monoplane.cues.transforms import (
     scaled_intrinsics,
 )
 from monoplane.errors import InvalidInput
+
+if TYPE_CHECKING:
+    import onnxruntime
 
 
 def _shape_text(shape: list) -> str:
@@ -43,7 +47,8 @@ def _static(dim: object) -> int | None:
     return dim if isinstance(dim, int) and dim > 0 else None
 
 
-def open_session(path: Path, threads: int, label: str, expected: str) -> object:
+def open_session(path: Path, threads: int, label: str, expected: str
+                 ) -> onnxruntime.InferenceSession:
     """An onnxruntime CPU session of an ONNX file, or a one-line error naming the file.
 
     Parameters

@@ -44,6 +44,13 @@ class Keypoints:
     def __len__(self) -> int:
         return len(self.pixels)
 
+    def described(self, who: str) -> np.ndarray:
+        """The (k, D) descriptors; a one-line error naming ``who`` when there are none
+        (keypoints a pairwise network produced cannot be matched by descriptor)."""
+        if self.descriptors is None:
+            raise InvalidInput(f"{who}: these keypoints have no descriptors to match")
+        return self.descriptors
+
 
 @dataclass(frozen=True)
 class PairMatches:
@@ -189,7 +196,7 @@ class Correspondences:
         listed = self._pixels.setdefault(v, [])
         count = sum(len(p) for p in listed)
         out = np.empty(len(pixels), np.int64)
-        fresh = []
+        fresh: list[np.ndarray] = []
         for k, (u, w) in enumerate(np.rint(pixels).astype(np.int64)):
             cell = (int(u), int(w))
             if cell not in where:

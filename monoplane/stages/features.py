@@ -71,7 +71,8 @@ class SiftFeatures(FeatureMatcher):
                          np.array([k.response for k in kp], np.float32))
 
     def match(self, a: Keypoints, b: Keypoints) -> PairMatches:
-        index, scores = mutual_ratio(a.descriptors, b.descriptors, self.config.ratio)
+        who = f"features stage '{self.name}'"
+        index, scores = mutual_ratio(a.described(who), b.described(who), self.config.ratio)
         return PairMatches(index, None, None, scores)
 
 
@@ -118,7 +119,9 @@ class XFeatFeatures(FeatureMatcher):
         return self._net().detect(_rgb(frame), cfg.max_keypoints, cfg.threshold)
 
     def match(self, a: Keypoints, b: Keypoints) -> PairMatches:
-        index, scores = mutual_nearest(a.descriptors, b.descriptors, self.config.min_similarity)
+        who = f"features stage '{self.name}'"
+        index, scores = mutual_nearest(a.described(who), b.described(who),
+                                       self.config.min_similarity)
         return PairMatches(index, None, None, scores)
 
 
@@ -185,25 +188,30 @@ class SiftXFeatFeatures(FeatureMatcher):
                 print(self._missing_note, file=sys.stderr)
                 self._missing_note = None
             return self.sift.detect(frame)
+        who = f"features stage '{self.name}'"
         a, b = self.sift.detect(frame), self.xfeat.detect(frame)
-        desc = np.zeros((len(a) + len(b), _SIFT_DIM + b.descriptors.shape[1]), np.float32)
-        norms = np.maximum(np.linalg.norm(a.descriptors, axis=1, keepdims=True), 1e-12)
-        desc[:len(a), :_SIFT_DIM] = a.descriptors / norms
-        desc[len(a):, _SIFT_DIM:] = b.descriptors
+        da, db = a.described(who), b.described(who)
+        desc = np.zeros((len(a) + len(b), _SIFT_DIM + db.shape[1]), np.float32)
+        desc[:len(a), :_SIFT_DIM] = da / np.maximum(np.linalg.norm(da, axis=1, keepdims=True),
+                                                    1e-12)
+        desc[len(a):, _SIFT_DIM:] = db
         return Keypoints(np.concatenate([a.pixels, b.pixels]), desc,
                          np.concatenate([a.scores, b.scores]))
 
     def match(self, a: Keypoints, b: Keypoints) -> PairMatches:
         if self.xfeat is None:
             return self.sift.match(a, b)
+        who = f"features stage '{self.name}'"
+        da, db = a.described(who), b.described(who)
         found, scores = [], []
         for part, rule in ((slice(0, _SIFT_DIM), self.sift), (slice(_SIFT_DIM, None),
                                                                 self.xfeat)):
-            ia = np.flatnonzero(np.any(a.descriptors[:, part] != 0, axis=1))
-            ib = np.flatnonzero(np.any(b.descriptors[:, part] != 0, axis=1))
-            m = rule.match(Keypoints(a.pixels[ia], a.descriptors[ia, part], a.scores[ia]),
-                           Keypoints(b.pixels[ib], b.descriptors[ib, part], b.scores[ib]))
-            found.append(np.c_[ia[m.index[:, 0]], ib[m.index[:, 1]]])
+            ia = np.flatnonzero(np.any(da[:, part] != 0, axis=1))
+            ib = np.flatnonzero(np.any(db[:, part] != 0, axis=1))
+            m = rule.match(Keypoints(a.pixels[ia], da[ia, part], a.scores[ia]),
+                           Keypoints(b.pixels[ib], db[ib, part], b.scores[ib]))
+            pairs = m.index if m.index is not None else np.zeros((0, 2), np.int64)
+            found.append(np.c_[ia[pairs[:, 0]], ib[pairs[:, 1]]])
             scores.append(m.scores)
         return PairMatches(np.concatenate(found).astype(np.int64), None, None,
                            np.concatenate(scores))

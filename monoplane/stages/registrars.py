@@ -422,18 +422,18 @@ class PlaneAwareRegistrar(Registrar):
             pr, pv = np.concatenate([pr, gr]), np.concatenate([pv, gv])
         if len(pr) >= cfg.min_epipolar_support:
             for estimator, threshold in _ESSENTIAL_FITS:
-                found = essential_pose(pr, pv, ref.K, ref.depth, other.K, other.depth, 8,
-                                       threshold, estimator)
-                if found is not None:
-                    candidates.append(Hypothesis(found.R, found.t, found.depth_scale_j,
-                                                 "essential", found.inliers))
+                fit = essential_pose(pr, pv, ref.K, ref.depth, other.K, other.depth, 8,
+                                     threshold, estimator)
+                if fit is not None:
+                    candidates.append(Hypothesis(fit.R, fit.t, fit.depth_scale_j, "essential",
+                                                 fit.inliers))
         thr = cfg.epipolar_threshold_px
         refined: list[tuple[int, Agreement, Hypothesis]] = []
         for start in candidates:
-            found = refine_epipolar(start, pr, pv, ref.K, other.K, thr)
-            if found is None:
+            moved_and_support = refine_epipolar(start, pr, pv, ref.K, other.K, thr)
+            if moved_and_support is None:
                 continue
-            moved, support = found
+            moved, support = moved_and_support
             after = agreement(ref, other, moved, tol)
             if _accepted(after, cfg):
                 refined.append((support, after, moved))
