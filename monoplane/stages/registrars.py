@@ -439,9 +439,10 @@ class PlaneAwareRegistrar(Registrar):
                 refined.append((support, after, moved))
         most = max((c[0] for c in refined), default=0)
         if most < cfg.min_epipolar_support:
-            if check is None:
-                return agreement(ref, other, extra, tol), extra, False
-            return check, hyp, False
+            if check is not None and hyp is not None:
+                return check, hyp, False
+            assert extra is not None  # _pair returns before this with neither
+            return agreement(ref, other, extra, tol), extra, False
         close = [(depth_disagreement(c[2], pr, pv, ref, other, thr), c) for c in refined
                  if c[0] >= cfg.support_share * most]
         spread, best = min(close, key=lambda e: e[0])
