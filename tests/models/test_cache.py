@@ -173,6 +173,7 @@ def test_catalogue_records_are_well_formed() -> None:
         assert rec.url.startswith(f"{host}{rec.repo}/")
         assert rec.size and rec.sha256 and rec.licence and rec.provenance
         assert "NC" not in rec.licence.split(" ")[0]  # no non-commercial defaults
+        assert "  " not in rec.summary + rec.provenance  # TOML line continuations trimmed
     assert not get_model("moge-2-vits-normal").pinned  # honest: no commit hash known
     assert get_model("depth-anything-v2-small").pinned
     with pytest.raises(ConfigError, match="catalogue models: depth-anything-v2-small"):
