@@ -1,10 +1,10 @@
-"""Time ``monoplane.mincut`` against PyMaxflow's vectorised API on the pipeline's own graphs.
+"""Time ``monoplane.algorithm.mincut`` against PyMaxflow's vectorised API on the pipeline's own graphs.
 
 Runs the ``monoplane`` preset on synthetic frames (``monoplane.synth.generate(seed, "mild")``)
 at 256x192 and 640x480, records every graph the graph-cut labeler solves (by wrapping the
-solver that :mod:`monoplane.graphcut` calls), then solves each recorded graph with both:
+solver that :mod:`monoplane.algorithm.graphcut` calls), then solves each recorded graph with both:
 
-* ``monoplane.mincut.min_cut_flows``: the arrays as they are, one compiled call;
+* ``monoplane.algorithm.mincut.min_cut_flows``: the arrays as they are, one compiled call;
 * PyMaxflow (``maxflow.Graph[float]``): ``add_nodes``, ``add_edges`` with arrays,
   ``add_grid_tedges``, ``maxflow``, ``get_grid_segments``; graph building timed apart.
 
@@ -24,9 +24,9 @@ from typing import Any
 import maxflow
 import numpy as np
 
-import monoplane.graphcut as graphcut
-from monoplane.mincut import min_cut_flows
-from monoplane.pipeline import Pipeline
+import monoplane.algorithm.graphcut as graphcut
+from monoplane.algorithm.mincut import min_cut_flows
+from monoplane.host.pipeline import Pipeline
 from monoplane.synth import generate
 
 #: (nodes, tails, heads, caps, rev_caps, terminal) of every solve, in call order.
@@ -34,7 +34,7 @@ Graph = tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
 
 def record_graphs(captured: list[Graph]) -> None:
-    """Make :mod:`monoplane.graphcut`'s solver calls append their graph to ``captured``."""
+    """Make :mod:`monoplane.algorithm.graphcut`'s solver calls append their graph to ``captured``."""
     flows, cut = graphcut.min_cut_flows, graphcut.min_cut
 
     def copy(n: int, *arrays: Any) -> Graph:
@@ -101,7 +101,7 @@ def main() -> None:
         print(f"{width}x{height}: {len(frames)} frames, {len(graphs)} graphs; nodes median "
               f"{int(np.median(nodes))} max {nodes.max()}, edges median {int(np.median(edges))} "
               f"max {edges.max()}")
-        print(f"  monoplane.mincut        {ours * per_frame:6.2f} ms per frame")
+        print(f"  monoplane.algorithm.mincut        {ours * per_frame:6.2f} ms per frame")
         print(f"  PyMaxflow (vectorised)  {theirs * per_frame:6.2f} ms per frame, of which "
               f"{build * per_frame:.2f} ms building the graph")
         print(f"  same cuts: {same}")

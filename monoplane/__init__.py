@@ -9,14 +9,18 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
+from monoplane import moved_modules
+
+moved_modules.install()
+
 #: Module -> the public names it defines.
 _MODULES: dict[str, tuple[str, ...]] = {
-    "monoplane.detect": ("detect_planes",),
+    "monoplane.host.detect": ("detect_planes",),
     "monoplane.export.rerun_log": ("log_rerun",),
     "monoplane.errors": ("ConfigError", "InvalidInput", "MonoplaneError", "StageError"),
     "monoplane.hookspecs": ("hookimpl",),
-    "monoplane.fileio": ("load_frame", "save_reconstruction"),
-    "monoplane.pipeline": ("Pipeline",),
+    "monoplane.io.frames": ("load_frame", "save_reconstruction"),
+    "monoplane.host.pipeline": ("Pipeline",),
     "monoplane.datamodel": ("Camera", "Frame", "Reconstruction", "Scene"),
     "monoplane.version": ("__version__",),
 }
@@ -30,12 +34,12 @@ __all__ = [
 
 if TYPE_CHECKING:
     from monoplane.datamodel import Camera, Frame, Reconstruction, Scene
-    from monoplane.detect import detect_planes
+    from monoplane.host.detect import detect_planes
     from monoplane.errors import ConfigError, InvalidInput, MonoplaneError, StageError
     from monoplane.export.rerun_log import log_rerun
-    from monoplane.fileio import load_frame, save_reconstruction
+    from monoplane.io.frames import load_frame, save_reconstruction
     from monoplane.hookspecs import hookimpl
-    from monoplane.pipeline import Pipeline
+    from monoplane.host.pipeline import Pipeline
     from monoplane.version import __version__
 
 

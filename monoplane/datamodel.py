@@ -12,7 +12,7 @@ Conventions used everywhere in monoplane
 
 This module imports nothing of the project but :mod:`monoplane.errors` and
 :mod:`monoplane.jit` (which loads numba only when a kernel first runs), so every other module
-can depend on it. Writing outputs lives in :mod:`monoplane.fileio`
+can depend on it. Writing outputs lives in :mod:`monoplane.io.frames`
 (``monoplane.save_reconstruction``) and meshes in :mod:`monoplane.geometry.mesh`
 (``reconstruction_to_open3d``).
 """
@@ -159,7 +159,7 @@ class Frame:
     normals_from_depth : bool
         True when ``normals`` were estimated from this frame's own ``depth`` (no normal cue of
         their own): they then carry no evidence that the depth does not, and the planarity
-        test (:mod:`monoplane.planarity`) judges curvature by the depth alone.
+        test (:mod:`monoplane.algorithm.planarity`) judges curvature by the depth alone.
     depth_predicted : bool
         True when a network predicted ``depth`` from the image. Even a metric network's depth
         warps by several percent, so registration treats its scale and shape as estimates, as

@@ -2,7 +2,7 @@
 
 A plugin is any module or object with functions marked ``@monoplane.hookimpl`` whose names
 match the specs below. Built-in stages register through exactly these hooks (see
-``monoplane.plugin_manager.DEFAULT_PLUGINS``); third-party packages are found through the
+``monoplane.host.registry.DEFAULT_PLUGINS``); third-party packages are found through the
 ``monoplane`` entry-point group::
 
     [project.entry-points.monoplane]

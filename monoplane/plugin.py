@@ -58,7 +58,7 @@ from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.geometry.planes import fit_plane
 from monoplane.hookspecs import hookimpl
-from monoplane.plugin_manager import get_plugin_manager, get_registry
+from monoplane.host.registry import get_plugin_manager, get_registry
 from monoplane.stages.base import (
     KINDS,
     STAGE_KINDS,

@@ -300,7 +300,7 @@ def synthetic_view() -> SynthView:
 @pytest.fixture
 def plugin_manager() -> pluggy.PluginManager:
     """A fresh plugin manager with the built-in stages only."""
-    from monoplane.plugin_manager import get_plugin_manager
+    from monoplane.host.registry import get_plugin_manager
 
     return get_plugin_manager(autoload=False)
 

@@ -1,6 +1,6 @@
 """Compile every numba kernel once, so that the first real run loads them from the disk cache.
 
-monoplane's kernels (:mod:`monoplane.jit`, :mod:`monoplane.lattice_kernels`) compile on their
+monoplane's kernels (:mod:`monoplane.jit`, :mod:`monoplane.algorithm.lattice_kernels`) compile on their
 first call and cache the machine code on disk. Without a warm-up, the first ``monoplane run``
 on a machine spends 20-30 s compiling; ``setup.sh`` runs this module instead, so the user's
 first run costs what every later run does::
@@ -98,7 +98,7 @@ def package_kernels() -> dict[str, Callable[[], bool]]:
 
 
 def _run_preset(preset: str, frame: Any) -> Any:
-    from monoplane.pipeline import Pipeline
+    from monoplane.host.pipeline import Pipeline
 
     return Pipeline.from_preset(preset).run(frame)
 
@@ -125,11 +125,11 @@ def _workloads(report: bool = True) -> Iterator[tuple[str, Callable[[], Any]]]:
     """
     import numpy as np
 
-    from monoplane import config
-    from monoplane.detect import detect_planes
-    from monoplane.fileio import save_reconstruction
+    from monoplane.host import config
+    from monoplane.host.detect import detect_planes
+    from monoplane.io.frames import save_reconstruction
     from monoplane.geometry.planes import planes_from_triplets
-    from monoplane.pipeline import Pipeline
+    from monoplane.host.pipeline import Pipeline
     from monoplane.report.frame import write_frame_report
     from monoplane.synth import generate
 

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from monoplane.plugin_manager import AUTOLOAD_ENV
+from monoplane.host.registry import AUTOLOAD_ENV
 from monoplane.testing import CORNER_PLANES, box_frame
 
 

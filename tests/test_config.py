@@ -1,6 +1,6 @@
 import pytest
 
-from monoplane import config
+from monoplane.host import config
 from monoplane.errors import ConfigError
 
 

@@ -100,7 +100,7 @@ def test_plane_world_round_trip():
     assert np.allclose(cam.center, R.T @ -t)
 
 
-def test_data_model_imports_nothing_of_the_project_but_errors_and_jit() -> None:
+def test_data_model_imports_nothing_of_the_project_but_errors_jit_and_the_aliases() -> None:
     import subprocess
     import sys
 
@@ -108,7 +108,8 @@ def test_data_model_imports_nothing_of_the_project_but_errors_and_jit() -> None:
             "print(sorted(m for m in sys.modules if m.startswith('monoplane'))); "
             "print('cv2' in sys.modules, 'pluggy' in sys.modules, 'numba' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    loaded = "['monoplane', 'monoplane.datamodel', 'monoplane.errors', 'monoplane.jit']"
+    loaded = ("['monoplane', 'monoplane.datamodel', 'monoplane.errors', 'monoplane.jit', "
+              "'monoplane.moved_modules']")
     assert out.stdout.split("\n")[:2] == [loaded, "False False False"]
 
 
@@ -117,7 +118,7 @@ def test_a_single_view_run_imports_no_scipy_submodule_it_does_not_use() -> None:
     import subprocess
     import sys
 
-    code = ("import sys, numpy as np; from monoplane.pipeline import Pipeline; "
+    code = ("import sys, numpy as np; from monoplane.host.pipeline import Pipeline; "
             "from monoplane.datamodel import Frame; "
             "v, u = np.mgrid[0:72, 0:96]; "
             "depth = np.where(u < 48, 2.0, 1.5 + 0.01 * u).astype(np.float32); "
@@ -134,7 +135,7 @@ def test_a_single_view_run_imports_no_scipy_submodule_it_does_not_use() -> None:
 
 def test_package_names_load_on_first_use() -> None:
     import monoplane
-    from monoplane.pipeline import Pipeline
+    from monoplane.host.pipeline import Pipeline
 
     assert monoplane.Pipeline is Pipeline and "Pipeline" in dir(monoplane)
     assert set(monoplane.__all__) <= set(dir(monoplane))

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from monoplane import lattice_kernels as lk
-from monoplane.densecrf import (
+from monoplane.algorithm import lattice_kernels as lk
+from monoplane.algorithm.densecrf import (
     CrfParams,
     GaussianKernel,
     PermutohedralLattice,
@@ -399,7 +399,7 @@ def test_dense_crf_trivial_cases():
 @pytest.mark.parametrize("num_labels", [2, 11])
 @pytest.mark.parametrize("step, shape", [(3, (192, 256)), (8, (480, 640)), (2, (37, 53))])
 def test_block_means_from_counts_equal_the_per_pixel_sums(uniform, num_labels, step, shape):
-    from monoplane.densecrf import _block_mean_probabilities
+    from monoplane.algorithm.densecrf import _block_mean_probabilities
 
     h, w = shape
     lab = np.random.default_rng(num_labels).integers(0, num_labels, size=shape)
@@ -417,7 +417,7 @@ def test_block_means_from_counts_equal_the_per_pixel_sums(uniform, num_labels, s
 
 @pytest.mark.parametrize("uniform", [True, False])
 def test_final_labels_kernel_equals_the_numpy_argmax(uniform):
-    from monoplane.densecrf import _final_labels
+    from monoplane.algorithm.densecrf import _final_labels
 
     rng = np.random.default_rng(11)
     h, w, num = 23, 31, 6

@@ -6,11 +6,11 @@ import numpy as np
 import open3d as o3d
 import pytest
 
-from monoplane.detect import detect_planes
+from monoplane.host.detect import detect_planes
 from monoplane.errors import ConfigError, InvalidInput, StageError
 from monoplane.hookspecs import hookimpl
-from monoplane.pipeline import Pipeline
-from monoplane.plugin_manager import get_plugin_manager
+from monoplane.host.pipeline import Pipeline
+from monoplane.host.registry import get_plugin_manager
 from monoplane.stages.base import Refiner
 from monoplane.testing import box_frame
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from monoplane.errors import InvalidInput
-from monoplane.fileio import (
+from monoplane.io.frames import (
     atomic_output_dir,
     load_frame,
     read_depth,

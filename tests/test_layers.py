@@ -8,6 +8,8 @@ from pathlib import Path
 
 import pytest
 
+from monoplane.moved_modules import MOVED
+
 PACKAGE = Path(__file__).resolve().parents[1] / "monoplane"
 
 
@@ -30,6 +32,9 @@ def _imports(path: Path) -> set[str]:
                 found |= {f"monoplane.{alias.name}" for alias in node.names}
     return found
 
+
+#: The stage contracts: the modules of ``monoplane.stages`` that define no stage.
+CONTRACTS = ("monoplane.stages", "monoplane.stages.base", "monoplane.stages.config_fields")
 
 MODULES = {_module_name(p): _imports(p) for p in sorted(PACKAGE.rglob("*.py"))}
 
@@ -61,20 +66,19 @@ def test_geometry_imports_only_the_data_model_and_kernels(module: str) -> None:
 @pytest.mark.parametrize("module", sorted(m for m in MODULES
                                           if _within(m, ("monoplane.stages",))))
 def test_stages_import_no_other_stage_and_no_host_driver(module: str) -> None:
-    forbidden = ("monoplane.cli", "monoplane.pipeline", "monoplane.batch", "monoplane.bench",
+    forbidden = ("monoplane.cli", "monoplane.host.pipeline", "monoplane.batch", "monoplane.evaluation.bench",
                  "monoplane.evaluation", "monoplane.report", "monoplane.multiview")
     bad = {n for n in _ours(MODULES[module])
            if _within(n, forbidden)
-           or (_within(n, ("monoplane.stages",)) and n not in ("monoplane.stages",
-                                                                 "monoplane.stages.base"))}
+           or (_within(n, ("monoplane.stages",)) and n not in CONTRACTS)}
     assert bad == set()
 
 
 def test_concrete_stages_are_named_only_in_the_default_plugin_list() -> None:
-    from monoplane.plugin_manager import DEFAULT_PLUGINS
+    from monoplane.host.registry import DEFAULT_PLUGINS
 
     stage_modules = {m for m in MODULES if _within(m, ("monoplane.stages",))
-                     and m not in ("monoplane.stages", "monoplane.stages.base")}
+                     and m not in CONTRACTS}
     assert stage_modules <= set(DEFAULT_PLUGINS)
     importers = {m: MODULES[m] & stage_modules for m in MODULES
                  if not _within(m, ("monoplane.stages",)) and MODULES[m] & stage_modules}
@@ -175,7 +179,8 @@ def _dependencies(path: Path) -> set[str]:
               and isinstance(node.values[0], ast.Constant)
               and str(node.values[0].value).startswith("monoplane.")):
             named += [m for m in _FILES if m.startswith(str(node.values[0].value))]
-    homes = {_home(n) for n in named if n.split(".")[0] == "monoplane"}
+    # an old path of a moved module is an alias, not a module this file needs
+    homes = {_home(n) for n in named if n.split(".")[0] == "monoplane" and n not in MOVED}
     return {h for h in homes if h is not None} - {_module_name(path)}
 
 
@@ -210,11 +215,11 @@ def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
 
 def test_the_cycle_check_sees_every_import_form() -> None:
     deps = {m: _dependencies(p) for m, p in _FILES.items()}
-    assert "monoplane.cloud_config" in deps["monoplane.config"]            # "module:Name"
-    assert "monoplane.stages.samplers" in deps["monoplane.plugin_manager"]  # "module"
+    assert "monoplane.host.cloud_config" in deps["monoplane.host.config"]            # "module:Name"
+    assert "monoplane.stages.samplers" in deps["monoplane.host.registry"]  # "module"
     assert "monoplane.cli.run" in deps["monoplane.cli"]                     # f"prefix.{name}"
-    assert "monoplane.pipeline" in deps["monoplane"]                        # TYPE_CHECKING
-    assert "monoplane.report.colors" in deps["monoplane.detect"]            # inside a function
+    assert "monoplane.host.pipeline" in deps["monoplane"]                        # TYPE_CHECKING
+    assert "monoplane.report.colors" in deps["monoplane.host.detect"]            # inside a function
     assert "monoplane.report.html" in deps["monoplane.report.frame"]        # from P import N
     assert "monoplane.cli" not in deps["monoplane.batch.throughput"]        # python -m
     assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
@@ -226,5 +231,5 @@ def test_no_import_cycles() -> None:
 
 def test_file_outputs_trigger_no_report() -> None:
     # Reports are the caller's choice (save_reconstruction's `also`), not the writer's.
-    deps = _dependencies(_FILES["monoplane.fileio"])
+    deps = _dependencies(_FILES["monoplane.io.frames"])
     assert {d for d in deps if _within(d, ("monoplane.report",))} == set()

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from monoplane.errors import InvalidInput
-from monoplane.mincut import min_cut, min_cut_flows
+from monoplane.algorithm.mincut import min_cut, min_cut_flows
 
 
 def cut_capacity(sink_side, tails, heads, caps, rev_caps, terminal):

@@ -72,14 +72,14 @@ def test_scene_mesh_lies_on_its_fused_planes(synth_pair) -> None:
 
 
 def test_failed_save_leaves_nothing(synth_pair, tmp_path: Path, monkeypatch) -> None:
-    import monoplane.fileio
+    import monoplane.io.frames
 
     result = _oracle_result(synth_pair)
 
     def boom(*args, **kwargs):
         raise RuntimeError("disk full")
 
-    monkeypatch.setattr(monoplane.fileio, "write_plane_mesh_ply", boom)
+    monkeypatch.setattr(monoplane.io.frames, "write_plane_mesh_ply", boom)
     with pytest.raises(RuntimeError):
         save_scene(result, tmp_path / "scene")
     assert list(tmp_path.iterdir()) == []
@@ -96,7 +96,7 @@ def test_scale_sfm_keeps_rotations_and_scales_positions(synth_pair) -> None:
 
 def test_driver_aligns_scales_and_fuses(synth_pair) -> None:
     from monoplane.multiview import reconstruct_multiview
-    from monoplane.pipeline import Pipeline
+    from monoplane.host.pipeline import Pipeline
 
     pipe = Pipeline.from_preset("monoplane", overrides=["cues.plugin=given"])
     sfm = ground_truth_sfm(synth_pair)

@@ -10,7 +10,7 @@ from monoplane import Pipeline, load_frame, save_reconstruction
 from monoplane.errors import StageError
 from monoplane.evaluation.segmentation import segmentation_scores
 from monoplane.hookspecs import hookimpl
-from monoplane.plugin_manager import get_plugin_manager
+from monoplane.host.registry import get_plugin_manager
 from monoplane.stages.base import Refiner
 from monoplane.synth import generate
 

@@ -7,7 +7,7 @@ import pytest
 
 import monoplane
 from monoplane.datamodel import Reconstruction
-from monoplane.planarity import PlanarityConfig, check_cloud, check_image, curved_planes
+from monoplane.algorithm.planarity import PlanarityConfig, check_cloud, check_image, curved_planes
 from monoplane.synth import generate
 
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from monoplane.datamodel import Frame, Reconstruction, intrinsics_matrix
-from monoplane.fileio import save_reconstruction
+from monoplane.io.frames import save_reconstruction
 
 _SCALARS = {"char": int, "uchar": int, "short": int, "ushort": int, "int": int, "uint": int,
             "int8": int, "uint8": int, "int16": int, "uint16": int, "int32": int, "uint32": int,

@@ -4,7 +4,7 @@ from pathlib import Path
 import pytest
 
 from monoplane.errors import PluginError
-from monoplane.plugin_manager import get_plugin_manager, get_registry
+from monoplane.host.registry import get_plugin_manager, get_registry
 from monoplane.stages.base import KINDS, STAGE_KINDS, Sampler, param
 from monoplane.testing import check_stage_contract, stage_plugin
 

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from monoplane import config
-from monoplane.plugin_manager import get_registry
+from monoplane.host import config
+from monoplane.host.registry import get_registry
 
 #: The resolved config of every preset, recorded when the presets still restated every default.
 RECORDED = json.loads((Path(__file__).parent / "data" / "preset_resolved_configs.json")

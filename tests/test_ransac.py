@@ -8,7 +8,7 @@ from monoplane.errors import InvalidInput, StageError
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.geometry.hypotheses import needed_samples
-from monoplane.ransac import RansacConfig, SequentialRansac
+from monoplane.algorithm.ransac import RansacConfig, SequentialRansac
 from monoplane.stages.labelers import GraphCutLabeler, ProximityGraphCutLabeler, ThresholdLabeler
 from monoplane.stages.samplers import NormalConsistentSampler, UniformSampler
 from monoplane.stages.scorers import InlierCountScorer, MsacNormalScorer, MsacScorer

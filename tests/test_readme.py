@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from monoplane import config
+from monoplane.host import config
 from monoplane.cli import SUBCOMMANDS, build_parser
 from monoplane.stages.base import STAGE_KINDS
 

@@ -8,7 +8,7 @@ from scipy import ndimage
 
 from monoplane.datamodel import Frame, Reconstruction, intrinsics_matrix, pixel_rays
 from monoplane.errors import InvalidInput
-from monoplane.regions import (
+from monoplane.algorithm.regions import (
     absorb_small_regions,
     clean_regions,
     gate_filled_pixels,
@@ -320,7 +320,7 @@ def _reference_moments(points, valid, labels, num):
 
 @pytest.mark.parametrize("seed", range(4))
 def test_region_moments_match_the_bincount_reference(seed):
-    from monoplane.regions import RegionMoments
+    from monoplane.algorithm.regions import RegionMoments
 
     rng = np.random.default_rng(seed)
     labels = rng.integers(0, 7, size=(30, 40))

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from monoplane import detect_planes
-from monoplane.pipeline import Pipeline
-from monoplane.plugin_manager import get_plugin_manager
+from monoplane.host.pipeline import Pipeline
+from monoplane.host.registry import get_plugin_manager
 from monoplane.stages.graph_refiner import GraphCrfRefiner
 from monoplane.stages.labelers import ProximityGraphCutLabeler
 from monoplane.stages.samplers import NormalConsistentSampler

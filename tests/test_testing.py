@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from monoplane.datamodel import Scene, SfmResult, intrinsics_matrix, plane_to_world
-from monoplane.plugin_manager import get_plugin_manager, get_registry
+from monoplane.host.registry import get_plugin_manager, get_registry
 from monoplane.stages.base import Fuser, Matcher
 from monoplane.testing import (
     ROOM,

@@ -22,7 +22,7 @@ def test_every_kernel_of_the_package_is_listed():
     assert defined, "no @kernel found: has the decorator been renamed?"
     listed = set(package_kernels())
     assert defined <= listed, sorted(defined - listed)
-    assert "monoplane.lattice_kernels" in kernel_modules()  # plain numba.njit kernels too
+    assert "monoplane.algorithm.lattice_kernels" in kernel_modules()  # plain numba.njit kernels too
 
 
 def test_warmup_reaches_every_kernel_in_a_fresh_process():

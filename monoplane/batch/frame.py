@@ -2,7 +2,7 @@
 
 :func:`process_frame` is ``(job, frame spec) -> FrameResult``: it loads the frame's files, runs
 the pipeline the job's config describes and writes ``<out>/<name>/`` with
-:func:`monoplane.fileio.save_reconstruction`, exactly as ``monoplane run`` does. It never raises for
+:func:`monoplane.io.frames.save_reconstruction`, exactly as ``monoplane run`` does. It never raises for
 a bad frame: the failure comes back as a one-line reason. The pipeline (and any ONNX session
 its stages open) is built once per process and reused for every later frame of the same config.
 
@@ -43,7 +43,7 @@ class BatchJob:
     Attributes
     ----------
     config : dict
-        Resolved pipeline config (:meth:`monoplane.config.ResolvedConfig.to_dict`).
+        Resolved pipeline config (:meth:`monoplane.host.config.ResolvedConfig.to_dict`).
     out : str
         Batch output folder; frame ``name`` goes to ``out/name``.
     report : bool
@@ -157,7 +157,7 @@ def has_pipeline() -> bool:
 
 def pipeline_for(config: dict[str, Any]):  # -> monoplane.Pipeline
     """This process's pipeline for ``config``, built (with every stage) on first use."""
-    from monoplane.pipeline import Pipeline
+    from monoplane.host.pipeline import Pipeline
 
     key = json.dumps(config, sort_keys=True, default=str)
     if _CACHE.key != key:
@@ -184,7 +184,7 @@ def process_frame(job: BatchJob, spec: FrameSpec) -> FrameResult:
         ``"ok"`` with the plane count, or ``"failed"`` with a one-line reason; never raises
         for a bad frame or a stage error.
     """
-    from monoplane.fileio import load_frame, save_reconstruction
+    from monoplane.io.frames import load_frame, save_reconstruction
 
     start = time.perf_counter()
     try:
@@ -228,7 +228,7 @@ def clean_stale(out: Path) -> list[Path]:
     """Delete temporary folders that a killed run left in ``out``; returns what was removed.
 
     These are the hidden ``.<name>.<random>.partial`` / ``.old`` siblings of
-    :func:`monoplane.fileio.atomic_output_dir`. Call it only while holding the batch lock, so that
+    :func:`monoplane.io.frames.atomic_output_dir`. Call it only while holding the batch lock, so that
     no live run is writing them.
     """
     removed = []

@@ -27,7 +27,7 @@ THUMB_WIDTH = 240
 
 def thumbnail(spec: FrameSpec, frame_dir: Path, dest: Path) -> bool:
     """Write a small label overlay of one finished frame; False if its files are unreadable."""
-    from monoplane.fileio import read_image
+    from monoplane.io.frames import read_image
 
     labels = cv2.imread(str(frame_dir / "labels.png"), cv2.IMREAD_UNCHANGED)
     if labels is None or labels.ndim != 2:

@@ -51,7 +51,7 @@ def load_frame_output(folder: Path, spec: FrameSpec) -> Reconstruction:
     InvalidInput
         A file is missing or unreadable.
     """
-    from monoplane.fileio import load_frame
+    from monoplane.io.frames import load_frame
 
     try:
         doc = json.loads((folder / "planes.json").read_text())

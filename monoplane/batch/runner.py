@@ -151,7 +151,7 @@ def run_batch(source: str | Path | Sequence[FrameSpec], out: str | Path,
     KeyboardInterrupt
         After stopping the workers and writing ``summary.json`` (``interrupted: true``).
     """
-    from monoplane.pipeline import Pipeline
+    from monoplane.host.pipeline import Pipeline
 
     start = time.perf_counter()
     notes: list[str] = []

@@ -42,7 +42,7 @@ class FrameSpec:
     image : str or None
         Absolute path of the colour image; None for a depth-only frame.
     depth, normals : str or None
-        Absolute paths of cue files (see :func:`monoplane.fileio.load_frame`).
+        Absolute paths of cue files (see :func:`monoplane.io.frames.load_frame`).
     intrinsics : str or None
         Absolute path of a JSON file, or ``"fx,fy,cx,cy"``; None = assumed 60 degree FOV.
     depth_scale : float or None

@@ -24,7 +24,7 @@ from monoplane.batch.pool import WorkerInitError, WorkerPool, default_workers
 
 if TYPE_CHECKING:
     from monoplane.datamodel import Frame, Reconstruction
-    from monoplane.pipeline import Pipeline
+    from monoplane.host.pipeline import Pipeline
 
 # Each worker builds the pipeline once from the config (initializer), then takes one view per task.
 _PIPE: Pipeline | None = None
@@ -35,7 +35,7 @@ VIEW_STAGES = ("cues", "ransac", "refiner")
 
 def _init_view_worker(config: dict[str, Any]) -> None:
     """Worker initializer: build this worker's pipeline from the resolved config."""
-    from monoplane.pipeline import Pipeline
+    from monoplane.host.pipeline import Pipeline
 
     global _PIPE
     _PIPE = Pipeline.from_config(config)

@@ -16,7 +16,7 @@ timings), the traced memory of each stage, throughput, the first call of a fresh
 (numba kernels loaded from their cache), the peak RSS of each size (each size runs in its own
 process), and every registered baseline timed on the same frames in the same process: its own
 call (without converting the cloud into the library's data structure), its whole call, and
-the ratio of the preset's total to the baseline's call. See monoplane/bench.py for the
+the ratio of the preset's total to the baseline's call. See monoplane/evaluation/bench.py for the
 method.
 
 --complexity (or --objects with ranges of your own) adds a scene-complexity axis: each size runs
@@ -132,7 +132,7 @@ def _worker_counts(text: str | None) -> list[int]:
 
 def _object_ranges(text: str | None, complexity: bool) -> list[tuple[int, int]] | None:
     """``--objects``/``--complexity`` as (min, max) ranges; ``None`` for the usual scenes."""
-    from monoplane.bench import COMPLEXITY_LEVELS
+    from monoplane.evaluation.bench import COMPLEXITY_LEVELS
 
     if text is None:
         return list(COMPLEXITY_LEVELS) if complexity else None
@@ -163,7 +163,7 @@ def _write_json(path: str, doc: dict) -> None:
 
 def _from_json(path: str, markdown: bool) -> str:
     from monoplane.batch.throughput import BatchBenchResult, format_batch_bench
-    from monoplane.bench import BenchResult, format_bench
+    from monoplane.evaluation.bench import BenchResult, format_bench
 
     try:
         data = json.loads(Path(path).read_text())
@@ -175,8 +175,8 @@ def _from_json(path: str, markdown: bool) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from monoplane.bench import bench, format_bench, parse_sizes
-    from monoplane.bench_data import DataSource
+    from monoplane.evaluation.bench import bench, format_bench, parse_sizes
+    from monoplane.evaluation.bench_frames import DataSource
 
     if args.from_json:
         print(_from_json(args.from_json, args.markdown))

@@ -9,7 +9,7 @@ import numpy as np
 
 from monoplane.cli.common import add_rerun_arg, add_set_arg, check_output_args, write_rerun_arg
 from monoplane.errors import InvalidInput
-from monoplane.fileio import atomic_output_dir, write_plane_mesh_ply
+from monoplane.io.frames import atomic_output_dir, write_plane_mesh_ply
 
 DESCRIPTION = """Detect the planes of a point cloud (PLY, PCD, XYZ or PTS) with MonoPlane's
 graph-cut RANSAC and the graph-crf refiner, and write into --out:
@@ -73,9 +73,9 @@ def _up_hint(text: str) -> tuple[float, float, float] | None:
 def run(args: argparse.Namespace) -> int:
     import open3d as o3d
 
-    from monoplane.cloud_files import read_point_cloud
-    from monoplane.config import dumps_toml
-    from monoplane.detect import detect_planes
+    from monoplane.io.clouds import read_point_cloud
+    from monoplane.host.config import dumps_toml
+    from monoplane.host.detect import detect_planes
     from monoplane.report.cloud import cloud_glb, write_cloud_report
 
     check_output_args(args)  # fail before any work

@@ -23,7 +23,7 @@ from monoplane.models import (
     require_model,
 )
 from monoplane.models.catalogue import ModelRecord
-from monoplane.pipeline import Pipeline
+from monoplane.host.pipeline import Pipeline
 from monoplane.stages.base import CueProvider
 
 DESCRIPTION = """Monocular depth/normal networks monoplane can download on request (ONNX exports

@@ -14,7 +14,7 @@ from monoplane.cli.common import (
     pipeline_from_args,
     write_rerun_arg,
 )
-from monoplane.fileio import load_frame
+from monoplane.io.frames import load_frame
 
 DESCRIPTION = """Sparse-view planar reconstruction (MonoPlane §III-C): structure from motion
 (pycolmap SIFT, CPU), monocular cues per image, scale alignment of each depth onto the SfM

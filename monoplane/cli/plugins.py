@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from monoplane.plugin_manager import AUTOLOAD_ENV, autoload_enabled, get_registry
+from monoplane.host.registry import AUTOLOAD_ENV, autoload_enabled, get_registry
 from monoplane.stages.base import STAGE_KINDS
 
 

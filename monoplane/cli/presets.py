@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from monoplane import config
+from monoplane.host import config
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:

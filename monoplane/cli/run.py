@@ -18,12 +18,12 @@ from monoplane.cli.common import (
     write_rerun_arg,
 )
 from monoplane.cli.models import prepare_cue_model
-from monoplane.config import load as load_config
+from monoplane.host.config import load as load_config
 from monoplane.cues import CueNetwork
 from monoplane.errors import ConfigError, InvalidInput
-from monoplane.fileio import load_frame, save_reconstruction
-from monoplane.pipeline import Pipeline
-from monoplane.plugin_manager import Registry, get_registry
+from monoplane.io.frames import load_frame, save_reconstruction
+from monoplane.host.pipeline import Pipeline
+from monoplane.host.registry import Registry, get_registry
 from monoplane.stages.base import CueProvider
 
 DESCRIPTION = """Recover the planes of one image and write labels.png (uint16, 0 = non-planar),

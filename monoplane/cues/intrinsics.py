@@ -13,7 +13,7 @@ import numpy as np
 
 from monoplane.datamodel import Frame, default_intrinsics
 
-#: Every note about assumed intrinsics starts with this (``monoplane.fileio.load_frame`` too).
+#: Every note about assumed intrinsics starts with this (``monoplane.io.frames.load_frame`` too).
 ASSUMED_INTRINSICS_NOTE = "intrinsics not given"
 #: Field of view used when nothing better is known (see ``monoplane.datamodel.default_intrinsics``).
 DEFAULT_HFOV_DEG = 60.0

@@ -36,7 +36,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any, Literal
 
-from monoplane.config_fields import build_dataclass
+from monoplane.stages.config_fields import build_dataclass
 from monoplane.cues.profiles import ModelSpec, OnnxProfile
 from monoplane.errors import ConfigError
 from monoplane.stages.base import param

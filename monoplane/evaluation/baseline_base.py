@@ -25,10 +25,10 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, TypeVar
 
-from monoplane.config_fields import build_dataclass
+from monoplane.stages.config_fields import build_dataclass
 from monoplane.datamodel import Reconstruction
 from monoplane.errors import ConfigError
-from monoplane.ransac import RansacConfig
+from monoplane.algorithm.ransac import RansacConfig
 
 #: Type of a baseline: a frame with cues in, planes out.
 Baseline = Callable[..., Reconstruction]
@@ -76,7 +76,7 @@ def baseline_config(cls: type[_Config], options: Mapping[str, Any], name: str) -
 class RansacBaselineSettings:
     """Settings every RANSAC-type baseline shares with the pipeline, in unit-sphere units.
 
-    The defaults are read from :class:`~monoplane.ransac.RansacConfig`, so a baseline and the
+    The defaults are read from :class:`~monoplane.algorithm.ransac.RansacConfig`, so a baseline and the
     presets are compared at the same thresholds unless a user overrides them
     (``--baseline-set NAME.FIELD=VALUE``). Baselines subclass it with their own fields.
 

@@ -22,7 +22,7 @@ from typing import Any
 
 import pluggy
 
-from monoplane.config import parse_override
+from monoplane.host.config import parse_override
 from monoplane.datamodel import Frame, Reconstruction
 from monoplane.errors import ConfigError, PluginError
 from monoplane.evaluation.baseline_base import (
@@ -46,7 +46,7 @@ def registered_baselines(pm: pluggy.PluginManager | None = None) -> dict[str, Ba
     Parameters
     ----------
     pm : pluggy.PluginManager, optional
-        Defaults to :func:`monoplane.plugin_manager.get_plugin_manager` (built-ins, plus
+        Defaults to :func:`monoplane.host.registry.get_plugin_manager` (built-ins, plus
         installed plugins unless autoloading is disabled).
 
     Raises
@@ -55,7 +55,7 @@ def registered_baselines(pm: pluggy.PluginManager | None = None) -> dict[str, Ba
         When a plugin returns something else than a name -> callable dict, or two plugins
         register the same name.
     """
-    from monoplane.plugin_manager import get_plugin_manager
+    from monoplane.host.registry import get_plugin_manager
 
     pm = pm or get_plugin_manager()
     found: dict[str, Baseline] = {}

@@ -64,7 +64,7 @@ def load_dataset(folder: str | Path) -> list[LabelledFrame]:
         When the folder does not exist, holds no frame with ``gt_labels.png``, or a frame's
         files do not agree in size.
     """
-    from monoplane.fileio import load_frame
+    from monoplane.io.frames import load_frame
 
     root = Path(folder)
     if not root.is_dir():
@@ -168,7 +168,7 @@ class DatasetResults:
 def cloud_reconstruction(frame: Frame, preset: str, overrides: list[str] | None,
                          seed: int) -> Reconstruction:
     """Run :func:`monoplane.detect_planes` on a frame's shuffled 3D points; labels per pixel."""
-    from monoplane.detect import detect_planes
+    from monoplane.host.detect import detect_planes
 
     valid = np.flatnonzero(frame.valid.ravel())
     order = np.random.default_rng(seed).permutation(valid.size)
@@ -184,7 +184,7 @@ def _methods(presets: Sequence[str], baselines: Sequence[str], overrides: list[s
              as_cloud: bool, baseline_options: dict[str, dict[str, Any]]
              ) -> list[tuple[str, str, Any]]:
     from monoplane.evaluation.baselines import bind_baseline
-    from monoplane.pipeline import Pipeline
+    from monoplane.host.pipeline import Pipeline
 
     out: list[tuple[str, str, Any]] = []
     for name in presets:
@@ -239,7 +239,7 @@ def evaluate_dataset(folder: str | Path, presets: Sequence[str] = (),
     """
     from tqdm import tqdm
 
-    from monoplane.pipeline import Pipeline
+    from monoplane.host.pipeline import Pipeline
 
     if not 0.5 < tolerance <= 1.0:
         raise InvalidInput(f"--tolerance must lie in (0.5, 1], got {tolerance}")

@@ -7,7 +7,7 @@ room):
 * ``depth/``: one depth map per image (16-bit ``.png`` divided by ``depth_scale``, or ``.npy``),
   sorted by name, 0 = no measurement;
 * ``trajectory.log``: per frame, camera-to-world 4x4 in metres (Redwood ``.log``, read by
-  :func:`monoplane.fileio.read_redwood_log`); frame id ``k`` is the ``k``-th image and depth;
+  :func:`monoplane.io.frames.read_redwood_log`); frame id ``k`` is the ``k``-th image and depth;
 * ``intrinsics.json`` (optional): ``{"fx", "fy", "cx", "cy"}``, used when no intrinsics are
   given.
 
@@ -57,13 +57,13 @@ import numpy as np
 from monoplane.datamodel import Frame
 from monoplane.errors import InvalidInput, MonoplaneError
 from monoplane.evaluation.twoview import relative_pose_error
-from monoplane.fileio import load_frame, read_depth, read_intrinsics, read_redwood_log
+from monoplane.io.frames import load_frame, read_depth, read_intrinsics, read_redwood_log
 from monoplane.geometry.normals import normals_from_depth
 from monoplane.synth.corrupt import LEVEL_PARAMS, corrupt_depth, corrupt_normals
 
 if TYPE_CHECKING:
     from monoplane.multiview import MultiviewResult
-    from monoplane.pipeline import Pipeline
+    from monoplane.host.pipeline import Pipeline
 
 #: What each view gets (module docstring, step 3).
 MODES: tuple[str, ...] = ("rgbd", "mono", "mono-depth", "network")
@@ -797,7 +797,7 @@ def evaluate_posed_sequence(data_dir: str | Path,
     from tqdm import tqdm
 
     from monoplane.multiview import hold_intrinsics_fixed
-    from monoplane.pipeline import Pipeline
+    from monoplane.host.pipeline import Pipeline
 
     modes = mode_list(mode)
     if any(m in MONOCULAR_MODES for m in modes):

@@ -76,7 +76,7 @@ def preset_method(name: str, overrides: list[str] | None = None) -> Method:
     The synthetic frames carry their (corrupted) cues already, so the pipeline skips the cue
     provider for them (:meth:`~monoplane.stages.base.CueProvider.needs_cues`).
     """
-    from monoplane.pipeline import Pipeline
+    from monoplane.host.pipeline import Pipeline
 
     pipe = Pipeline.from_preset(name, overrides=overrides)
     return Method(name=name, kind="preset", run=lambda frame, seed: pipe.run(frame))

@@ -208,7 +208,7 @@ def evaluate_sequences(n: int = 10, views: int = 5, path: str = "walk", level: s
     from tqdm import tqdm
 
     from monoplane.multiview import hold_intrinsics_fixed, reconstruct_multiview
-    from monoplane.pipeline import Pipeline
+    from monoplane.host.pipeline import Pipeline
     from monoplane.synth.sequence import generate_sequence
 
     if n < 1:

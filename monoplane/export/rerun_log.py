@@ -168,7 +168,7 @@ def log_rerun(result: Any, path: str | Path | None = None, *, recording: Any = N
 
 
 def _log_any(rr: ModuleType, stream: Any, result: Any, entity: str) -> None:
-    from monoplane.detect import CloudPlaneResult
+    from monoplane.host.detect import CloudPlaneResult
     from monoplane.errors import InvalidInput
 
     if isinstance(result, Reconstruction):

@@ -58,7 +58,7 @@ class PlaneCloud:
 
     A frame's cloud (:meth:`from_frame`) knows the pixel of each point; a point cloud's
     (:meth:`from_points`) has no image, and its pixel attributes are ``None``: the RANSAC's
-    :meth:`~monoplane.ransac.SequentialRansac.run_cloud`, a refiner's ``refine_cloud`` and
+    :meth:`~monoplane.algorithm.ransac.SequentialRansac.run_cloud`, a refiner's ``refine_cloud`` and
     :meth:`label_points` need none, the methods on the pixel grid (:meth:`propagate`,
     :meth:`image_nearest_sample`, :meth:`pixel_grid`) refuse such a cloud.
 

@@ -3,7 +3,7 @@ scale alignment, per-view planes, fusion and joint refinement.
 
 Python API::
 
-    from monoplane.pipeline import Pipeline
+    from monoplane.host.pipeline import Pipeline
     from monoplane.multiview import reconstruct_multiview, save_scene
     pipe = Pipeline.from_preset("monoplane")
     result = reconstruct_multiview([frame_a, frame_b], pipe, progress=True)

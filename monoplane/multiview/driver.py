@@ -32,7 +32,7 @@ from monoplane.multiview.registration import (
 from monoplane.stages.base import Registrar
 
 if TYPE_CHECKING:
-    from monoplane.pipeline import Pipeline
+    from monoplane.host.pipeline import Pipeline
 
 
 @dataclass

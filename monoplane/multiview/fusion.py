@@ -16,7 +16,7 @@ from monoplane.geometry.polygons import PlaneMesh, points_plane_mesh
 from monoplane.stages.base import Adjuster, Fuser
 
 if TYPE_CHECKING:
-    from monoplane.pipeline import Pipeline
+    from monoplane.host.pipeline import Pipeline
 
 
 def fuse_and_adjust(pipe: Pipeline, views: list[Reconstruction], sfm: SfmResult,

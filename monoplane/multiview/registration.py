@@ -19,7 +19,7 @@ from monoplane.geometry.alignment import ScaleAlignment, align_scale
 from monoplane.stages.base import FeatureMatcher, Matcher
 
 if TYPE_CHECKING:
-    from monoplane.pipeline import Pipeline
+    from monoplane.host.pipeline import Pipeline
 
 
 def feature_correspondences(pipe: Pipeline, frames: list[Frame]) -> Correspondences:

@@ -13,7 +13,7 @@ import numpy as np
 
 from monoplane.datamodel import Camera, SfmResult
 from monoplane.export.gltf import scene_glb
-from monoplane.fileio import (
+from monoplane.io.frames import (
     atomic_output_dir,
     write_plane_mesh_ply,
     write_points_ply,

@@ -32,7 +32,7 @@ from monoplane.report.viewpoints import (
 )
 
 if TYPE_CHECKING:
-    from monoplane.detect import CloudPlaneResult
+    from monoplane.host.detect import CloudPlaneResult
     from monoplane.geometry.polygons import PlaneMesh
 
 #: Size of the 3D renders in pixels.

@@ -68,7 +68,7 @@ class ProximityAffinities:
 
     def affinities(self) -> tuple[float, float, float, float, float, float]:
         """``(alpha_p2, alpha_c2, alpha_n2, w_p, w_c, w_n)``, in the order
-        :func:`monoplane.graphcut.proximity_weights` takes them."""
+        :func:`monoplane.algorithm.graphcut.proximity_weights` takes them."""
         return (self.alpha_p2, self.alpha_c2, self.alpha_n2, self.w_p, self.w_c, self.w_n)
 
 

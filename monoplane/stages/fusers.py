@@ -29,7 +29,7 @@ from monoplane.datamodel import (
 from monoplane.errors import InvalidInput
 from monoplane.geometry.coplanar import coplanarity_residual, footprint_gap
 from monoplane.geometry.normals import normals_from_depth
-from monoplane.geometry.planarity import noise_floor_deg, normal_spread_deg
+from monoplane.geometry.flatness import noise_floor_deg, normal_spread_deg
 from monoplane.geometry.plane_matching import (
     consistent_groups,
     fuse_planes,
@@ -249,7 +249,7 @@ class AverageFuser(Fuser):
 
         A plane is rejected as curved when the median angle between its pixels' normals (the
         view's normal cue, away from its border) and their dominant direction exceeds the
-        scene's noise floor (:func:`~monoplane.geometry.planarity.noise_floor_deg`, pooled
+        scene's noise floor (:func:`~monoplane.geometry.flatness.noise_floor_deg`, pooled
         over all views: one cue, one noise level) by more than ``max_extra_spread_deg``.
 
         Parameters

@@ -40,7 +40,7 @@ from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.components import graph_components
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.geometry.planes import fit_planes_per_label
-from monoplane.graphcut import normal_costs, proximity_weights
+from monoplane.algorithm.graphcut import normal_costs, proximity_weights
 from monoplane.hookspecs import hookimpl
 from monoplane.jit import chunks, kernel, run_threaded
 from monoplane.stages.base import ProximityAffinities, RansacParams, Refiner, Stage, param

@@ -4,7 +4,7 @@
 * ``graph-cut``: GC-RANSAC with the paper's truncated-L2 data term and a constant Potts
   pairwise term (cut cost 1, both-outliers cost ½(f(0,p) + f(0,q))), E = (1-λ)E_d + λE_s;
   by default E_s is divided by the mean degree k̄ of the kNN graph
-  (:func:`~monoplane.graphcut.degree_normalisation`): unnormalised, on a dense graph the
+  (:func:`~monoplane.algorithm.graphcut.degree_normalisation`): unnormalised, on a dense graph the
   smoothness term outweighs the data term k̄ times more than λ says and a plane absorbs strips
   of its neighbours.
 * ``proximity-graph-cut``: MonoPlane's labeler (§III-B2): the data term adds the normal energy
@@ -22,7 +22,7 @@ import numpy as np
 
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
-from monoplane.graphcut import (
+from monoplane.algorithm.graphcut import (
     data_costs,
     degree_normalisation,
     minimize_gc_ransac,
@@ -81,7 +81,7 @@ class _PoolTerms:
     scale: float
     """Pairwise scale s of the frame's graph."""
     payback: np.ndarray
-    """(M,) :func:`~monoplane.graphcut.pool_payback` of the pool's points."""
+    """(M,) :func:`~monoplane.algorithm.graphcut.pool_payback` of the pool's points."""
 
 
 class GraphCutContext(LabelingContext):

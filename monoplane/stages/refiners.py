@@ -15,13 +15,13 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from monoplane.datamodel import Frame, Reconstruction
-from monoplane.densecrf import REFERENCE_AREA, CrfGrid, CrfParams, crf_grid, dense_crf
+from monoplane.algorithm.densecrf import REFERENCE_AREA, CrfGrid, CrfParams, crf_grid, dense_crf
 from monoplane.errors import ConfigError, InvalidInput, check_config
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.hookspecs import hookimpl
 from monoplane.jit import in_background, thread_budget
-from monoplane.regions import (
+from monoplane.algorithm.regions import (
     MIN_AREA_AT_REFERENCE,
     clean_regions,
     gate_filled_pixels,
@@ -38,7 +38,7 @@ class _FrameWork:
     Attributes
     ----------
     grid : CrfGrid
-        The CRF's block grid and lattices (:func:`monoplane.densecrf.crf_grid`).
+        The CRF's block grid and lattices (:func:`monoplane.algorithm.densecrf.crf_grid`).
     points : numpy.ndarray
         (H, W, 3) camera-frame points, depth units (``frame.points()``).
     fill_tolerance : float
@@ -72,7 +72,7 @@ class DenseCrfRefiner(Refiner):
 
     The unary term gives each pixel's RANSAC label probability ``confidence`` and spreads the
     rest evenly over the other labels. The pairwise term is a Potts model weighted by four
-    Gaussian kernels (weights 1, as in the paper); see :class:`monoplane.densecrf.CrfParams`
+    Gaussian kernels (weights 1, as in the paper); see :class:`monoplane.algorithm.densecrf.CrfParams`
     for exactly what each θ divides. Kernels whose weight is 0, or whose cue is missing (no or
     grey RGB, no depth, no normals), are dropped. Positional θ and the minimum area are given
     at the paper's 256 x 192 and scale with the image.
@@ -92,7 +92,7 @@ class DenseCrfRefiner(Refiner):
     * ``absorb``: a region under the minimum area joins an adjacent plane its points fit
       (RMS within ``merge_distance``) and is set non-planar only otherwise.
 
-    Distances are fractions of the scene radius (:func:`monoplane.regions.scene_radius`), like
+    Distances are fractions of the scene radius (:func:`monoplane.algorithm.regions.scene_radius`), like
     the RANSAC's ε.
     """
 

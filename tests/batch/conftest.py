@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from batch_helpers import BROKEN, GOOD, frame_args, run_cli_labels
 
-from monoplane.plugin_manager import AUTOLOAD_ENV
+from monoplane.host.registry import AUTOLOAD_ENV
 from monoplane.synth.batchset import write_frame_folder
 
 

@@ -20,7 +20,7 @@ from batch_helpers import BROKEN, GOOD, read_labels
 
 from monoplane.batch import run_batch
 from monoplane.batch.frame import is_complete
-from monoplane.plugin_manager import AUTOLOAD_ENV
+from monoplane.host.registry import AUTOLOAD_ENV
 
 TIMEOUT = 60.0
 

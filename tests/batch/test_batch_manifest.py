@@ -145,7 +145,7 @@ def test_index_histogram_counts_every_value():
 
 def test_pipeline_is_built_once_per_process_and_config():
     from monoplane.batch.frame import pipeline_for
-    from monoplane.pipeline import Pipeline
+    from monoplane.host.pipeline import Pipeline
 
     cfg = Pipeline.from_preset("monoplane").config.to_dict()
     first = pipeline_for(cfg)

@@ -5,12 +5,12 @@ import dataclasses
 
 import pytest
 
-from monoplane import config
+from monoplane.host import config
 from monoplane.cli import main
 from monoplane.cli.run import cue_model_overrides
 from monoplane.errors import ConfigError
 from monoplane.hookspecs import hookimpl
-from monoplane.plugin_manager import get_plugin_manager, get_registry
+from monoplane.host.registry import get_plugin_manager, get_registry
 from monoplane.stages.base import CueProvider, param
 
 

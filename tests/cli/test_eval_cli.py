@@ -103,7 +103,7 @@ def test_bench_complexity_levels_in_table_and_json(tmp_path: Path,
 
 
 def test_bench_complexity_is_the_default_objects_ranges() -> None:
-    from monoplane.bench import COMPLEXITY_LEVELS
+    from monoplane.evaluation.bench import COMPLEXITY_LEVELS
     from monoplane.cli.bench import _object_ranges
 
     assert _object_ranges(None, True) == list(COMPLEXITY_LEVELS) == [(1, 2), (4, 6), (8, 12)]

@@ -7,7 +7,7 @@ import json
 import pytest
 import tomli_w
 
-from monoplane import config
+from monoplane.host import config
 from monoplane.cli import main
 
 

@@ -12,7 +12,7 @@ import pytest
 
 pytest.importorskip("onnx")
 
-from monoplane import config  # noqa: E402
+from monoplane.host import config  # noqa: E402
 from monoplane.cues import BUILTIN_PROFILES, CueNetwork  # noqa: E402
 from monoplane.cues.profile_files import (  # noqa: E402
     load_profile_file,
@@ -26,7 +26,7 @@ from monoplane.cues.tiny_models import (  # noqa: E402
 )
 from monoplane.datamodel import Frame, default_intrinsics  # noqa: E402
 from monoplane.errors import ConfigError, InvalidInput  # noqa: E402
-from monoplane.stages.cues import OnnxCues, OnnxCuesConfig  # noqa: E402
+from monoplane.stages.cue_providers import OnnxCues, OnnxCuesConfig  # noqa: E402
 
 H, W = 48, 64
 

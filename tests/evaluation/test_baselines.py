@@ -21,8 +21,8 @@ from monoplane.evaluation.baselines import (
     run_baseline,
 )
 from monoplane.evaluation.segmentation import segmentation_scores
-from monoplane.plugin_manager import get_plugin_manager
-from monoplane.ransac import RansacConfig
+from monoplane.host.registry import get_plugin_manager
+from monoplane.algorithm.ransac import RansacConfig
 from monoplane.testing import BOX_PLANES, box_frame
 
 

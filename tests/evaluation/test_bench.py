@@ -1,4 +1,4 @@
-"""Benchmark helpers of ``monoplane bench`` (monoplane/bench.py)."""
+"""Benchmark helpers of ``monoplane bench`` (monoplane/evaluation/bench.py)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 import pytest
 
-from monoplane.bench import (
+from monoplane.evaluation.bench import (
     BaselineBench,
     BenchResult,
     StageBench,
@@ -18,7 +18,7 @@ from monoplane.bench import (
     format_bench,
     parse_sizes,
 )
-from monoplane.bench_data import DataSource, load_data_frames
+from monoplane.evaluation.bench_frames import DataSource, load_data_frames
 from monoplane.errors import InvalidInput
 
 

@@ -27,7 +27,7 @@ from monoplane.evaluation.posed_sequences import (
     summarise,
     view_overlap,
 )
-from monoplane.fileio import read_redwood_log
+from monoplane.io.frames import read_redwood_log
 from monoplane.synth.corrupt import LEVEL_PARAMS
 
 LIVINGROOM = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "icl-livingroom-dev"
@@ -348,7 +348,7 @@ def _angles_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def test_network_normals_are_given_and_differ_from_normals_of_the_depth(walk: Path) -> None:
     from monoplane.geometry.normals import normals_from_depth
-    from monoplane.pipeline import Pipeline
+    from monoplane.host.pipeline import Pipeline
 
     seq = load_posed_sequence(walk)
     pipe = Pipeline.from_preset("monoplane", overrides=["cues.plugin=given"])
@@ -477,10 +477,10 @@ def test_network_mode_scores_the_cue_providers_prediction(walk: Path,
                                                           monkeypatch: pytest.MonkeyPatch
                                                           ) -> None:
     pytest.importorskip("pycolmap")
-    import monoplane.pipeline
+    import monoplane.host.pipeline
     from monoplane.evaluation.posed_sequences import evaluate_posed_sequence
     from monoplane.geometry.normals import normals_from_depth
-    from monoplane.plugin_manager import get_plugin_manager
+    from monoplane.host.registry import get_plugin_manager
     from monoplane.stages.base import CueProvider
     from monoplane.testing import stage_plugin
 
@@ -501,7 +501,7 @@ def test_network_mode_scores_the_cue_providers_prediction(walk: Path,
                                normals_from_depth=True)
 
     plugin = stage_plugin(monoplane_register_cue_providers=[TrueDepth])
-    monkeypatch.setattr(monoplane.pipeline, "get_plugin_manager",
+    monkeypatch.setattr(monoplane.host.pipeline, "get_plugin_manager",
                         lambda: get_plugin_manager(autoload=False, extra_plugins=(plugin,)))
     res = evaluate_posed_sequence(walk, mode="network", pairs="0-1,1-2",
                                   overrides=["cues.plugin=true-depth"])

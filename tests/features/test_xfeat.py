@@ -140,7 +140,7 @@ def test_the_catalogue_entry_is_the_shared_file(tmp_path: Path,
     from monoplane.datamodel import Frame, intrinsics_matrix
     from monoplane.models import get_model, model_path, require_model
     from monoplane.models.cache import check_file
-    from monoplane.pipeline import Pipeline
+    from monoplane.host.pipeline import Pipeline
     from monoplane.stages.base import FeatureMatcher
 
     monkeypatch.setenv("MONOPLANE_CACHE", str(tmp_path))
@@ -162,7 +162,7 @@ def test_sift_plus_xfeat_says_what_colmap_maps(tmp_path: Path,
                                                monkeypatch: pytest.MonkeyPatch,
                                                capsys: pytest.CaptureFixture) -> None:
     from monoplane.errors import ConfigError
-    from monoplane.pipeline import Pipeline
+    from monoplane.host.pipeline import Pipeline
     from monoplane.stages.base import FeatureMatcher
 
     monkeypatch.setenv("MONOPLANE_CACHE", str(tmp_path))  # an empty cache: no XFeat file

@@ -10,9 +10,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from monoplane import config
+from monoplane.host import config
 from monoplane.errors import ConfigError
-from monoplane.plugin_manager import get_registry
+from monoplane.host.registry import get_registry
 from monoplane.stages.base import STAGE_KINDS
 
 REGISTRY = get_registry()

@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 from monoplane.errors import InvalidInput
-from monoplane.fileio import read_depth, read_intrinsics, read_normals
+from monoplane.io.frames import read_depth, read_intrinsics, read_normals
 
 _DTYPES = st.sampled_from(["float32", "float64", "float16", "int16", "uint16", "int64", "uint8",
                            "bool", "complex64", "U3", "O"])

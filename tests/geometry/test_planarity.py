@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from monoplane.geometry.planarity import interior_labels, noise_floor_deg, normal_spread_deg
+from monoplane.geometry.flatness import interior_labels, noise_floor_deg, normal_spread_deg
 
 
 def _unit(x: np.ndarray) -> np.ndarray:
@@ -63,7 +63,7 @@ def test_too_few_samples_give_nan_and_the_floor_is_the_weighted_median() -> None
 def test_spread_of_groups_ignores_the_sign_of_a_normal() -> None:
     # A face whose normals flip sign from point to point (a viewpoint on its plane) is still one
     # direction: the spread is its noise, not 90 degrees.
-    from monoplane.geometry.planarity import spread_of_groups
+    from monoplane.geometry.flatness import spread_of_groups
 
     rng = np.random.default_rng(1)
     n = _unit(np.array([0.0, 0.0, 1.0]) + rng.normal(0, 0.01, (400, 3)))
@@ -73,7 +73,7 @@ def test_spread_of_groups_ignores_the_sign_of_a_normal() -> None:
 
 
 def test_quadric_ratio_is_one_on_a_noisy_plane_and_large_on_a_cap_and_a_strip() -> None:
-    from monoplane.geometry.planarity import quadric_ratio
+    from monoplane.geometry.flatness import quadric_ratio
 
     rng = np.random.default_rng(2)
     u, v = rng.uniform(-1, 1, (2, 2000))

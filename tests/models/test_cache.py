@@ -26,7 +26,7 @@ from monoplane.models import (
     require_model,
 )
 from monoplane.models import cache as cache_mod
-from monoplane.pipeline import Pipeline
+from monoplane.host.pipeline import Pipeline
 
 PAYLOAD = b"not really an onnx file, but bytes with a known hash" * 100
 

@@ -17,8 +17,8 @@ from monoplane.multiview import (
     reconstruct_multiview,
     rescale_reconstruction,
 )
-from monoplane.pipeline import Pipeline
-from monoplane.plugin_manager import get_plugin_manager
+from monoplane.host.pipeline import Pipeline
+from monoplane.host.registry import get_plugin_manager
 from monoplane.stages.base import Matcher
 from monoplane.synth.sequence import generate_sequence
 

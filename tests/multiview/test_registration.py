@@ -12,7 +12,7 @@ import pytest
 from monoplane.errors import InvalidInput
 from monoplane.evaluation.twoview import ground_truth_sfm, relative_pose_error
 from monoplane.multiview import reconstruct_multiview, save_scene
-from monoplane.pipeline import Pipeline
+from monoplane.host.pipeline import Pipeline
 from monoplane.synth.sequence import generate_sequence
 
 OVERRIDES = ["cues.plugin=given", "refiner.plugin=none"]

@@ -15,7 +15,7 @@ from report_fixtures import make_scene
 
 from monoplane.datamodel import Reconstruction
 from monoplane.export.gltf import SOURCE_TO_GLTF, reconstruction_glb, scene_glb
-from monoplane.fileio import save_reconstruction
+from monoplane.io.frames import save_reconstruction
 from monoplane.geometry.polygons import reconstruction_mesh
 from monoplane.report.colors import plane_palette
 

@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 import pytest
 
-from monoplane.detect import CloudPlaneResult
+from monoplane.host.detect import CloudPlaneResult
 from monoplane.report.cloud import CAMERA_UP, CUT_SHARE, cloud_views, room_frame
 from monoplane.report.colors import plane_palette, shade
 from monoplane.report.render3d import Mesh

@@ -89,7 +89,7 @@ def test_scene_report_3d_view_renders(chromium: str, tmp_path: Path) -> None:
 
 
 def test_cloud_report_3d_view_renders(chromium: str, tmp_path: Path) -> None:
-    from monoplane.detect import detect_planes
+    from monoplane.host.detect import detect_planes
     from monoplane.report.cloud import write_cloud_report
     from monoplane.testing import box_frame
 

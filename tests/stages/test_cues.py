@@ -12,7 +12,7 @@ from monoplane.cues import assume_intrinsics, intrinsics_assumed
 from monoplane.datamodel import Frame, default_intrinsics, intrinsics_matrix, pixel_rays
 from monoplane.errors import ConfigError, InvalidInput
 from monoplane.stages.base import param
-from monoplane.stages.cues import GivenCues, GivenCuesConfig, OnnxCues, OnnxCuesConfig
+from monoplane.stages.cue_providers import GivenCues, GivenCuesConfig, OnnxCues, OnnxCuesConfig
 from monoplane.testing import check_stage_contract
 
 LIVINGROOM = Path("/work/shared/data/rgbd-livingroom")
@@ -80,7 +80,7 @@ def test_given_config_is_validated() -> None:
 
 
 def test_given_on_real_rgbd_frame() -> None:
-    from monoplane.fileio import load_frame
+    from monoplane.io.frames import load_frame
 
     image = LIVINGROOM / "color_00000.jpg"
     if not image.is_file():
@@ -230,7 +230,7 @@ def test_contract(tmp_path: Path) -> None:
 
 
 def test_profile_is_chosen_by_config_overrides() -> None:
-    from monoplane import config
+    from monoplane.host import config
 
     preset = sorted(config.list_presets())[0]
     resolved = config.load(preset=preset, config={"cues": {"plugin": "onnx"}},

@@ -5,7 +5,7 @@ import pytest
 
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
-from monoplane.graphcut import (
+from monoplane.algorithm.graphcut import (
     gc_ransac_energy,
     msac_costs,
     normal_angles,

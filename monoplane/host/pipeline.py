@@ -1,5 +1,5 @@
 """The single-view pipeline: cue provider → sequential RANSAC (sampler, scorer, labeler) → refiner
-→ planarity test (:mod:`monoplane.planarity`).
+→ planarity test (:mod:`monoplane.algorithm.planarity`).
 
 Python API first::
 
@@ -23,12 +23,12 @@ from typing import TYPE_CHECKING, Any, TypeVar
 import numpy as np
 import pluggy
 
-from monoplane import config as config_mod
+from monoplane.host import config as config_mod
 from monoplane.cues.given import use_given_cues
 from monoplane.datamodel import Frame, Reconstruction
 from monoplane.errors import ConfigError, StageError
-from monoplane.planarity import check_cloud, check_image
-from monoplane.plugin_manager import get_plugin_manager, get_registry
+from monoplane.algorithm.planarity import check_cloud, check_image
+from monoplane.host.registry import get_plugin_manager, get_registry
 from monoplane.stages.base import CueProvider, Labeler, Refiner, Sampler, Scorer, Stage
 
 if TYPE_CHECKING:
@@ -45,7 +45,7 @@ class Pipeline:
     Parameters
     ----------
     config : ResolvedConfig
-        Validated configuration (see :mod:`monoplane.config`).
+        Validated configuration (see :mod:`monoplane.host.config`).
     pm : pluggy.PluginManager, optional
         Plugin manager the stages come from; a fresh default one if omitted.
     """
@@ -127,7 +127,7 @@ class Pipeline:
 
     def segment(self, frame: Frame, timings: dict[str, float] | None = None) -> Reconstruction:
         """Sequential RANSAC then the refiner, on a frame that already has its cues."""
-        from monoplane.ransac import SequentialRansac
+        from monoplane.algorithm.ransac import SequentialRansac
 
         timings = {} if timings is None else timings
         sampler = self.stage("sampler", Sampler)
@@ -172,7 +172,7 @@ class Pipeline:
         (:func:`detect_planes`).
 
         The same stages, ``monoplane_stage_finished`` hooks and :class:`StageError` wrapping as
-        :meth:`segment`: the RANSAC's :meth:`~monoplane.ransac.SequentialRansac.run_cloud` and
+        :meth:`segment`: the RANSAC's :meth:`~monoplane.algorithm.ransac.SequentialRansac.run_cloud` and
         the refiner's :meth:`~monoplane.stages.base.Refiner.refine_cloud`.
 
         Parameters
@@ -191,7 +191,7 @@ class Pipeline:
         own_normals : bool
             The cloud's normals came with it; False when they were estimated from its points,
             which tells the planarity test nothing the points do not
-            (:func:`monoplane.planarity.check_cloud`).
+            (:func:`monoplane.algorithm.planarity.check_cloud`).
 
         Returns
         -------
@@ -200,7 +200,7 @@ class Pipeline:
         planes : numpy.ndarray
             (P, 4) float64 planes ``n . x + d = 0`` in the normalised frame.
         """
-        from monoplane.ransac import SequentialRansac
+        from monoplane.algorithm.ransac import SequentialRansac
 
         timings = {} if timings is None else timings
         refiner = self.cloud_refiner()

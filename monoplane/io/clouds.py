@@ -25,7 +25,7 @@ Refused, with the reason: an empty file; not the format its suffix says (no ``pl
 PCD ``DATA`` line); a header that contradicts itself or the data (more or fewer points than
 declared, rows with the wrong number of values, trailing data); binary data cut short; values
 that are not numbers; no finite point at all, or fewer than 3; coordinates beyond
-:data:`~monoplane.io_checks.MAX_MAGNITUDE`.
+:data:`~monoplane.io.checks.MAX_MAGNITUDE`.
 
 Kept: NaN and inf points (a scanner's "no return"), in input order. :func:`monoplane.detect_planes`
 sets them aside, labels them 0 and says how many there were; it also drops non-finite or
@@ -45,7 +45,7 @@ from typing import Any
 import numpy as np
 
 from monoplane.errors import InvalidInput
-from monoplane.io_checks import MAX_MAGNITUDE
+from monoplane.io.checks import MAX_MAGNITUDE
 
 #: File suffixes :func:`read_point_cloud` reads (lower case).
 SUFFIXES = (".ply", ".pcd", ".xyz", ".xyzn", ".xyzrgb", ".pts")

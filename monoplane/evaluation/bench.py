@@ -14,9 +14,9 @@ Scene complexity
     times, and per-frame medians in :attr:`BenchResult.per_frame`: time against plane count.
 
 Your own frames
-    With ``data`` (:class:`monoplane.bench_data.DataSource`, ``monoplane bench --data DIR``) the
+    With ``data`` (:class:`monoplane.evaluation.bench_frames.DataSource`, ``monoplane bench --data DIR``) the
     frames are read from a folder instead (the layouts ``monoplane batch`` reads, or a
-    Redwood-style ``depth/`` + ``image/`` sequence; see :mod:`monoplane.bench_data`), and the
+    Redwood-style ``depth/`` + ``image/`` sequence; see :mod:`monoplane.evaluation.bench_frames`), and the
     sizes and objects ranges do not apply: one result, whose size is that of the first frame.
     Frames without normals (depth-only) have them estimated by the preset's cue stage, inside
     the timed call; a baseline needs normals, so it gets the ones the preset estimated and its
@@ -65,7 +65,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from monoplane.bench_data import DataSource, load_data_frames
+from monoplane.evaluation.bench_frames import DataSource, load_data_frames
 from monoplane.errors import InvalidInput
 from monoplane.hookspecs import hookimpl
 
@@ -335,7 +335,7 @@ def bench(preset: str = "monoplane", sizes: Sequence[tuple[int, int]] = DEFAULT_
             raise InvalidInput(f"objects range {bad[0]}-{bad[1]}: need 0 <= min <= max")
     # Resolve names now, in this process, so that bad input fails before any child starts.
     from monoplane.evaluation.baselines import baseline_names
-    from monoplane.pipeline import Pipeline
+    from monoplane.host.pipeline import Pipeline
 
     Pipeline.from_preset(preset, overrides=list(overrides or []))
     names = baseline_names(_plugin_manager(plugins))
@@ -358,7 +358,7 @@ def bench(preset: str = "monoplane", sizes: Sequence[tuple[int, int]] = DEFAULT_
 
 
 def _plugin_manager(plugins: Sequence[str], *extra: object) -> Any:
-    from monoplane.plugin_manager import get_plugin_manager
+    from monoplane.host.registry import get_plugin_manager
 
     try:
         modules = tuple(importlib.import_module(name) for name in plugins)
@@ -374,7 +374,7 @@ def _bench_size(preset: str, overrides: list[str], size: tuple[int, int], seed: 
     """One size (and objects range), or the data frames, of :func:`bench` (in a child process
     when isolated)."""
     from monoplane.evaluation.baselines import CALL_TIMING, get_baseline
-    from monoplane.pipeline import Pipeline
+    from monoplane.host.pipeline import Pipeline
     from monoplane.synth import generate
 
     tracker = StagePeakTracker()

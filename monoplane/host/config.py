@@ -27,21 +27,21 @@ from typing import Any
 
 import tomli_w
 
-from monoplane.config_fields import build_dataclass
+from monoplane.stages.config_fields import build_dataclass
 from monoplane.errors import ConfigError
-from monoplane.plugin_manager import Registry, get_registry
+from monoplane.host.registry import Registry, get_registry
 from monoplane.stages.base import STAGE_KINDS, config_key
 
 DEFAULT_PRESET = "monoplane"
 #: Host tables (not stages) and the import path of their config dataclass.
-HOST_TABLES: dict[str, str] = {"ransac": "monoplane.ransac:RansacConfig",
-                               "cloud": "monoplane.cloud_config:CloudConfig",
-                               "planarity": "monoplane.planarity:PlanarityConfig"}
+HOST_TABLES: dict[str, str] = {"ransac": "monoplane.algorithm.ransac:RansacConfig",
+                               "cloud": "monoplane.host.cloud_config:CloudConfig",
+                               "planarity": "monoplane.algorithm.planarity:PlanarityConfig"}
 
 
 def list_presets() -> list[str]:
-    """Names of the presets shipped in ``monoplane/presets``."""
-    folder = resources.files("monoplane") / "presets"
+    """Names of the presets shipped in ``monoplane/host/presets``."""
+    folder = resources.files(__package__) / "presets"
     return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
 
 
@@ -63,7 +63,7 @@ def read_preset(name: str) -> dict[str, Any]:
     presets = list_presets()
     if name not in presets:
         raise ConfigError(f"unknown preset {name!r}; valid presets: {', '.join(presets)}")
-    text = (resources.files("monoplane") / "presets" / f"{name}.toml").read_text()
+    text = (resources.files(__package__) / "presets" / f"{name}.toml").read_text()
     return _parse_toml(text, f"preset '{name}'")
 
 

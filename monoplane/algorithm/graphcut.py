@@ -15,7 +15,7 @@ The energy of a labelling L of M points with a neighbourhood graph (paper §III-
   0.5 + k_p + k_c + k_n (paper eqs. kp, kc, kn).
 
 Each edge table is reduced to unaries plus one directed edge (Kolmogorov & Zabih 2004) and the
-energy is minimised exactly by max-flow (:mod:`monoplane.mincut`). Nothing here knows about
+energy is minimised exactly by max-flow (:mod:`monoplane.algorithm.mincut`). Nothing here knows about
 stages or frames.
 
 Two forms of the same minimisation live here. :class:`BinaryEnergy` (built by
@@ -34,7 +34,7 @@ import numpy as np
 
 from monoplane.errors import InvalidInput
 from monoplane.jit import chunks, kernel, run_threaded
-from monoplane.mincut import min_cut, min_cut_flows
+from monoplane.algorithm.mincut import min_cut, min_cut_flows
 
 #: Edges per thread below which proximity weights are computed on one thread.
 THREADED_EDGES = 20_000
@@ -492,7 +492,7 @@ def minimize_gc_ransac(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray,
 
     The max-flow starts from a flow rather than from none (:func:`_warm_start`): flow pushed
     straight from each outlier-preferring point to an inlier-preferring neighbour. Any
-    starting flow gives the same cut (see :func:`monoplane.mincut.min_cut_flows`); this one
+    starting flow gives the same cut (see :func:`monoplane.algorithm.mincut.min_cut_flows`); this one
     leaves less to search. (Starting the local optimisation's relabel from the flow of the
     labelling before it was measured too, and saved nothing: docs/evaluation.md.)
 

@@ -10,7 +10,7 @@ permutohedral lattice (Adams, Baek & Davis, Eurographics 2010), linear in the pi
 instead of the O(N²) dense sum.
 
 The lattice's construction and its splat, blur and slice steps are numba kernels
-(:mod:`monoplane.lattice_kernels`, compiled once and cached on disk, no compiler needed at
+(:mod:`monoplane.algorithm.lattice_kernels`, compiled once and cached on disk, no compiler needed at
 install time: numba ships as wheels); the rest is numpy.
 """
 
@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from monoplane import lattice_kernels as lk
+from monoplane.algorithm import lattice_kernels as lk
 from monoplane.errors import InvalidInput
 from monoplane.jit import kernel, run_threaded
 
@@ -44,7 +44,7 @@ class PermutohedralLattice:
     The lattice is built once (a hash table of the vertices in use and each vertex's two
     neighbours along every direction) and reused by every :meth:`filter` call, i.e. by every
     mean-field iteration. Construction and filtering are numba kernels
-    (:mod:`monoplane.lattice_kernels`), compiled on first use and cached on disk.
+    (:mod:`monoplane.algorithm.lattice_kernels`), compiled on first use and cached on disk.
 
     Parameters
     ----------
@@ -115,7 +115,7 @@ class PermutohedralLattice:
 
     def locate(self, features: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Simplex vertices and weights of other points (e.g. full-resolution pixels), to
-        slice this lattice's values there with :func:`monoplane.lattice_kernels.slice_values`.
+        slice this lattice's values there with :func:`monoplane.algorithm.lattice_kernels.slice_values`.
 
         Parameters
         ----------

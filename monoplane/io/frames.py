@@ -35,7 +35,7 @@ from monoplane.datamodel import Frame, Reconstruction, intrinsics_matrix
 from monoplane.errors import InvalidInput
 from monoplane.export.gltf import reconstruction_glb
 from monoplane.geometry.polygons import PlaneMesh, reconstruction_mesh
-from monoplane.io_checks import MAX_MAGNITUDE, load_npy, read_png
+from monoplane.io.checks import MAX_MAGNITUDE, load_npy, read_png
 from monoplane.version import __version__
 
 #: Accepted pinhole intrinsics, in pixels. A focal length below 0.1 px is a field of view of
@@ -80,7 +80,7 @@ def read_image(path: str | Path) -> np.ndarray:
 
 
 def _read_raster(p: Path, what: str) -> np.ndarray | None:
-    """A PNG checked before decoding (:func:`monoplane.io_checks.read_png`), any other format
+    """A PNG checked before decoding (:func:`monoplane.io.checks.read_png`), any other format
     through OpenCV as it is; None when OpenCV cannot read it."""
     if p.suffix.lower() == ".png":
         return read_png(p, what)
@@ -516,7 +516,7 @@ def planes_document(rec: Reconstruction) -> dict:
 
 def write_reconstruction_files(rec: Reconstruction, folder: Path) -> None:
     """Write the single-view outputs into an existing folder (not atomic by itself)."""
-    from monoplane.config import dumps_toml  # config imports the plugin registry
+    from monoplane.host.config import dumps_toml  # config imports the plugin registry
 
     if rec.num_planes > np.iinfo(np.uint16).max:
         raise InvalidInput(f"{rec.num_planes} planes do not fit in a uint16 labels.png")

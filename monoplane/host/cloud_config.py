@@ -1,7 +1,7 @@
-"""The ``[cloud]`` config table: how :func:`monoplane.detect.detect_planes` prepares a cloud.
+"""The ``[cloud]`` config table: how :func:`monoplane.host.detect.detect_planes` prepares a cloud.
 
-It lives apart from :mod:`monoplane.detect` because :mod:`monoplane.config` loads it to check the
-table, and :mod:`monoplane.detect` drives the pipeline, which imports :mod:`monoplane.config`.
+It lives apart from :mod:`monoplane.host.detect` because :mod:`monoplane.host.config` loads it to check the
+table, and :mod:`monoplane.host.detect` drives the pipeline, which imports :mod:`monoplane.host.config`.
 """
 
 from __future__ import annotations

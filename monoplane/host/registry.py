@@ -26,7 +26,7 @@ from monoplane.version import __version__
 
 #: The built-in stage modules, registered in this order. The one place that names them.
 DEFAULT_PLUGINS: tuple[str, ...] = (
-    "monoplane.stages.cues",
+    "monoplane.stages.cue_providers",
     "monoplane.stages.samplers",
     "monoplane.stages.scorers",
     "monoplane.stages.labelers",

@@ -1,6 +1,6 @@
 """One config table's values checked against its dataclass: :func:`build_dataclass`.
 
-Apart from :mod:`monoplane.config` so that a plugin can check its own settings with it (the
+Apart from :mod:`monoplane.host.config` so that a plugin can check its own settings with it (the
 built-in baseline does) without loading the plugin registry, which loads the plugins.
 """
 

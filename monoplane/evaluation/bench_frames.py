@@ -108,7 +108,7 @@ def load_data_frames(source: DataSource) -> list[Frame]:
         depth PNG without a scale, unreadable files.
     """
     from monoplane.batch.specs import read_frames
-    from monoplane.fileio import load_frame
+    from monoplane.io.frames import load_frame
 
     if source.frames is not None and source.frames < 1:
         raise InvalidInput(f"--frames must be at least 1, got {source.frames}")

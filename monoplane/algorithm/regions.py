@@ -28,7 +28,7 @@ import cv2
 import numpy as np
 
 from monoplane.datamodel import Reconstruction
-from monoplane.densecrf import REFERENCE_AREA
+from monoplane.algorithm.densecrf import REFERENCE_AREA
 from monoplane.errors import InvalidInput
 from monoplane.geometry.components import graph_components, label_regions
 from monoplane.jit import kernel

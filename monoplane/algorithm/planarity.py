@@ -9,10 +9,10 @@ Two signs, either one rejects a plane:
 1. **Normals that turn across the region.** On a flat region the normal cue scatters around
    one direction by its noise only; on a curved one it turns with position, so it spreads
    far wider. The spread of a plane is the median angle between its normals and their
-   dominant direction (:func:`~monoplane.geometry.planarity.spread_of_groups`), measured
+   dominant direction (:func:`~monoplane.geometry.flatness.spread_of_groups`), measured
    away from the region's border (where the cue blurs across the neighbouring surface). The
    cue's noise is the *noise floor*, the spread of the median planar point
-   (:func:`~monoplane.geometry.planarity.noise_floor_deg`): most points of a scene lie on
+   (:func:`~monoplane.geometry.flatness.noise_floor_deg`): most points of a scene lie on
    flat surfaces. A plane is curved when its spread exceeds the floor by more than
    ``max_extra_spread_deg``.
 2. **A quadric that explains the points better than the plane.** In the plane's own frame
@@ -22,7 +22,7 @@ Two signs, either one rejects a plane:
    a quadric also absorbs, but never by that ratio.
 
 Thin genuine planes survive: a region with fewer than
-:data:`~monoplane.geometry.planarity.MIN_SAMPLES` points away from its border (a table top
+:data:`~monoplane.geometry.flatness.MIN_SAMPLES` points away from its border (a table top
 seen edge-on, a shelf board) has no evidence of curvature and is kept.
 
 Where the measurements come from: images use the frame's normal cue and its 3D points on the
@@ -44,14 +44,14 @@ import numpy as np
 
 from monoplane.datamodel import Reconstruction
 from monoplane.errors import check_config
-from monoplane.geometry.planarity import (
+from monoplane.geometry.flatness import (
     MIN_SAMPLES,
     interior_labels,
     noise_floor_deg,
     quadric_ratio,
     spread_of_groups,
 )
-from monoplane.regions import scene_radius
+from monoplane.algorithm.regions import scene_radius
 from monoplane.stages.base import param
 
 

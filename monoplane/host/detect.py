@@ -8,7 +8,7 @@ The cloud goes through the same stages as an image, without the pixel grid:
    meaning) and, for the search, subsampled to ``ransac.max_points``;
 3. missing normals are estimated with Open3D (PCA over ``cloud.normals_knn`` neighbours) and
    oriented (``cloud.orient``, see :class:`CloudConfig`);
-4. the sequential graph-cut RANSAC (:meth:`monoplane.ransac.SequentialRansac.run_cloud`) runs
+4. the sequential graph-cut RANSAC (:meth:`monoplane.algorithm.ransac.SequentialRansac.run_cloud`) runs
    on the subsample's kNN graph, then the configured refiner's :meth:`refine_cloud` (which
    must not need pixels; the ``cloud`` preset uses ``graph-crf``);
 5. every input point is labelled: a point takes, among the planes of its few nearest sampled
@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from monoplane.cloud_config import CloudConfig
+from monoplane.host.cloud_config import CloudConfig
 from monoplane.errors import InvalidInput
 from monoplane.geometry.cloud import PROPAGATION_RADIUS_FACTOR, PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
@@ -31,7 +31,7 @@ from monoplane.geometry.neighbours import PointIndex
 from monoplane.geometry.orientation import orient_normals
 from monoplane.geometry.planes import fit_planes_per_label
 from monoplane.geometry.polygons import PlaneMesh, points_plane_mesh
-from monoplane.io_checks import MAX_MAGNITUDE
+from monoplane.io.checks import MAX_MAGNITUDE
 
 
 @dataclass
@@ -259,8 +259,8 @@ def detect_planes(cloud: Any, preset: str = "cloud",
     """
     import time
 
-    from monoplane import config as config_mod
-    from monoplane.pipeline import Pipeline
+    from monoplane.host import config as config_mod
+    from monoplane.host.pipeline import Pipeline
 
     timings: dict[str, float] = {}
     t0 = time.perf_counter()

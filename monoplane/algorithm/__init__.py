@@ -1,0 +1,1 @@
+"""The algorithm of the paper: sequential RANSAC, graph cut, max-flow, dense CRF, regions, planarity."""

@@ -1,0 +1,1 @@
+"""The host: plugin registry, configuration, and the pipelines that run the stages."""
