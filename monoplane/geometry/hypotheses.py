@@ -26,6 +26,7 @@ import math
 import numpy as np
 
 from monoplane.errors import InvalidInput
+from monoplane.geometry.normal_bins import bin_by_normal  # noqa: F401  (re-exported)
 from monoplane.jit import inline, kernel
 
 #: Cost kinds of :func:`hypothesis_costs`.
@@ -240,50 +241,6 @@ def _sum4(term: np.ndarray, n: int) -> float:
         total += term[j]
         j += 1
     return total
-
-
-@kernel
-def bin_by_normal(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, cells: int
-                   ) -> tuple[np.ndarray, np.ndarray]:
-    """The (M,) ``pool`` points grouped by cube-map cell of their normal.
-
-    The cell of a normal n: its face is the axis of its largest component and that
-    component's sign (face ``2 axis + (sign < 0)``), its position on the face the other two
-    components divided by the largest (in [-1, 1]), cut into ``cells`` x ``cells``.
-    Returns (6, M) float64 coordinates ``x, y, z, nx, ny, nz`` ordered by cell (pool order
-    within one) and the (6 cells² + 1,) start of each cell's run.
-    """
-    m = pool.shape[0]
-    count = 6 * cells * cells
-    cell = np.empty(m, dtype=np.int64)
-    start = np.zeros(count + 1, dtype=np.int64)
-    for i in range(m):
-        p = pool[i]
-        axis = 0
-        for k in range(1, 3):
-            if abs(normals[p, k]) > abs(normals[p, axis]):
-                axis = k
-        top = normals[p, axis]
-        a = 1 if axis == 0 else 0
-        b = 1 if axis == 2 else 2
-        scale = 1.0 / abs(top) if top != 0.0 else 0.0
-        iu = min(max(int((normals[p, a] * scale + 1.0) * 0.5 * cells), 0), cells - 1)
-        iv = min(max(int((normals[p, b] * scale + 1.0) * 0.5 * cells), 0), cells - 1)
-        face = 2 * axis + (1 if top < 0.0 else 0)
-        cell[i] = (face * cells + iu) * cells + iv
-        start[cell[i] + 1] += 1
-    for c in range(count):
-        start[c + 1] += start[c]
-    fill = start[:-1].copy()
-    coords = np.empty((6, m))
-    for i in range(m):
-        j = fill[cell[i]]
-        fill[cell[i]] += 1
-        p = pool[i]
-        for k in range(3):
-            coords[k, j] = points[p, k]
-            coords[3 + k, j] = normals[p, k]
-    return coords, start
 
 
 @inline

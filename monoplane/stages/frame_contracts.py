@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
 
 import numpy as np
 
+from monoplane.geometry.normal_bins import BinnedPoints  # noqa: F401  (part of the contract)
 from monoplane.stages.contract import Stage, param
 
 if TYPE_CHECKING:
@@ -169,21 +170,6 @@ class TripletDraws(NamedTuple):
     cos_min: float | None
     """A candidate passes when its three normals' pairwise dot products all reach this; None
     passes every candidate."""
-
-
-class BinnedPoints(NamedTuple):
-    """Points a scorer scores on, grouped by normal direction, when it scores as
-    :func:`monoplane.geometry.hypotheses.binned_costs` does (see :meth:`Scorer.binned_points`).
-    """
-
-    coords: np.ndarray
-    """(6, K) float64 x, y, z, nx, ny, nz of the points, ordered by cell."""
-    start: np.ndarray
-    """(C + 1,) int64 start of each cell's run in ``coords``."""
-    centres: np.ndarray
-    """(C, 3) float64 unit centre direction of each cell."""
-    cos_reach: np.ndarray
-    """(C,) float64 cosine of each cell's angular radius plus ε_n (plus a margin)."""
 
 
 class Sampler(Stage):

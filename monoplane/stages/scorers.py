@@ -23,7 +23,6 @@ search in one compiled call when the sampler allows it too.
 
 from __future__ import annotations
 
-import functools
 from typing import ClassVar
 
 import numpy as np
@@ -33,18 +32,12 @@ from monoplane.geometry.hypotheses import (
     INLIERS,
     MSAC,
     MSAC_NORMAL,
-    bin_by_normal,
     binned_costs,
     hypothesis_costs,
 )
+from monoplane.geometry.normal_bins import NORMAL_CELLS, bin_by_normal, cell_reach
 from monoplane.hookspecs import hookimpl
 from monoplane.stages.base import BinnedPoints, RansacParams, Scorer, Stage
-
-#: Cells per cube-map face side of the normal directions :func:`bin_by_normal` groups by.
-NORMAL_CELLS = 4
-#: Angle (radians) added to a cell's radius before its points are counted instead of visited:
-#: far wider than the rounding of a cosine, so no point the full test would visit is skipped.
-_SKIP_MARGIN = 1e-6
 
 
 class _KernelScorer(Scorer):
@@ -110,50 +103,10 @@ class MsacNormalScorer(_KernelScorer):
             coords, start = bin_by_normal(cloud.points, cloud.normals,
                                           np.ascontiguousarray(pool, dtype=np.int64),
                                           NORMAL_CELLS)
-            centres, cos_reach = _cell_reach(NORMAL_CELLS, params.epsilon_n)
+            centres, cos_reach = cell_reach(NORMAL_CELLS, params.epsilon_n)
             last = self._last = (pool, cloud.points, params.epsilon_n,
                                  BinnedPoints(coords, start, centres, cos_reach))
         return last[3]
-
-
-@functools.cache
-def _cell_cones(cells: int) -> tuple[np.ndarray, np.ndarray]:
-    """Unit centre direction (6 c², 3) and angular radius (6 c²,) in radians of each cube-map
-    cell of :func:`bin_by_normal`: the largest angle from the centre to a corner of the cell
-    (the farthest point of a cell, which is convex on the sphere)."""
-    edges = np.linspace(-1.0, 1.0, cells + 1)
-    mids = (edges[:-1] + edges[1:]) / 2
-    centres, radii = [], []
-    for face in range(6):
-        for iu in range(cells):
-            for iv in range(cells):
-                c = _face_direction(face, mids[iu], mids[iv])
-                corners = [_face_direction(face, edges[iu + du], edges[iv + dv])
-                           for du in (0, 1) for dv in (0, 1)]
-                centres.append(c)
-                radii.append(max(np.arccos(np.clip(c @ k, -1.0, 1.0)) for k in corners))
-    return np.array(centres), np.array(radii)
-
-
-@functools.lru_cache(maxsize=8)
-def _cell_reach(cells: int, epsilon_n: float) -> tuple[np.ndarray, np.ndarray]:
-    """Centre directions (6 c², 3) of the cells of :func:`_cell_cones` and the cosine of
-    their radius plus ε_n (radians) plus a margin: the test by which
-    :func:`~monoplane.geometry.hypotheses.binned_costs` skips cells (asked once per pool, with
-    the same ε_n all frame long)."""
-    centres, radii = _cell_cones(cells)
-    return centres, np.cos(np.minimum(epsilon_n + radii + _SKIP_MARGIN, np.pi))
-
-
-def _face_direction(face: int, u: float, v: float) -> np.ndarray:
-    """Unit direction at position (u, v) of cube-map face ``face`` (see
-    :func:`~monoplane.geometry.hypotheses.bin_by_normal`: axis ``face // 2``, negative when
-    ``face`` is odd; u and v along the other two axes)."""
-    axis = face // 2
-    a, b = [k for k in range(3) if k != axis]
-    d = np.zeros(3)
-    d[axis], d[a], d[b] = 1.0 - 2.0 * (face % 2), u, v
-    return d / np.linalg.norm(d)
 
 
 @hookimpl
