@@ -25,9 +25,8 @@ _SKIP_MARGIN = 1e-6
 
 
 class BinnedPoints(NamedTuple):
-    """Points a scorer scores on, grouped by normal direction, when it scores as
-    :func:`monoplane.geometry.hypotheses.binned_costs` does (see :meth:`Scorer.binned_points`).
-    """
+    """Points grouped by normal direction (:func:`bin_points`), as
+    :func:`monoplane.geometry.hypotheses.binned_costs` and the compiled search score them."""
 
     coords: np.ndarray
     """(6, K) float64 x, y, z, nx, ny, nz of the points, ordered by cell."""
@@ -121,3 +120,28 @@ def _face_direction(face: int, u: float, v: float) -> np.ndarray:
     d = np.zeros(3)
     d[axis], d[a], d[b] = 1.0 - 2.0 * (face % 2), u, v
     return d / np.linalg.norm(d)
+
+
+def bin_points(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, epsilon_n: float
+               ) -> BinnedPoints:
+    """The ``pool`` points grouped by normal direction, with each cell's skipping test.
+
+    Parameters
+    ----------
+    points, normals : numpy.ndarray
+        (N, 3) float64 points and unit normals, one frame.
+    pool : numpy.ndarray
+        (M,) int64 indices of the points to group.
+    epsilon_n : float
+        Normal threshold ε_n in radians of the cost the cells are skipped for.
+
+    Returns
+    -------
+    BinnedPoints
+        :func:`bin_by_normal` of the pool in :data:`NORMAL_CELLS` cells per face side, and
+        :func:`cell_reach` of those cells.
+    """
+    coords, start = bin_by_normal(points, normals, np.ascontiguousarray(pool, dtype=np.int64),
+                                  NORMAL_CELLS)
+    centres, cos_reach = cell_reach(NORMAL_CELLS, epsilon_n)
+    return BinnedPoints(coords, start, centres, cos_reach)

@@ -30,8 +30,16 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 # Every contract, importable from here as before the contracts were split by kind.
-from monoplane.stages.contract import NoConfig, Stage, config_key, param  # noqa: F401
+from monoplane.stages.contract import (  # noqa: F401
+    NoConfig,
+    Stage,
+    config_key,
+    param,
+    run_stage,
+)
 from monoplane.stages.frame_contracts import (  # noqa: F401
+    SAMPLER_DRAWS,
+    SCORER_COSTS,
     BinnedPoints,
     CueProvider,
     Labeler,

@@ -7,8 +7,13 @@ The contracts of the stage kinds subclass it (:mod:`monoplane.stages.frame_contr
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import Any, ClassVar, TypeVar
+
+from monoplane.errors import StageError
+
+T = TypeVar("T")
 
 
 def param(default: Any, doc: str, **kwargs: Any) -> Any:
@@ -60,3 +65,18 @@ class Stage:
             type_name = f.type if isinstance(f.type, str) else getattr(f.type, "__name__", "")
             rows.append((config_key(f), type_name, default, f.metadata.get("doc", "")))
         return rows
+
+
+def run_stage(kind: str, name: str, fn: Callable[..., T], *args: Any) -> T:
+    """``fn(*args)``, a failure reported as a :class:`~monoplane.errors.StageError` naming the
+    stage kind and plugin: the one place where stage failures are wrapped.
+
+    A :class:`StageError` raised inside passes through unchanged, so the innermost stage is
+    the one named (a failing sampler, not the RANSAC that called it).
+    """
+    try:
+        return fn(*args)
+    except StageError:
+        raise
+    except Exception as exc:
+        raise StageError(kind, name, exc) from exc

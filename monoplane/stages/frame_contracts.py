@@ -12,7 +12,9 @@ from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
 
 import numpy as np
 
-from monoplane.geometry.normal_bins import BinnedPoints  # noqa: F401  (part of the contract)
+from monoplane.errors import PluginError
+# Re-exported: the public plugin API lists it.
+from monoplane.geometry.normal_bins import BinnedPoints  # noqa: F401
 from monoplane.stages.contract import Stage, param
 
 if TYPE_CHECKING:
@@ -158,9 +160,42 @@ class NetworkCues(CueProvider):
         return self.network.provide(frame)
 
 
+#: The draws a sampler can state (:attr:`Sampler.draws`); the host runs each in its compiled
+#: search (:func:`monoplane.geometry.hypotheses.search_batches`):
+#:
+#: * ``"uniform"``: three distinct pool points, uniformly, ``count`` candidates all kept;
+#: * ``"normal-consistent"``: uniform candidates kept when their three normals' pairwise dot
+#:   products all reach cos ε_n; ``2 count`` candidates first and, when fewer than ``count``
+#:   passed, the rest of :meth:`Sampler.draw_budget` in one more round.
+#:
+#: Both draw as :func:`monoplane.geometry.hypotheses.draw_triplets` does, from the driver's
+#: generator.
+SAMPLER_DRAWS: tuple[str, ...] = ("uniform", "normal-consistent")
+#: The costs a scorer can state (:attr:`Scorer.scores`), lower is better: ``"inliers"`` (minus
+#: the points within ε), ``"msac"`` (Σ min(φ²/ε², 1)) and ``"msac-normal"`` (Σ min(φ²/ε² +
+#: g(1, p), 1), :func:`monoplane.geometry.hypotheses.hypothesis_costs`). The compiled search
+#: scores ``"msac-normal"``.
+SCORER_COSTS: tuple[str, ...] = ("inliers", "msac", "msac-normal")
+
+
+def _own_statement(cls: type, method: str, attr: str, choices: tuple[str, ...]) -> None:
+    """Hold a stage class's statement about ``method`` to the class that defines the method.
+
+    A class that defines ``method`` without stating ``attr`` itself states nothing (None),
+    whatever its base stated: the statement described the base's method, not this one. A
+    stated value must be one of ``choices``.
+    """
+    if method in cls.__dict__ and attr not in cls.__dict__:
+        setattr(cls, attr, None)
+    value = getattr(cls, attr)
+    if value is not None and value not in choices:
+        raise PluginError(f"{cls.__module__}.{cls.__qualname__}.{attr} = {value!r}: state one "
+                          f"of {', '.join(map(repr, choices))}, or None")
+
+
 class TripletDraws(NamedTuple):
-    """How a sampler draws a batch, when it draws as :func:`monoplane.geometry.hypotheses.
-    draw_triplets` does (see :meth:`Sampler.triplet_draws`)."""
+    """The rounds of one batch of a stated draw (:data:`SAMPLER_DRAWS`), as
+    :func:`monoplane.geometry.hypotheses.draw_triplets` takes them."""
 
     first: int
     """Candidate samples drawn first."""
@@ -171,22 +206,51 @@ class TripletDraws(NamedTuple):
     """A candidate passes when its three normals' pairwise dot products all reach this; None
     passes every candidate."""
 
+    @classmethod
+    def stated(cls, draws: str, count: int, budget: int, epsilon_n: float) -> TripletDraws:
+        """The rounds of a batch of ``count`` samples under the draw ``draws``.
+
+        Parameters
+        ----------
+        draws : str
+            One of :data:`SAMPLER_DRAWS`.
+        count : int
+            Samples wanted.
+        budget : int
+            Candidates drawn at most (:meth:`Sampler.draw_budget`); a uniform draw ignores it.
+        epsilon_n : float
+            Normal threshold ε_n in radians.
+        """
+        if draws == "uniform":
+            return cls(count, count, None)
+        return cls(min(2 * count, budget), budget, float(np.cos(epsilon_n)))
+
 
 class Sampler(Stage):
-    """Draws minimal samples (3 points) for plane hypotheses."""
+    """Draws minimal samples (3 points) for plane hypotheses.
+
+    A sampler whose :meth:`sample` draws one of :data:`SAMPLER_DRAWS` says so in
+    :attr:`draws`; with a scorer that states ``scores = "msac-normal"``, the RANSAC driver
+    then runs each plane search in one compiled call instead of calling :meth:`sample` and
+    :meth:`Scorer.score` batch by batch, with the same samples, hypotheses and generator
+    state. The statement belongs to the class that defines :meth:`sample`: a subclass that
+    overrides :meth:`sample` states nothing until it states :attr:`draws` again, and is
+    called batch by batch.
+    """
 
     kind = "sampler"
+    #: What :meth:`sample` draws, one of :data:`SAMPLER_DRAWS`; None (the default): something
+    #: else, and the driver calls :meth:`sample` for every batch.
+    draws: ClassVar[str | None] = None
 
-    def triplet_draws(self, count: int, params: RansacParams) -> TripletDraws | None:
-        """How a batch of ``count`` samples is drawn, if the way of
-        :func:`monoplane.geometry.hypotheses.draw_triplets` (uniform, optionally normal-
-        checked): then, with a scorer that answers :meth:`Scorer.binned_points`, the RANSAC
-        driver runs a whole plane search in one compiled call
-        (:func:`~monoplane.geometry.hypotheses.search_batches`) instead of calling
-        :meth:`sample` and :meth:`Scorer.score` batch by batch. The answer must describe
-        exactly what :meth:`sample` draws. The default, None, is always safe.
-        """
-        return None
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        _own_statement(cls, "sample", "draws", SAMPLER_DRAWS)
+
+    def draw_budget(self, count: int) -> int:
+        """Candidates a ``"normal-consistent"`` draw of ``count`` samples draws at most (the
+        default, ``count``: one round). A uniform draw does not ask."""
+        return count
 
     def sample(self, cloud: PlaneCloud, pool: np.ndarray, count: int,
                rng: np.random.Generator, params: RansacParams) -> np.ndarray:
@@ -214,17 +278,22 @@ class Sampler(Stage):
 
 
 class Scorer(Stage):
-    """Scores plane hypotheses on the remaining points; lower cost is better."""
+    """Scores plane hypotheses on the remaining points; lower cost is better.
+
+    A scorer whose :meth:`score` is one of :data:`SCORER_COSTS` says so in :attr:`scores`
+    (see :class:`Sampler` for what the driver does with it).
+    """
 
     kind = "scorer"
 
-    def binned_points(self, cloud: PlaneCloud, pool: np.ndarray, params: RansacParams
-                      ) -> BinnedPoints | None:
-        """The pool's points binned as :func:`monoplane.geometry.hypotheses.binned_costs`
-        scores them, if :meth:`score` is that cost (MSAC plus the normal term): see
-        :meth:`Sampler.triplet_draws`. The default, None, is always safe.
-        """
-        return None
+    #: What :meth:`score` costs, one of :data:`SCORER_COSTS`; None (the default): something
+    #: else. The statement belongs to the class that defines :meth:`score`, as
+    #: :attr:`Sampler.draws` does to :meth:`Sampler.sample`.
+    scores: ClassVar[str | None] = None
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        _own_statement(cls, "score", "scores", SCORER_COSTS)
 
     def score(self, cloud: PlaneCloud, pool: np.ndarray, planes: np.ndarray,
               model_normals: np.ndarray, params: RansacParams) -> np.ndarray:

@@ -17,8 +17,8 @@ direction of their normal (``bin_by_normal``, the cells of a cube map), and a ce
 cone of directions lies farther than ε_n from the model normal is counted, not visited
 (``binned_costs``). A hypothesis of one orientation in a scene of several thus reads a
 fraction of the points; the sum comes out equal up to the order of its additions. Because it
-answers :meth:`~monoplane.stages.base.Scorer.binned_points`, the RANSAC driver runs its whole
-search in one compiled call when the sampler allows it too.
+states ``scores = "msac-normal"`` (:attr:`~monoplane.stages.base.Scorer.scores`), the RANSAC
+driver runs its whole search in one compiled call when the sampler states its draw too.
 """
 
 from __future__ import annotations
@@ -35,9 +35,9 @@ from monoplane.geometry.hypotheses import (
     binned_costs,
     hypothesis_costs,
 )
-from monoplane.geometry.normal_bins import NORMAL_CELLS, bin_by_normal, cell_reach
+from monoplane.geometry.normal_bins import BinnedPoints, bin_points
 from monoplane.hookspecs import hookimpl
-from monoplane.stages.base import BinnedPoints, RansacParams, Scorer, Stage
+from monoplane.stages.base import RansacParams, Scorer, Stage
 
 
 class _KernelScorer(Scorer):
@@ -60,6 +60,7 @@ class InlierCountScorer(_KernelScorer):
     """Vanilla RANSAC: the negated number of points closer than ε."""
 
     name = "inliers"
+    scores = "inliers"
     cost_kind = INLIERS
 
 
@@ -67,6 +68,7 @@ class MsacScorer(_KernelScorer):
     """MSAC: truncated quadratic cost Σ min(φ²/ε², 1)."""
 
     name = "msac"
+    scores = "msac"
     cost_kind = MSAC
 
 
@@ -74,6 +76,7 @@ class MsacNormalScorer(_KernelScorer):
     """MSAC plus the normal cost g of E_n: Σ min(φ²/ε² + g(1, p), 1)."""
 
     name = "msac-normal"
+    scores = "msac-normal"
     cost_kind = MSAC_NORMAL
     _last: tuple[np.ndarray, np.ndarray, float, BinnedPoints] | None = None
 
@@ -85,14 +88,6 @@ class MsacNormalScorer(_KernelScorer):
                             np.ascontiguousarray(model_normals, dtype=np.float64),
                             float(params.epsilon), float(params.epsilon_n))
 
-    def binned_points(self, cloud: PlaneCloud, pool: np.ndarray, params: RansacParams
-                      ) -> BinnedPoints | None:
-        """See :meth:`monoplane.stages.base.Scorer.binned_points` (None for a subclass that
-        scores otherwise)."""
-        if type(self).score is not MsacNormalScorer.score:
-            return None
-        return self._binned(cloud, pool, params)
-
     def _binned(self, cloud: PlaneCloud, pool: np.ndarray, params: RansacParams
                 ) -> BinnedPoints:
         """The pool's points binned by normal direction, kept for the next call with the same
@@ -100,12 +95,9 @@ class MsacNormalScorer(_KernelScorer):
         last = self._last  # one read: a search ahead on another thread may replace it
         if (last is None or last[0] is not pool or last[1] is not cloud.points
                 or last[2] != params.epsilon_n):
-            coords, start = bin_by_normal(cloud.points, cloud.normals,
-                                          np.ascontiguousarray(pool, dtype=np.int64),
-                                          NORMAL_CELLS)
-            centres, cos_reach = cell_reach(NORMAL_CELLS, params.epsilon_n)
             last = self._last = (pool, cloud.points, params.epsilon_n,
-                                 BinnedPoints(coords, start, centres, cos_reach))
+                                 bin_points(cloud.points, cloud.normals, pool,
+                                            params.epsilon_n))
         return last[3]
 
 
