@@ -9,8 +9,8 @@ from monoplane.geometry.cloud import (
     PROPAGATION_NEIGHBOURS,
     PROPAGATION_RADIUS_FACTOR,
     PlaneCloud,
-    nearest_true_pixel,
 )
+from monoplane.geometry.distance_transform import nearest_true_pixel
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.testing import ROOM, room_cues
 
