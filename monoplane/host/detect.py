@@ -23,14 +23,14 @@ from typing import Any
 
 import numpy as np
 
-from monoplane.host.cloud_config import CloudConfig
 from monoplane.errors import InvalidInput
 from monoplane.geometry.cloud import PROPAGATION_RADIUS_FACTOR, PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.geometry.neighbours import PointIndex
-from monoplane.geometry.orientation import orient_normals
 from monoplane.geometry.planes import fit_planes_per_label
 from monoplane.geometry.polygons import PlaneMesh, points_plane_mesh
+from monoplane.host.cloud_config import CloudConfig
+from monoplane.host.cloud_input import cloud_arrays, estimate_normals
 from monoplane.io.checks import MAX_MAGNITUDE
 
 
@@ -163,56 +163,6 @@ class CloudPlaneResult:
         }
 
 
-def _as_arrays(cloud: Any) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
-    """(N, 3) points, optional normals and colours of any supported cloud type."""
-    import open3d as o3d
-
-    normals = colors = None
-    if isinstance(cloud, o3d.geometry.PointCloud):
-        points = np.asarray(cloud.points, dtype=np.float64)
-        if cloud.has_normals():
-            normals = np.asarray(cloud.normals, dtype=np.float64)
-        if cloud.has_colors():
-            colors = np.asarray(cloud.colors, dtype=np.float64)
-    elif isinstance(cloud, o3d.t.geometry.PointCloud):
-        if "positions" not in cloud.point:
-            raise InvalidInput("the tensor point cloud has no 'positions' attribute")
-        points = cloud.point.positions.numpy().astype(np.float64)
-        if "normals" in cloud.point:
-            normals = cloud.point.normals.numpy().astype(np.float64)
-        if "colors" in cloud.point:
-            colors = cloud.point.colors.numpy().astype(np.float64)
-            if colors.size and colors.max() > 1.0:  # 8-bit colours
-                colors = colors / 255.0
-    else:
-        try:
-            points = np.asarray(cloud, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise InvalidInput(
-                f"cloud must be an open3d PointCloud (legacy or tensor) or an (N, 3) array, "
-                f"got {type(cloud).__name__}") from None
-    if points.ndim != 2 or points.shape[1] != 3:
-        raise InvalidInput(f"points must have shape (N, 3), got {points.shape}")
-    return points, normals, colors
-
-
-def _estimate_normals(points: np.ndarray, cfg: CloudConfig) -> np.ndarray:
-    """Unit normals of ``points`` by Open3D PCA, oriented as ``cfg.orient`` says."""
-    import open3d as o3d
-
-    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
-    k = min(cfg.normals_knn, len(points))
-    pcd.estimate_normals(o3d.geometry.KDTreeSearchParamKNN(knn=k))
-    if cfg.orient == "consistent" and len(points) > 3:
-        pcd.orient_normals_consistent_tangent_plane(min(15, len(points) - 1))
-        return np.asarray(pcd.normals, dtype=np.float64)
-    normals = np.asarray(pcd.normals, dtype=np.float64)
-    if cfg.orient == "auto":
-        return orient_normals(points, normals, np.asarray(cfg.viewpoint, dtype=np.float64))
-    towards = np.asarray(cfg.viewpoint, dtype=np.float64) - points
-    return np.where(((normals * towards).sum(axis=1) < 0)[:, None], -normals, normals)
-
-
 def _propagate(cloud: PlaneCloud, points: np.ndarray, sample: np.ndarray, labels: np.ndarray,
                planes: np.ndarray, spacing: float) -> np.ndarray:
     """Labels of all (normalised) ``points`` from the labelled ``sample`` of them that
@@ -268,7 +218,7 @@ def detect_planes(cloud: Any, preset: str = "cloud",
     pipe.cloud_refiner()  # a refiner that needs pixels fails before any work
     cfg: CloudConfig = pipe.config.host["cloud"]
     rcfg = pipe.config.host["ransac"]
-    points, normals, colors = _as_arrays(cloud)
+    points, normals, colors = cloud_arrays(cloud)
     n_in = points.shape[0]
     notes: list[str] = []
     for what, arr in (("normals", normals), ("colors", colors)):
@@ -324,7 +274,7 @@ def detect_planes(cloud: Any, preset: str = "cloud",
 
     t = time.perf_counter()
     if u_normals is None:
-        s_normals = _estimate_normals(unique[sample], cfg)
+        s_normals = estimate_normals(unique[sample], cfg)
         notes.append(f"normals estimated (PCA, {cfg.normals_knn} neighbours, "
                      f"oriented: {cfg.orient})")
     else:
