@@ -458,15 +458,42 @@ class SequentialRansac:
         already; a total-least-squares fit commutes with the similarity that maps them back
         to the camera frame, where planes and RMSE are then expressed.
         """
-        params, rmse, support = fit_planes_per_label(
+        renumber, params, rmse, support = refit_planes(
             cloud.all_points, labels.ravel()[cloud.pixel_grid()[2]], int(labels.max(initial=0)))
         params = cloud.plane_to_camera(params)
-        rmse = rmse * cloud.scale
-        kept = ~np.isnan(rmse)
-        # Labels too small to fit a plane become non-planar; the others are renumbered 1..P.
-        renumber = np.zeros(len(kept) + 1, dtype=np.int32)
-        renumber[1:][kept] = np.arange(1, kept.sum() + 1)
         return Reconstruction(frame=frame, labels=renumber[labels],
-                              params=orient_towards_camera(params[kept]) if kept.any()
+                              params=orient_towards_camera(params) if len(params)
                               else np.zeros((0, 4)),
-                              rmse=rmse[kept], support=support[kept])
+                              rmse=rmse * cloud.scale, support=support)
+
+
+def refit_planes(points: np.ndarray, labels: np.ndarray, count: int
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Least-squares plane of each label on all its points; labels too small to fit a plane
+    become non-planar and the others are renumbered 1..P in their order.
+
+    Parameters
+    ----------
+    points : numpy.ndarray
+        (V, 3) float64 points, any frame and unit.
+    labels : numpy.ndarray
+        (V,) int label of each point, 0 = none, at most ``count``.
+    count : int
+        Number of labels.
+
+    Returns
+    -------
+    renumber : numpy.ndarray
+        (count + 1,) int32 new label of each old one (0 for the dropped ones).
+    planes : numpy.ndarray
+        (P, 4) float64 unit-normal planes in the points' frame, not oriented.
+    rmse : numpy.ndarray
+        (P,) RMS point-to-plane distance, the points' unit.
+    support : numpy.ndarray
+        (P,) int64 points per plane.
+    """
+    planes, rmse, support = fit_planes_per_label(points, labels, count)
+    kept = ~np.isnan(rmse)
+    renumber = np.zeros(count + 1, dtype=np.int32)
+    renumber[1:][kept] = np.arange(1, int(kept.sum()) + 1)
+    return renumber, planes[kept], rmse[kept], support[kept]
