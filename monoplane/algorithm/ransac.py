@@ -417,6 +417,7 @@ class SequentialRansac:
         cfg = self.config
         count = cfg.batch_size
         draws = self.sampler.draws
+        assert draws is not None  # compiled_search: the sampler stated its draw
         budget = (count if draws == "uniform" else
                   _call(self.sampler, self.sampler.draw_budget, count))
         first, budget, cos_min = TripletDraws.stated(draws, count, budget, params.epsilon_n)
