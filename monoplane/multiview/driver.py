@@ -18,7 +18,7 @@ from monoplane.batch.views import VIEW_STAGES, ViewPool, process_view
 from monoplane.datamodel import Frame, Scene, SfmResult
 from monoplane.errors import InvalidInput, StageError
 from monoplane.geometry.alignment import ScaleAlignment
-from monoplane.multiview.fusion import fuse_and_adjust
+from monoplane.multiview.global_planes import fuse_and_adjust
 from monoplane.multiview.registration import (
     align_to_sfm,
     feature_correspondences,
