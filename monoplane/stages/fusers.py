@@ -357,25 +357,8 @@ class AverageFuser(Fuser):
             plane = merger.fused(members)
             x = plane_footprint(views[i], sfm.cameras[i], [nodes[k][1] for k in members],
                                 plane, self._step(views[i]), cfg.merge_samples)
-            contra, unseg, seen = 0, 0, 0
-            support: dict[int, int] = {}
-            for j, (rec, cam) in enumerate(zip(views, sfm.cameras, strict=True)):
-                if j == i or len(x) == 0:
-                    continue
-                hit = project_to_view(x, rec.frame.depth, cam, cfg.see_through_distance)
-                if hit is None or hit[0].sum() < cfg.single_min_visible * len(x):
-                    continue
-                visible, through, rows, cols = hit
-                labels, original = rec.labels[rows, cols], originals[j].labels[rows, cols]
-                on = visible & ~through
-                # The view's curved planes were removed from ``labels`` only.
-                curved = on & (original > 0) & (labels == 0)
-                contra += int((visible & through).sum() + curved.sum())
-                unseg += int((on & (original == 0)).sum())
-                owners = group_of[node_index[j][labels[on & (labels > 0)]]]
-                for h, c in zip(*np.unique(owners[owners >= 0], return_counts=True), strict=True):
-                    support[int(h)] = support.get(int(h), 0) + int(c)
-                seen += int(visible.sum())
+            contra, unseg, seen, support = self._single_view_evidence(
+                views, originals, sfm, i, x, group_of, node_index)
             if seen == 0:
                 continue
             best = max(support, key=support.get) if support else -1
@@ -402,6 +385,56 @@ class AverageFuser(Fuser):
         absorbed = {k: new_index[h] for g, h in absorb.items() for k in groups[g]}
         recoverable = {new_index[g] for g, (what, _) in verdicts.items() if what == "recover"}
         return kept, absorbed, recoverable
+
+    def _single_view_evidence(self, views: list[Reconstruction],
+                              originals: list[Reconstruction], sfm: SfmResult, i: int,
+                              x: np.ndarray, group_of: np.ndarray, node_index: list[np.ndarray]
+                              ) -> tuple[int, int, int, dict[int, int]]:
+        """What the views other than ``i`` say about a group of view ``i`` (see
+        :meth:`check_single_view`).
+
+        Parameters
+        ----------
+        views, originals : list of Reconstruction
+            The views without and with their curved planes.
+        sfm : SfmResult
+            Their cameras.
+        i : int
+            The view that alone sees the group.
+        x : numpy.ndarray
+            (N, 3) world samples of the group on its fused plane.
+        group_of : numpy.ndarray
+            (nodes,) group index of each node, -1 for none.
+        node_index : list of numpy.ndarray
+            Per view, node index of each local plane id (-1 for none).
+
+        Returns
+        -------
+        (int, int, int, dict)
+            Contradicting, unsegmented and seen samples over the views taking part, and the
+            samples supporting each other group, by group index.
+        """
+        cfg = self.config
+        contra, unseg, seen = 0, 0, 0
+        support: dict[int, int] = {}
+        for j, (rec, cam) in enumerate(zip(views, sfm.cameras, strict=True)):
+            if j == i or len(x) == 0:
+                continue
+            hit = project_to_view(x, rec.frame.depth, cam, cfg.see_through_distance)
+            if hit is None or hit[0].sum() < cfg.single_min_visible * len(x):
+                continue
+            visible, through, rows, cols = hit
+            labels, original = rec.labels[rows, cols], originals[j].labels[rows, cols]
+            on = visible & ~through
+            # The view's curved planes were removed from ``labels`` only.
+            curved = on & (original > 0) & (labels == 0)
+            contra += int((visible & through).sum() + curved.sum())
+            unseg += int((on & (original == 0)).sum())
+            owners = group_of[node_index[j][labels[on & (labels > 0)]]]
+            for h, c in zip(*np.unique(owners[owners >= 0], return_counts=True), strict=True):
+                support[int(h)] = support.get(int(h), 0) + int(c)
+            seen += int(visible.sum())
+        return contra, unseg, seen, support
 
     def recover_planes(self, views: list[Reconstruction], sfm: SfmResult, planes: np.ndarray,
                        links: list[dict[int, int]], single: set[int] | None = None
