@@ -30,7 +30,8 @@ Protocol (see ``docs/multiview.md``, "Evaluating on a posed RGB-D sequence"):
    noisy as the same level says; ``mono-depth`` gives the corrupted depth alone (as a
    depth-only network does). ``network`` gives no depth at all: the pipeline's cue provider
    predicts the cues from the image. Missing normals are left to the cue provider, which
-   estimates them from the depth it is given (the ``given`` provider by default).
+   estimates them from the depth it is given (by default the provider that serves given
+   depth, :data:`monoplane.host.config.GIVEN_CUES_PROVIDER`).
 4. **The product path.** Each set runs through
    :func:`monoplane.multiview.reconstruct_multiview` with the intrinsics held fixed; a run
    that raises a :class:`~monoplane.errors.MonoplaneError` registers none of its views.
@@ -271,8 +272,10 @@ def evaluate_posed_sequence(data_dir: str | Path,
     pairs : str or sequence of (int, int), optional
         Evaluate these frame-id pairs (``"i-j,k-l"``) instead of choosing.
     preset, overrides : str, list of str
-        Pipeline; ``cues.plugin=given`` comes first, so overrides may replace it (``network``
-        mode needs a provider that predicts depth from the image, e.g. ``cues.plugin=onnx``).
+        Pipeline; the cue provider that serves given depth comes first
+        (:func:`monoplane.host.config.given_cues_overrides`), so overrides may replace it
+        (``network`` mode needs one that predicts depth from the image, e.g.
+        ``cues.plugin=onnx``).
     depth_scale : float
         Divisor of the depth files' values.
     min_angle, max_angle : float
@@ -302,23 +305,14 @@ def evaluate_posed_sequence(data_dir: str | Path,
         :func:`summarise`'s totals plus ``rows`` (per set: :func:`score_view_set`'s row with
         ``time_s``).
     """
-    from tqdm import tqdm
-
+    from monoplane.host.config import given_cues_overrides
     from monoplane.host.pipeline import Pipeline
     from monoplane.multiview import hold_intrinsics_fixed
 
-    modes = mode_list(mode)
-    if any(m in MONOCULAR_MODES for m in modes):
-        check_level(level)
-    if n < 1:
-        raise InvalidInput(f"--n must be at least 1, got {n}")
-    for name, value in (("--rotation-threshold", rotation_threshold),
-                        ("--translation-threshold", translation_threshold)):
-        if not value > 0:
-            raise InvalidInput(f"{name} must be positive, got {value}")
+    modes = _checked_modes(mode, level, n, rotation_threshold, translation_threshold)
     seq = load_posed_sequence(data_dir, intrinsics, depth_scale)
     # Build the pipeline before the costly selection so a bad --set fails at once.
-    pipe = Pipeline.from_preset(preset, overrides=["cues.plugin=given", *(overrides or [])])
+    pipe = Pipeline.from_preset(preset, overrides=given_cues_overrides(overrides))
     fixed = hold_intrinsics_fixed(pipe)
     sets, selection, angles, overlap = choose_view_sets(seq, split, n, views, pairs, min_angle,
                                                         max_angle, min_overlap)
@@ -338,15 +332,48 @@ def evaluate_posed_sequence(data_dir: str | Path,
     if "network" in modes:
         probe_network_cues(seq, sets[0][0], pipe)
     for m in modes:
-        rows = []
-        for members in tqdm(sets, desc=f"{m} view sets", disable=not progress):
-            result, error, seconds = run_view_set(seq, members, m, pipe, seed, level)
-            row = score_view_set(seq, members, result, error, overlap, angles,
-                                 rotation_threshold, translation_threshold)
-            row["time_s"] = seconds
-            rows.append(row)
+        rows = _mode_rows(seq, sets, m, pipe, seed, level, overlap, angles,
+                          (rotation_threshold, translation_threshold), progress)
         out["modes"][m] = {**summarise(rows), "rows": rows}
     return out
+
+
+def _mode_rows(seq: PosedSequence, sets: list[list[int]], mode: str, pipe: Pipeline, seed: int,
+               level: str, overlap: np.ndarray, angles: np.ndarray,
+               thresholds: tuple[float, float], progress: bool) -> list[dict[str, Any]]:
+    """Run and score every view set in one mode: :func:`score_view_set`'s rows, each with
+    its run's ``time_s``; ``thresholds`` are the rotation and translation thresholds."""
+    from tqdm import tqdm
+
+    rows = []
+    for members in tqdm(sets, desc=f"{mode} view sets", disable=not progress):
+        result, error, seconds = run_view_set(seq, members, mode, pipe, seed, level)
+        row = score_view_set(seq, members, result, error, overlap, angles, *thresholds)
+        row["time_s"] = seconds
+        rows.append(row)
+    return rows
+
+
+def _checked_modes(mode: str, level: str, n: int, rotation_threshold: float,
+                   translation_threshold: float) -> list[str]:
+    """The modes ``mode`` runs (:func:`mode_list`), once the arguments of
+    :func:`evaluate_posed_sequence` that need no data are checked.
+
+    Raises
+    ------
+    InvalidInput
+        Naming the bad option.
+    """
+    modes = mode_list(mode)
+    if any(m in MONOCULAR_MODES for m in modes):
+        check_level(level)
+    if n < 1:
+        raise InvalidInput(f"--n must be at least 1, got {n}")
+    for name, value in (("--rotation-threshold", rotation_threshold),
+                        ("--translation-threshold", translation_threshold)):
+        if not value > 0:
+            raise InvalidInput(f"{name} must be positive, got {value}")
+    return modes
 
 
 def probe_network_cues(seq: PosedSequence, k: int, pipe: Pipeline) -> None:
