@@ -9,6 +9,9 @@ surface:
 * **reprojection**: ``p`` warped into view ``j`` through its plane parameters and the relative
   pose overlaps ``q`` with a large IoU, measured only where ``p`` is visible from ``j``.
 
+A third, looser criterion (:func:`geometric_matches`) accepts pairs that overlap some and agree
+in 3D (normals, and each plane's world centroid, :func:`world_centroids`, near the other plane).
+
 Fusion follows the paper (after Jin et al., SparsePlanes): the fused normal maximises
 ``Σ_i (nᵀ n_i)²``, i.e. it is the principal eigenvector of ``Σ_i n_i n_iᵀ``, and the fused
 offset is the mean offset. This holds for any number of planes.
@@ -20,7 +23,7 @@ integer ``(u, v)``; poses are world-to-camera ``x_cam = R x_world + t``.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
+from typing import Protocol
 
 import numpy as np
 
@@ -318,6 +321,15 @@ def consistent_groups(node_views: np.ndarray, edges: np.ndarray, strengths: np.n
     return sorted(groups, key=lambda g: g[0])
 
 
+class GeometricMatchSettings(Protocol):
+    """What :func:`geometric_matches` reads (the ``average`` fuser's config has these
+    fields)."""
+
+    geometry_min_iou: float
+    geometry_max_angle_deg: float
+    geometry_max_distance: float
+
+
 def world_centroids(rec: Reconstruction, cam: object) -> np.ndarray:
     """(P, 4) world centroid of each plane's pixels (lifted on its plane) and its mean depth."""
     out = np.full((rec.num_planes, 4), np.nan)
@@ -341,7 +353,7 @@ def world_centroids(rec: Reconstruction, cam: object) -> np.ndarray:
 
 def geometric_matches(score: np.ndarray, angles: np.ndarray, cent_i: np.ndarray,
                        cent_j: np.ndarray, world_i: np.ndarray, world_j: np.ndarray,
-                       cfg: Any) -> list[tuple[int, int]]:
+                       cfg: GeometricMatchSettings) -> list[tuple[int, int]]:
     """Plane pairs that overlap some (IoU) and agree in 3D: normals and centroid distances.
 
     This catches a plane that one view segments larger than another (e.g. together with a

@@ -4,8 +4,8 @@ A global plane in the making is a group of view planes (``(view, local id)`` nod
 are one surface when they are coplanar and their footprints touch, or when every view that
 holds both explains the gap between them by an occluder (docs/multiview.md, "Fusion that does
 not over-split"). The ``average`` fuser (:mod:`monoplane.stages.fusers`) drives these tests;
-its settings arrive as ``cfg``, an object with the ``merge_*`` and ``see_through_distance``
-attributes of :class:`monoplane.stages.fusers.AverageConfig`.
+its settings arrive as ``cfg``, any object with the fields of :class:`MergeSettings` (the
+fuser's config).
 
 Frames: world frame of the SfM model; cameras world-to-camera ``x_cam = R x_world + t``
 (OpenCV axes); planes ``normal . x + offset = 0``.
@@ -13,7 +13,7 @@ Frames: world frame of the SfM model; cameras world-to-camera ``x_cam = R x_worl
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Protocol
 
 import cv2
 import numpy as np
@@ -26,6 +26,17 @@ from monoplane.datamodel import (
 )
 from monoplane.geometry.coplanar import coplanarity_residual, footprint_gap
 from monoplane.geometry.plane_matching import fuse_planes
+
+
+class MergeSettings(Protocol):
+    """What the merge tests read (the ``average`` fuser's config has these fields)."""
+
+    merge_max_angle_deg: float
+    merge_max_distance: float
+    merge_max_gap: float
+    merge_max_see_through: float
+    merge_samples: int
+    see_through_distance: float
 
 
 def plane_samples(rec: Reconstruction, cam: object,
@@ -68,13 +79,13 @@ class CoplanarMerger:
         Their cameras.
     steps : list of int
         Pixel stride of each view's samples.
-    cfg : AverageConfig-like
-        The fuser's settings (``merge_*``, ``see_through_distance``).
+    cfg : MergeSettings
+        The thresholds (see :class:`monoplane.stages.fusers.AverageConfig`).
     """
 
     def __init__(self, nodes: list[tuple[int, int]], planes: np.ndarray,
                  views: list[Reconstruction], cameras: list, steps: list[int],
-                 cfg: Any) -> None:
+                 cfg: MergeSettings) -> None:
         self.nodes, self.planes, self.cfg = nodes, planes, cfg
         self.views, self.cameras, self.steps = views, cameras, steps
         per_view = [plane_samples(rec, cam, step)

@@ -3,8 +3,8 @@ world, where world points land in another view (and whether that view sees them)
 a view a global plane should own, and edits of a view's planes.
 
 Used by the ``average`` fuser (:mod:`monoplane.stages.fusers`) to test a plane one view alone
-segments and to recover planes a view merged away; ``cfg`` there is the fuser's settings (the
-``recover_*`` attributes of :class:`monoplane.stages.fusers.AverageConfig`).
+segments and to recover planes a view merged away; ``cfg`` there is any object with the fields
+of :class:`RecoverySettings` (the fuser's config).
 
 Frames: world frame of the SfM model; cameras world-to-camera ``x_cam = R x_world + t``
 (OpenCV axes); planes ``normal . x + offset = 0``.
@@ -13,12 +13,19 @@ Frames: world frame of the SfM model; cameras world-to-camera ``x_cam = R x_worl
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import Any
+from typing import Protocol
 
 import cv2
 import numpy as np
 
 from monoplane.datamodel import Reconstruction, pixel_rays, plane_to_camera, ray_plane_depth
+
+
+class RecoverySettings(Protocol):
+    """What :func:`recovered_region` reads (the ``average`` fuser's config has these fields)."""
+
+    recover_min_area: float
+    recover_max_distance: float
 
 
 def plane_footprint(rec: Reconstruction, cam: object, locals_: list[int],
@@ -96,7 +103,7 @@ def drop_planes(rec: Reconstruction, drop: np.ndarray) -> Reconstruction:
 
 
 def recovered_region(views: list[Reconstruction], cameras: list, members: list[tuple[int, int]],
-                      i: int, plane_world: np.ndarray, cfg: Any,
+                      i: int, plane_world: np.ndarray, cfg: RecoverySettings,
                       step: int, rays_all: np.ndarray) -> np.ndarray | None:
     """(H, W) bool pixels of view ``i`` to relabel onto ``plane_world``, or None (see
     :meth:`monoplane.stages.fusers.AverageFuser.recover_planes`; ``rays_all`` is view ``i``'s
