@@ -84,9 +84,6 @@ def run(args: argparse.Namespace) -> int:
         load_frame(img, depth=d, normals=nm, intrinsics=args.intrinsics, **depth_reading(args))
         for img, d, nm in zip(args.images, depths, normals, strict=True)
     ]
-    names = [f.name for f in frames]
-    if len(set(names)) < n:
-        frames = [f.with_(name=f"{i:03d}_{f.name}") for i, f in enumerate(frames)]
     if not args.quiet and not args.intrinsics:
         print("monoplane: note: intrinsics not given: the focal length is estimated by SfM "
               "from a 60 degree field-of-view start", file=sys.stderr)

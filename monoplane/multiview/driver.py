@@ -104,7 +104,8 @@ def reconstruct_multiview(frames: list[Frame], pipe: Pipeline, progress: bool = 
     frames : list of Frame
         Two or more colour frames, optionally with depth/normals (then the cue
         provider uses them). ``K`` is held fixed in SfM only after
-        :func:`hold_intrinsics_fixed`; otherwise it is the initial guess.
+        :func:`hold_intrinsics_fixed`; otherwise it is the initial guess. When two share a
+        name, each name gets its input index as a prefix (``000_rgb``).
     pipe : Pipeline
         Configured pipeline; its ``matcher``, ``cues``, RANSAC stages, ``refiner``, ``fuser``
         and ``adjuster`` are used.
@@ -136,6 +137,7 @@ def reconstruct_multiview(frames: list[Frame], pipe: Pipeline, progress: bool = 
 
     if len(frames) < 2:
         raise InvalidInput(f"multi-view reconstruction needs at least 2 images, got {len(frames)}")
+    frames = _unique_names(frames)
     workers = default_workers() if workers is None else max(1, int(workers))
     with ViewPool(pipe, workers, len(frames)) as views_pool, contextlib.ExitStack() as blas_limit:
         timings: dict[str, float] = {}
@@ -147,10 +149,7 @@ def reconstruct_multiview(frames: list[Frame], pipe: Pipeline, progress: bool = 
                  if sfm is None and matcher_keeps_intrinsics(pipe) else None)
         correspondences = feature_correspondences(pipe, frames)
         sfm, sfm_failure = _structure_from_motion(pipe, frames, sfm, correspondences, timings)
-        registration = _sfm_registration(sfm, len(frames))
-        if progress:
-            print(f"monoplane: SfM registered {sum(r['method'] != 'none' for r in registration)} "
-                  f"of {len(frames)} views", file=sys.stderr)
+        registration = _sfm_registration(sfm, len(frames), progress)
 
         config = pipe.config.to_dict()
         # Everything below runs small dense products ((N, 3) @ (3, k)), where OpenBLAS's
@@ -219,14 +218,26 @@ def _structure_from_motion(pipe: Pipeline, frames: list[Frame], sfm: SfmResult |
         return replace(origin_sfm(frames, str(exc)), correspondences=correspondences), str(exc)
 
 
-def _sfm_registration(sfm: SfmResult, n_views: int) -> list[dict[str, Any]]:
+def _unique_names(frames: list[Frame]) -> list[Frame]:
+    """``frames``, or when two share a name (``view0/rgb.png`` and ``view1/rgb.png``), each
+    renamed with its input index as a prefix (``000_rgb``), so the outputs tell them apart."""
+    if len({f.name for f in frames}) == len(frames):
+        return frames
+    return [f.with_(name=f"{i:03d}_{f.name}") for i, f in enumerate(frames)]
+
+
+def _sfm_registration(sfm: SfmResult, n_views: int, progress: bool) -> list[dict[str, Any]]:
     """Per view, how SfM placed it (``method``; ``"sfm"`` for all when the matcher says
-    nothing) and, for an SfM placement, its evidence: the keypoints that observe model points."""
+    nothing) and, for an SfM placement, its evidence: the keypoints that observe model points.
+    With ``progress``, says how many views SfM placed on stderr."""
     registration = [dict(r) for r in sfm.registration] or [{"method": "sfm"}
                                                            for _ in range(n_views)]
     for v, r in enumerate(registration):
         if r["method"] == "sfm":
             r.setdefault("observations", int((sfm.point_ids[v] >= 0).sum()))
+    if progress:
+        print(f"monoplane: SfM registered {sum(r['method'] != 'none' for r in registration)} "
+              f"of {n_views} views", file=sys.stderr)
     return registration
 
 
