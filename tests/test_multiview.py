@@ -95,8 +95,8 @@ def test_scale_sfm_keeps_rotations_and_scales_positions(synth_pair) -> None:
 
 
 def test_driver_aligns_scales_and_fuses(synth_pair) -> None:
-    from monoplane.multiview import reconstruct_multiview
     from monoplane.host.pipeline import Pipeline
+    from monoplane.multiview import reconstruct_multiview
 
     pipe = Pipeline.from_preset("monoplane", overrides=["cues.plugin=given"])
     sfm = ground_truth_sfm(synth_pair)
