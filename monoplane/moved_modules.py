@@ -31,6 +31,7 @@ MOVED: dict[str, str] = {
     "monoplane.io_checks": "monoplane.io.checks",
     "monoplane.lattice_kernels": "monoplane.algorithm.lattice_kernels",
     "monoplane.mincut": "monoplane.algorithm.mincut",
+    "monoplane.multiview.fusion": "monoplane.multiview.global_planes",
     "monoplane.pipeline": "monoplane.host.pipeline",
     "monoplane.planarity": "monoplane.algorithm.planarity",
     "monoplane.plugin_manager": "monoplane.host.registry",

@@ -95,12 +95,15 @@ def test_scale_sfm_keeps_rotations_and_scales_positions(synth_pair) -> None:
 
 
 def test_driver_aligns_scales_and_fuses(synth_pair) -> None:
-    from monoplane.multiview import reconstruct_multiview
     from monoplane.host.pipeline import Pipeline
+    from monoplane.multiview import reconstruct_multiview
 
     pipe = Pipeline.from_preset("monoplane", overrides=["cues.plugin=given"])
     sfm = ground_truth_sfm(synth_pair)
-    result = reconstruct_multiview([v.frame for v in synth_pair.views], pipe, sfm=sfm)
+    # Two frames of one name (view0/rgb.png, view1/rgb.png) come out told apart.
+    frames = [v.frame.with_(name="rgb") for v in synth_pair.views]
+    result = reconstruct_multiview(frames, pipe, sfm=sfm)
+    assert [v.frame.name for v in result.scene.views] == ["000_rgb", "001_rgb"]
     # Mild cues have an unknown per-view scale; alignment must undo it (the warp is smooth).
     for s, view in zip(result.scene.scales, synth_pair.views, strict=True):
         assert s * view.scale == pytest.approx(1.0, rel=0.1)

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from monoplane.cli.common import add_set_arg
 from monoplane.errors import InvalidInput
+from monoplane.evaluation.score_files import write_scores
 
 DESCRIPTION = """Run a preset on seeded synthetic frames at one or more image sizes and print one
 table: the median time of every pipeline stage and sub-step (from the reconstruction's
@@ -153,12 +154,8 @@ def _object_ranges(text: str | None, complexity: bool) -> list[tuple[int, int]] 
 
 
 def _write_json(path: str, doc: dict) -> None:
-    target = Path(path)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    tmp = target.with_name(target.name + ".tmp")
-    tmp.write_text(json.dumps(doc, indent=2) + "\n")
-    tmp.replace(target)
-    print(f"numbers written to {target}", file=sys.stderr)
+    # --from-json reads the numbers back as floats, NaN included.
+    print(f"numbers written to {write_scores(path, doc, nan_as_null=False)}", file=sys.stderr)
 
 
 def _from_json(path: str, markdown: bool) -> str:

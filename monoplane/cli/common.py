@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from monoplane.io.frames import check_output_dir
 from monoplane.host.pipeline import Pipeline
+from monoplane.io.frames import check_output_dir
 
 
 def add_pipeline_args(parser: argparse.ArgumentParser) -> None:
@@ -30,9 +30,12 @@ def add_set_arg(parser: argparse.ArgumentParser | argparse._ArgumentGroup,
                         metavar="TABLE.KEY=VALUE", help=text)
 
 
-def pipeline_from_args(args: argparse.Namespace) -> Pipeline:
-    """Build the pipeline the user asked for (validates the whole config)."""
-    return Pipeline.from_config(args.config, preset=args.preset, overrides=args.overrides)
+def pipeline_from_args(args: argparse.Namespace,
+                       overrides: dict[str, Any] | list[str] | None = None) -> Pipeline:
+    """Build the pipeline the user asked for (validates the whole config); ``overrides``, when
+    given, stand for ``args.overrides`` (e.g. with a catalogue model's keys under them)."""
+    return Pipeline.from_config(args.config, preset=args.preset,
+                                overrides=args.overrides if overrides is None else overrides)
 
 
 def add_input_args(parser: argparse.ArgumentParser, per_image: bool = False) -> None:

@@ -3,14 +3,13 @@
 from __future__ import annotations
 
 import argparse
-import json
-import math
 import sys
 from pathlib import Path
 from typing import Any
 
 from monoplane.cli.common import add_set_arg
 from monoplane.errors import InvalidInput
+from monoplane.evaluation.score_files import write_scores
 
 DESCRIPTION = """Score pipeline presets and external baselines on N seeded synthetic indoor
 scenes with exact plane ground truth (monoplane.synth), using the paper's single-view protocol:
@@ -138,19 +137,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def _write_json(path: str, data: dict[str, Any]) -> None:
-    def clean(x: Any) -> Any:  # JSON has no NaN
-        if isinstance(x, float) and not math.isfinite(x):
-            return None
-        if isinstance(x, dict):
-            return {k: clean(v) for k, v in x.items()}
-        if isinstance(x, list):
-            return [clean(v) for v in x]
-        return x
-
-    target = Path(path)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    target.write_text(json.dumps(clean(data), indent=2) + "\n")
-    print(f"scores written to {target}", file=sys.stderr)
+    print(f"scores written to {write_scores(path, data)}", file=sys.stderr)
 
 
 def _run_multiview(args: argparse.Namespace, size: tuple[int, int]) -> int:

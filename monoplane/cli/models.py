@@ -13,6 +13,7 @@ from monoplane.cues.profile_files import (
     profile_to_toml,
 )
 from monoplane.errors import InvalidInput
+from monoplane.host.pipeline import Pipeline
 from monoplane.models import (
     CATALOGUE,
     cache_dir,
@@ -23,7 +24,6 @@ from monoplane.models import (
     require_model,
 )
 from monoplane.models.catalogue import ModelRecord
-from monoplane.host.pipeline import Pipeline
 from monoplane.stages.base import CueProvider
 
 DESCRIPTION = """Monocular depth/normal networks monoplane can download on request (ONNX exports

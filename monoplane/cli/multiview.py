@@ -14,6 +14,7 @@ from monoplane.cli.common import (
     pipeline_from_args,
     write_rerun_arg,
 )
+from monoplane.geometry.plane_adjustment import refinement_summary
 from monoplane.io.frames import load_frame
 
 DESCRIPTION = """Sparse-view planar reconstruction (MonoPlane §III-C): structure from motion
@@ -83,9 +84,6 @@ def run(args: argparse.Namespace) -> int:
         load_frame(img, depth=d, normals=nm, intrinsics=args.intrinsics, **depth_reading(args))
         for img, d, nm in zip(args.images, depths, normals, strict=True)
     ]
-    names = [f.name for f in frames]
-    if len(set(names)) < n:
-        frames = [f.with_(name=f"{i:03d}_{f.name}") for i, f in enumerate(frames)]
     if not args.quiet and not args.intrinsics:
         print("monoplane: note: intrinsics not given: the focal length is estimated by SfM "
               "from a 60 degree field-of-view start", file=sys.stderr)
@@ -98,47 +96,7 @@ def run(args: argparse.Namespace) -> int:
         per_view = ", ".join(str(v.num_planes) for v in scene.views)
         print(f"{scene.planes.shape[0]} global planes from {per_view} view planes, "
               f"{len(result.sfm.points)} SfM points, {result.timings['total']:.2f} s -> {out}")
-        refined = adjustment_summary(result.adjustment)
+        refined = refinement_summary(result.adjustment)
         if refined:
             print(refined)
     return 0
-
-
-def adjustment_summary(adj: dict) -> str:
-    """One line on the adjuster's report: its objective before -> after, then its components.
-
-    The headline is the objective, the only figure the adjuster promises not to raise; each
-    component is measured on the same residuals, points and planes before and after, and may
-    rise where the solve trades it for another (plane pixels from monocular depth against the
-    triangulated SfM points).
-
-    Parameters
-    ----------
-    adj : dict
-        ``MultiviewResult.adjustment``: empty when no adjuster ran.
-
-    Returns
-    -------
-    str
-        The line, or "" when there is nothing to report.
-    """
-    if not adj.get("accepted", True):
-        return f"refinement rejected, scene as fused: {adj.get('reason', '')}"
-    b, a = adj.get("before"), adj.get("after")
-    if not b or not a:
-        return ""
-    parts = []
-    if b["sfm_points_on_planes"]:
-        parts.append(f"SfM points to their planes {100 * b['sfm_point_plane_median_rel']:.2f}% "
-                     f"-> {100 * a['sfm_point_plane_median_rel']:.2f}% of depth (median, "
-                     f"{b['sfm_points_on_planes']} points)")
-    if b["plane_samples"]:
-        parts.append(f"plane pixels to their planes {100 * b['plane_rms_rel']:.2f}% -> "
-                     f"{100 * a['plane_rms_rel']:.2f}% of depth (RMS)")
-        parts.append(f"view-plane normals {b['normal_rms_deg']:.2f} -> "
-                     f"{a['normal_rms_deg']:.2f} deg (RMS)")
-    if b["observations"]:
-        parts.append(f"reprojection {b['reprojection_rms_px']:.2f} -> "
-                     f"{a['reprojection_rms_px']:.2f} px (RMS)")
-    return (f"refinement: objective {b['cost']:.4g} -> {a['cost']:.4g} (robust cost); "
-            + ", ".join(parts))

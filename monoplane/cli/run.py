@@ -4,9 +4,6 @@ from __future__ import annotations
 
 import argparse
 import functools
-import json
-from pathlib import Path
-from typing import cast
 
 from monoplane.cli.common import (
     add_input_args,
@@ -18,12 +15,11 @@ from monoplane.cli.common import (
     write_rerun_arg,
 )
 from monoplane.cli.models import prepare_cue_model
-from monoplane.host.config import load as load_config
 from monoplane.cues import CueNetwork
-from monoplane.errors import ConfigError, InvalidInput
-from monoplane.io.frames import load_frame, save_reconstruction
+from monoplane.errors import InvalidInput
+from monoplane.host.config import cue_model_overrides
 from monoplane.host.pipeline import Pipeline
-from monoplane.host.registry import Registry, get_registry
+from monoplane.io.frames import load_frame, save_reconstruction
 from monoplane.stages.base import CueProvider
 
 DESCRIPTION = """Recover the planes of one image and write labels.png (uint16, 0 = non-planar),
@@ -59,10 +55,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     check_output_args(args)  # fail before any work
-    if args.cues:
-        args.overrides = [*cue_model_overrides(args.cues, args.preset, args.config,
-                                               args.overrides), *args.overrides]
-    pipe = pipeline_from_args(args)
+    overrides = (cue_model_overrides(args.cues, args.preset, args.config, args.overrides)
+                 if args.cues else args.overrides)
+    pipe = pipeline_from_args(args, overrides)
     prepare_cue_model(pipe, fetch_missing=args.fetch, has_depth=args.depth is not None,
                       has_normals=args.normals is not None, quiet=args.quiet)
     frame = load_frame(args.image, depth=args.depth, normals=args.normals,
@@ -82,40 +77,6 @@ def run(args: argparse.Namespace) -> int:
             print(f"note: {note}")
         print(f"{rec.num_planes} planes in {rec.timings.get('total', 0.0):.2f} s -> {out}")
     return 0
-
-
-def cue_model_overrides(model: str, preset: str | None = None,
-                        config: str | Path | None = None, overrides: list[str] | None = None,
-                        registry: Registry | None = None) -> list[str]:
-    """``--cues NAME`` as ``cues.KEY=VALUE`` overrides, for whichever cue provider the config
-    names: the provider says which of its keys select a catalogue model
-    (:meth:`~monoplane.stages.base.CueProvider.catalogue_config`).
-
-    Parameters
-    ----------
-    model : str
-        Catalogue name given to ``--cues``.
-    preset, config, overrides
-        The run's ``--preset``, ``--config`` and ``--set`` (they pick the provider).
-    registry : Registry, optional
-        Stage registry; the default plugin manager's when omitted.
-
-    Raises
-    ------
-    ConfigError
-        When the configured provider takes no catalogue model.
-    """
-    registry = registry or get_registry()
-    name = load_config(preset, config, overrides, registry).stages["cues"][0]
-    # The registry admits only CueProvider subclasses under "cues".
-    provider = cast(type[CueProvider], registry.get("cues", name).cls)
-    keys = provider.catalogue_config(model)
-    if keys is None:
-        raise ConfigError(f"--cues {model}: cue provider '{name}' takes no catalogue model; "
-                          "pick one that does with --set cues.plugin=NAME (see 'monoplane "
-                          "plugins')")
-    # json.dumps writes strings, numbers, booleans and lists as valid TOML values too.
-    return [f"cues.{key}={json.dumps(value)}" for key, value in keys.items()]
 
 
 def require_depth_source(pipe: Pipeline, image: str) -> None:

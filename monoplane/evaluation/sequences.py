@@ -30,13 +30,17 @@ For each sequence (:func:`monoplane.synth.sequence.generate_sequence`) it report
 from __future__ import annotations
 
 import time
-from typing import Any
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from monoplane.datamodel import Scene
 from monoplane.errors import InvalidInput, MonoplaneError
 from monoplane.evaluation.twoview import relative_pose_error
+
+if TYPE_CHECKING:
+    from monoplane.multiview import MultiviewResult
 
 
 def similarity_to_truth(R_pred: np.ndarray, c_pred: np.ndarray, R_gt: np.ndarray,
@@ -207,8 +211,8 @@ def evaluate_sequences(n: int = 10, views: int = 5, path: str = "walk", level: s
     """
     from tqdm import tqdm
 
-    from monoplane.multiview import hold_intrinsics_fixed, reconstruct_multiview
     from monoplane.host.pipeline import Pipeline
+    from monoplane.multiview import hold_intrinsics_fixed, reconstruct_multiview
     from monoplane.synth.sequence import generate_sequence
 
     if n < 1:
@@ -218,75 +222,107 @@ def evaluate_sequences(n: int = 10, views: int = 5, path: str = "walk", level: s
     pipe = Pipeline.from_preset(preset, overrides=overrides)
     hold_intrinsics_fixed(pipe)
     min_area = float(pipe.config.to_dict()["ransac"]["min_support"])
-    rot, trans, times, failures = [], [], [], []
-    steps: dict[str, list[float]] = {}
-    reg_views = all_reg = g_pred = g_true = g_seen = curved = 0
-    good = multi = good_all = multi_all = 0
-    errors: dict[str, dict[str, list[float]]] = {"fused": {"n": [], "d": []},
-                                                 "refined": {"n": [], "d": []}}
+    tally = _Tally()
     for k in tqdm(range(n), desc=f"{path} sequences", disable=not progress):
         synth = generate_sequence(seed + k, views, path, level, width, height)
-        g_true += len(synth.gt_planes_world)
+        tally.g_true += len(synth.gt_planes_world)
         start = time.perf_counter()
         try:
             out = reconstruct_multiview([v.frame for v in synth.views], pipe, workers=workers)
         except MonoplaneError as exc:
-            failures.append(f"seed {seed + k}: {exc}")
+            tally.failures.append(f"seed {seed + k}: {exc}")
             continue
-        times.append(time.perf_counter() - start)
+        tally.times.append(time.perf_counter() - start)
+        tally.add(out, synth, views, min_area)
+    return tally.result(n, views, path, level)
+
+
+def _stats(x: list[float]) -> dict[str, float]:
+    if not x:
+        return {"mean": float("nan"), "median": float("nan")}
+    return {"mean": float(np.mean(x)), "median": float(np.median(x))}
+
+
+@dataclass
+class _Tally:
+    """What :func:`evaluate_sequences` sums and collects over its sequences: pose errors,
+    plane counts, consistency counts, plane errors (``fused`` and ``refined``), times and
+    failures."""
+
+    rot: list[float] = field(default_factory=list)
+    trans: list[float] = field(default_factory=list)
+    times: list[float] = field(default_factory=list)
+    failures: list[str] = field(default_factory=list)
+    steps: dict[str, list[float]] = field(default_factory=dict)
+    reg_views: int = 0
+    all_reg: int = 0
+    g_pred: int = 0
+    g_true: int = 0
+    g_seen: int = 0
+    curved: int = 0
+    good: int = 0
+    multi: int = 0
+    good_all: int = 0
+    multi_all: int = 0
+    errors: dict[str, dict[str, list[float]]] = field(
+        default_factory=lambda: {"fused": {"n": [], "d": []}, "refined": {"n": [], "d": []}})
+
+    def add(self, out: MultiviewResult, synth: Any, views: int, min_area: float) -> None:
+        """Score one sequence's result against its truth (``synth``, a synthetic sequence of
+        ``views`` views); ``min_area`` is the smallest plane (pixels) consistency counts."""
         for step, sec in out.timings.items():
-            steps.setdefault(step, []).append(sec)
+            self.steps.setdefault(step, []).append(sec)
         keep = out.frame_indices
-        reg_views += len(keep)
-        all_reg += len(keep) == views
+        self.reg_views += len(keep)
+        self.all_reg += len(keep) == views
         true_views = [synth.views[v] for v in keep]
         links = [synth.view_to_global[v] for v in keep]
-        g_seen += len(true_planes_seen(true_views, links, min_area))
+        self.g_seen += len(true_planes_seen(true_views, links, min_area))
         cams = out.scene.cameras
         for a in range(len(keep)):
             for b in range(a + 1, len(keep)):
                 va, vb = true_views[a], true_views[b]
                 r, t = relative_pose_error(cams[a], cams[b], va.R, va.t, vb.R, vb.t)
-                rot.append(r)
-                trans.append(t)
+                self.rot.append(r)
+                self.trans.append(t)
         areas = np.zeros(out.scene.planes.shape[0])
         for v, rec in enumerate(out.scene.views):
             for local, glob in out.scene.links[v].items():
                 areas[glob] += rec.area_px[local - 1]
-        g_pred += int((areas > 0).sum())
-        curved += curved_global_planes(out.scene, true_views)
+        self.g_pred += int((areas > 0).sum())
+        self.curved += curved_global_planes(out.scene, true_views)
         c_good, c_all = consistency(out.scene, true_views, links, min_area)
-        good += c_good
-        multi += c_all
+        self.good += c_good
+        self.multi += c_all
         c_good, c_all = consistency(out.scene, true_views, links)
-        good_all += c_good
-        multi_all += c_all
+        self.good_all += c_good
+        self.multi_all += c_all
         for tag, scene in (("fused", out.fused or out.scene), ("refined", out.scene)):
             ne, oe = plane_errors(scene, true_views, synth.gt_planes_world, links)
-            errors[tag]["n"] += ne
-            errors[tag]["d"] += oe
+            self.errors[tag]["n"] += ne
+            self.errors[tag]["d"] += oe
 
-    def stats(x: list[float]) -> dict[str, float]:
-        if not x:
-            return {"mean": float("nan"), "median": float("nan")}
-        return {"mean": float(np.mean(x)), "median": float(np.median(x))}
-
-    return {
-        "sequences": n, "views": views, "path": path, "level": level,
-        "registered_views": reg_views, "total_views": n * views, "all_registered": all_reg,
-        "rotation_error_deg": stats(rot), "translation_error_deg": stats(trans),
-        "global_planes": g_pred, "gt_planes": g_true, "gt_planes_seen": g_seen,
-        "plane_count_ratio": g_pred / max(g_true, 1),
-        "plane_count_ratio_seen": g_pred / max(g_seen, 1), "curved_global_planes": curved,
-        "consistency": good / multi if multi else float("nan"),
-        "consistent_planes": good, "multi_view_planes": multi,
-        "consistency_all": good_all / multi_all if multi_all else float("nan"),
-        "consistent_planes_all": good_all, "multi_view_planes_all": multi_all,
-        "normal_error_deg": {t: stats(e["n"]) for t, e in errors.items()},
-        "offset_error_m": {t: stats(e["d"]) for t, e in errors.items()},
-        "time_s": stats(times), "failures": failures,
-        "step_time_s": {k: float(np.mean(v)) for k, v in steps.items()},
-    }
+    def result(self, n: int, views: int, path: str, level: str) -> dict[str, Any]:
+        """The dict :func:`evaluate_sequences` returns."""
+        good, multi, good_all, multi_all = self.good, self.multi, self.good_all, self.multi_all
+        return {
+            "sequences": n, "views": views, "path": path, "level": level,
+            "registered_views": self.reg_views, "total_views": n * views,
+            "all_registered": self.all_reg,
+            "rotation_error_deg": _stats(self.rot), "translation_error_deg": _stats(self.trans),
+            "global_planes": self.g_pred, "gt_planes": self.g_true, "gt_planes_seen": self.g_seen,
+            "plane_count_ratio": self.g_pred / max(self.g_true, 1),
+            "plane_count_ratio_seen": self.g_pred / max(self.g_seen, 1),
+            "curved_global_planes": self.curved,
+            "consistency": good / multi if multi else float("nan"),
+            "consistent_planes": good, "multi_view_planes": multi,
+            "consistency_all": good_all / multi_all if multi_all else float("nan"),
+            "consistent_planes_all": good_all, "multi_view_planes_all": multi_all,
+            "normal_error_deg": {t: _stats(e["n"]) for t, e in self.errors.items()},
+            "offset_error_m": {t: _stats(e["d"]) for t, e in self.errors.items()},
+            "time_s": _stats(self.times), "failures": self.failures,
+            "step_time_s": {k: float(np.mean(v)) for k, v in self.steps.items()},
+        }
 
 
 def format_sequences(r: dict[str, Any]) -> str:

@@ -357,8 +357,8 @@ def evaluate_pairs(n: int = 20, level: str = "mild", seed: int = 0, progress: bo
     """
     from tqdm import tqdm
 
-    from monoplane.multiview import hold_intrinsics_fixed, reconstruct_multiview
     from monoplane.host.pipeline import Pipeline
+    from monoplane.multiview import hold_intrinsics_fixed, reconstruct_multiview
     from monoplane.synth import generate
 
     if n < 1:

@@ -267,7 +267,7 @@ def scene_glb(scene: Scene, mesh: PlaneMesh | None = None) -> bytes:
     scene : Scene
         Fused scene: global planes in the SfM world frame, world-to-camera poses.
     mesh : PlaneMesh, optional
-        :func:`~monoplane.multiview.fusion.scene_mesh` of ``scene``, when the caller already
+        :func:`~monoplane.geometry.mesh.scene_mesh` of ``scene``, when the caller already
         has it (it is also what ``scene.ply`` holds).
 
     Returns
@@ -275,7 +275,7 @@ def scene_glb(scene: Scene, mesh: PlaneMesh | None = None) -> bytes:
     bytes
         The ``.glb`` file; plane ids are the 0-based global ids of ``scene.json``.
     """
-    from monoplane.multiview.fusion import scene_mesh
+    from monoplane.geometry.mesh import scene_mesh
     from monoplane.report.colors import plane_palette
 
     if mesh is None:

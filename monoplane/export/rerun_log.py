@@ -272,7 +272,8 @@ def log_scene(rr: ModuleType, stream: Any, scene: Scene, sfm_colors: np.ndarray 
               entity: str = "world") -> None:
     """Log a multi-view scene (see the module notes); ``sfm_colors`` are the (M, 3) uint8
     colours of ``scene.points``, if known."""
-    from monoplane.multiview.fusion import global_label_map, scene_mesh
+    from monoplane.geometry.mesh import scene_mesh
+    from monoplane.multiview.global_planes import global_label_map
 
     G = scene.planes.shape[0]
     stream.log(entity, rr.ViewCoordinates.RDF, static=True)

@@ -8,13 +8,23 @@ corners carry the same plane label. The mesh therefore follows the label map's o
 Coordinates are in the camera frame (OpenCV axes: x right, y down, z forward) and the frame's
 depth units. Triangles are wound so that their geometric normal (right-hand rule) equals the
 plane normal, i.e. faces the camera that saw them.
+
+A fused multi-view scene's mesh (:func:`scene_mesh`) is the union of each global plane's view
+masks on the fused plane, in the scene's world frame.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from monoplane.datamodel import Reconstruction, pixel_rays, ray_plane_depth
+from monoplane.datamodel import (
+    Reconstruction,
+    Scene,
+    pixel_rays,
+    plane_to_camera,
+    ray_plane_depth,
+)
+from monoplane.geometry.polygons import PlaneMesh, points_plane_mesh
 
 
 def planar_mesh(
@@ -115,3 +125,55 @@ def reconstruction_to_open3d(rec: Reconstruction, step: int = 2):  # -> o3d.geom
     mesh.vertex_colors = o3d.utility.Vector3dVector(colors)
     mesh.compute_vertex_normals()
     return mesh
+
+
+def scene_mesh(scene: Scene, step: int = 2, max_cells: int = 512) -> PlaneMesh:
+    """Every global plane's surface: the union of its views' masks on the fused plane.
+
+    Every ``step``-th mask pixel of each linked view plane is lifted along its ray onto the
+    fused plane (pixels whose lifted depth disagrees with the view's own plane by more than a
+    factor 2 are dropped, which removes grazing-angle slivers). The union is triangulated by
+    :func:`~monoplane.geometry.polygons.points_plane_mesh` at about the pixel footprint, holes
+    left open.
+
+    Parameters
+    ----------
+    scene : Scene
+        Fused scene.
+    step : int
+        Pixel stride used when lifting masks.
+    max_cells : int
+        Cap on the raster size per side.
+
+    Returns
+    -------
+    PlaneMesh
+        World-frame triangles; ``plane_ids`` are global plane ids (0-based, as in scene.json).
+    """
+    members: dict[int, list[tuple[int, int]]] = {}
+    for v, table in enumerate(scene.links):
+        for local, glob in table.items():
+            members.setdefault(glob, []).append((v, local))
+    rays_cache: dict[int, np.ndarray] = {}
+    parts = []
+    for g, plane in enumerate(scene.planes):
+        points, footprints = [], []
+        for v, local in members.get(g, []):
+            rec, cam = scene.views[v], scene.cameras[v]
+            if v not in rays_cache:
+                rays_cache[v] = pixel_rays(cam.K, cam.height, cam.width)[::step, ::step]
+            mask = rec.labels[::step, ::step] == local
+            rays = rays_cache[v][mask]
+            z = ray_plane_depth(rays, plane_to_camera(plane, cam.R, cam.t)[0])
+            z_own = ray_plane_depth(rays, rec.params[local - 1])
+            ok = (z > 0) & (z_own > 0) & (z < 2 * z_own) & (z_own < 2 * z)
+            if not np.any(ok):
+                continue
+            x_cam = rays[ok] * z[ok, None]
+            points.append((x_cam - cam.t) @ cam.R)
+            footprints.append(np.median(z[ok]) * step / cam.K[0, 0])
+        if points:
+            verts, tris = points_plane_mesh(np.concatenate(points), plane,
+                                            float(np.median(footprints)), max_cells=max_cells)
+            parts.append((g, verts, tris))
+    return PlaneMesh.concatenate(parts)

@@ -42,7 +42,7 @@ integer coordinates; planes ``n · x + d = 0``.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -323,6 +323,49 @@ def residual_summary(reproj: np.ndarray, plane: np.ndarray, normal: np.ndarray,
         "observations": int(len(reproj)),
         "plane_samples": int(len(plane)),
     }
+
+
+def refinement_summary(adj: dict[str, Any]) -> str:
+    """One line on a ``plane-ba`` adjuster report (what ``monoplane multiview`` prints): the
+    objective before -> after, then the figures of :func:`residual_summary`.
+
+    The headline is the objective, the only figure the adjuster promises not to raise; each
+    component is measured on the same residuals, points and planes before and after, and may
+    rise where the solve trades it for another (plane pixels from monocular depth against the
+    triangulated SfM points).
+
+    Parameters
+    ----------
+    adj : dict
+        The adjuster's report (``MultiviewResult.adjustment``): ``accepted`` (and ``reason``
+        when False), ``before`` and ``after`` (:func:`residual_summary` plus ``cost``); empty
+        when no adjuster ran.
+
+    Returns
+    -------
+    str
+        The line, or "" when there is nothing to report.
+    """
+    if not adj.get("accepted", True):
+        return f"refinement rejected, scene as fused: {adj.get('reason', '')}"
+    b, a = adj.get("before"), adj.get("after")
+    if not b or not a:
+        return ""
+    parts = []
+    if b["sfm_points_on_planes"]:
+        parts.append(f"SfM points to their planes {100 * b['sfm_point_plane_median_rel']:.2f}% "
+                     f"-> {100 * a['sfm_point_plane_median_rel']:.2f}% of depth (median, "
+                     f"{b['sfm_points_on_planes']} points)")
+    if b["plane_samples"]:
+        parts.append(f"plane pixels to their planes {100 * b['plane_rms_rel']:.2f}% -> "
+                     f"{100 * a['plane_rms_rel']:.2f}% of depth (RMS)")
+        parts.append(f"view-plane normals {b['normal_rms_deg']:.2f} -> "
+                     f"{a['normal_rms_deg']:.2f} deg (RMS)")
+    if b["observations"]:
+        parts.append(f"reprojection {b['reprojection_rms_px']:.2f} -> "
+                     f"{a['reprojection_rms_px']:.2f} px (RMS)")
+    return (f"refinement: objective {b['cost']:.4g} -> {a['cost']:.4g} (robust cost); "
+            + ", ".join(parts))
 
 
 def _sparsity(lay: _Layout, prob: AdjustmentProblem) -> coo_matrix:

@@ -9,6 +9,9 @@ surface:
 * **reprojection**: ``p`` warped into view ``j`` through its plane parameters and the relative
   pose overlaps ``q`` with a large IoU, measured only where ``p`` is visible from ``j``.
 
+A third, looser criterion (:func:`geometric_matches`) accepts pairs that overlap some and agree
+in 3D (normals, and each plane's world centroid, :func:`world_centroids`, near the other plane).
+
 Fusion follows the paper (after Jin et al., SparsePlanes): the fused normal maximises
 ``Σ_i (nᵀ n_i)²``, i.e. it is the principal eigenvector of ``Σ_i n_i n_iᵀ``, and the fused
 offset is the mean offset. This holds for any number of planes.
@@ -20,9 +23,11 @@ integer ``(u, v)``; poses are world-to-camera ``x_cam = R x_world + t``.
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Protocol
 
 import numpy as np
 
+from monoplane.datamodel import Reconstruction, pixel_rays
 from monoplane.errors import InvalidInput
 
 
@@ -314,3 +319,55 @@ def consistent_groups(node_views: np.ndarray, edges: np.ndarray, strengths: np.n
         views[root] = views.pop(a if root == b else b) | views[root]
     groups = [sorted(int(k) for k in subset) for subset in sets.subsets()]
     return sorted(groups, key=lambda g: g[0])
+
+
+class GeometricMatchSettings(Protocol):
+    """What :func:`geometric_matches` reads (the ``average`` fuser's config has these
+    fields)."""
+
+    geometry_min_iou: float
+    geometry_max_angle_deg: float
+    geometry_max_distance: float
+
+
+def world_centroids(rec: Reconstruction, cam: object) -> np.ndarray:
+    """(P, 4) world centroid of each plane's pixels (lifted on its plane) and its mean depth."""
+    out = np.full((rec.num_planes, 4), np.nan)
+    if rec.num_planes == 0:
+        return out
+    depth = rec.planar_depth()[::2, ::2]
+    labels = rec.labels[::2, ::2]
+    rays = pixel_rays(cam.K, cam.height, cam.width)[::2, ::2]
+    ok = (labels > 0) & (depth > 0)
+    x = rays[ok] * depth[ok, None]
+    lab = labels[ok] - 1
+    count = np.bincount(lab, minlength=rec.num_planes)
+    has = count > 0
+    for axis in range(3):
+        out[has, axis] = np.bincount(lab, weights=x[:, axis], minlength=rec.num_planes)[
+            has] / count[has]
+    out[has, 3] = out[has, 2]
+    out[:, :3] = (out[:, :3] - cam.t) @ cam.R
+    return out
+
+
+def geometric_matches(score: np.ndarray, angles: np.ndarray, cent_i: np.ndarray,
+                       cent_j: np.ndarray, world_i: np.ndarray, world_j: np.ndarray,
+                       cfg: GeometricMatchSettings) -> list[tuple[int, int]]:
+    """Plane pairs that overlap some (IoU) and agree in 3D: normals and centroid distances.
+
+    This catches a plane that one view segments larger than another (e.g. together with a
+    coplanar neighbour), whose IoU stays below the reprojection threshold.
+    """
+    out = []
+    for p, q in np.argwhere(score >= cfg.geometry_min_iou):
+        if angles[p, q] > cfg.geometry_max_angle_deg:
+            continue
+        ci, cj = cent_i[p], cent_j[q]
+        if not (np.isfinite(ci).all() and np.isfinite(cj).all()):
+            continue
+        d_ij = abs(world_j[q, :3] @ ci[:3] + world_j[q, 3]) / max(ci[3], 1e-9)
+        d_ji = abs(world_i[p, :3] @ cj[:3] + world_i[p, 3]) / max(cj[3], 1e-9)
+        if max(d_ij, d_ji) <= cfg.geometry_max_distance:
+            out.append((int(p) + 1, int(q) + 1))
+    return out

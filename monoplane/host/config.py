@@ -23,16 +23,19 @@ import tomllib
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import tomli_w
 
-from monoplane.stages.config_fields import build_dataclass
 from monoplane.errors import ConfigError
 from monoplane.host.registry import Registry, get_registry
-from monoplane.stages.base import STAGE_KINDS, config_key
+from monoplane.stages.base import STAGE_KINDS, CueProvider, config_key
+from monoplane.stages.config_fields import build_dataclass
 
 DEFAULT_PRESET = "monoplane"
+#: The cue provider that serves the depth (and normals) given with each frame, estimating only
+#: what is missing and predicting nothing: what a run on recorded or corrupted depth needs.
+GIVEN_CUES_PROVIDER = "given"
 #: Host tables (not stages) and the import path of their config dataclass.
 HOST_TABLES: dict[str, str] = {"ransac": "monoplane.algorithm.ransac:RansacConfig",
                                "cloud": "monoplane.host.cloud_config:CloudConfig",
@@ -163,6 +166,67 @@ def overrides_to_tables(overrides: dict[str, Any] | list[str] | None) -> dict[st
     for table, key, value in items:
         tables.setdefault(table, {})[key] = value
     return tables
+
+
+def stacked_overrides(first: dict[str, dict[str, Any]],
+                      then: dict[str, Any] | list[str] | None) -> dict[str, dict[str, Any]]:
+    """Override tables: ``first``, then ``then`` on top of it key by key, as if both came in
+    one ``--set`` list (no :func:`merge` rule applies between them: a ``plugin`` in ``then``
+    replaces only that key).
+
+    Parameters
+    ----------
+    first : dict
+        ``{table: {key: value}}`` with parsed values.
+    then : dict or list of str, optional
+        Overrides in any form :func:`overrides_to_tables` takes (e.g. the user's ``--set``).
+    """
+    tables = {table: dict(values) for table, values in first.items()}
+    for table, values in overrides_to_tables(then).items():
+        tables.setdefault(table, {}).update(values)
+    return tables
+
+
+def given_cues_overrides(overrides: dict[str, Any] | list[str] | None = None
+                         ) -> dict[str, dict[str, Any]]:
+    """``overrides`` on top of the cue provider that serves each frame's given depth
+    (:data:`GIVEN_CUES_PROVIDER`), so that ``cues.plugin=...`` among them may replace it."""
+    return stacked_overrides({"cues": {"plugin": GIVEN_CUES_PROVIDER}}, overrides)
+
+
+def cue_model_overrides(model: str, preset: str | None = None,
+                        config: str | Path | dict[str, Any] | None = None,
+                        overrides: dict[str, Any] | list[str] | None = None,
+                        registry: Registry | None = None) -> dict[str, dict[str, Any]]:
+    """The overrides of a run whose cue provider uses the catalogue model ``model``
+    (``monoplane run --cues NAME``): the keys the configured provider names for it
+    (:meth:`~monoplane.stages.base.CueProvider.catalogue_config`) in ``[cues]``, then
+    ``overrides`` on top.
+
+    Parameters
+    ----------
+    model : str
+        Catalogue name (or, for providers that take one, a profile file).
+    preset, config, overrides
+        The run's preset, config file and overrides (they pick the provider).
+    registry : Registry, optional
+        Stage registry; the default plugin manager's when omitted.
+
+    Raises
+    ------
+    ConfigError
+        When the configured provider takes no catalogue model.
+    """
+    registry = registry or get_registry()
+    name = load(preset, config, overrides, registry).stages["cues"][0]
+    # The registry admits only CueProvider subclasses under "cues".
+    provider = cast(type[CueProvider], registry.get("cues", name).cls)
+    keys = provider.catalogue_config(model)
+    if keys is None:
+        raise ConfigError(f"--cues {model}: cue provider '{name}' takes no catalogue model; "
+                          "pick one that does with --set cues.plugin=NAME (see 'monoplane "
+                          "plugins')")
+    return stacked_overrides({"cues": keys}, overrides)
 
 
 def _host_config_class(table: str) -> type:

@@ -20,15 +20,16 @@ Steps (:func:`~monoplane.multiview.driver.reconstruct_multiview`):
    the matcher left out, from their planes, normals, depth and whatever feature matches exist;
    when every view's depth is metric the world is then expressed in the depth's units;
 4. the fuser (``[fuser]``) matches and fuses planes into a :class:`~monoplane.datamodel.Scene`
-   and the adjuster (``[adjuster]``) refines it (:mod:`~monoplane.multiview.fusion`);
+   and the adjuster (``[adjuster]``) refines it (:mod:`~monoplane.multiview.global_planes`);
 5. :func:`~monoplane.multiview.writers.save_scene` writes it (:mod:`~monoplane.multiview.writers`).
 
 Frames: cameras are world-to-camera ``x_cam = R x_world + t`` with OpenCV axes (x right, y down,
 z forward).
 """
 
+from monoplane.geometry.mesh import scene_mesh
 from monoplane.multiview.driver import MultiviewResult, reconstruct_multiview
-from monoplane.multiview.fusion import global_label_map, scene_mesh, scene_plane_colors
+from monoplane.multiview.global_planes import global_label_map, scene_plane_colors
 from monoplane.multiview.registration import (
     hold_intrinsics_fixed,
     matcher_keeps_intrinsics,

@@ -7,6 +7,7 @@ z forward).
 from __future__ import annotations
 
 import contextlib
+import sys
 import time
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
@@ -15,10 +16,10 @@ import numpy as np
 
 from monoplane.batch.pool import default_workers
 from monoplane.batch.views import VIEW_STAGES, ViewPool, process_view
-from monoplane.datamodel import Frame, Scene, SfmResult
+from monoplane.datamodel import Frame, Reconstruction, Scene, SfmResult
 from monoplane.errors import InvalidInput, StageError
 from monoplane.geometry.alignment import ScaleAlignment
-from monoplane.multiview.fusion import fuse_and_adjust
+from monoplane.multiview.global_planes import fuse_and_adjust
 from monoplane.multiview.registration import (
     align_to_sfm,
     feature_correspondences,
@@ -103,7 +104,8 @@ def reconstruct_multiview(frames: list[Frame], pipe: Pipeline, progress: bool = 
     frames : list of Frame
         Two or more colour frames, optionally with depth/normals (then the cue
         provider uses them). ``K`` is held fixed in SfM only after
-        :func:`hold_intrinsics_fixed`; otherwise it is the initial guess.
+        :func:`hold_intrinsics_fixed`; otherwise it is the initial guess. When two share a
+        name, each name gets its input index as a prefix (``000_rgb``).
     pipe : Pipeline
         Configured pipeline; its ``matcher``, ``cues``, RANSAC stages, ``refiner``, ``fuser``
         and ``adjuster`` are used.
@@ -131,86 +133,36 @@ def reconstruct_multiview(frames: list[Frame], pipe: Pipeline, progress: bool = 
         When fewer than two views register, or (``strict``) when any view does not; when a
         view cannot be scale-aligned (too few SfM points on valid depth).
     """
-    import sys
-
     from threadpoolctl import threadpool_limits
 
     if len(frames) < 2:
         raise InvalidInput(f"multi-view reconstruction needs at least 2 images, got {len(frames)}")
+    frames = _unique_names(frames)
     workers = default_workers() if workers is None else max(1, int(workers))
     with ViewPool(pipe, workers, len(frames)) as views_pool, contextlib.ExitStack() as blas_limit:
         timings: dict[str, float] = {}
         start = time.perf_counter()
-        sfm_failure = ""
         # The single-view stages do not depend on the depth's scale (see
         # rescale_reconstruction), only on K. When the matcher keeps every K as given, the
         # views are segmented while SfM runs, and only scaled once it is done.
         early = (views_pool.submit(process_view, frames)
                  if sfm is None and matcher_keeps_intrinsics(pipe) else None)
         correspondences = feature_correspondences(pipe, frames)
-        if sfm is None:
-            try:
-                sfm = match_views(pipe, frames, correspondences, "multiview", timings)
-            except StageError as exc:
-                if exc.kind != "matcher":
-                    raise
-                # No model at all: view 0 becomes the world frame and the registrar places
-                # the other views.
-                sfm_failure = str(exc)
-                print(f"monoplane: warning: {exc}; placing the views with the registrar",
-                      file=sys.stderr)
-                sfm = replace(origin_sfm(frames, sfm_failure), correspondences=correspondences)
-        elif sfm.num_views != len(frames):
-            raise InvalidInput(f"{len(frames)} frames but the SfM result has {sfm.num_views} views")
-        registration = [dict(r) for r in sfm.registration] or [{"method": "sfm"} for _ in frames]
-        for v, r in enumerate(registration):
-            if r["method"] == "sfm":
-                # Evidence of an SfM placement: the view's keypoints that observe model points.
-                r.setdefault("observations", int((sfm.point_ids[v] >= 0).sum()))
-        if progress:
-            print(f"monoplane: SfM registered {sum(r['method'] != 'none' for r in registration)} "
-                  f"of {len(frames)} views", file=sys.stderr)
+        sfm, sfm_failure = _structure_from_motion(pipe, frames, sfm, correspondences, timings)
+        registration = _sfm_registration(sfm, len(frames), progress)
 
         config = pipe.config.to_dict()
         # Everything below runs small dense products ((N, 3) @ (3, k)), where OpenBLAS's
         # threads cost far more than they give: 10x slower on a 2-core machine with one core
         # busy (measured: 23 ms against 2.5 ms for a 76 800 x 3 product). One BLAS thread.
         blas_limit.enter_context(threadpool_limits(1, user_api="blas"))
-        with_k = []
-        for v, frame in enumerate(frames):
-            cam = sfm.cameras[v]
-            if (cam.height, cam.width) != frame.shape:
-                raise InvalidInput(f"{frame.name}: SfM camera size differs from the image size")
-            with_k.append(frame.with_(K=cam.K) if not np.allclose(cam.K, frame.K) else frame)
-        t0 = time.perf_counter()
-        if early is None:
-            segmented = views_pool.map(process_view, with_k)
-        else:
-            segmented = early.result()
-            # A view whose K SfM changed after all (a matcher that did not hold it) is redone.
-            redo = [v for v in range(len(frames)) if with_k[v] is not frames[v]]
-            if redo:
-                for v, rec in zip(redo, views_pool.map(process_view, [with_k[v] for v in redo]),
-                                  strict=True):
-                    segmented[v] = rec
+        segmented = _segment_views(views_pool, early, frames, sfm, timings)
         prepared = [rec.frame for rec in segmented]
-        timings["single_view"] = time.perf_counter() - t0
-        timings["per_view"] = float(np.mean([sum(rec.timings.get(k, 0.0) for k in VIEW_STAGES)
-                                             for rec in segmented]))
 
         t0 = time.perf_counter()
-        found = align_to_sfm(prepared, sfm, registration, strict)
-        if not any(r["method"] != "none" for r in registration):
-            # SfM placed views but none could be scale-aligned (too few model points on valid
-            # depth): as if it had built no model, view 0 sets the world and the registrar
-            # places the rest.
-            reasons = "; ".join(r.get("reason", "") for r in registration if r.get("reason"))
-            sfm_failure = f"no registered view could be scale-aligned ({reasons})"
-            sfm = replace(origin_sfm(prepared, sfm_failure), correspondences=correspondences)
-            registration = [dict(r) for r in sfm.registration]
-            found = align_to_sfm(prepared, sfm, registration, strict)
+        sfm, found, sfm_failure = _align_views(prepared, sfm, registration, strict,
+                                               correspondences, sfm_failure)
         timings["alignment"] = time.perf_counter() - t0
-        sfm = replace(sfm, registration=registration)
         # The registrar places the views SfM left out, and checks the weakly supported ones.
         registrar = pipe.stage("registrar", Registrar)
         sfm, found = pipe.call("registrar", registrar.name,
@@ -221,45 +173,13 @@ def reconstruct_multiview(frames: list[Frame], pipe: Pipeline, progress: bool = 
             placed = sum(r["method"] not in ("none", "sfm", "origin") for r in registration)
             print(f"monoplane: the registrar placed {placed} view(s)", file=sys.stderr)
         t0 = time.perf_counter()
-        keep = [v for v, r in enumerate(registration) if r["method"] != "none"]
-        unregistered = [frames[v].name for v, r in enumerate(registration) if r["method"] == "none"]
-        if strict and unregistered:
-            why = f" (structure from motion: {sfm_failure})" if sfm_failure else ""
-            raise InvalidInput(f"could not register {len(unregistered)} of {len(frames)} images: "
-                               f"{', '.join(unregistered)}; no method placed them{why} (drop "
-                               "--strict to reconstruct the registered views)")
-        if len(keep) < 2:
-            why = f"; {sfm_failure}" if sfm_failure else ""
-            raise InvalidInput(f"only {len(keep)} of {len(frames)} images could be registered "
-                               f"({', '.join(unregistered)} could not){why}; a scene needs two")
-        reasons = {frames[v].name: registration[v].get("reason", "not placed")
-                   for v, r in enumerate(registration) if r["method"] == "none"}
-        if unregistered:
-            print(f"monoplane: warning: {len(unregistered)} of {len(frames)} images could not be "
-                  f"registered and are left out: "
-                  f"{'; '.join(f'{n} ({why})' for n, why in reasons.items())}", file=sys.stderr)
-        sfm = subset_sfm(sfm, keep)
-        prepared = [prepared[v] for v in keep]
-        aligns = [found[v] for v in keep]
-
-        metric = all(f.depth_kind == "metric" for f in prepared)
-        units = prepared[0].depth_units if metric and len(
-            {f.depth_units for f in prepared}) == 1 else "sfm"
-        world_factor = 1.0
-        if units != "sfm":
-            # Depth is metric: express the SfM world in the depth's unit instead of the reverse.
-            world_factor = float(np.median([1.0 / a.scale for a in aligns]))
-            sfm = scale_sfm(sfm, world_factor)
-        aligns = [replace(a, scale=a.scale * world_factor, residual=a.residual * world_factor)
-                  for a in aligns]
-        scales = [a.scale for a in aligns]
-        aligned = [
-            f.with_(depth=(f.depth * s).astype(np.float32), depth_units=units,
-                    notes=[*f.notes, f"depth scaled by {s:.6g} onto the SfM points "
-                           f"({a.num_inliers}/{a.num_points} inliers)"])
-            for f, s, a in zip(prepared, scales, aligns, strict=True)
-        ]
+        keep, unregistered, reasons = _registered_views(frames, registration, strict,
+                                                        sfm_failure)
+        sfm, units, aligns, aligned = _to_scene_units(subset_sfm(sfm, keep),
+                                                      [prepared[v] for v in keep],
+                                                      [found[v] for v in keep])
         timings["alignment"] += time.perf_counter() - t0
+        scales = [a.scale for a in aligns]
         views = [rescale_reconstruction(segmented[v], frame, s)
                  for v, frame, s in zip(keep, aligned, scales, strict=True)]
 
@@ -272,3 +192,167 @@ def reconstruct_multiview(frames: list[Frame], pipe: Pipeline, progress: bool = 
                            registration=[registration[v] for v in keep],
                            unregistered=unregistered, unregistered_reasons=reasons,
                            adjustment=adjustment, fused=fused)
+
+
+def _structure_from_motion(pipe: Pipeline, frames: list[Frame], sfm: SfmResult | None,
+                           correspondences: Any, timings: dict[str, float]
+                           ) -> tuple[SfmResult, str]:
+    """The matcher's SfM result (or ``sfm`` when given), and why SfM failed ("" if it did not).
+
+    When the matcher builds no model at all, view 0 becomes the world frame
+    (:func:`~monoplane.multiview.registration.origin_sfm`) and the registrar places the others.
+    """
+    if sfm is not None:
+        if sfm.num_views != len(frames):
+            raise InvalidInput(f"{len(frames)} frames but the SfM result has {sfm.num_views} views")
+        return sfm, ""
+    try:
+        return match_views(pipe, frames, correspondences, "multiview", timings), ""
+    except StageError as exc:
+        if exc.kind != "matcher":
+            raise
+        # No model at all: view 0 becomes the world frame and the registrar places the other
+        # views.
+        print(f"monoplane: warning: {exc}; placing the views with the registrar",
+              file=sys.stderr)
+        return replace(origin_sfm(frames, str(exc)), correspondences=correspondences), str(exc)
+
+
+def _unique_names(frames: list[Frame]) -> list[Frame]:
+    """``frames``, or when two share a name (``view0/rgb.png`` and ``view1/rgb.png``), each
+    renamed with its input index as a prefix (``000_rgb``), so the outputs tell them apart."""
+    if len({f.name for f in frames}) == len(frames):
+        return frames
+    return [f.with_(name=f"{i:03d}_{f.name}") for i, f in enumerate(frames)]
+
+
+def _sfm_registration(sfm: SfmResult, n_views: int, progress: bool) -> list[dict[str, Any]]:
+    """Per view, how SfM placed it (``method``; ``"sfm"`` for all when the matcher says
+    nothing) and, for an SfM placement, its evidence: the keypoints that observe model points.
+    With ``progress``, says how many views SfM placed on stderr."""
+    registration = [dict(r) for r in sfm.registration] or [{"method": "sfm"}
+                                                           for _ in range(n_views)]
+    for v, r in enumerate(registration):
+        if r["method"] == "sfm":
+            r.setdefault("observations", int((sfm.point_ids[v] >= 0).sum()))
+    if progress:
+        print(f"monoplane: SfM registered {sum(r['method'] != 'none' for r in registration)} "
+              f"of {n_views} views", file=sys.stderr)
+    return registration
+
+
+def _align_views(prepared: list[Frame], sfm: SfmResult, registration: list[dict[str, Any]],
+                 strict: bool, correspondences: Any, sfm_failure: str
+                 ) -> tuple[SfmResult, list[ScaleAlignment | None], str]:
+    """Scale-align each SfM-placed view's depth onto the SfM points
+    (:func:`~monoplane.multiview.registration.align_to_sfm`, which updates ``registration``).
+
+    When SfM placed views but none could be scale-aligned (too few model points on valid
+    depth), it is as if SfM had built no model: view 0 sets the world and the registrar
+    places the rest.
+
+    Returns
+    -------
+    (SfmResult, list, str)
+        The SfM result carrying the registration records, each view's alignment (None where
+        there is none) and why SfM failed ("" if it did not).
+    """
+    found = align_to_sfm(prepared, sfm, registration, strict)
+    if not any(r["method"] != "none" for r in registration):
+        reasons = "; ".join(r.get("reason", "") for r in registration if r.get("reason"))
+        sfm_failure = f"no registered view could be scale-aligned ({reasons})"
+        sfm = replace(origin_sfm(prepared, sfm_failure), correspondences=correspondences)
+        registration = [dict(r) for r in sfm.registration]
+        found = align_to_sfm(prepared, sfm, registration, strict)
+    return replace(sfm, registration=registration), found, sfm_failure
+
+
+def _segment_views(views_pool: ViewPool, early: Any, frames: list[Frame], sfm: SfmResult,
+                   timings: dict[str, float]) -> list[Reconstruction]:
+    """Each view's single-view result at its SfM camera's intrinsics.
+
+    ``early`` is the pool's pending result for the frames as given (None when none was
+    started); a view whose ``K`` SfM changed is redone. Records ``single_view`` (the wait) and
+    ``per_view`` (a view's mean stage seconds) in ``timings``.
+    """
+    with_k = []
+    for v, frame in enumerate(frames):
+        cam = sfm.cameras[v]
+        if (cam.height, cam.width) != frame.shape:
+            raise InvalidInput(f"{frame.name}: SfM camera size differs from the image size")
+        with_k.append(frame.with_(K=cam.K) if not np.allclose(cam.K, frame.K) else frame)
+    t0 = time.perf_counter()
+    if early is None:
+        segmented = views_pool.map(process_view, with_k)
+    else:
+        segmented = early.result()
+        # A view whose K SfM changed after all (a matcher that did not hold it) is redone.
+        redo = [v for v in range(len(frames)) if with_k[v] is not frames[v]]
+        if redo:
+            for v, rec in zip(redo, views_pool.map(process_view, [with_k[v] for v in redo]),
+                              strict=True):
+                segmented[v] = rec
+    timings["single_view"] = time.perf_counter() - t0
+    timings["per_view"] = float(np.mean([sum(rec.timings.get(k, 0.0) for k in VIEW_STAGES)
+                                         for rec in segmented]))
+    return segmented
+
+
+def _registered_views(frames: list[Frame], registration: list[dict[str, Any]], strict: bool,
+                      sfm_failure: str) -> tuple[list[int], list[str], dict[str, str]]:
+    """The indices of the views with a pose, the names of the others and why each was left
+    out (warned about on stderr).
+
+    Raises
+    ------
+    InvalidInput
+        When fewer than two views have a pose, or (``strict``) when any view has none.
+    """
+    keep = [v for v, r in enumerate(registration) if r["method"] != "none"]
+    unregistered = [frames[v].name for v, r in enumerate(registration) if r["method"] == "none"]
+    if strict and unregistered:
+        why = f" (structure from motion: {sfm_failure})" if sfm_failure else ""
+        raise InvalidInput(f"could not register {len(unregistered)} of {len(frames)} images: "
+                           f"{', '.join(unregistered)}; no method placed them{why} (drop "
+                           "--strict to reconstruct the registered views)")
+    if len(keep) < 2:
+        why = f"; {sfm_failure}" if sfm_failure else ""
+        raise InvalidInput(f"only {len(keep)} of {len(frames)} images could be registered "
+                           f"({', '.join(unregistered)} could not){why}; a scene needs two")
+    reasons = {frames[v].name: registration[v].get("reason", "not placed")
+               for v, r in enumerate(registration) if r["method"] == "none"}
+    if unregistered:
+        print(f"monoplane: warning: {len(unregistered)} of {len(frames)} images could not be "
+              f"registered and are left out: "
+              f"{'; '.join(f'{n} ({why})' for n, why in reasons.items())}", file=sys.stderr)
+    return keep, unregistered, reasons
+
+
+def _to_scene_units(sfm: SfmResult, prepared: list[Frame], aligns: list[ScaleAlignment]
+                    ) -> tuple[SfmResult, str, list[ScaleAlignment], list[Frame]]:
+    """Express the registered views in one unit: the depth's when every view's depth is
+    metric in one unit (the SfM world is scaled onto it), otherwise SfM's (``"sfm"``).
+
+    Returns
+    -------
+    (SfmResult, str, list of ScaleAlignment, list of Frame)
+        The SfM result in scene units, the unit, each view's alignment to it and each frame
+        with its depth scaled into it.
+    """
+    metric = all(f.depth_kind == "metric" for f in prepared)
+    units = prepared[0].depth_units if metric and len(
+        {f.depth_units for f in prepared}) == 1 else "sfm"
+    world_factor = 1.0
+    if units != "sfm":
+        # Depth is metric: express the SfM world in the depth's unit instead of the reverse.
+        world_factor = float(np.median([1.0 / a.scale for a in aligns]))
+        sfm = scale_sfm(sfm, world_factor)
+    aligns = [replace(a, scale=a.scale * world_factor, residual=a.residual * world_factor)
+              for a in aligns]
+    aligned = [
+        f.with_(depth=(f.depth * a.scale).astype(np.float32), depth_units=units,
+                notes=[*f.notes, f"depth scaled by {a.scale:.6g} onto the SfM points "
+                       f"({a.num_inliers}/{a.num_points} inliers)"])
+        for f, a in zip(prepared, aligns, strict=True)
+    ]
+    return sfm, units, aligns, aligned

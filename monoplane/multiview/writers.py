@@ -13,13 +13,14 @@ import numpy as np
 
 from monoplane.datamodel import Camera, SfmResult
 from monoplane.export.gltf import scene_glb
+from monoplane.geometry.mesh import scene_mesh
 from monoplane.io.frames import (
     atomic_output_dir,
     write_plane_mesh_ply,
     write_points_ply,
     write_reconstruction_files,
 )
-from monoplane.multiview.fusion import global_label_map, scene_mesh, scene_plane_colors
+from monoplane.multiview.global_planes import global_label_map, scene_plane_colors
 
 if TYPE_CHECKING:
     from monoplane.multiview.driver import MultiviewResult

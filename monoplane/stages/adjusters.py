@@ -17,7 +17,7 @@ import numpy as np
 
 from monoplane.datamodel import Scene, SfmResult, pixel_rays, plane_to_camera, plane_to_world
 from monoplane.errors import InvalidInput
-from monoplane.geometry.plane_adjustment import AdjustmentProblem, adjust
+from monoplane.geometry.plane_adjustment import AdjustmentProblem, AdjustmentResult, adjust
 from monoplane.geometry.plane_matching import fuse_planes
 from monoplane.hookspecs import hookimpl
 from monoplane.stages.base import Adjuster, Stage, param
@@ -99,38 +99,9 @@ class PlaneBundleAdjuster(Adjuster):
         refined = sorted(g for g, m in members.items()
                          if len(m) >= (2 if cfg.multi_view_only else 1))
         row = {g: k for k, g in enumerate(refined)}
-        rng = np.random.default_rng(cfg.seed)
-        samp_view, samp_plane, samp_x = [], [], []
-        norm_view, norm_plane, norm_m = [], [], []
         if cfg.lift not in ("planar", "cues"):
             raise InvalidInput(f"adjuster.lift must be 'planar' or 'cues', got {cfg.lift!r}")
-        for v, (rec, cam) in enumerate(zip(scene.views, scene.cameras, strict=True)):
-            depth = rec.planar_depth() if cfg.lift == "planar" else rec.frame.depth
-            rays = None
-            for local, glob in scene.links[v].items():
-                if glob not in row:
-                    continue
-                norm_view.append(v)
-                norm_plane.append(row[glob])
-                m = rec.params[local - 1, :3]
-                # Same side as the global plane (both normally face the cameras).
-                norm_m.append(m if (cam.R.T @ m) @ scene.planes[glob, :3] >= 0 else -m)
-                idx = np.flatnonzero((rec.labels.ravel() == local) & (depth.ravel() > 0))
-                if len(idx) == 0:
-                    continue
-                if rays is None:
-                    rays = pixel_rays(cam.K, cam.height, cam.width).reshape(-1, 3)
-                pick = rng.choice(idx, size=min(cfg.samples_per_plane, len(idx)), replace=False)
-                samp_x.append(rays[pick] * depth.ravel()[pick, None])
-                samp_view.append(np.full(len(pick), v))
-                samp_plane.append(np.full(len(pick), row[glob]))
-        obs_view, obs_point, obs_uv = [], [], []
-        for v in range(n_views):
-            ids = sfm.point_ids[v]
-            ok = ids >= 0
-            obs_view.append(np.full(int(ok.sum()), v))
-            obs_point.append(ids[ok])
-            obs_uv.append(sfm.keypoints[v][ok])
+        samples = self._plane_samples(scene, row)
         pp_point, pp_plane, pp_depth = (self._points_on_planes(scene, sfm, row)
                                         if cfg.sigma_point > 0 else
                                         (np.zeros(0, np.int64),) * 2 + (np.zeros(0),))
@@ -140,25 +111,7 @@ class PlaneBundleAdjuster(Adjuster):
                 "reason": f"{len(pp_point)} SfM points inside planes, fewer than "
                           f"adjuster.min_sfm_points = {cfg.min_sfm_points}: nothing anchors the "
                           "planes but the monocular depth"}
-        prob = AdjustmentProblem(
-            K=np.stack([c.K for c in scene.cameras]), R=np.stack([c.R for c in scene.cameras]),
-            t=np.stack([c.t for c in scene.cameras]), points=sfm.points.copy(),
-            obs_view=np.concatenate(obs_view).astype(np.int64),
-            obs_point=np.concatenate(obs_point).astype(np.int64),
-            obs_uv=np.concatenate(obs_uv).reshape(-1, 2),
-            planes=scene.planes[refined].copy(),
-            samp_view=np.concatenate(samp_view or [np.zeros(0)]).astype(np.int64),
-            samp_plane=np.concatenate(samp_plane or [np.zeros(0)]).astype(np.int64),
-            samp_x=np.concatenate(samp_x or [np.zeros((0, 3))]).reshape(-1, 3),
-            norm_view=np.array(norm_view, dtype=np.int64),
-            norm_plane=np.array(norm_plane, dtype=np.int64),
-            norm_m=np.array(norm_m, dtype=np.float64).reshape(-1, 3),
-            pp_point=pp_point, pp_plane=pp_plane, pp_depth=pp_depth,
-            sigma_px=cfg.sigma_px, sigma_rel=cfg.sigma_rel,
-            sigma_normal_deg=cfg.sigma_normal_deg, sigma_point=max(cfg.sigma_point, 1e-9),
-            prior_rot_deg=cfg.prior_rot_deg,
-            prior_t=self._prior_t(samp_view, samp_x, n_views),
-        )
+        prob = self._problem(scene, sfm, refined, samples, (pp_point, pp_plane, pp_depth))
         res = adjust(prob, max_evaluations=cfg.max_evaluations, refine_points=cfg.refine_points,
                      figure_tolerance=cfg.figure_tolerance)
         report = {"accepted": res.accepted, "before": res.before, "after": res.after,
@@ -170,7 +123,91 @@ class PlaneBundleAdjuster(Adjuster):
             # exactly as fused; the report keeps what the solver reached, for diagnosis.
             report.update(reason=res.reason, rejected=res.rejected)
             return scene, sfm, report
+        new_scene, new_sfm = self._apply(scene, sfm, res, members, row, refined)
+        return new_scene, new_sfm, report
 
+    def _plane_samples(self, scene: Scene, row: dict[int, int]) -> dict[str, list]:
+        """The point-to-plane and normal terms' data: per view plane linked to a refined global
+        plane (``row[global]`` its row in the solve), its normal and up to
+        ``samples_per_plane`` of its pixels lifted into its camera (``lift``).
+
+        Returns
+        -------
+        dict
+            Lists to concatenate: ``samp_view``, ``samp_plane`` and ``samp_x`` (pixels, camera
+            frame), ``norm_view``, ``norm_plane`` and ``norm_m`` (normals, camera frame).
+        """
+        cfg = self.config
+        rng = np.random.default_rng(cfg.seed)
+        out: dict[str, list] = {k: [] for k in ("samp_view", "samp_plane", "samp_x",
+                                                "norm_view", "norm_plane", "norm_m")}
+        for v, (rec, cam) in enumerate(zip(scene.views, scene.cameras, strict=True)):
+            depth = rec.planar_depth() if cfg.lift == "planar" else rec.frame.depth
+            rays = None
+            for local, glob in scene.links[v].items():
+                if glob not in row:
+                    continue
+                out["norm_view"].append(v)
+                out["norm_plane"].append(row[glob])
+                m = rec.params[local - 1, :3]
+                # Same side as the global plane (both normally face the cameras).
+                out["norm_m"].append(m if (cam.R.T @ m) @ scene.planes[glob, :3] >= 0 else -m)
+                idx = np.flatnonzero((rec.labels.ravel() == local) & (depth.ravel() > 0))
+                if len(idx) == 0:
+                    continue
+                if rays is None:
+                    rays = pixel_rays(cam.K, cam.height, cam.width).reshape(-1, 3)
+                pick = rng.choice(idx, size=min(cfg.samples_per_plane, len(idx)), replace=False)
+                out["samp_x"].append(rays[pick] * depth.ravel()[pick, None])
+                out["samp_view"].append(np.full(len(pick), v))
+                out["samp_plane"].append(np.full(len(pick), row[glob]))
+        return out
+
+    def _problem(self, scene: Scene, sfm: SfmResult, refined: list[int],
+                 samples: dict[str, list], on_planes: tuple[np.ndarray, np.ndarray, np.ndarray]
+                 ) -> AdjustmentProblem:
+        """The least-squares problem: the SfM observations, the plane samples
+        (:meth:`_plane_samples`) and the SfM points on planes (:meth:`_points_on_planes`)."""
+        cfg = self.config
+        n_views = len(scene.cameras)
+        obs_view, obs_point, obs_uv = [], [], []
+        for v in range(n_views):
+            ids = sfm.point_ids[v]
+            ok = ids >= 0
+            obs_view.append(np.full(int(ok.sum()), v))
+            obs_point.append(ids[ok])
+            obs_uv.append(sfm.keypoints[v][ok])
+        samp_view, samp_plane, samp_x = (samples["samp_view"], samples["samp_plane"],
+                                         samples["samp_x"])
+        pp_point, pp_plane, pp_depth = on_planes
+        return AdjustmentProblem(
+            K=np.stack([c.K for c in scene.cameras]), R=np.stack([c.R for c in scene.cameras]),
+            t=np.stack([c.t for c in scene.cameras]), points=sfm.points.copy(),
+            obs_view=np.concatenate(obs_view).astype(np.int64),
+            obs_point=np.concatenate(obs_point).astype(np.int64),
+            obs_uv=np.concatenate(obs_uv).reshape(-1, 2),
+            planes=scene.planes[refined].copy(),
+            samp_view=np.concatenate(samp_view or [np.zeros(0)]).astype(np.int64),
+            samp_plane=np.concatenate(samp_plane or [np.zeros(0)]).astype(np.int64),
+            samp_x=np.concatenate(samp_x or [np.zeros((0, 3))]).reshape(-1, 3),
+            norm_view=np.array(samples["norm_view"], dtype=np.int64),
+            norm_plane=np.array(samples["norm_plane"], dtype=np.int64),
+            norm_m=np.array(samples["norm_m"], dtype=np.float64).reshape(-1, 3),
+            pp_point=pp_point, pp_plane=pp_plane, pp_depth=pp_depth,
+            sigma_px=cfg.sigma_px, sigma_rel=cfg.sigma_rel,
+            sigma_normal_deg=cfg.sigma_normal_deg, sigma_point=max(cfg.sigma_point, 1e-9),
+            prior_rot_deg=cfg.prior_rot_deg,
+            prior_t=self._prior_t(samp_view, samp_x, n_views),
+        )
+
+    @staticmethod
+    def _apply(scene: Scene, sfm: SfmResult, res: AdjustmentResult,
+               members: dict[int, list[tuple[int, int]]],
+               row: dict[int, int], refined: list[int]) -> tuple[Scene, SfmResult]:
+        """The scene and SfM result an accepted solve gives: new poses, depth scales (views'
+        depth and plane offsets), refined planes, and the planes left out of the solve moved
+        with their views."""
+        n_views = len(scene.cameras)
         cameras = [replace(c, R=res.R[v], t=res.t[v]) for v, c in enumerate(scene.cameras)]
         views = []
         for v, rec in enumerate(scene.views):
@@ -199,8 +236,7 @@ class PlaneBundleAdjuster(Adjuster):
         new_sfm = replace(sfm, cameras=[replace(c, R=res.R[v], t=res.t[v])
                                         for v, c in enumerate(sfm.cameras)],
                           points=res.points)
-        return new_scene, new_sfm, report
-
+        return new_scene, new_sfm
 
     @staticmethod
     def _points_on_planes(scene: Scene, sfm: SfmResult, row: dict[int, int]

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
-import cv2
 import numpy as np
 
 from monoplane.datamodel import (
@@ -24,21 +23,29 @@ from monoplane.datamodel import (
     pixel_rays,
     plane_to_camera,
     plane_to_world,
-    ray_plane_depth,
 )
 from monoplane.errors import InvalidInput
-from monoplane.geometry.coplanar import coplanarity_residual, footprint_gap
-from monoplane.geometry.normals import normals_from_depth
 from monoplane.geometry.flatness import noise_floor_deg, normal_spread_deg
+from monoplane.geometry.normals import normals_from_depth
 from monoplane.geometry.plane_matching import (
     consistent_groups,
     fuse_planes,
+    geometric_matches,
     keypoint_counts,
     keypoint_plane_matches,
     normal_angles_deg,
     relative_pose,
     reprojection_iou,
     reprojection_plane_matches,
+    world_centroids,
+)
+from monoplane.geometry.plane_merging import CoplanarMerger
+from monoplane.geometry.plane_transfer import (
+    drop_planes,
+    plane_footprint,
+    project_to_view,
+    recovered_region,
+    replace_plane,
 )
 from monoplane.hookspecs import hookimpl
 from monoplane.stages.base import Fuser, Stage, param
@@ -186,7 +193,7 @@ class AverageFuser(Fuser):
         cfg = self.config
         flat = self.flat_planes(views)
         # Rejected planes are non-planar for every later step: matching, fusion, recovery.
-        screened = [_drop_planes(rec, ~ok) for rec, ok in zip(views, flat, strict=True)]
+        screened = [drop_planes(rec, ~ok) for rec, ok in zip(views, flat, strict=True)]
         matches = self.match_planes(screened, sfm)
         nodes = [(v, local) for v, rec in enumerate(views)
                  for local in range(1, rec.num_planes + 1) if flat[v][local - 1]]
@@ -196,8 +203,8 @@ class AverageFuser(Fuser):
         world = [plane_to_world(rec.params, cam.R, cam.t) if rec.num_planes else
                  np.zeros((0, 4)) for rec, cam in zip(views, sfm.cameras, strict=True)]
         node_planes = np.array([world[v][local - 1] for v, local in nodes]).reshape(-1, 4)
-        merger = _CoplanarMerger(nodes, node_planes, screened, sfm.cameras,
-                                 [self._step(rec) for rec in screened], cfg)
+        merger = CoplanarMerger(nodes, node_planes, screened, sfm.cameras,
+                                [self._step(rec) for rec in screened], cfg)
         groups = consistent_groups(np.array([v for v, _ in nodes], dtype=np.int64), edges,
                                    np.array([m.strength for m in matches]),
                                    merger.coplanar if cfg.merge_coplanar else None)
@@ -229,7 +236,7 @@ class AverageFuser(Fuser):
             # An absorbed plane becomes its global plane in its camera, as a recovered one:
             # its own fit disagreed with the global plane, the other views' depth did not.
             v, local = nodes[k]
-            screened[v] = _replace_plane(screened[v], sfm.cameras[v], local, planes_array[g])
+            screened[v] = replace_plane(screened[v], sfm.cameras[v], local, planes_array[g])
             links[v][local] = g
         if cfg.recover_planes:
             screened, links = self.recover_planes(screened, sfm, planes_array, links,
@@ -288,7 +295,7 @@ class AverageFuser(Fuser):
 
     def check_single_view(self, views: list[Reconstruction], originals: list[Reconstruction],
                           sfm: SfmResult, nodes: list[tuple[int, int]],
-                          groups: list[list[int]], merger: _CoplanarMerger
+                          groups: list[list[int]], merger: CoplanarMerger
                           ) -> tuple[list[list[int]], dict[int, int], set[int]]:
         """Test each group seen by one view only against the other views that see it.
 
@@ -325,7 +332,7 @@ class AverageFuser(Fuser):
             ``(view, local id)`` of each node.
         groups : list of list of int
             Node indices of each group.
-        merger : _CoplanarMerger
+        merger : CoplanarMerger
             Fuses a group's plane.
 
         Returns
@@ -348,27 +355,10 @@ class AverageFuser(Fuser):
                 continue
             i = view_set.pop()
             plane = merger.fused(members)
-            x = _footprint(views[i], sfm.cameras[i], [nodes[k][1] for k in members], plane,
-                           self._step(views[i]), cfg.merge_samples)
-            contra, unseg, seen = 0, 0, 0
-            support: dict[int, int] = {}
-            for j, (rec, cam) in enumerate(zip(views, sfm.cameras, strict=True)):
-                if j == i or len(x) == 0:
-                    continue
-                hit = _project(x, rec.frame.depth, cam, cfg.see_through_distance)
-                if hit is None or hit[0].sum() < cfg.single_min_visible * len(x):
-                    continue
-                visible, through, rows, cols = hit
-                labels, original = rec.labels[rows, cols], originals[j].labels[rows, cols]
-                on = visible & ~through
-                # The view's curved planes were removed from ``labels`` only.
-                curved = on & (original > 0) & (labels == 0)
-                contra += int((visible & through).sum() + curved.sum())
-                unseg += int((on & (original == 0)).sum())
-                owners = group_of[node_index[j][labels[on & (labels > 0)]]]
-                for h, c in zip(*np.unique(owners[owners >= 0], return_counts=True), strict=True):
-                    support[int(h)] = support.get(int(h), 0) + int(c)
-                seen += int(visible.sum())
+            x = plane_footprint(views[i], sfm.cameras[i], [nodes[k][1] for k in members],
+                                plane, self._step(views[i]), cfg.merge_samples)
+            contra, unseg, seen, support = self._single_view_evidence(
+                views, originals, sfm, i, x, group_of, node_index)
             if seen == 0:
                 continue
             best = max(support, key=support.get) if support else -1
@@ -395,6 +385,56 @@ class AverageFuser(Fuser):
         absorbed = {k: new_index[h] for g, h in absorb.items() for k in groups[g]}
         recoverable = {new_index[g] for g, (what, _) in verdicts.items() if what == "recover"}
         return kept, absorbed, recoverable
+
+    def _single_view_evidence(self, views: list[Reconstruction],
+                              originals: list[Reconstruction], sfm: SfmResult, i: int,
+                              x: np.ndarray, group_of: np.ndarray, node_index: list[np.ndarray]
+                              ) -> tuple[int, int, int, dict[int, int]]:
+        """What the views other than ``i`` say about a group of view ``i`` (see
+        :meth:`check_single_view`).
+
+        Parameters
+        ----------
+        views, originals : list of Reconstruction
+            The views without and with their curved planes.
+        sfm : SfmResult
+            Their cameras.
+        i : int
+            The view that alone sees the group.
+        x : numpy.ndarray
+            (N, 3) world samples of the group on its fused plane.
+        group_of : numpy.ndarray
+            (nodes,) group index of each node, -1 for none.
+        node_index : list of numpy.ndarray
+            Per view, node index of each local plane id (-1 for none).
+
+        Returns
+        -------
+        (int, int, int, dict)
+            Contradicting, unsegmented and seen samples over the views taking part, and the
+            samples supporting each other group, by group index.
+        """
+        cfg = self.config
+        contra, unseg, seen = 0, 0, 0
+        support: dict[int, int] = {}
+        for j, (rec, cam) in enumerate(zip(views, sfm.cameras, strict=True)):
+            if j == i or len(x) == 0:
+                continue
+            hit = project_to_view(x, rec.frame.depth, cam, cfg.see_through_distance)
+            if hit is None or hit[0].sum() < cfg.single_min_visible * len(x):
+                continue
+            visible, through, rows, cols = hit
+            labels, original = rec.labels[rows, cols], originals[j].labels[rows, cols]
+            on = visible & ~through
+            # The view's curved planes were removed from ``labels`` only.
+            curved = on & (original > 0) & (labels == 0)
+            contra += int((visible & through).sum() + curved.sum())
+            unseg += int((on & (original == 0)).sum())
+            owners = group_of[node_index[j][labels[on & (labels > 0)]]]
+            for h, c in zip(*np.unique(owners[owners >= 0], return_counts=True), strict=True):
+                support[int(h)] = support.get(int(h), 0) + int(c)
+            seen += int(visible.sum())
+        return contra, unseg, seen, support
 
     def recover_planes(self, views: list[Reconstruction], sfm: SfmResult, planes: np.ndarray,
                        links: list[dict[int, int]], single: set[int] | None = None
@@ -447,8 +487,8 @@ class AverageFuser(Fuser):
                 rec, cam = views[i], sfm.cameras[i]
                 if i not in rays:
                     rays[i] = pixel_rays(cam.K, cam.height, cam.width)
-                region = _recovered_region(views, sfm.cameras, members[g], i, planes[g], cfg,
-                                           self._step(rec), rays[i])
+                region = recovered_region(views, sfm.cameras, members[g], i, planes[g], cfg,
+                                          self._step(rec), rays[i])
                 if region is None:
                     continue
                 plane = plane_to_camera(planes[g], cam.R, cam.t)[0]
@@ -472,8 +512,8 @@ class AverageFuser(Fuser):
         """
         cfg = self.config
         out: list[PlaneMatch] = []
-        centroids = [_world_centroids(rec, cam) for rec, cam in zip(views, sfm.cameras,
-                                                                      strict=True)]
+        centroids = [world_centroids(rec, cam) for rec, cam in zip(views, sfm.cameras,
+                                                                     strict=True)]
         world = [plane_to_world(rec.params, cam.R, cam.t).reshape(-1, 4)
                  for rec, cam in zip(views, sfm.cameras, strict=True)]
         for i in range(len(views)):
@@ -507,8 +547,8 @@ class AverageFuser(Fuser):
                         found.setdefault((int(p), int(q)),
                                          ("reprojection", float(score[p - 1, q - 1])))
                     if cfg.use_geometry:
-                        for p, q in _geometric_matches(score, angles, centroids[i],
-                                                       centroids[j], world[i], world[j], cfg):
+                        for p, q in geometric_matches(score, angles, centroids[i],
+                                                      centroids[j], world[i], world[j], cfg):
                             found.setdefault((p, q), ("geometry",
                                                       0.5 * float(score[p - 1, q - 1])))
                 for (p, q), (criterion, strength) in found.items():
@@ -518,354 +558,6 @@ class AverageFuser(Fuser):
 
     def _step(self, rec: Reconstruction) -> int:
         return max(1, rec.frame.width // max(self.config.grid_width, 1))
-
-
-def _plane_samples(rec: Reconstruction, cam: object,
-                   step: int) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Every ``step``-th pixel of each plane lifted by the view's depth into the world.
-
-    The depth, not the plane: whether a view plane's pixels lie on another plane is a question
-    about the pixels, which a plane fitted to a small or warped region may misstate.
-
-    Returns
-    -------
-    list of (numpy.ndarray, numpy.ndarray)
-        Per plane (local id ``k + 1`` at index ``k``): (N, 3) world points and their (N,)
-        depths in the view's camera; pixels without depth are left out.
-    """
-    labels = rec.labels[::step, ::step].ravel()
-    depth = rec.frame.depth[::step, ::step].ravel().astype(np.float64)
-    rays = pixel_rays(cam.K, cam.height, cam.width)[::step, ::step].reshape(-1, 3)
-    out = []
-    for local in range(1, rec.num_planes + 1):
-        mask = (labels == local) & (depth > 0)
-        x_cam = rays[mask] * depth[mask, None]
-        out.append(((x_cam - cam.t) @ cam.R, depth[mask]))
-    return out
-
-
-class _CoplanarMerger:
-    """Coplanarity and contact tests between groups of view planes (global planes in the
-    making), and the greedy merge of :meth:`AverageFuser.fuse_with_matches`.
-
-    Parameters
-    ----------
-    nodes : list of (int, int)
-        ``(view, local id)`` of each node (view plane).
-    planes : numpy.ndarray
-        (N, 4) world plane of each node.
-    views : list of Reconstruction
-        Scale-aligned views (curved planes removed).
-    cameras : list of Camera
-        Their cameras.
-    steps : list of int
-        Pixel stride of each view's samples.
-    cfg : AverageConfig
-    """
-
-    def __init__(self, nodes: list[tuple[int, int]], planes: np.ndarray,
-                 views: list[Reconstruction], cameras: list, steps: list[int],
-                 cfg: AverageConfig) -> None:
-        self.nodes, self.planes, self.cfg = nodes, planes, cfg
-        self.views, self.cameras, self.steps = views, cameras, steps
-        per_view = [_plane_samples(rec, cam, step)
-                    for rec, cam, step in zip(views, cameras, steps, strict=True)]
-        self.samples = []
-        for v, local in nodes:
-            x, z = per_view[v][local - 1]
-            # Evenly thinned: the tests only need the footprint's shape, not every pixel.
-            keep = max(1, int(np.ceil(len(z) / max(cfg.merge_samples, 1))))
-            self.samples.append((x[::keep], z[::keep]))
-
-    def fused(self, group: list[int]) -> np.ndarray:
-        """(4,) fused world plane of a group of node indices."""
-        return fuse_planes(self.planes[group])
-
-    def coplanar(self, group_a: list[int], group_b: list[int]) -> bool:
-        """Whether two groups are one plane (:meth:`residual`)."""
-        return self.residual(list(group_a), list(group_b)) is not None
-
-    def residual_to(self, group: list[int], plane: np.ndarray) -> float:
-        """Coplanarity residual of a group's samples to a given world plane."""
-        return coplanarity_residual([self.samples[k][0] for k in group],
-                                    [self.samples[k][1] for k in group], plane)
-
-    def residual(self, group_a: list[int], group_b: list[int]) -> float | None:
-        """How far two groups are from one plane, or None when they are not one.
-
-        Every member's normal must lie within ``merge_max_angle_deg`` of their union's fused
-        normal, and one group's samples within ``merge_max_distance`` of their depth of the
-        other group's plane (median per member, the better of the two directions). Measuring
-        against the other group's plane, not the union's, keeps two parallel surfaces apart
-        (a box top on a table top): the union's plane lies halfway between them.
-
-        Returns
-        -------
-        float or None
-            The residual (relative to depth) when coplanar.
-        """
-        cos = np.abs(self.planes[group_a + group_b, :3] @ self.fused(group_a + group_b)[:3])
-        if np.degrees(np.arccos(np.clip(cos.min(), -1.0, 1.0))) > self.cfg.merge_max_angle_deg:
-            return None
-        res = min(self.residual_to(group_a, self.fused(group_b)),
-                  self.residual_to(group_b, self.fused(group_a)))
-        return res if res <= self.cfg.merge_max_distance else None
-
-    def _touch(self, group_a: list[int], group_b: list[int], plane: np.ndarray) -> bool:
-        """Whether two coplanar groups are parts of one surface.
-
-        Their footprints on ``plane`` come within ``merge_max_gap`` of their depth, or every
-        view that holds planes of both explains the gap between them: within the convex
-        hull of their two masks, at most ``merge_max_see_through`` of the other pixels see
-        through the plane (depth beyond it by more than ``see_through_distance``); the rest
-        lie on it or in front of it (an occluder, e.g. a cabinet before a wall).
-        """
-        cfg = self.cfg
-        xa = np.concatenate([self.samples[k][0] for k in group_a])
-        za = np.concatenate([self.samples[k][1] for k in group_a])
-        xb = np.concatenate([self.samples[k][0] for k in group_b])
-        zb = np.concatenate([self.samples[k][1] for k in group_b])
-        if footprint_gap(xa, za, xb, zb, plane) <= cfg.merge_max_gap:
-            return True
-        shared = ({self.nodes[k][0] for k in group_a} & {self.nodes[k][0] for k in group_b})
-        if not shared:
-            return False
-        for v in shared:
-            rec, cam, step = self.views[v], self.cameras[v], self.steps[v]
-            labels = rec.labels[::step, ::step]
-            mask_a = np.isin(labels, [self.nodes[k][1] for k in group_a if self.nodes[k][0] == v])
-            mask_b = np.isin(labels, [self.nodes[k][1] for k in group_b if self.nodes[k][0] == v])
-            hull = np.zeros(labels.shape, dtype=np.uint8)
-            rows, cols = np.nonzero(mask_a | mask_b)
-            cv2.fillConvexPoly(hull, cv2.convexHull(np.stack([cols, rows], 1).astype(np.int32)), 1)
-            gap = hull.astype(bool) & ~mask_a & ~mask_b
-            if not gap.any():
-                continue
-            rays = pixel_rays(cam.K, cam.height, cam.width)[::step, ::step][gap]
-            z = ray_plane_depth(rays, plane_to_camera(plane, cam.R, cam.t)[0])
-            depth = rec.frame.depth[::step, ::step][gap]
-            through = (z <= 0) | (depth > z * (1.0 + cfg.see_through_distance))
-            if through.mean() > cfg.merge_max_see_through:
-                return False
-        return True
-
-    def _score(self, group_a: list[int], group_b: list[int]) -> float | None:
-        """Coplanarity residual of the union, if coplanar and the footprints touch."""
-        res = self.residual(group_a, group_b)
-        if res is None or not self._touch(group_a, group_b, self.fused(group_a + group_b)):
-            return None
-        return res
-
-    def merge(self, groups: list[list[int]]) -> list[list[int]]:
-        """Merge coplanar groups that are parts of one surface, the most coplanar pair first.
-
-        Returns
-        -------
-        list of list of int
-            The merged groups, each sorted, ordered by their first node.
-        """
-        groups = [list(g) for g in groups]
-        normals = [self.fused(g)[:3] for g in groups]
-        cos_max = np.cos(np.radians(self.cfg.merge_max_angle_deg))
-        scores: dict[tuple[int, int], float] = {}
-
-        def consider(a: int, b: int) -> None:
-            # The normal test first: most pairs of global planes are far from parallel.
-            if abs(normals[a] @ normals[b]) >= cos_max:
-                score = self._score(groups[a], groups[b])
-                if score is not None:
-                    scores[(a, b)] = score
-
-        for a in range(len(groups)):
-            for b in range(a + 1, len(groups)):
-                consider(a, b)
-        alive = set(range(len(groups)))
-        while scores:
-            a, b = min(scores, key=scores.get)
-            groups[a] = sorted(groups[a] + groups[b])
-            normals[a] = self.fused(groups[a])[:3]
-            alive.discard(b)
-            scores = {k: v for k, v in scores.items() if a not in k and b not in k}
-            for c in alive - {a}:
-                consider(min(a, c), max(a, c))
-        return sorted((groups[k] for k in alive), key=lambda g: g[0])
-
-
-def _footprint(rec: Reconstruction, cam: object, locals_: list[int], plane_world: np.ndarray,
-               step: int, max_samples: int) -> np.ndarray:
-    """(N, 3) world points: every ``step``-th pixel of the given planes of one view, lifted
-    along its ray onto ``plane_world``, thinned evenly to at most ``max_samples``."""
-    mask = np.isin(rec.labels[::step, ::step], locals_)
-    rays = pixel_rays(cam.K, cam.height, cam.width)[::step, ::step][mask]
-    z = ray_plane_depth(rays, plane_to_camera(plane_world, cam.R, cam.t)[0])
-    ahead = z > 0
-    x = (rays[ahead] * z[ahead, None] - cam.t) @ cam.R
-    return x[::max(1, int(np.ceil(len(x) / max(max_samples, 1))))]
-
-
-def _project(x_world: np.ndarray, depth: np.ndarray, cam: object, tol: float
-             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
-    """Where world points on a plane land in a view, and how the view's depth compares.
-
-    Parameters
-    ----------
-    x_world : numpy.ndarray
-        (N, 3) world points.
-    depth : numpy.ndarray
-        (H, W) the view's depth, same units.
-    cam : Camera
-        The view's camera.
-    tol : float
-        Relative depth tolerance.
-
-    Returns
-    -------
-    (visible, through, rows, cols) or None
-        Over the points that project in front of the camera and inside the image (None if
-        there are none): ``visible`` (M,) bool, not occluded (the view's depth is valid and
-        not nearer than the point by more than ``tol`` of the point's depth); ``through`` (M,)
-        bool, the depth lies beyond the point by more than ``tol``; their pixels (M,) int.
-    """
-    x = x_world @ cam.R.T + cam.t
-    x = x[x[:, 2] > 0]
-    if len(x) == 0:
-        return None
-    uv = x @ cam.K.T
-    u = np.rint(uv[:, 0] / uv[:, 2])
-    r = np.rint(uv[:, 1] / uv[:, 2])
-    inside = (u >= 0) & (u < cam.width) & (r >= 0) & (r < cam.height)
-    if not np.any(inside):
-        return None
-    u, r, z = u[inside].astype(np.int64), r[inside].astype(np.int64), x[inside, 2]
-    d = depth[r, u]
-    rel = (d - z) / z
-    return (d > 0) & (rel >= -tol), rel > tol, r, u
-
-
-def _replace_plane(rec: Reconstruction, cam: object, local: int,
-                   plane_world: np.ndarray) -> Reconstruction:
-    """``rec`` with plane ``local`` replaced by ``plane_world`` in its camera (RMS error of
-    its pixels' depth to it updated)."""
-    plane = plane_to_camera(plane_world, cam.R, cam.t)[0]
-    mask = rec.labels == local
-    rays = pixel_rays(cam.K, cam.height, cam.width)[mask]
-    points = rays * rec.frame.depth[mask, None]
-    params, rmse = rec.params.copy(), rec.rmse.copy()
-    params[local - 1] = plane
-    rmse[local - 1] = float(np.sqrt(np.mean((points @ plane[:3] + plane[3]) ** 2))) if len(
-        points) else 0.0
-    return replace(rec, params=params, rmse=rmse)
-
-
-def _drop_planes(rec: Reconstruction, drop: np.ndarray) -> Reconstruction:
-    """``rec`` with the pixels of the planes flagged in ``drop`` ((P,) bool) set to 0."""
-    if not drop.any():
-        return rec
-    labels = np.where(drop[np.maximum(rec.labels, 1) - 1], 0, rec.labels)
-    return replace(rec, labels=labels.astype(np.int32))
-
-
-def _world_centroids(rec: Reconstruction, cam: object) -> np.ndarray:
-    """(P, 4) world centroid of each plane's pixels (lifted on its plane) and its mean depth."""
-    from monoplane.datamodel import pixel_rays
-
-    out = np.full((rec.num_planes, 4), np.nan)
-    if rec.num_planes == 0:
-        return out
-    depth = rec.planar_depth()[::2, ::2]
-    labels = rec.labels[::2, ::2]
-    rays = pixel_rays(cam.K, cam.height, cam.width)[::2, ::2]
-    ok = (labels > 0) & (depth > 0)
-    x = rays[ok] * depth[ok, None]
-    lab = labels[ok] - 1
-    count = np.bincount(lab, minlength=rec.num_planes)
-    has = count > 0
-    for axis in range(3):
-        out[has, axis] = np.bincount(lab, weights=x[:, axis], minlength=rec.num_planes)[
-            has] / count[has]
-    out[has, 3] = out[has, 2]
-    out[:, :3] = (out[:, :3] - cam.t) @ cam.R
-    return out
-
-
-def _recovered_region(views: list[Reconstruction], cameras: list, members: list[tuple[int, int]],
-                      i: int, plane_world: np.ndarray, cfg: AverageConfig,
-                      step: int, rays_all: np.ndarray) -> np.ndarray | None:
-    """(H, W) bool pixels of view ``i`` to relabel onto ``plane_world``, or None (see
-    :meth:`AverageFuser.recover_planes`; ``rays_all`` is view ``i``'s (H, W, 3)
-    :func:`pixel_rays`). A pass on every ``step``-th pixel finds whether there is anything to
-    recover and where; the full-resolution pass runs on that box only."""
-    rec, cam = views[i], cameras[i]
-    h, w = rec.labels.shape
-    min_pixels = cfg.recover_min_area * h * w
-    plane = plane_to_camera(plane_world, cam.R, cam.t)[0]
-
-    def candidates(rows: slice, cols: slice) -> np.ndarray:
-        rays = rays_all[rows, cols]
-        z = ray_plane_depth(rays, plane)
-        ahead = z > 0
-        x_world = (rays * z[..., None] - cam.t) @ cam.R
-        covered = np.zeros(z.shape, dtype=bool)
-        for v, local in members:
-            other = cameras[v]
-            x = x_world @ other.R.T + other.t
-            with np.errstate(divide="ignore", invalid="ignore"):
-                uv = x @ other.K.T
-                u = np.rint(uv[..., 0] / uv[..., 2])
-                r = np.rint(uv[..., 1] / uv[..., 2])
-            inside = ahead & (x[..., 2] > 0) & (u >= 0) & (u < other.width) & (r >= 0) & (
-                r < other.height)
-            hit = np.zeros(z.shape, dtype=bool)
-            hit[inside] = views[v].labels[r[inside].astype(np.int64),
-                                          u[inside].astype(np.int64)] == local
-            covered |= hit
-        depth = rec.frame.depth[rows, cols]
-        labels = rec.labels[rows, cols]
-        off = np.abs(depth - z)
-        own = np.full(z.shape, np.inf)
-        if rec.num_planes:
-            z_own = ray_plane_depth(rays, rec.params[np.maximum(labels, 1) - 1])
-            own = np.where(labels > 0, np.abs(depth - z_own), np.inf)
-        return covered & (depth > 0) & (off <= cfg.recover_max_distance * depth) & (off < own)
-
-    coarse = candidates(slice(None, None, step), slice(None, None, step))
-    if coarse.sum() * step * step < min_pixels:
-        return None
-    rr, cc = np.nonzero(coarse)
-    r0, r1 = max(0, rr.min() * step - step), min(h, rr.max() * step + 2 * step)
-    c0, c1 = max(0, cc.min() * step - step), min(w, cc.max() * step + 2 * step)
-    fine = candidates(slice(r0, r1), slice(c0, c1))
-    n, comp, stats, _ = cv2.connectedComponentsWithStats(fine.astype(np.uint8), connectivity=4)
-    if n <= 1:
-        return None
-    best = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
-    if stats[best, cv2.CC_STAT_AREA] < min_pixels:
-        return None
-    region = np.zeros((h, w), dtype=bool)
-    region[r0:r1, c0:c1] = comp == best
-    return region
-
-
-def _geometric_matches(score: np.ndarray, angles: np.ndarray, cent_i: np.ndarray,
-                       cent_j: np.ndarray, world_i: np.ndarray, world_j: np.ndarray,
-                       cfg: AverageConfig) -> list[tuple[int, int]]:
-    """Plane pairs that overlap some (IoU) and agree in 3D: normals and centroid distances.
-
-    This catches a plane that one view segments larger than another (e.g. together with a
-    coplanar neighbour), whose IoU stays below the reprojection threshold.
-    """
-    out = []
-    for p, q in np.argwhere(score >= cfg.geometry_min_iou):
-        if angles[p, q] > cfg.geometry_max_angle_deg:
-            continue
-        ci, cj = cent_i[p], cent_j[q]
-        if not (np.isfinite(ci).all() and np.isfinite(cj).all()):
-            continue
-        d_ij = abs(world_j[q, :3] @ ci[:3] + world_j[q, 3]) / max(ci[3], 1e-9)
-        d_ji = abs(world_i[p, :3] @ cj[:3] + world_i[p, 3]) / max(cj[3], 1e-9)
-        if max(d_ij, d_ji) <= cfg.geometry_max_distance:
-            out.append((int(p) + 1, int(q) + 1))
-    return out
 
 
 @hookimpl

@@ -20,6 +20,15 @@ import numpy as np
 from monoplane.datamodel import Camera, Reconstruction, SfmResult
 from monoplane.errors import ConfigError
 from monoplane.geometry.alignment import ScaleAlignment
+from monoplane.geometry.epipolar import depth_disagreement, refine_epipolar
+from monoplane.geometry.open3d_registration import fpfh_hypothesis, refine_icp
+from monoplane.geometry.pose_hypotheses import (
+    feature_hypotheses,
+    rotation_deg,
+    rotation_hypotheses,
+    translation_from_matches,
+    translation_from_planes,
+)
 from monoplane.geometry.relative_pose import (
     Features,
     essential_pose,
@@ -28,20 +37,11 @@ from monoplane.geometry.relative_pose import (
     pnp_pose,
     sift_features,
 )
-from monoplane.geometry.view_registration import (
+from monoplane.geometry.view_agreement import (
     Agreement,
     Hypothesis,
     ViewGeometry,
-    _rotation_deg,
     agreement,
-    depth_disagreement,
-    feature_hypotheses,
-    fpfh_hypothesis,
-    refine_epipolar,
-    refine_icp,
-    rotation_hypotheses,
-    translation_from_matches,
-    translation_from_planes,
     view_geometry,
 )
 from monoplane.hookspecs import hookimpl
@@ -415,7 +415,7 @@ class PlaneAwareRegistrar(Registrar):
             candidates.append(extra)
         if hyp is not None:
             guided, (gr, gv) = self._guided(views, sfm, features, ref, other, r, v, hyp, None)
-            if guided is not None and _rotation_deg(guided.R, hyp.R) < cfg.guided_max_change_deg:
+            if guided is not None and rotation_deg(guided.R, hyp.R) < cfg.guided_max_change_deg:
                 candidates.append(guided)
             # Guided matching finds correct matches the unguided search missed (a few of them
             # twice): every hypothesis is judged on both.

@@ -5,11 +5,11 @@ import dataclasses
 
 import pytest
 
-from monoplane.host import config
 from monoplane.cli import main
-from monoplane.cli.run import cue_model_overrides
 from monoplane.errors import ConfigError
 from monoplane.hookspecs import hookimpl
+from monoplane.host import config
+from monoplane.host.config import cue_model_overrides
 from monoplane.host.registry import get_plugin_manager, get_registry
 from monoplane.stages.base import CueProvider, param
 
@@ -36,16 +36,16 @@ class _ThirdParty:
 
 def test_the_onnx_provider_maps_a_catalogue_name_to_its_model_key() -> None:
     reg = get_registry(get_plugin_manager(autoload=False))
-    assert cue_model_overrides("depth-anything-v2-small", registry=reg) == [
-        'cues.model="depth-anything-v2-small"']
+    assert cue_model_overrides("depth-anything-v2-small", registry=reg) == {
+        "cues": {"model": "depth-anything-v2-small"}}
 
 
 def test_a_third_party_provider_takes_cues_through_its_own_keys() -> None:
     reg = get_registry(get_plugin_manager(autoload=False, extra_plugins=(_ThirdParty(),)))
     overrides = ["cues.plugin=stand-in"]
-    extra = cue_model_overrides("my-net", overrides=overrides, registry=reg)
-    assert extra == ['cues.weights="my-net"']
-    resolved = config.load(overrides=[*extra, *overrides], registry=reg)
+    tables = cue_model_overrides("my-net", overrides=overrides, registry=reg)
+    assert tables == {"cues": {"weights": "my-net", "plugin": "stand-in"}}
+    resolved = config.load(overrides=tables, registry=reg)
     assert resolved.stages["cues"][0] == "stand-in"
     assert resolved.stages["cues"][1].weights == "my-net"
 
@@ -57,3 +57,25 @@ def test_a_provider_without_catalogue_models_refuses_cues(capsys, tmp_path) -> N
     assert main(["run", "x.png", "--out", str(tmp_path / "out"), "--cues",
                  "depth-anything-v2-small", "--set", "cues.plugin=given"]) != 0
     assert "takes no catalogue model" in capsys.readouterr().err
+
+
+def test_the_user_overrides_go_on_top_of_the_catalogue_keys_key_by_key() -> None:
+    reg = get_registry(get_plugin_manager(autoload=False))
+    tables = cue_model_overrides("depth-anything-v2-small",
+                                 overrides=["cues.model=metric3d-v2-small", "labeler.lambda=0.5"],
+                                 registry=reg)
+    assert tables == {"cues": {"model": "metric3d-v2-small"}, "labeler": {"lambda": 0.5}}
+    # As if both came in one --set list: the same resolved config.
+    strings = config.load(overrides=['cues.model="depth-anything-v2-small"',
+                                     "cues.model=metric3d-v2-small", "labeler.lambda=0.5"],
+                          registry=reg)
+    assert config.load(overrides=tables, registry=reg).to_dict() == strings.to_dict()
+
+
+def test_the_given_cue_provider_comes_first_and_may_be_replaced() -> None:
+    assert config.given_cues_overrides() == {"cues": {"plugin": config.GIVEN_CUES_PROVIDER}}
+    assert config.given_cues_overrides(["cues.plugin=onnx", "cues.model=x"]) == {
+        "cues": {"plugin": "onnx", "model": "x"}}
+    reg = get_registry(get_plugin_manager(autoload=False))
+    resolved = config.load(overrides=config.given_cues_overrides(), registry=reg)
+    assert resolved.stages["cues"][0] == config.GIVEN_CUES_PROVIDER

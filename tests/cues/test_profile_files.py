@@ -194,12 +194,12 @@ def test_profile_file_from_config_alone(tmp_path: Path) -> None:
 
 
 def test_cues_option_takes_a_profile_file(tmp_path: Path) -> None:
-    from monoplane.cli.run import cue_model_overrides
+    from monoplane.host.config import cue_model_overrides
 
     path = write_profile(tmp_path)
-    assert cue_model_overrides(str(path)) == [f'cues.profile="{path}"']
-    assert cue_model_overrides("depth-anything-v2-small") == [
-        'cues.model="depth-anything-v2-small"']
+    assert cue_model_overrides(str(path)) == {"cues": {"profile": str(path)}}
+    assert cue_model_overrides("depth-anything-v2-small") == {
+        "cues": {"model": "depth-anything-v2-small"}}
 
 
 def test_inline_custom_profile(tmp_path: Path) -> None:

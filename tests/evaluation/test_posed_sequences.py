@@ -12,19 +12,20 @@ import pytest
 
 from monoplane.datamodel import Camera, intrinsics_matrix
 from monoplane.errors import InvalidInput
-from monoplane.evaluation.posed_sequences import (
-    choose_view_sets,
+from monoplane.evaluation.posed_frames import (
     load_posed_sequence,
     mode_list,
     monocular_cues,
+    sequence_frame,
+)
+from monoplane.evaluation.posed_sequences import score_view_set, summarise
+from monoplane.evaluation.view_sets import (
+    choose_view_sets,
     parse_pairs,
     rotation_angles,
-    score_view_set,
     select_pairs,
     select_views,
-    sequence_frame,
     split_positions,
-    summarise,
     view_overlap,
 )
 from monoplane.io.frames import read_redwood_log
@@ -201,7 +202,7 @@ def test_monocular_cues_are_scaled_warped_noisy_and_repeatable() -> None:
 
 def test_mode_names() -> None:
     from monoplane.cli.eval import POSED_MODE_GROUPS, POSED_MODES
-    from monoplane.evaluation.posed_sequences import MODE_GROUPS, MODES
+    from monoplane.evaluation.posed_frames import MODE_GROUPS, MODES
 
     assert (POSED_MODES, POSED_MODE_GROUPS) == (MODES, tuple(MODE_GROUPS))
     assert mode_list("all") == ["rgbd", "mono", "mono-depth"]
@@ -558,3 +559,10 @@ def test_livingroom_pair_registers_with_monocular_cues() -> None:
     mono = res["modes"]["mono"]
     assert (mono["pairs_registered"], mono["pairs_correct"]) == (1, 1)
     assert res["settings"]["level"] == "mild"
+
+
+def test_the_posed_sequence_module_still_offers_the_names_it_used_to_define() -> None:
+    import monoplane.evaluation.posed_sequences as old
+
+    assert old.view_overlap is view_overlap and old.load_posed_sequence is load_posed_sequence
+    assert all(hasattr(old, name) for name in old.__all__)

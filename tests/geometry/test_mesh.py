@@ -78,3 +78,13 @@ def test_open3d_mesh_matches_planar_mesh() -> None:
     np.testing.assert_array_equal(np.asarray(mesh.triangles), t)
     np.testing.assert_allclose(np.asarray(mesh.vertex_colors), c)
     assert mesh.has_vertex_normals()
+
+
+def test_scene_mesh_keeps_its_old_path_with_a_warning() -> None:
+    from monoplane.geometry.mesh import scene_mesh
+
+    # The old module path warns too (the first time it is imported).
+    with pytest.warns(DeprecationWarning) as record:
+        from monoplane.multiview.fusion import scene_mesh as old
+    assert old is scene_mesh
+    assert any("monoplane.geometry.mesh.scene_mesh" in str(w.message) for w in record)

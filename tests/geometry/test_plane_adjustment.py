@@ -13,6 +13,7 @@ from monoplane.geometry.plane_adjustment import (
     AdjustmentProblem,
     AdjustmentResult,
     adjust,
+    refinement_summary,
 )
 from monoplane.synth.scene import WORLD_UP
 
@@ -204,3 +205,18 @@ def test_a_solution_that_lowers_the_cost_is_accepted() -> None:
     for key in ("observations", "plane_samples", "sfm_points_on_planes"):
         assert res.after[key] == res.before[key]
     assert not np.allclose(res.t, prob.t)  # the solution, not the start, is returned
+
+
+def test_the_refinement_summary_reads_the_report_figures() -> None:
+    figures = {"sfm_points_on_planes": 40, "sfm_point_plane_median_rel": 0.0123,
+               "plane_samples": 0, "plane_rms_rel": 0.0, "normal_rms_deg": 0.0,
+               "observations": 10, "reprojection_rms_px": 1.5}
+    report = {"accepted": True, "before": {**figures, "cost": 12.0},
+              "after": {**figures, "cost": 3.0, "sfm_point_plane_median_rel": 0.005,
+                        "reprojection_rms_px": 0.5}}
+    assert refinement_summary(report) == (
+        "refinement: objective 12 -> 3 (robust cost); SfM points to their planes 1.23% -> "
+        "0.50% of depth (median, 40 points), reprojection 1.50 -> 0.50 px (RMS)")
+    assert refinement_summary({"accepted": False, "reason": "too few points"}) == (
+        "refinement rejected, scene as fused: too few points")
+    assert refinement_summary({}) == ""

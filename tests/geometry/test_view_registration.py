@@ -8,24 +8,24 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from monoplane.evaluation.twoview import rotation_error_deg, translation_angle_deg
+from monoplane.geometry.epipolar import (
+    depth_disagreement,
+    epipolar_support,
+    refine_epipolar,
+)
+from monoplane.geometry.pose_hypotheses import (
+    feature_hypotheses,
+    rotation_hypotheses,
+    translation_from_matches,
+    translation_from_planes,
+)
 from monoplane.geometry.relative_pose import (
     essential_pose,
     guided_matches,
     match_features,
     sift_features,
 )
-from monoplane.geometry.view_registration import (
-    Hypothesis,
-    agreement,
-    depth_disagreement,
-    epipolar_support,
-    feature_hypotheses,
-    refine_epipolar,
-    rotation_hypotheses,
-    translation_from_matches,
-    translation_from_planes,
-    view_geometry,
-)
+from monoplane.geometry.view_agreement import Hypothesis, agreement, view_geometry
 from monoplane.synth import generate
 
 R_TRUE = Rotation.from_euler("xyz", [4.0, 28.0, -3.0], degrees=True).as_matrix()
@@ -240,3 +240,11 @@ def test_depth_disagreement_is_zero_for_the_true_pose_and_any_scale() -> None:
     assert depth_disagreement(Hypothesis(turned, T_TRUE, 1.0, "t"), p_ref, p_oth, ref, other,
                               1e9) > 0.1
     assert depth_disagreement(true, p_ref[:5], p_oth[:5], ref, other, 2.0) == float("inf")
+
+
+def test_the_old_module_still_gathers_the_registration_names() -> None:
+    import monoplane.geometry.epipolar as epipolar
+    import monoplane.geometry.view_registration as old
+
+    assert old.refine_epipolar is epipolar.refine_epipolar
+    assert all(hasattr(old, name) for name in old.__all__)

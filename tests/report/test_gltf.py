@@ -107,7 +107,7 @@ def test_a_reconstruction_without_planes_gives_a_valid_empty_scene(room, tmp_pat
 
 
 def test_scene_glb_holds_global_planes_and_cameras(tmp_path: Path) -> None:
-    from monoplane.multiview.fusion import scene_mesh
+    from monoplane.geometry.mesh import scene_mesh
 
     sc = make_scene(2)
     mesh = scene_mesh(sc)
