@@ -21,12 +21,12 @@ from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.hookspecs import hookimpl
 from monoplane.jit import in_background, thread_budget
+from monoplane.algorithm.region_moments import scene_radius
 from monoplane.algorithm.regions import (
     MIN_AREA_AT_REFERENCE,
     clean_regions,
     gate_filled_pixels,
     scaled_min_area,
-    scene_radius,
 )
 from monoplane.stages.base import RansacParams, Refiner, Stage, param
 
@@ -92,8 +92,8 @@ class DenseCrfRefiner(Refiner):
     * ``absorb``: a region under the minimum area joins an adjacent plane its points fit
       (RMS within ``merge_distance``) and is set non-planar only otherwise.
 
-    Distances are fractions of the scene radius (:func:`monoplane.algorithm.regions.scene_radius`), like
-    the RANSAC's ε.
+    Distances are fractions of the scene radius
+    (:func:`monoplane.algorithm.region_moments.scene_radius`), like the RANSAC's ε.
     """
 
     name = "dense-crf"
