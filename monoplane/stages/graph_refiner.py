@@ -27,30 +27,26 @@ subsampling), so it can serve ``monoplane run`` on range data as well.
 
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from monoplane.algorithm.graphcut import normal_costs, proximity_weights
+from monoplane.algorithm.label_mean_field import candidate_labels, potts_mean_field
 from monoplane.datamodel import Reconstruction, orient_towards_camera
 from monoplane.errors import check_config
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.components import graph_components
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.geometry.planes import fit_planes_per_label
-from monoplane.algorithm.graphcut import normal_costs, proximity_weights
 from monoplane.hookspecs import hookimpl
-from monoplane.jit import chunks, kernel, run_threaded
+from monoplane.jit import kernel
 from monoplane.stages.base import ProximityAffinities, RansacParams, Refiner, Stage, param
 
 if TYPE_CHECKING:
     from scipy.sparse import csr_matrix
-
-#: Nodes per thread below which a mean-field iteration runs on one thread.
-_THREADED_NODES = 4096
-
 
 @dataclass
 class GraphCrfConfig(ProximityAffinities):
@@ -131,35 +127,6 @@ def pixel_graph(cloud: PlaneCloud, max_jump: float) -> NeighbourGraph:
     # No point index: the grid gave the neighbours, and building one over every pixel would
     # cost more than the graph.
     return NeighbourGraph(cloud.size, edges, indptr, indices, None, spacing)
-
-
-@kernel
-def _shifted_energy(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, q: np.ndarray,
-                    unary: np.ndarray, weight: np.float32, scale: np.float32, row0: int,
-                    row1: int, out: np.ndarray) -> None:
-    """One mean-field step's exponent for rows ``row0:row1`` into ``out`` ((row1 - row0, L)
-    float32): ``scale (e - min_l e)`` with ``e = weight (W Q) + U``.
-
-    ``W`` is the CSR matrix ``(indptr, indices, data)`` (float32 weights), ``Q`` and ``U`` are
-    (N, L) float32. Every operation is float32 in the order of the NumPy/SciPy expression it
-    replaces (``W @ Q`` accumulates each row's entries in storage order), so the result is
-    the same to the bit.
-    """
-    labels = q.shape[1]
-    for i in range(row0, row1):
-        row = out[i - row0]
-        row[:] = 0
-        for jj in range(indptr[i], indptr[i + 1]):
-            j = indices[jj]
-            a = data[jj]
-            for k in range(labels):
-                row[k] += a * q[j, k]
-        low = np.float32(np.inf)
-        for k in range(labels):
-            row[k] = row[k] * weight + unary[i, k]
-            low = min(low, row[k])
-        for k in range(labels):
-            row[k] = (row[k] - low) * scale
 
 
 @kernel
@@ -287,38 +254,17 @@ class GraphCrfRefiner(Refiner):
         if c.iterations == 0 or unary.shape[1] < 2:
             return labels
         beta = c.beta / max(mean_degree, 1e-12)
-        adj = adj.astype(np.float32)
-        inv_t = np.float32(1.0 / c.temperature)
-        q = np.zeros(unary.shape, dtype=np.float32)
-        q[np.arange(labels.size), labels] = 1.0
+        indptr = adj.indptr.astype(np.int64)
+        weights = adj.data.astype(np.float32)
+        # Each pixel carries only the planes it can hold with non-negligible probability
+        # (2-4 of up to 41 on a range image); the rest could change no sum and no argmax.
         # "Non-planar" after RANSAC means no plane claimed the point, not evidence against
         # every plane: such points start from their data term alone, so a strip the greedy
         # search left over does not hold itself in place through the pairwise term.
-        free = labels == 0
-        if free.any():
-            e = unary[free] - unary[free].min(axis=1, keepdims=True)
-            q[free] = np.exp(-e * inv_t)
-            q[free] /= q[free].sum(axis=1, keepdims=True)
-        unary = np.ascontiguousarray(unary, dtype=np.float32)
-        weight = np.float32(-beta)
-        spans = chunks(labels.size, _THREADED_NODES)
-        nxt = np.empty_like(q)
-
-        def update(a: int, b: int) -> None:
-            # Expected Potts cost of label l at i: Σ_j w_ij (1 - Q_j(l)) = deg_i - (W Q)_i(l);
-            # deg_i is the same for every label and cancels in the softmax.
-            part = nxt[a:b]
-            _shifted_energy(adj.indptr, adj.indices, adj.data, q, unary, weight, -inv_t, a, b,
-                            part)
-            np.exp(part, out=part)
-            part /= part.sum(axis=1, keepdims=True)
-
-        # Rows are independent within an iteration: contiguous row ranges run on parallel
-        # threads, each reading the last iteration's Q and writing its rows of the next.
-        for _ in range(c.iterations):
-            run_threaded([functools.partial(update, a, b) for a, b in spans])
-            q, nxt = nxt, q
-        return np.argmax(q, axis=1).astype(np.int32)
+        ptr, cand, costs = candidate_labels(unary, labels, indptr, weights, beta,
+                                            c.temperature)
+        return potts_mean_field(ptr, cand, costs, indptr, adj.indices.astype(np.int64),
+                                weights, labels, beta, c.temperature, c.iterations)
 
     def _components(self, graph: NeighbourGraph, labels: np.ndarray, min_size: int
                     ) -> np.ndarray:
