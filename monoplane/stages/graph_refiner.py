@@ -27,13 +27,14 @@ subsampling), so it can serve ``monoplane run`` on range data as well.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from monoplane.algorithm.graphcut import normal_costs, proximity_weights
+from monoplane.algorithm.graphcut import proximity_weights
 from monoplane.algorithm.label_mean_field import candidate_labels, potts_mean_field
 from monoplane.datamodel import Reconstruction, orient_towards_camera
 from monoplane.errors import check_config
@@ -42,11 +43,14 @@ from monoplane.geometry.components import graph_components
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.geometry.planes import fit_planes_per_label
 from monoplane.hookspecs import hookimpl
-from monoplane.jit import kernel
+from monoplane.jit import chunks, kernel, run_threaded
 from monoplane.stages.base import ProximityAffinities, RansacParams, Refiner, Stage, param
 
 if TYPE_CHECKING:
     from scipy.sparse import csr_matrix
+
+#: Points per thread below which the data costs are computed on one thread.
+_THREADED_NODES = 4096
 
 @dataclass
 class GraphCrfConfig(ProximityAffinities):
@@ -127,6 +131,29 @@ def pixel_graph(cloud: PlaneCloud, max_jump: float) -> NeighbourGraph:
     # No point index: the grid gave the neighbours, and building one over every pixel would
     # cost more than the graph.
     return NeighbourGraph(cloud.size, edges, indptr, indices, None, spacing)
+
+
+@kernel
+def _plane_costs(points: np.ndarray, normals: np.ndarray, planes: np.ndarray, inv_eps: np.float32,
+                 normal_weight: float, epsilon_n: float, row0: int, row1: int, out: np.ndarray
+                 ) -> None:
+    """Rows ``row0:row1`` of :meth:`GraphCrfRefiner.unary` into ``out`` ((N, P + 1) float32),
+    from (N, 3) float32 points and normals and (P, 4) float32 planes: ``out[:, 0] = 1``,
+    ``out[:, p] = ((x·n_p + d_p) inv_eps)²`` plus ``normal_weight`` times the normal cost of
+    :func:`monoplane.algorithm.graphcut.normal_costs` (float64, as there) when it is > 0."""
+    for i in range(row0, row1):
+        out[i, 0] = 1.0
+        for p in range(planes.shape[0]):
+            c = (points[i, 0] * planes[p, 0] + points[i, 1] * planes[p, 1]
+                 + points[i, 2] * planes[p, 2] + planes[p, 3]) * inv_eps
+            c = c * c
+            if normal_weight > 0:
+                cos = (normals[i, 0] * planes[p, 0] + normals[i, 1] * planes[p, 1]
+                       + normals[i, 2] * planes[p, 2])
+                angle = np.arccos(min(max(cos, np.float32(-1.0)), np.float32(1.0)))
+                if angle >= epsilon_n:
+                    c = np.float32(c + normal_weight * np.exp(angle / epsilon_n - 1.0))
+            out[i, p + 1] = c
 
 
 @kernel
@@ -233,19 +260,16 @@ class GraphCrfRefiner(Refiner):
         c = self.config
         epsilon = params.epsilon if epsilon is None else epsilon
         # float32: the costs only rank labels, and the (N, P + 1) arrays of a 512x512 range
-        # image with 40 planes are the refiner's main memory traffic.
-        points = cloud.points.astype(np.float32)
-        normals_p = planes[:, :3].astype(np.float32)
-        out = np.empty((cloud.size, planes.shape[0] + 1), dtype=np.float32)
-        out[:, 0] = 1.0
-        cost = out[:, 1:]
-        np.matmul(points, normals_p.T, out=cost)
-        cost += planes[:, 3].astype(np.float32)
-        cost *= np.float32(1.0 / epsilon)
-        np.square(cost, out=cost)
-        if c.normal_weight > 0:  # the angles are only needed then
-            cos = np.clip(cloud.normals.astype(np.float32) @ normals_p.T, -1.0, 1.0)
-            cost += c.normal_weight * normal_costs(np.arccos(cos), params.epsilon_n)
+        # image with 40 planes are the refiner's main memory traffic: one compiled pass
+        # writes them, row range by row range on the frame's threads.
+        points = np.ascontiguousarray(cloud.points, dtype=np.float32)
+        normals = np.ascontiguousarray(cloud.normals, dtype=np.float32)
+        planes32 = np.ascontiguousarray(planes, dtype=np.float32).reshape(-1, 4)
+        out = np.empty((cloud.size, planes32.shape[0] + 1), dtype=np.float32)
+        run_threaded([functools.partial(_plane_costs, points, normals, planes32,
+                                        np.float32(1.0 / epsilon), float(c.normal_weight),
+                                        float(params.epsilon_n), a, b, out)
+                      for a, b in chunks(cloud.size, _THREADED_NODES)])
         return out
 
     def _mean_field(self, unary: np.ndarray, adj: csr_matrix, labels: np.ndarray,
