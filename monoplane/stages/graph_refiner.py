@@ -30,7 +30,6 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -45,9 +44,6 @@ from monoplane.geometry.planes import fit_planes_per_label
 from monoplane.hookspecs import hookimpl
 from monoplane.jit import chunks, kernel, run_threaded
 from monoplane.stages.base import ProximityAffinities, RansacParams, Refiner, Stage, param
-
-if TYPE_CHECKING:
-    from scipy.sparse import csr_matrix
 
 #: Points per thread below which the data costs are computed on one thread.
 _THREADED_NODES = 4096
@@ -93,16 +89,6 @@ class GraphCrfConfig(ProximityAffinities):
             (0 <= self.merge_angle_deg <= 90, "merge_angle_deg must lie in [0, 90]"),
             (self.merge_distance >= 0, "merge_distance must be >= 0"),
         ], prefix="refiner (graph-crf): ")
-
-
-def _adjacency(graph: NeighbourGraph, weights: np.ndarray) -> csr_matrix:
-    """Symmetric (N, N) sparse matrix of edge weights."""
-    from scipy.sparse import coo_matrix  # only this refiner needs SciPy's sparse matrices
-
-    i, j = graph.edges[:, 0], graph.edges[:, 1]
-    n = graph.num_nodes
-    return coo_matrix((np.r_[weights, weights], (np.r_[i, j], np.r_[j, i])),
-                      shape=(n, n)).tocsr()
 
 
 def pixel_graph(cloud: PlaneCloud, max_jump: float) -> NeighbourGraph:
@@ -272,14 +258,15 @@ class GraphCrfRefiner(Refiner):
                       for a, b in chunks(cloud.size, _THREADED_NODES)])
         return out
 
-    def _mean_field(self, unary: np.ndarray, adj: csr_matrix, labels: np.ndarray,
-                    mean_degree: float) -> np.ndarray:
+    def _mean_field(self, unary: np.ndarray, adj: tuple[np.ndarray, np.ndarray, np.ndarray],
+                    labels: np.ndarray, mean_degree: float) -> np.ndarray:
+        """Labels after mean-field inference from ``labels``; ``adj`` is the graph's weighted
+        adjacency (:meth:`NeighbourGraph.weighted_adjacency`)."""
         c = self.config
         if c.iterations == 0 or unary.shape[1] < 2:
             return labels
         beta = c.beta / max(mean_degree, 1e-12)
-        indptr = adj.indptr.astype(np.int64)
-        weights = adj.data.astype(np.float32)
+        indptr, indices, weights = adj
         # Each pixel carries only the planes it can hold with non-negligible probability
         # (2-4 of up to 41 on a range image); the rest could change no sum and no argmax.
         # "Non-planar" after RANSAC means no plane claimed the point, not evidence against
@@ -287,8 +274,8 @@ class GraphCrfRefiner(Refiner):
         # search left over does not hold itself in place through the pairwise term.
         ptr, cand, costs = candidate_labels(unary, labels, indptr, weights, beta,
                                             c.temperature)
-        return potts_mean_field(ptr, cand, costs, indptr, adj.indices.astype(np.int64),
-                                weights, labels, beta, c.temperature, c.iterations)
+        return potts_mean_field(ptr, cand, costs, indptr, indices, weights, labels, beta,
+                                c.temperature, c.iterations)
 
     def _components(self, graph: NeighbourGraph, labels: np.ndarray, min_size: int
                     ) -> np.ndarray:
@@ -337,9 +324,9 @@ class GraphCrfRefiner(Refiner):
         # labels are dense in the order of their first region.
         return graph_components(num + 1, pairs[agree]).astype(np.int32)[labels]
 
-    def _refit_round(self, cloud: PlaneCloud, adj: csr_matrix, graph: NeighbourGraph,
-                     labels: np.ndarray, planes: np.ndarray, params: RansacParams,
-                     epsilon: float) -> tuple[np.ndarray, np.ndarray]:
+    def _refit_round(self, cloud: PlaneCloud, adj: tuple[np.ndarray, np.ndarray, np.ndarray],
+                     graph: NeighbourGraph, labels: np.ndarray, planes: np.ndarray,
+                     params: RansacParams, epsilon: float) -> tuple[np.ndarray, np.ndarray]:
         """One more mean-field round on planes refit by least squares to the labels so far.
 
         The search's planes were fitted to their inlier bands, which along a crease include a
@@ -363,7 +350,7 @@ class GraphCrfRefiner(Refiner):
             return labels, planes
         weights = proximity_weights(cloud.points, graph.edges, cloud.normals, cloud.colors,
                                     *c.affinities())
-        adj = _adjacency(graph, weights)
+        adj = graph.weighted_adjacency(weights)
         epsilon = self.distance_scale(cloud, labels, planes, params)
         labels = self._mean_field(self.unary(cloud, planes, params, epsilon), adj, labels,
                                   graph.mean_degree)
