@@ -38,7 +38,7 @@ from monoplane.algorithm.label_mean_field import candidate_labels, potts_mean_fi
 from monoplane.datamodel import Reconstruction, orient_towards_camera
 from monoplane.errors import check_config
 from monoplane.geometry.cloud import PlaneCloud
-from monoplane.geometry.components import graph_components
+from monoplane.geometry.components import graph_components, same_label_components
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.geometry.planes import fit_planes_per_label
 from monoplane.hookspecs import hookimpl
@@ -140,6 +140,44 @@ def _plane_costs(points: np.ndarray, normals: np.ndarray, planes: np.ndarray, in
                 if angle >= epsilon_n:
                     c = np.float32(c + normal_weight * np.exp(angle / epsilon_n - 1.0))
             out[i, p + 1] = c
+
+
+@kernel
+def _touching_pairs(labels: np.ndarray, edges: np.ndarray, num: int) -> np.ndarray:
+    """(K, 2) int64 pairs ``p < q`` of labels 1..``num`` joined by some of the (E, 2) int64
+    ``edges`` of nodes labelled by the (N,) int64 ``labels``, in lexicographic order."""
+    touch = np.zeros((num + 1, num + 1), dtype=np.bool_)
+    count = 0
+    for e in range(edges.shape[0]):
+        a, b = labels[edges[e, 0]], labels[edges[e, 1]]
+        if a > 0 and b > 0 and a != b:
+            lo, hi = min(a, b), max(a, b)
+            if not touch[lo, hi]:
+                touch[lo, hi] = True
+                count += 1
+    pairs = np.empty((count, 2), dtype=np.int64)
+    k = 0
+    for p in range(1, num + 1):
+        for q in range(p + 1, num + 1):
+            if touch[p, q]:
+                pairs[k, 0] = p
+                pairs[k, 1] = q
+                k += 1
+    return pairs
+
+
+@kernel
+def _stable_order(labels: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """``np.argsort(labels, kind="stable")`` of (N,) int64 labels 0..L-1 with (L,) counts,
+    by counting."""
+    slot = np.zeros(counts.shape[0], dtype=np.int64)
+    for k in range(1, counts.shape[0]):
+        slot[k] = slot[k - 1] + counts[k - 1]
+    order = np.empty(labels.shape[0], dtype=np.int64)
+    for i in range(labels.shape[0]):
+        order[slot[labels[i]]] = i
+        slot[labels[i]] += 1
+    return order
 
 
 @kernel
@@ -280,10 +318,7 @@ class GraphCrfRefiner(Refiner):
     def _components(self, graph: NeighbourGraph, labels: np.ndarray, min_size: int
                     ) -> np.ndarray:
         """Relabel every graph-connected region of one label as its own label 1..R."""
-        i, j = graph.edges[:, 0], graph.edges[:, 1]
-        same = (labels[i] == labels[j]) & (labels[i] > 0)
-        n = labels.size
-        comp = graph_components(n, np.stack([i[same], j[same]], axis=1))
+        comp = same_label_components(labels, graph.edges)
         comp = np.where(labels > 0, comp + 1, 0)
         sizes = np.bincount(comp)
         sizes[0] = 0
@@ -302,15 +337,13 @@ class GraphCrfRefiner(Refiner):
         num = planes.shape[0]
         if num < 2 or c.merge_distance == 0:
             return labels
-        a, b = labels[graph.edges[:, 0]], labels[graph.edges[:, 1]]
-        touch = (a > 0) & (b > 0) & (a != b)
-        pairs = np.unique(np.sort(np.stack([a[touch], b[touch]], axis=1), axis=1), axis=0)
+        pairs = _touching_pairs(np.ascontiguousarray(labels, dtype=np.int64), graph.edges, num)
         if pairs.size == 0:
             return labels
         cos_max = math.cos(math.radians(c.merge_angle_deg))
         tol2 = (c.merge_distance * epsilon) ** 2
-        order = np.argsort(labels, kind="stable")
         counts = np.bincount(labels, minlength=num + 1)
+        order = _stable_order(np.ascontiguousarray(labels, dtype=np.int64), counts)
         groups = np.split(order, np.cumsum(counts)[:-1])
         agree = np.zeros(len(pairs), dtype=np.bool_)
         for i, (p, q) in enumerate(pairs):
