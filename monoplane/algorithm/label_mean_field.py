@@ -94,11 +94,18 @@ def potts_mean_field(ptr: np.ndarray, labels: np.ndarray, costs: np.ndarray,
     q = _initial(ptr, labels, costs, start, np.float32(-1.0 / temperature))
     nxt = np.empty_like(q)
     weight, scale = np.float32(-beta), np.float32(-1.0 / temperature)
-    for _ in range(iterations):
+    # A node's update reads only its neighbours' probabilities: when none of them changed in
+    # the last iteration, its result would be the same to the bit, so it is copied instead.
+    # Inside a plane the probabilities reach a fixed point after a few iterations.
+    changed = np.ones(start.size, dtype=np.bool_)
+    changed_next = np.empty_like(changed)
+    for it in range(iterations):
         run_threaded([functools.partial(_update, ptr, labels, costs, indptr, indices, weights,
-                                        q, weight, scale, a, b, nxt)
+                                        q, weight, scale, a, b, it == 0, changed, nxt,
+                                        changed_next)
                       for a, b in chunks(start.size, _THREADED_NODES)])
         q, nxt = nxt, q
+        changed, changed_next = changed_next, changed
     return _argmax(ptr, labels, q)
 
 
@@ -161,13 +168,27 @@ def _initial(ptr: np.ndarray, labels: np.ndarray, costs: np.ndarray, start: np.n
 @kernel
 def _update(ptr: np.ndarray, labels: np.ndarray, costs: np.ndarray, indptr: np.ndarray,
             indices: np.ndarray, weights: np.ndarray, q: np.ndarray, weight: np.float32,
-            scale: np.float32, row0: int, row1: int, out: np.ndarray) -> None:
+            scale: np.float32, row0: int, row1: int, first: bool, changed: np.ndarray,
+            out: np.ndarray, changed_out: np.ndarray) -> None:
     """One update of nodes ``row0:row1``: ``out`` (M,) float32 from ``q`` (M,) float32.
 
-    The two nodes' label lists are ascending, so one merge pass finds the labels they share.
+    ``changed`` (N,) bool says which nodes' probabilities changed in the last iteration; after
+    the ``first`` one, a node none of whose neighbours changed keeps its probabilities.
+    ``changed_out`` receives whether each updated node's probabilities changed. The two
+    nodes' label lists are ascending, so one merge pass finds the labels they share.
     """
     for i in range(row0, row1):
         a, b = ptr[i], ptr[i + 1]
+        due = first
+        for jj in range(indptr[i], indptr[i + 1]):
+            if changed[indices[jj]]:
+                due = True
+                break
+        if not due:
+            for s in range(a, b):
+                out[s] = q[s]
+            changed_out[i] = False
+            continue
         for s in range(a, b):
             out[s] = 0.0
         for jj in range(indptr[i], indptr[i + 1]):
@@ -191,8 +212,11 @@ def _update(ptr: np.ndarray, labels: np.ndarray, costs: np.ndarray, indptr: np.n
         for s in range(a, b):
             out[s] = np.exp((out[s] - low) * scale)
             total += out[s]
+        moved = False
         for s in range(a, b):
             out[s] /= total
+            moved = moved or out[s] != q[s]
+        changed_out[i] = moved
 
 
 @kernel
