@@ -104,7 +104,8 @@ class PermutohedralLattice:
 
     def locate(self, features: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Simplex vertices and weights of other points (e.g. full-resolution pixels), to
-        slice this lattice's values there with :func:`monoplane.algorithm.lattice_kernels.slice_values`.
+        slice this lattice's values there with
+        :func:`monoplane.algorithm.lattice_kernels.slice_values`.
 
         Parameters
         ----------
