@@ -12,12 +12,14 @@ from scipy import ndimage
 from monoplane.algorithm import lattice_kernels as lk
 from monoplane.algorithm.densecrf import (
     CrfParams,
-    GaussianKernel,
-    PermutohedralLattice,
     _not_constant_3x3,
     crf_features,
     crf_grid,
     dense_crf,
+)
+from monoplane.algorithm.mean_field import (
+    GaussianKernel,
+    PermutohedralLattice,
     mean_field,
     unary_from_labels,
 )

@@ -6,20 +6,19 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from monoplane.datamodel import Frame, Reconstruction, intrinsics_matrix, pixel_rays
-from monoplane.errors import InvalidInput
+from monoplane.algorithm.region_moments import RegionMoments, refit_planes, scene_radius
 from monoplane.algorithm.regions import (
     absorb_small_regions,
     clean_regions,
     gate_filled_pixels,
     merge_coplanar,
-    refit_planes,
     region_adjacency,
     remove_small_regions,
     scaled_min_area,
-    scene_radius,
     split_components,
 )
+from monoplane.datamodel import Frame, Reconstruction, intrinsics_matrix, pixel_rays
+from monoplane.errors import InvalidInput
 
 # Label 1 has two regions touching only at a corner (joined by 8- but not by 4-connectivity)
 # plus a separate region on the right; label 2 has two regions; 0 is non-planar. New labels go
@@ -320,8 +319,6 @@ def _reference_moments(points, valid, labels, num):
 
 @pytest.mark.parametrize("seed", range(4))
 def test_region_moments_match_the_bincount_reference(seed):
-    from monoplane.algorithm.regions import RegionMoments
-
     rng = np.random.default_rng(seed)
     labels = rng.integers(0, 7, size=(30, 40))
     valid = rng.random((30, 40)) > 0.2

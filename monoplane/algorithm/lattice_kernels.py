@@ -1,4 +1,4 @@
-"""numba kernels of the permutohedral lattice (:class:`monoplane.algorithm.densecrf.PermutohedralLattice`).
+"""numba kernels of the permutohedral lattice (:mod:`monoplane.algorithm.mean_field`).
 
 Construction follows Adams, Baek & Davis (Eurographics 2010, §3): elevate each feature vector
 onto the hyperplane ``Σ x = 0`` of R^(d+1), find the nearest remainder-0 lattice point, sort the

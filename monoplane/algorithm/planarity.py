@@ -42,6 +42,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from monoplane.algorithm.region_moments import scene_radius
 from monoplane.datamodel import Reconstruction
 from monoplane.errors import check_config
 from monoplane.geometry.flatness import (
@@ -51,7 +52,6 @@ from monoplane.geometry.flatness import (
     quadric_ratio,
     spread_of_groups,
 )
-from monoplane.algorithm.regions import scene_radius
 from monoplane.stages.base import param
 
 

@@ -96,12 +96,46 @@ def graph_components(num_nodes: int, edges: np.ndarray) -> np.ndarray:
     return _graph_components(int(num_nodes), pairs)
 
 
+def same_label_components(labels: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """:func:`graph_components` of the edges that join two nodes of the same positive label.
+
+    Parameters
+    ----------
+    labels : numpy.ndarray
+        (N,) int labels; nodes of label 0 or below join nothing.
+    edges : numpy.ndarray
+        (E, 2) int node pairs in ``0 .. N-1``.
+
+    Returns
+    -------
+    numpy.ndarray
+        (N,) int64 component ids, numbered as :func:`graph_components` numbers them: the
+        same as ``graph_components(N, edges[same])`` without building ``edges[same]``.
+    """
+    lab = np.ascontiguousarray(labels, dtype=np.int64).ravel()
+    pairs = np.ascontiguousarray(edges, dtype=np.int64).reshape(-1, 2)
+    if pairs.size and (pairs.min() < 0 or pairs.max() >= lab.size):
+        raise InvalidInput(f"edge ends must lie in 0..{lab.size - 1}")
+    return _graph_components_within(lab, pairs)
+
+
 @kernel
-def _graph_components(n: int, edges: np.ndarray) -> np.ndarray:
-    """:func:`graph_components` of ``n`` nodes and (E, 2) int64 ``edges``."""
+def _graph_components_within(labels: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """:func:`same_label_components` of (N,) int64 ``labels`` and (E, 2) int64 ``edges``."""
+    n = labels.shape[0]
     parent = np.arange(n)
     for e in range(edges.shape[0]):
-        _union(parent, edges[e, 0], edges[e, 1])
+        a, b = edges[e, 0], edges[e, 1]
+        if labels[a] > 0 and labels[a] == labels[b]:
+            _union(parent, a, b)
+    return _numbered(parent)
+
+
+@inline
+def _numbered(parent: np.ndarray) -> np.ndarray:
+    """Component ids of a union-find forest whose roots are their sets' smallest nodes,
+    numbered in the order of those nodes."""
+    n = parent.shape[0]
     comp = np.empty(n, dtype=np.int64)
     count = 0
     for p in range(n):  # a root is its set's smallest node, met before the rest of its set
@@ -114,6 +148,15 @@ def _graph_components(n: int, edges: np.ndarray) -> np.ndarray:
         else:
             comp[p] = comp[r]
     return comp
+
+
+@kernel
+def _graph_components(n: int, edges: np.ndarray) -> np.ndarray:
+    """:func:`graph_components` of ``n`` nodes and (E, 2) int64 ``edges``."""
+    parent = np.arange(n)
+    for e in range(edges.shape[0]):
+        _union(parent, edges[e, 0], edges[e, 1])
+    return _numbered(parent)
 
 
 @inline

@@ -115,6 +115,27 @@ class NeighbourGraph:
         spacing = float(np.median(dist[:, 1]))
         return cls(n, edges, None, None, tree, spacing)
 
+    def weighted_adjacency(self, weights: np.ndarray
+                           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Symmetric CSR matrix of per-edge weights, every row's columns ascending.
+
+        Parameters
+        ----------
+        weights : numpy.ndarray
+            (E,) weight of each edge of :attr:`edges`.
+
+        Returns
+        -------
+        indptr, indices, data : numpy.ndarray
+            (N + 1,) int64, (2E,) int64 and (2E,) float32: the entries of row ``i`` are
+            ``indices[indptr[i]:indptr[i + 1]]`` with weights ``data[...]`` (the layout of
+            ``scipy.sparse.csr_matrix`` with sorted indices).
+        """
+        w = np.asarray(weights, dtype=np.float32)
+        if w.shape != (self.num_edges,):
+            raise InvalidInput(f"weights must be ({self.num_edges},), got {w.shape}")
+        return _weighted_adjacency(self.num_nodes, self.edges, w)
+
     @property
     def num_edges(self) -> int:
         """Number E of undirected edges."""
@@ -257,6 +278,30 @@ def _adjacency(n: int, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         indices[pos[hi]] = lo
         pos[hi] += 1
     return indptr, indices
+
+
+@kernel
+def _weighted_adjacency(n: int, edges: np.ndarray, weights: np.ndarray
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_adjacency` of the sorted (E, 2) int64 edges, with their (E,) float32 weights."""
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    for e in range(edges.shape[0]):
+        indptr[edges[e, 0] + 1] += 1
+        indptr[edges[e, 1] + 1] += 1
+    for i in range(n):
+        indptr[i + 1] += indptr[i]
+    indices = np.empty(2 * edges.shape[0], dtype=np.int64)
+    data = np.empty(2 * edges.shape[0], dtype=np.float32)
+    pos = indptr[:n].copy()
+    for e in range(edges.shape[0]):
+        lo, hi = edges[e, 0], edges[e, 1]
+        indices[pos[lo]] = hi
+        data[pos[lo]] = weights[e]
+        pos[lo] += 1
+        indices[pos[hi]] = lo
+        data[pos[hi]] = weights[e]
+        pos[hi] += 1
+    return indptr, indices, data
 
 
 @kernel

@@ -30,27 +30,23 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
+from monoplane.algorithm.graphcut import proximity_weights
+from monoplane.algorithm.label_mean_field import candidate_labels, potts_mean_field
 from monoplane.datamodel import Reconstruction, orient_towards_camera
 from monoplane.errors import check_config
 from monoplane.geometry.cloud import PlaneCloud
-from monoplane.geometry.components import graph_components
+from monoplane.geometry.components import graph_components, same_label_components
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.geometry.planes import fit_planes_per_label
-from monoplane.algorithm.graphcut import normal_costs, proximity_weights
 from monoplane.hookspecs import hookimpl
 from monoplane.jit import chunks, kernel, run_threaded
 from monoplane.stages.base import ProximityAffinities, RansacParams, Refiner, Stage, param
 
-if TYPE_CHECKING:
-    from scipy.sparse import csr_matrix
-
-#: Nodes per thread below which a mean-field iteration runs on one thread.
+#: Points per thread below which the data costs are computed on one thread.
 _THREADED_NODES = 4096
-
 
 @dataclass
 class GraphCrfConfig(ProximityAffinities):
@@ -95,16 +91,6 @@ class GraphCrfConfig(ProximityAffinities):
         ], prefix="refiner (graph-crf): ")
 
 
-def _adjacency(graph: NeighbourGraph, weights: np.ndarray) -> csr_matrix:
-    """Symmetric (N, N) sparse matrix of edge weights."""
-    from scipy.sparse import coo_matrix  # only this refiner needs SciPy's sparse matrices
-
-    i, j = graph.edges[:, 0], graph.edges[:, 1]
-    n = graph.num_nodes
-    return coo_matrix((np.r_[weights, weights], (np.r_[i, j], np.r_[j, i])),
-                      shape=(n, n)).tocsr()
-
-
 def pixel_graph(cloud: PlaneCloud, max_jump: float) -> NeighbourGraph:
     """8-connected graph of a frame's valid pixels, cut across depth jumps.
 
@@ -134,32 +120,64 @@ def pixel_graph(cloud: PlaneCloud, max_jump: float) -> NeighbourGraph:
 
 
 @kernel
-def _shifted_energy(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, q: np.ndarray,
-                    unary: np.ndarray, weight: np.float32, scale: np.float32, row0: int,
-                    row1: int, out: np.ndarray) -> None:
-    """One mean-field step's exponent for rows ``row0:row1`` into ``out`` ((row1 - row0, L)
-    float32): ``scale (e - min_l e)`` with ``e = weight (W Q) + U``.
-
-    ``W`` is the CSR matrix ``(indptr, indices, data)`` (float32 weights), ``Q`` and ``U`` are
-    (N, L) float32. Every operation is float32 in the order of the NumPy/SciPy expression it
-    replaces (``W @ Q`` accumulates each row's entries in storage order), so the result is
-    the same to the bit.
-    """
-    labels = q.shape[1]
+def _plane_costs(points: np.ndarray, normals: np.ndarray, planes: np.ndarray, inv_eps: np.float32,
+                 normal_weight: float, epsilon_n: float, row0: int, row1: int, out: np.ndarray
+                 ) -> None:
+    """Rows ``row0:row1`` of :meth:`GraphCrfRefiner.unary` into ``out`` ((N, P + 1) float32),
+    from (N, 3) float32 points and normals and (P, 4) float32 planes: ``out[:, 0] = 1``,
+    ``out[:, p] = ((x·n_p + d_p) inv_eps)²`` plus ``normal_weight`` times the normal cost of
+    :func:`monoplane.algorithm.graphcut.normal_costs` (float64, as there) when it is > 0."""
     for i in range(row0, row1):
-        row = out[i - row0]
-        row[:] = 0
-        for jj in range(indptr[i], indptr[i + 1]):
-            j = indices[jj]
-            a = data[jj]
-            for k in range(labels):
-                row[k] += a * q[j, k]
-        low = np.float32(np.inf)
-        for k in range(labels):
-            row[k] = row[k] * weight + unary[i, k]
-            low = min(low, row[k])
-        for k in range(labels):
-            row[k] = (row[k] - low) * scale
+        out[i, 0] = 1.0
+        for p in range(planes.shape[0]):
+            c = (points[i, 0] * planes[p, 0] + points[i, 1] * planes[p, 1]
+                 + points[i, 2] * planes[p, 2] + planes[p, 3]) * inv_eps
+            c = c * c
+            if normal_weight > 0:
+                cos = (normals[i, 0] * planes[p, 0] + normals[i, 1] * planes[p, 1]
+                       + normals[i, 2] * planes[p, 2])
+                angle = np.arccos(min(max(cos, np.float32(-1.0)), np.float32(1.0)))
+                if angle >= epsilon_n:
+                    c = np.float32(c + normal_weight * np.exp(angle / epsilon_n - 1.0))
+            out[i, p + 1] = c
+
+
+@kernel
+def _touching_pairs(labels: np.ndarray, edges: np.ndarray, num: int) -> np.ndarray:
+    """(K, 2) int64 pairs ``p < q`` of labels 1..``num`` joined by some of the (E, 2) int64
+    ``edges`` of nodes labelled by the (N,) int64 ``labels``, in lexicographic order."""
+    touch = np.zeros((num + 1, num + 1), dtype=np.bool_)
+    count = 0
+    for e in range(edges.shape[0]):
+        a, b = labels[edges[e, 0]], labels[edges[e, 1]]
+        if a > 0 and b > 0 and a != b:
+            lo, hi = min(a, b), max(a, b)
+            if not touch[lo, hi]:
+                touch[lo, hi] = True
+                count += 1
+    pairs = np.empty((count, 2), dtype=np.int64)
+    k = 0
+    for p in range(1, num + 1):
+        for q in range(p + 1, num + 1):
+            if touch[p, q]:
+                pairs[k, 0] = p
+                pairs[k, 1] = q
+                k += 1
+    return pairs
+
+
+@kernel
+def _stable_order(labels: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """``np.argsort(labels, kind="stable")`` of (N,) int64 labels 0..L-1 with (L,) counts,
+    by counting."""
+    slot = np.zeros(counts.shape[0], dtype=np.int64)
+    for k in range(1, counts.shape[0]):
+        slot[k] = slot[k - 1] + counts[k - 1]
+    order = np.empty(labels.shape[0], dtype=np.int64)
+    for i in range(labels.shape[0]):
+        order[slot[labels[i]]] = i
+        slot[labels[i]] += 1
+    return order
 
 
 @kernel
@@ -266,67 +284,41 @@ class GraphCrfRefiner(Refiner):
         c = self.config
         epsilon = params.epsilon if epsilon is None else epsilon
         # float32: the costs only rank labels, and the (N, P + 1) arrays of a 512x512 range
-        # image with 40 planes are the refiner's main memory traffic.
-        points = cloud.points.astype(np.float32)
-        normals_p = planes[:, :3].astype(np.float32)
-        out = np.empty((cloud.size, planes.shape[0] + 1), dtype=np.float32)
-        out[:, 0] = 1.0
-        cost = out[:, 1:]
-        np.matmul(points, normals_p.T, out=cost)
-        cost += planes[:, 3].astype(np.float32)
-        cost *= np.float32(1.0 / epsilon)
-        np.square(cost, out=cost)
-        if c.normal_weight > 0:  # the angles are only needed then
-            cos = np.clip(cloud.normals.astype(np.float32) @ normals_p.T, -1.0, 1.0)
-            cost += c.normal_weight * normal_costs(np.arccos(cos), params.epsilon_n)
+        # image with 40 planes are the refiner's main memory traffic: one compiled pass
+        # writes them, row range by row range on the frame's threads.
+        points = np.ascontiguousarray(cloud.points, dtype=np.float32)
+        normals = np.ascontiguousarray(cloud.normals, dtype=np.float32)
+        planes32 = np.ascontiguousarray(planes, dtype=np.float32).reshape(-1, 4)
+        out = np.empty((cloud.size, planes32.shape[0] + 1), dtype=np.float32)
+        run_threaded([functools.partial(_plane_costs, points, normals, planes32,
+                                        np.float32(1.0 / epsilon), float(c.normal_weight),
+                                        float(params.epsilon_n), a, b, out)
+                      for a, b in chunks(cloud.size, _THREADED_NODES)])
         return out
 
-    def _mean_field(self, unary: np.ndarray, adj: csr_matrix, labels: np.ndarray,
-                    mean_degree: float) -> np.ndarray:
+    def _mean_field(self, unary: np.ndarray, adj: tuple[np.ndarray, np.ndarray, np.ndarray],
+                    labels: np.ndarray, mean_degree: float) -> np.ndarray:
+        """Labels after mean-field inference from ``labels``; ``adj`` is the graph's weighted
+        adjacency (:meth:`NeighbourGraph.weighted_adjacency`)."""
         c = self.config
         if c.iterations == 0 or unary.shape[1] < 2:
             return labels
         beta = c.beta / max(mean_degree, 1e-12)
-        adj = adj.astype(np.float32)
-        inv_t = np.float32(1.0 / c.temperature)
-        q = np.zeros(unary.shape, dtype=np.float32)
-        q[np.arange(labels.size), labels] = 1.0
+        indptr, indices, weights = adj
+        # Each pixel carries only the planes it can hold with non-negligible probability
+        # (2-4 of up to 41 on a range image); the rest could change no sum and no argmax.
         # "Non-planar" after RANSAC means no plane claimed the point, not evidence against
         # every plane: such points start from their data term alone, so a strip the greedy
         # search left over does not hold itself in place through the pairwise term.
-        free = labels == 0
-        if free.any():
-            e = unary[free] - unary[free].min(axis=1, keepdims=True)
-            q[free] = np.exp(-e * inv_t)
-            q[free] /= q[free].sum(axis=1, keepdims=True)
-        unary = np.ascontiguousarray(unary, dtype=np.float32)
-        weight = np.float32(-beta)
-        spans = chunks(labels.size, _THREADED_NODES)
-        nxt = np.empty_like(q)
-
-        def update(a: int, b: int) -> None:
-            # Expected Potts cost of label l at i: Σ_j w_ij (1 - Q_j(l)) = deg_i - (W Q)_i(l);
-            # deg_i is the same for every label and cancels in the softmax.
-            part = nxt[a:b]
-            _shifted_energy(adj.indptr, adj.indices, adj.data, q, unary, weight, -inv_t, a, b,
-                            part)
-            np.exp(part, out=part)
-            part /= part.sum(axis=1, keepdims=True)
-
-        # Rows are independent within an iteration: contiguous row ranges run on parallel
-        # threads, each reading the last iteration's Q and writing its rows of the next.
-        for _ in range(c.iterations):
-            run_threaded([functools.partial(update, a, b) for a, b in spans])
-            q, nxt = nxt, q
-        return np.argmax(q, axis=1).astype(np.int32)
+        ptr, cand, costs = candidate_labels(unary, labels, indptr, weights, beta,
+                                            c.temperature)
+        return potts_mean_field(ptr, cand, costs, indptr, indices, weights, labels, beta,
+                                c.temperature, c.iterations)
 
     def _components(self, graph: NeighbourGraph, labels: np.ndarray, min_size: int
                     ) -> np.ndarray:
         """Relabel every graph-connected region of one label as its own label 1..R."""
-        i, j = graph.edges[:, 0], graph.edges[:, 1]
-        same = (labels[i] == labels[j]) & (labels[i] > 0)
-        n = labels.size
-        comp = graph_components(n, np.stack([i[same], j[same]], axis=1))
+        comp = same_label_components(labels, graph.edges)
         comp = np.where(labels > 0, comp + 1, 0)
         sizes = np.bincount(comp)
         sizes[0] = 0
@@ -345,15 +337,13 @@ class GraphCrfRefiner(Refiner):
         num = planes.shape[0]
         if num < 2 or c.merge_distance == 0:
             return labels
-        a, b = labels[graph.edges[:, 0]], labels[graph.edges[:, 1]]
-        touch = (a > 0) & (b > 0) & (a != b)
-        pairs = np.unique(np.sort(np.stack([a[touch], b[touch]], axis=1), axis=1), axis=0)
+        pairs = _touching_pairs(np.ascontiguousarray(labels, dtype=np.int64), graph.edges, num)
         if pairs.size == 0:
             return labels
         cos_max = math.cos(math.radians(c.merge_angle_deg))
         tol2 = (c.merge_distance * epsilon) ** 2
-        order = np.argsort(labels, kind="stable")
         counts = np.bincount(labels, minlength=num + 1)
+        order = _stable_order(np.ascontiguousarray(labels, dtype=np.int64), counts)
         groups = np.split(order, np.cumsum(counts)[:-1])
         agree = np.zeros(len(pairs), dtype=np.bool_)
         for i, (p, q) in enumerate(pairs):
@@ -367,9 +357,9 @@ class GraphCrfRefiner(Refiner):
         # labels are dense in the order of their first region.
         return graph_components(num + 1, pairs[agree]).astype(np.int32)[labels]
 
-    def _refit_round(self, cloud: PlaneCloud, adj: csr_matrix, graph: NeighbourGraph,
-                     labels: np.ndarray, planes: np.ndarray, params: RansacParams,
-                     epsilon: float) -> tuple[np.ndarray, np.ndarray]:
+    def _refit_round(self, cloud: PlaneCloud, adj: tuple[np.ndarray, np.ndarray, np.ndarray],
+                     graph: NeighbourGraph, labels: np.ndarray, planes: np.ndarray,
+                     params: RansacParams, epsilon: float) -> tuple[np.ndarray, np.ndarray]:
         """One more mean-field round on planes refit by least squares to the labels so far.
 
         The search's planes were fitted to their inlier bands, which along a crease include a
@@ -393,7 +383,7 @@ class GraphCrfRefiner(Refiner):
             return labels, planes
         weights = proximity_weights(cloud.points, graph.edges, cloud.normals, cloud.colors,
                                     *c.affinities())
-        adj = _adjacency(graph, weights)
+        adj = graph.weighted_adjacency(weights)
         epsilon = self.distance_scale(cloud, labels, planes, params)
         labels = self._mean_field(self.unary(cloud, planes, params, epsilon), adj, labels,
                                   graph.mean_degree)

@@ -14,20 +14,20 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from monoplane.datamodel import Frame, Reconstruction
 from monoplane.algorithm.densecrf import REFERENCE_AREA, CrfGrid, CrfParams, crf_grid, dense_crf
-from monoplane.errors import ConfigError, InvalidInput, check_config
-from monoplane.geometry.cloud import PlaneCloud
-from monoplane.geometry.graph import NeighbourGraph
-from monoplane.hookspecs import hookimpl
-from monoplane.jit import in_background, thread_budget
+from monoplane.algorithm.region_moments import scene_radius
 from monoplane.algorithm.regions import (
     MIN_AREA_AT_REFERENCE,
     clean_regions,
     gate_filled_pixels,
     scaled_min_area,
-    scene_radius,
 )
+from monoplane.datamodel import Frame, Reconstruction
+from monoplane.errors import ConfigError, InvalidInput, check_config
+from monoplane.geometry.cloud import PlaneCloud
+from monoplane.geometry.graph import NeighbourGraph
+from monoplane.hookspecs import hookimpl
+from monoplane.jit import in_background, thread_budget
 from monoplane.stages.base import RansacParams, Refiner, Stage, param
 
 
@@ -72,9 +72,10 @@ class DenseCrfRefiner(Refiner):
 
     The unary term gives each pixel's RANSAC label probability ``confidence`` and spreads the
     rest evenly over the other labels. The pairwise term is a Potts model weighted by four
-    Gaussian kernels (weights 1, as in the paper); see :class:`monoplane.algorithm.densecrf.CrfParams`
-    for exactly what each θ divides. Kernels whose weight is 0, or whose cue is missing (no or
-    grey RGB, no depth, no normals), are dropped. Positional θ and the minimum area are given
+    Gaussian kernels (weights 1, as in the paper); see
+    :class:`monoplane.algorithm.densecrf.CrfParams` for exactly what each θ divides. Kernels
+    whose weight is 0, or whose cue is missing (no or grey RGB, no depth, no normals), are
+    dropped. Positional θ and the minimum area are given
     at the paper's 256 x 192 and scale with the image.
 
     Deviations from the paper, each a switch (all on by default; off gives the paper's
@@ -92,8 +93,8 @@ class DenseCrfRefiner(Refiner):
     * ``absorb``: a region under the minimum area joins an adjacent plane its points fit
       (RMS within ``merge_distance``) and is set non-planar only otherwise.
 
-    Distances are fractions of the scene radius (:func:`monoplane.algorithm.regions.scene_radius`), like
-    the RANSAC's ε.
+    Distances are fractions of the scene radius
+    (:func:`monoplane.algorithm.region_moments.scene_radius`), like the RANSAC's ε.
     """
 
     name = "dense-crf"

@@ -5,7 +5,11 @@ import pytest
 from scipy import ndimage
 
 from monoplane.errors import InvalidInput
-from monoplane.geometry.components import graph_components, label_regions
+from monoplane.geometry.components import (
+    graph_components,
+    label_regions,
+    same_label_components,
+)
 
 
 def blocky(rng, h, w, labels):
@@ -79,3 +83,15 @@ def test_graph_components_reject_edges_outside_the_graph():
     assert graph_components(3, np.zeros((0, 2))).tolist() == [0, 1, 2]
     with pytest.raises(InvalidInput, match="0..2"):
         graph_components(3, [[0, 3]])
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_same_label_components_are_those_of_the_same_label_edges(seed):
+    rng = np.random.default_rng(seed)
+    labels = rng.integers(0, 4, 500)
+    edges = rng.integers(0, 500, (1500, 2))
+    same = (labels[edges[:, 0]] == labels[edges[:, 1]]) & (labels[edges[:, 0]] > 0)
+    np.testing.assert_array_equal(same_label_components(labels, edges),
+                                  graph_components(500, edges[same]))
+    with pytest.raises(InvalidInput, match="edge ends"):
+        same_label_components(labels[:10], edges)

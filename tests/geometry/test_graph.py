@@ -6,6 +6,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from monoplane.errors import InvalidInput
 from monoplane.geometry.components import largest_component
 from monoplane.geometry.graph import NeighbourGraph, _adjacency, _knn_edges, _pool_edges
 
@@ -223,3 +224,19 @@ def test_largest_component_kernel_matches_scipy(seed):
         members[0] = True
     np.testing.assert_array_equal(largest_component(members, edges),
                                   reference_largest_component(members, edges))
+
+
+def test_weighted_adjacency_is_scipys_sorted_csr():
+    rng = np.random.default_rng(5)
+    graph = NeighbourGraph.build(rng.normal(size=(300, 3)), 6)
+    weights = rng.uniform(0.1, 2.0, graph.num_edges)
+    indptr, indices, data = graph.weighted_adjacency(weights)
+    i, j = graph.edges[:, 0], graph.edges[:, 1]
+    want = coo_matrix((np.r_[weights, weights], (np.r_[i, j], np.r_[j, i])),
+                      shape=(300, 300)).tocsr()
+    want.sort_indices()
+    np.testing.assert_array_equal(indptr, want.indptr)
+    np.testing.assert_array_equal(indices, want.indices)
+    np.testing.assert_array_equal(data, want.data.astype(np.float32))
+    with pytest.raises(InvalidInput, match="weights must be"):
+        graph.weighted_adjacency(weights[:-1])

@@ -11,7 +11,13 @@ from monoplane.evaluation.segcomp import segcomp
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.stages.base import RansacParams
-from monoplane.stages.graph_refiner import GraphCrfConfig, GraphCrfRefiner, pixel_graph
+from monoplane.stages.graph_refiner import (
+    GraphCrfConfig,
+    GraphCrfRefiner,
+    _stable_order,
+    _touching_pairs,
+    pixel_graph,
+)
 from monoplane.testing import box_frame
 
 #: The pipeline's shared thresholds at their defaults.
@@ -183,3 +189,15 @@ def test_the_threaded_mean_field_does_not_depend_on_the_threads(monkeypatch):
     two = refiner.refine(rec, PARAMS)
     np.testing.assert_array_equal(one.labels, two.labels)
     np.testing.assert_array_equal(one.params, two.params)
+
+
+def test_touching_pairs_and_label_order_match_numpy():
+    rng = np.random.default_rng(3)
+    labels = rng.integers(0, 9, 2000)
+    edges = np.sort(rng.integers(0, 2000, (6000, 2)), axis=1)
+    a, b = labels[edges[:, 0]], labels[edges[:, 1]]
+    touch = (a > 0) & (b > 0) & (a != b)
+    want = np.unique(np.sort(np.stack([a[touch], b[touch]], axis=1), axis=1), axis=0)
+    np.testing.assert_array_equal(_touching_pairs(labels, edges, 8), want)
+    np.testing.assert_array_equal(_stable_order(labels, np.bincount(labels, minlength=9)),
+                                  np.argsort(labels, kind="stable"))

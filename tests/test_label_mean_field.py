@@ -1,0 +1,89 @@
+"""Mean field on candidate label lists against the dense update over every label."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.sparse import coo_matrix
+
+from monoplane.algorithm.label_mean_field import (
+    MARGIN_TEMPERATURES,
+    candidate_labels,
+    potts_mean_field,
+)
+
+
+def dense_mean_field(unary, adj, start, beta, temperature, iterations):
+    """The textbook update over all labels: q_i ∝ exp(-(U_i - β (W Q)_i) / T)."""
+    q = np.zeros(unary.shape)
+    q[np.arange(start.size), start] = 1.0
+    free = start == 0
+    e = unary[free] - unary[free].min(axis=1, keepdims=True)
+    q[free] = np.exp(-e / temperature)
+    q[free] /= q[free].sum(axis=1, keepdims=True)
+    for _ in range(iterations):
+        e = unary - beta * (adj @ q)
+        q = np.exp(-(e - e.min(axis=1, keepdims=True)) / temperature)
+        q /= q.sum(axis=1, keepdims=True)
+    return np.argmax(q, axis=1), q
+
+
+def random_problem(seed, n=400, labels=12, degree=6):
+    """A random weighted graph and data costs where each node is near a few labels only."""
+    rng = np.random.default_rng(seed)
+    i = rng.integers(0, n, n * degree // 2)
+    j = rng.integers(0, n, n * degree // 2)
+    keep = i != j
+    w = rng.uniform(0.5, 3.0, keep.sum())
+    adj = coo_matrix((np.r_[w, w], (np.r_[i[keep], j[keep]], np.r_[j[keep], i[keep]])),
+                     shape=(n, n)).tocsr()
+    adj.sum_duplicates()
+    unary = rng.uniform(0.0, 40.0, (n, labels)).astype(np.float32)
+    unary[:, 0] = 1.0
+    near = rng.integers(1, labels, (n, 2))
+    unary[np.arange(n)[:, None], near] = rng.uniform(0.0, 2.0, (n, 2))
+    start = np.where(rng.random(n) < 0.3, 0, near[:, 0])
+    return unary, adj, start
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_candidate_mean_field_matches_the_dense_one(seed):
+    unary, adj, start = random_problem(seed)
+    beta, temperature = 0.3, 0.2
+    ptr, cand, costs = candidate_labels(unary, start, adj.indptr, adj.data, beta, temperature)
+    got = potts_mean_field(ptr, cand, costs, adj.indptr.astype(np.int64),
+                           adj.indices.astype(np.int64), adj.data.astype(np.float32), start,
+                           beta, temperature, 6)
+    want, q = dense_mean_field(unary.astype(np.float64), adj, start, beta, temperature, 6)
+    # Only the clear winners are compared: float32 against float64 may swap near-ties.
+    top2 = np.sort(q, axis=1)[:, -2:]
+    clear = top2[:, 1] - top2[:, 0] > 1e-3
+    assert clear.mean() > 0.9
+    np.testing.assert_array_equal(got[clear], want[clear])
+    # The lists are short: most labels of most nodes were dropped.
+    assert ptr[-1] < 0.5 * unary.size
+
+
+def test_dropped_labels_are_beyond_the_bound_and_start_labels_kept():
+    unary, adj, start = random_problem(3)
+    beta, temperature = 0.3, 0.2
+    ptr, cand, costs = candidate_labels(unary, start, adj.indptr, adj.data, beta, temperature)
+    degree = np.asarray(adj.sum(axis=1)).ravel()
+    bound = unary.min(axis=1) + beta * degree + MARGIN_TEMPERATURES * temperature
+    for i in range(start.size):
+        kept = cand[ptr[i]:ptr[i + 1]]
+        assert np.all(np.diff(kept) > 0)
+        assert start[i] in kept
+        np.testing.assert_array_equal(costs[ptr[i]:ptr[i + 1]], unary[i, kept])
+        dropped = np.setdiff1d(np.arange(unary.shape[1]), kept)
+        assert np.all(unary[i, dropped] > bound[i] - 1e-4)
+
+
+def test_zero_iterations_return_the_start():
+    unary, adj, start = random_problem(4)
+    ptr, cand, costs = candidate_labels(unary, start, adj.indptr, adj.data, 0.3, 0.2)
+    got = potts_mean_field(ptr, cand, costs, adj.indptr.astype(np.int64),
+                           adj.indices.astype(np.int64), adj.data.astype(np.float32), start,
+                           0.3, 0.2, 0)
+    moved = start != 0
+    np.testing.assert_array_equal(got[moved], start[moved])
