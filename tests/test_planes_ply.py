@@ -74,7 +74,7 @@ def wall_and_box(tmp_path: Path) -> tuple[Path, np.ndarray, np.ndarray]:
     rgb[~box] = (200, 50, 50)
     rgb[box] = (20, 20, 220)
     planes = np.array([[0.0, 0.0, -1.0, 4.0], [0.0, 0.0, -1.0, 2.0]])
-    rec = Reconstruction(frame=Frame(rgb=rgb, K=K), labels=labels, params=planes)
+    rec = Reconstruction(frame=Frame(rgb=rgb, K=K), labels=labels, planes=planes)
     out = save_reconstruction(rec, tmp_path / "out")
     return out, K, box
 

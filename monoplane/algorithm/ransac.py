@@ -449,6 +449,6 @@ class SequentialRansac:
         renumber = np.zeros(len(kept) + 1, dtype=np.int32)
         renumber[1:][kept] = np.arange(1, kept.sum() + 1)
         return Reconstruction(frame=frame, labels=renumber[labels],
-                              params=orient_towards_camera(params[kept]) if kept.any()
+                              planes=orient_towards_camera(params[kept]) if kept.any()
                               else np.zeros((0, 4)),
                               rmse=rmse[kept], support=support[kept])

@@ -75,6 +75,9 @@ def run(args: argparse.Namespace) -> int:
 
     from monoplane.io.clouds import read_point_cloud
     from monoplane.host.config import dumps_toml
+    from monoplane.export.open3d_objects import cloud_plane_colors, cloud_to_open3d
+    from monoplane.geometry.cloud_mesh import cloud_mesh
+    from monoplane.host.cloud_result import CloudPlaneResult
     from monoplane.host.detect import detect_planes
     from monoplane.report.cloud import cloud_glb, write_cloud_report
 
@@ -87,13 +90,13 @@ def run(args: argparse.Namespace) -> int:
         raise InvalidInput(f"point cloud {args.cloud}: {exc}") from None
     with atomic_output_dir(args.out, args.overwrite) as tmp:
         np.save(tmp / "labels.npy", result.labels)
-        doc = {"source": str(args.cloud), **result.planes_document()}
+        doc = {"source": str(args.cloud), **CloudPlaneResult.planes_document(result)}
         (tmp / "planes.json").write_text(json.dumps(doc, indent=2) + "\n")
         (tmp / "config.toml").write_text(dumps_toml(result.config))
-        if not o3d.io.write_point_cloud(str(tmp / "labelled.ply"), result.to_open3d()):
+        if not o3d.io.write_point_cloud(str(tmp / "labelled.ply"), cloud_to_open3d(result)):
             raise InvalidInput(f"cannot write {args.out}/labelled.ply")
-        colors = np.round(result.plane_colors()[1:] * 255).astype(np.uint8)
-        mesh = result.plane_mesh()
+        colors = np.round(cloud_plane_colors(result)[1:] * 255).astype(np.uint8)
+        mesh = cloud_mesh(result)
         write_plane_mesh_ply(tmp / "planes.ply", mesh, colors)
         (tmp / "planes.glb").write_bytes(cloud_glb(result, mesh))
         if args.report:

@@ -1,4 +1,5 @@
-"""The data model that flows between stages: Frame, Reconstruction, Camera, Scene, SfmResult.
+"""The data model that flows between stages: Frame, Reconstruction, CloudResult, Camera, Scene,
+SfmResult, and the plane-set vocabulary they share (:mod:`.planeset`).
 
 Conventions used everywhere in monoplane
 ----------------------------------------
@@ -19,6 +20,7 @@ can depend on it. Writing outputs lives in :mod:`monoplane.io.frames`
 
 from __future__ import annotations
 
+from monoplane.datamodel.cloud import CloudResult
 from monoplane.datamodel.frame import DEPTH_KINDS, DepthKind, Frame
 from monoplane.datamodel.pinhole import (
     Camera,
@@ -29,11 +31,13 @@ from monoplane.datamodel.pinhole import (
     plane_to_world,
     ray_plane_depth,
 )
+from monoplane.datamodel.planeset import RESULT_KINDS, PlaneSet
 from monoplane.datamodel.reconstruction import Reconstruction, orient_towards_camera
 from monoplane.datamodel.scene import Scene, SfmResult
 
 __all__ = [
-    "DEPTH_KINDS", "Camera", "DepthKind", "Frame", "Reconstruction", "Scene", "SfmResult",
+    "DEPTH_KINDS", "RESULT_KINDS", "Camera", "CloudResult", "DepthKind", "Frame", "PlaneSet",
+    "Reconstruction", "Scene", "SfmResult",
     "default_intrinsics", "intrinsics_matrix", "orient_towards_camera", "pixel_rays",
     "plane_to_camera", "plane_to_world", "ray_plane_depth",
 ]

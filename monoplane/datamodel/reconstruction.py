@@ -6,11 +6,13 @@ Conventions: see :mod:`monoplane.datamodel`.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 
 from monoplane.datamodel.frame import Frame
 from monoplane.datamodel.pinhole import pixel_rays, ray_plane_depth
+from monoplane.datamodel.planeset import PlaneSet, as_planes, deprecated_name
 from monoplane.errors import InvalidInput
 
 
@@ -40,8 +42,8 @@ def orient_towards_camera(params: np.ndarray) -> np.ndarray:
     return p[0] if single else p
 
 
-@dataclass
-class Reconstruction:
+@dataclass(init=False)
+class Reconstruction(PlaneSet):
     """Planes recovered from one frame.
 
     Attributes
@@ -49,10 +51,11 @@ class Reconstruction:
     frame : Frame
         The frame (with cues) the planes were recovered from.
     labels : numpy.ndarray
-        (H, W) int32 label map: 0 = non-planar, ``i`` in 1..P = plane ``params[i - 1]``.
-    params : numpy.ndarray
+        (H, W) int32 label map: 0 = non-planar, ``i`` in 1..P = plane ``planes[i - 1]``.
+    planes : numpy.ndarray
         (P, 4) float64 planes ``(nx, ny, nz, d)``, ``n · X + d = 0`` in the camera frame
-        (OpenCV axes) and the frame's depth units, normal facing the camera.
+        (OpenCV axes) and the frame's depth units, normal facing the camera. Formerly
+        ``params`` (still accepted, with a DeprecationWarning, until 0.3.0).
     rmse : numpy.ndarray
         (P,) float64 RMS point-to-plane distance of each plane's pixels, in depth units.
     support : numpy.ndarray
@@ -61,49 +64,56 @@ class Reconstruction:
         The resolved pipeline config that produced this result (for reproducibility).
     timings : dict
         Seconds spent per stage.
+
+    ``ids`` (:class:`~monoplane.datamodel.planeset.PlaneSet`) are the label values 1..P.
     """
+
+    result_kind: ClassVar[str] = "frame"
 
     frame: Frame
     labels: np.ndarray
-    params: np.ndarray
-    rmse: np.ndarray | None = None
-    support: np.ndarray | None = None
+    planes: np.ndarray
+    rmse: np.ndarray
+    support: np.ndarray
     config: dict = field(default_factory=dict)
     timings: dict = field(default_factory=dict)
 
-    def __post_init__(self) -> None:
-        labels = np.asarray(self.labels)
-        if labels.shape != self.frame.shape:
+    def __init__(self, frame: Frame, labels: np.ndarray, planes: np.ndarray | None = None,
+                 rmse: np.ndarray | None = None, support: np.ndarray | None = None,
+                 config: dict | None = None, timings: dict | None = None, *,
+                 params: np.ndarray | None = None) -> None:
+        if params is not None:  # the old name wins: dataclasses.replace passes both
+            deprecated_name("Reconstruction", "params", "planes")
+            planes = params
+        if planes is None:
+            raise InvalidInput("Reconstruction needs planes")
+        self.frame = frame
+        labels = np.asarray(labels)
+        if labels.shape != frame.shape:
             raise InvalidInput(
-                f"labels must have the frame's shape {self.frame.shape}, got {labels.shape}"
+                f"labels must have the frame's shape {frame.shape}, got {labels.shape}"
             )
         if not np.issubdtype(labels.dtype, np.integer):
             raise InvalidInput(f"labels must be integers, got {labels.dtype}")
         self.labels = labels.astype(np.int32)
-        params = np.asarray(self.params, dtype=np.float64).reshape(-1, 4)
-        if not np.all(np.isfinite(params)):
-            raise InvalidInput("plane parameters contain NaN or inf")
-        if params.shape[0]:
-            self.params = orient_towards_camera(params)
-        else:
-            self.params = params
-        n = self.params.shape[0]
+        rows = as_planes(planes, "plane parameters")
+        self.planes = orient_towards_camera(rows) if rows.shape[0] else rows
+        n = self.planes.shape[0]
         if self.labels.size and (self.labels.min() < 0 or self.labels.max() > n):
             raise InvalidInput(f"labels must lie in 0..{n} for {n} planes")
-        self.rmse = (
-            np.zeros(n) if self.rmse is None else np.asarray(self.rmse, dtype=np.float64)
-        )
-        self.support = (
-            self.area_px.copy() if self.support is None
-            else np.asarray(self.support, dtype=np.int64)
-        )
+        self.rmse = np.zeros(n) if rmse is None else np.asarray(rmse, dtype=np.float64)
+        self.support = (self.area_px.copy() if support is None
+                        else np.asarray(support, dtype=np.int64))
         if self.rmse.shape != (n,) or self.support.shape != (n,):
             raise InvalidInput(f"rmse and support must have shape ({n},)")
+        self.config = {} if config is None else config
+        self.timings = {} if timings is None else timings
 
     @property
-    def num_planes(self) -> int:
-        """Number of planes P."""
-        return int(self.params.shape[0])
+    def params(self) -> np.ndarray:
+        """Deprecated name of :attr:`planes`."""
+        deprecated_name("Reconstruction", "params", "planes")
+        return self.planes
 
     @property
     def area_px(self) -> np.ndarray:
@@ -139,5 +149,5 @@ class Reconstruction:
         mask = self.labels > 0
         if not np.any(mask):
             return out
-        out[mask] = ray_plane_depth(rays[mask], self.params[self.labels[mask] - 1])
+        out[mask] = ray_plane_depth(rays[mask], self.planes[self.labels[mask] - 1])
         return out

@@ -7,17 +7,18 @@ Conventions: see :mod:`monoplane.datamodel`.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
 from monoplane.datamodel.pinhole import Camera
+from monoplane.datamodel.planeset import PlaneSet
 from monoplane.datamodel.reconstruction import Reconstruction
 from monoplane.errors import InvalidInput
 
 
 @dataclass
-class Scene:
+class Scene(PlaneSet):
     """Planes fused across several views.
 
     Attributes
@@ -27,7 +28,8 @@ class Scene:
     views : list of Reconstruction
         Per-view planes after scale alignment, in each camera's frame.
     planes : numpy.ndarray
-        (G, 4) global planes ``n · x_world + d = 0`` (unit normals).
+        (G, 4) global planes ``n · x_world + d = 0`` (unit normals); their ``ids`` are the
+        global ids 0..G-1 and their ``support`` the pixels of their view regions.
     links : list of dict
         ``links[v][local_id] = global_id`` for view ``v``; local ids are 1-based like labels,
         global ids 0-based rows of ``planes``.
@@ -36,6 +38,9 @@ class Scene:
     points : numpy.ndarray
         (M, 3) sparse SfM points in world coordinates.
     """
+
+    result_kind: ClassVar[str] = "scene"
+    first_id: ClassVar[int] = 0
 
     cameras: list[Camera]
     views: list[Reconstruction]
@@ -53,6 +58,16 @@ class Scene:
             for local, glob in table.items():
                 if not 1 <= local <= self.views[v].num_planes or not 0 <= glob < g:
                     raise InvalidInput(f"view {v}: bad link {local} -> {glob}")
+
+    @property
+    def support(self) -> np.ndarray:  # type: ignore[override]
+        """(G,) int64 pixels of each global plane, summed over the view regions linked to it."""
+        out = np.zeros(self.planes.shape[0], dtype=np.int64)
+        for rec, table in zip(self.views, self.links, strict=True):
+            area = rec.area_px
+            for local, glob in table.items():
+                out[glob] += area[local - 1]
+        return out
 
 
 @dataclass

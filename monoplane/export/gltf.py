@@ -256,7 +256,7 @@ def reconstruction_glb(rec: Reconstruction, mesh: PlaneMesh | None = None) -> by
 
     if mesh is None:
         mesh = reconstruction_mesh(rec)
-    return planes_glb(mesh, rec.params, plane_palette(rec.num_planes))
+    return planes_glb(mesh, rec.planes, plane_palette(rec.num_planes))
 
 
 def scene_glb(scene: Scene, mesh: PlaneMesh | None = None) -> bytes:

@@ -46,8 +46,9 @@ from typing import Any
 
 import numpy as np
 
-from monoplane.datamodel import Reconstruction, Scene
+from monoplane.datamodel import CloudResult, Reconstruction, Scene
 from monoplane.errors import MonoplaneError
+from monoplane.geometry.cloud_mesh import cloud_mesh
 from monoplane.geometry.polygons import PlaneMesh, reconstruction_mesh
 
 #: Most points logged per view (depth pixels are taken on a regular grid to stay below it).
@@ -130,7 +131,7 @@ def log_rerun(result: Any, path: str | Path | None = None, *, recording: Any = N
 
     Parameters
     ----------
-    result : Reconstruction, MultiviewResult, Scene or CloudPlaneResult
+    result : Reconstruction, MultiviewResult, Scene or CloudResult
         What ``monoplane run``/``batch``, ``multiview`` or ``cloud`` computed (see the module
         notes for the entities of each).
     path : str or Path, optional
@@ -168,20 +169,19 @@ def log_rerun(result: Any, path: str | Path | None = None, *, recording: Any = N
 
 
 def _log_any(rr: ModuleType, stream: Any, result: Any, entity: str) -> None:
-    from monoplane.host.detect import CloudPlaneResult
     from monoplane.errors import InvalidInput
 
     if isinstance(result, Reconstruction):
         log_reconstruction(rr, stream, result, entity)
     elif isinstance(result, Scene):
         log_scene(rr, stream, result, None, entity)
-    elif isinstance(result, CloudPlaneResult):
+    elif isinstance(result, CloudResult):
         log_cloud(rr, stream, result, entity)
     elif isinstance(getattr(result, "scene", None), Scene):  # a MultiviewResult
         log_scene(rr, stream, result.scene, result.sfm.colors, entity)
     else:
         raise InvalidInput(f"log_rerun: cannot log a {type(result).__name__}; give a "
-                           "Reconstruction, MultiviewResult, Scene or CloudPlaneResult")
+                           "Reconstruction, MultiviewResult, Scene or CloudResult")
 
 
 def annotation_context(rr: ModuleType, num_planes: int, first_id: int = 1) -> Any:
@@ -265,7 +265,7 @@ def log_reconstruction(rr: ModuleType, stream: Any, rec: Reconstruction,
     points, colors, classes = _view_points(rec, rec.labels)
     stream.log(f"{entity}/points", rr.Points3D(points, colors=colors, class_ids=classes))
     log_plane_meshes(rr, stream, reconstruction_mesh(rec) if mesh is None else mesh,
-                     rec.params, 1, entity)
+                     rec.planes, 1, entity)
 
 
 def log_scene(rr: ModuleType, stream: Any, scene: Scene, sfm_colors: np.ndarray | None,
@@ -292,7 +292,7 @@ def log_scene(rr: ModuleType, stream: Any, scene: Scene, sfm_colors: np.ndarray 
 
 
 def log_cloud(rr: ModuleType, stream: Any, result: Any, entity: str = "world") -> None:
-    """Log a point cloud's planes (see the module notes); ``result`` is a CloudPlaneResult."""
+    """Log a point cloud's planes (see the module notes); ``result`` is a CloudResult."""
     stream.log(entity, annotation_context(rr, result.num_planes))
     finite = np.isfinite(result.points).all(axis=1)
     colors = None
@@ -301,4 +301,4 @@ def log_cloud(rr: ModuleType, stream: Any, result: Any, entity: str = "world") -
     stream.log(f"{entity}/points", rr.Points3D(result.points[finite].astype(np.float32),
                                                colors=colors,
                                                class_ids=result.labels[finite].astype(np.uint16)))
-    log_plane_meshes(rr, stream, result.plane_mesh(), result.planes, 1, entity)
+    log_plane_meshes(rr, stream, cloud_mesh(result), result.planes, 1, entity)

@@ -57,7 +57,7 @@ def planar_mesh(
     z = np.zeros(labels.shape)
     planar = labels > 0
     if np.any(planar):
-        z[planar] = ray_plane_depth(rays[planar], rec.params[labels[planar] - 1])
+        z[planar] = ray_plane_depth(rays[planar], rec.planes[labels[planar] - 1])
     if max_depth is None and frame.depth is not None:
         max_depth = 2.0 * float(frame.depth.max())
     if max_depth is not None:

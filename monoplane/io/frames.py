@@ -492,8 +492,8 @@ def planes_document(rec: Reconstruction) -> dict:
     area = rec.area_px
     planes = [{
         "id": i + 1,
-        "normal": [float(v) for v in rec.params[i, :3]],
-        "offset": float(rec.params[i, 3]),
+        "normal": [float(v) for v in rec.planes[i, :3]],
+        "offset": float(rec.planes[i, 3]),
         "area_px": int(area[i]),
         "rmse": float(rec.rmse[i]),  # type: ignore[index]
         "support": int(rec.support[i]),  # type: ignore[index]

@@ -94,7 +94,7 @@ def scene_mesh(scene: Scene, step: int = 2, max_cells: int = 512) -> PlaneMesh:
             mask = rec.labels[::step, ::step] == local
             rays = rays_cache[v][mask]
             z = ray_plane_depth(rays, plane_to_camera(plane, cam.R, cam.t)[0])
-            z_own = ray_plane_depth(rays, rec.params[local - 1])
+            z_own = ray_plane_depth(rays, rec.planes[local - 1])
             ok = (z > 0) & (z_own > 0) & (z < 2 * z_own) & (z_own < 2 * z)
             if not np.any(ok):
                 continue
