@@ -45,8 +45,9 @@ from typing import Any
 
 import numpy as np
 
-from monoplane.datamodel import Camera, Reconstruction, Scene
+from monoplane.datamodel import Camera, CloudResult, Reconstruction, Scene
 from monoplane.geometry.camera import frustum
+from monoplane.geometry.cloud_mesh import cloud_mesh
 from monoplane.geometry.polygons import PlaneMesh, reconstruction_mesh
 from monoplane.version import __version__
 
@@ -282,3 +283,16 @@ def scene_glb(scene: Scene, mesh: PlaneMesh | None = None) -> bytes:
         mesh = scene_mesh(scene)
     return planes_glb(mesh, scene.planes, plane_palette(scene.planes.shape[0]), first_id=0,
                       cameras=scene.cameras)
+
+
+def cloud_glb(result: CloudResult, mesh: PlaneMesh | None = None) -> bytes:
+    """``planes.glb`` of a point cloud: two-sided planes in the cloud's frame, palette colours.
+
+    ``mesh`` is :func:`~monoplane.geometry.cloud_mesh.cloud_mesh` of the result when the caller
+    already has it.
+    """
+    from monoplane.report.colors import plane_palette
+
+    if mesh is None:
+        mesh = cloud_mesh(result)
+    return planes_glb(mesh, result.planes, plane_palette(result.num_planes), double_sided=True)

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from monoplane.export.gltf import planes_glb
+from monoplane.export.gltf import cloud_glb
 from monoplane.geometry.cloud_mesh import cloud_mesh
 from monoplane.report import figures as fig
 from monoplane.report import html
@@ -34,7 +34,6 @@ from monoplane.report.viewpoints import (
 
 if TYPE_CHECKING:
     from monoplane.datamodel import CloudResult
-    from monoplane.geometry.polygons import PlaneMesh
 
 #: Size of the 3D renders in pixels.
 RENDER_SIZE = (960, 720)
@@ -44,17 +43,6 @@ CAMERA_UP = (0.0, -1.0, 0.0)
 #: The bird's eye and outside views cut everything above this share of the floor-to-ceiling
 #: height away: the ceiling and the tops of the walls.
 CUT_SHARE = 0.8
-
-
-def cloud_glb(result: CloudResult, mesh: PlaneMesh | None = None) -> bytes:
-    """``planes.glb`` of a point cloud: two-sided planes in the cloud's frame, palette colours.
-
-    ``mesh`` is :func:`~monoplane.geometry.cloud_mesh.cloud_mesh` of the result when the caller
-    already has it.
-    """
-    if mesh is None:
-        mesh = cloud_mesh(result)
-    return planes_glb(mesh, result.planes, plane_palette(result.num_planes), double_sided=True)
 
 
 def room_frame(result: CloudResult, up_hint: tuple[float, float, float] | None = CAMERA_UP
