@@ -37,6 +37,7 @@ from monoplane.export.files import (  # noqa: F401 - moved there; importable fro
     write_points_ply,
 )
 from monoplane.export.gltf import reconstruction_glb
+from monoplane.export.labels import planes_document
 from monoplane.geometry.polygons import reconstruction_mesh
 from monoplane.io.checks import MAX_MAGNITUDE, load_npy, read_png
 from monoplane.version import __version__
@@ -342,35 +343,6 @@ def load_frame(image: str | Path | None = None, depth: str | Path | None = None,
         depth_units = "relative"
     return Frame(rgb=rgb, K=K, depth=d, normals=n, depth_kind=depth_kind,  # type: ignore[arg-type]
                  depth_units=depth_units, name=name, notes=notes)
-
-
-def planes_document(rec: Reconstruction) -> dict:
-    """The ``planes.json`` content for a reconstruction."""
-    K = rec.frame.K
-    colors = rec.colors
-    area = rec.area_px
-    planes = [{
-        "id": i + 1,
-        "normal": [float(v) for v in rec.planes[i, :3]],
-        "offset": float(rec.planes[i, 3]),
-        "area_px": int(area[i]),
-        "rmse": float(rec.rmse[i]),  # type: ignore[index]
-        "support": int(rec.support[i]),  # type: ignore[index]
-        "color": [int(c) for c in colors[i]],
-    } for i in range(rec.num_planes)]
-    return {
-        "planes": planes,
-        "convention": "normal . X + offset = 0, X in the camera frame (x right, y down, "
-                      "z forward) in depth_units; normal faces the camera",
-        "intrinsics": {"fx": float(K[0, 0]), "fy": float(K[1, 1]), "cx": float(K[0, 2]),
-                       "cy": float(K[1, 2]), "width": rec.frame.width,
-                       "height": rec.frame.height},
-        "depth_units": rec.frame.depth_units,
-        "depth_kind": rec.frame.depth_kind,
-        "notes": list(rec.frame.notes),
-        "timings_s": {k: round(float(v), 4) for k, v in rec.timings.items()},
-        "config": rec.config,
-    }
 
 
 def write_reconstruction_files(rec: Reconstruction, folder: Path) -> None:
