@@ -73,12 +73,12 @@ def _up_hint(text: str) -> tuple[float, float, float] | None:
 def run(args: argparse.Namespace) -> int:
     import open3d as o3d
 
-    from monoplane.io.clouds import read_point_cloud
-    from monoplane.host.config import dumps_toml
+    from monoplane.export.labels import planes_document
     from monoplane.export.open3d_objects import cloud_plane_colors, cloud_to_open3d
     from monoplane.geometry.cloud_mesh import cloud_mesh
-    from monoplane.host.cloud_result import CloudPlaneResult
+    from monoplane.host.config import dumps_toml
     from monoplane.host.detect import detect_planes
+    from monoplane.io.clouds import read_point_cloud
     from monoplane.report.cloud import cloud_glb, write_cloud_report
 
     check_output_args(args)  # fail before any work
@@ -90,7 +90,8 @@ def run(args: argparse.Namespace) -> int:
         raise InvalidInput(f"point cloud {args.cloud}: {exc}") from None
     with atomic_output_dir(args.out, args.overwrite) as tmp:
         np.save(tmp / "labels.npy", result.labels)
-        doc = {"source": str(args.cloud), **CloudPlaneResult.planes_document(result)}
+        result.source = str(args.cloud)
+        doc = planes_document(result)
         (tmp / "planes.json").write_text(json.dumps(doc, indent=2) + "\n")
         (tmp / "config.toml").write_text(dumps_toml(result.config))
         if not o3d.io.write_point_cloud(str(tmp / "labelled.ply"), cloud_to_open3d(result)):

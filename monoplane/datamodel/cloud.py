@@ -42,6 +42,8 @@ class CloudResult(PlaneSet):
         The resolved configuration.
     timings : dict
         Seconds per step.
+    source : str
+        Where the points came from (a file name), when known; ``planes.json`` records it.
     """
 
     result_kind: ClassVar[str] = "cloud"
@@ -56,12 +58,13 @@ class CloudResult(PlaneSet):
     notes: list[str] = field(default_factory=list)
     config: dict[str, Any] = field(default_factory=dict)
     timings: dict[str, float] = field(default_factory=dict)
+    source: str = ""
 
     def __init__(self, points: np.ndarray, labels: np.ndarray, planes: np.ndarray,
                  rmse: np.ndarray, support: np.ndarray | None = None,
                  centroids: np.ndarray | None = None, colors: np.ndarray | None = None,
                  notes: list[str] | None = None, config: dict[str, Any] | None = None,
-                 timings: dict[str, float] | None = None, *,
+                 timings: dict[str, float] | None = None, source: str = "", *,
                  num_points: np.ndarray | None = None) -> None:
         if num_points is not None:  # the old name wins: dataclasses.replace passes both
             deprecated_name("CloudResult", "num_points", "support")
@@ -84,6 +87,7 @@ class CloudResult(PlaneSet):
         self.notes = [] if notes is None else notes
         self.config = {} if config is None else config
         self.timings = {} if timings is None else timings
+        self.source = source
 
     @property
     def num_points(self) -> np.ndarray:

@@ -1,34 +1,53 @@
-"""Label maps and the JSON documents beside them: ``planes.json``, ``scene.json``,
-``cameras.json``."""
+"""Label maps and the JSON documents beside them: ``planes.json`` (a frame, a point cloud),
+``scene.json`` and ``cameras.json`` (several views).
+
+Every document lists its planes the same way (:func:`plane_entries`): ``id`` (the result's
+``ids``: label values, or a scene's global ids), ``normal`` and ``offset`` (``normal · X +
+offset = 0`` in the result's frame and units), then what that kind of result knows of each
+plane. :func:`planes_document` picks the document by the result's ``result_kind``.
+"""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 
-from monoplane.datamodel import Camera, Reconstruction
-
-if TYPE_CHECKING:
-    from monoplane.multiview.driver import MultiviewResult
+from monoplane.datamodel import Camera, CloudResult, PlaneSet, Reconstruction
+from monoplane.errors import InvalidInput
 
 
-def planes_document(rec: Reconstruction) -> dict:
-    """The ``planes.json`` content for a reconstruction."""
+def plane_entries(result: PlaneSet, columns: dict[str, Sequence[Any]]) -> list[dict[str, Any]]:
+    """One JSON entry per plane: ``id``, ``normal``, ``offset``, then ``columns``.
+
+    Parameters
+    ----------
+    result : PlaneSet
+        Planes (P, 4) and their ids (P,).
+    columns : dict
+        Per-plane values by key, each a sequence of P JSON-ready values, in output order.
+
+    Returns
+    -------
+    list of dict
+        P entries, in the order of ``result.planes``.
+    """
+    return [{"id": int(pid), "normal": [float(v) for v in plane[:3]], "offset": float(plane[3]),
+             **{key: values[row] for key, values in columns.items()}}
+            for row, (pid, plane) in enumerate(zip(result.ids, result.planes, strict=True))]
+
+
+def _frame_document(rec: Reconstruction) -> dict[str, Any]:
+    """``planes.json`` of one frame."""
     K = rec.frame.K
-    colors = rec.colors
-    area = rec.area_px
-    planes = [{
-        "id": i + 1,
-        "normal": [float(v) for v in rec.planes[i, :3]],
-        "offset": float(rec.planes[i, 3]),
-        "area_px": int(area[i]),
-        "rmse": float(rec.rmse[i]),  # type: ignore[index]
-        "support": int(rec.support[i]),  # type: ignore[index]
-        "color": [int(c) for c in colors[i]],
-    } for i in range(rec.num_planes)]
     return {
-        "planes": planes,
+        "planes": plane_entries(rec, {
+            "area_px": [int(a) for a in rec.area_px],
+            "rmse": [float(r) for r in rec.rmse],
+            "support": [int(n) for n in rec.support],
+            "color": [[int(c) for c in rgb] for rgb in rec.colors],
+        }),
         "convention": "normal . X + offset = 0, X in the camera frame (x right, y down, "
                       "z forward) in depth_units; normal faces the camera",
         "intrinsics": {"fx": float(K[0, 0]), "fy": float(K[1, 1]), "cx": float(K[0, 2]),
@@ -40,6 +59,103 @@ def planes_document(rec: Reconstruction) -> dict:
         "timings_s": {k: round(float(v), 4) for k, v in rec.timings.items()},
         "config": rec.config,
     }
+
+
+def _cloud_document(result: CloudResult) -> dict[str, Any]:
+    """``planes.json`` of a point cloud (``num_points``: the points of the cloud, and of each
+    plane its ``support``)."""
+    return {
+        **({"source": result.source} if result.source else {}),
+        "num_points": int(result.points.shape[0]),
+        "num_planes": result.num_planes,
+        "planes": plane_entries(result, {
+            "num_points": [int(n) for n in result.support],
+            "rmse": [float(r) for r in result.rmse],
+            "centroid": result.centroids.tolist(),
+        }),
+        "notes": list(result.notes),
+        "config": result.config,
+    }
+
+
+def _multiview_document(result: Any) -> dict[str, Any]:
+    """``scene.json`` of a multi-view result (a :class:`monoplane.multiview.MultiviewResult`:
+    the scene with its SfM, alignments and plane matches)."""
+    from monoplane.multiview.fusion import scene_plane_colors
+
+    scene = result.scene
+    cams = cameras_document(scene.cameras, result.registration)["cameras"]
+    for v, cam in enumerate(cams):
+        a = result.alignments[v]
+        cam["view_folder"] = f"view_{v:03d}"
+        if result.frame_indices:
+            cam["input_index"] = int(result.frame_indices[v])
+        cam["depth_scale"] = float(scene.scales[v]) if scene.scales else None
+        cam["alignment"] = {"num_points": a.num_points, "num_inliers": a.num_inliers,
+                            "residual": a.residual, "relative_residual": a.relative_residual}
+    views: list[list[dict[str, Any]]] = [[] for _ in range(scene.num_planes)]
+    for v, table in enumerate(scene.links):
+        for local, glob in table.items():
+            views[glob].append({"view": v, "image": scene.cameras[v].name,
+                                "local_id": int(local)})
+    return {
+        "cameras": cams,
+        "planes": plane_entries(scene, {
+            "color": [[int(c) for c in rgb] for rgb in scene_plane_colors(scene)],
+            "area_px": [int(a) for a in scene.support],
+            "views": views,
+        }),
+        "plane_matches": [{"view_i": m.view_i, "plane_i": m.plane_i, "view_j": m.view_j,
+                           "plane_j": m.plane_j, "criterion": m.criterion}
+                          for m in result.plane_matches],
+        "num_points": int(len(result.sfm.points)),
+        "units": result.units,
+        "convention": "world frame of the SfM model; planes satisfy normal . x_world + offset "
+                      "= 0, each normal facing the first camera that sees the plane; "
+                      "x_cam = R x_world + t with OpenCV camera axes; local_id is the view's "
+                      "labels.png value",
+        "unregistered": list(result.unregistered),
+        "unregistered_reasons": dict(result.unregistered_reasons),
+        "adjustment": result.adjustment,
+        "notes": list(result.sfm.notes),
+        "timings_s": {k: round(float(v), 4) for k, v in result.timings.items()},
+        "config": result.config,
+    }
+
+
+#: The document of each result kind: ``planes.json`` for a frame or a cloud, ``scene.json``
+#: for a multi-view result.
+_DOCUMENTS: dict[str, Callable[[Any], dict[str, Any]]] = {
+    "frame": _frame_document,
+    "cloud": _cloud_document,
+    "multiview": _multiview_document,
+}
+
+
+def planes_document(result: Any) -> dict[str, Any]:
+    """The JSON document of a result's planes, whatever the kind of result.
+
+    Parameters
+    ----------
+    result : Reconstruction, CloudResult or MultiviewResult
+        Told apart by ``result_kind``.
+
+    Returns
+    -------
+    dict
+        ``planes.json`` (a frame or a cloud) or ``scene.json`` (a multi-view result) content.
+
+    Raises
+    ------
+    InvalidInput
+        A result of another kind (a bare :class:`~monoplane.datamodel.Scene` lacks the SfM
+        and alignments ``scene.json`` reports).
+    """
+    kind = getattr(result, "result_kind", "")
+    if kind not in _DOCUMENTS:
+        raise InvalidInput(f"no plane document for a {type(result).__name__} (result kind "
+                           f"{kind!r}); give a result of kind {', '.join(_DOCUMENTS)}")
+    return _DOCUMENTS[kind](result)
 
 
 def cameras_document(cameras: list[Camera], registration: list[dict] | None = None,
@@ -71,46 +187,6 @@ def cameras_document(cameras: list[Camera], registration: list[dict] | None = No
     return doc
 
 
-def scene_document(result: MultiviewResult) -> dict:
-    """``scene.json`` content."""
-    from monoplane.multiview.fusion import scene_plane_colors
-
-    scene = result.scene
-    colors = scene_plane_colors(scene)
-    cams = cameras_document(scene.cameras, result.registration)["cameras"]
-    for v, cam in enumerate(cams):
-        a = result.alignments[v]
-        cam["view_folder"] = f"view_{v:03d}"
-        if result.frame_indices:
-            cam["input_index"] = int(result.frame_indices[v])
-        cam["depth_scale"] = float(scene.scales[v]) if scene.scales else None
-        cam["alignment"] = {"num_points": a.num_points, "num_inliers": a.num_inliers,
-                            "residual": a.residual, "relative_residual": a.relative_residual}
-    planes = []
-    for g, plane in enumerate(scene.planes):
-        views = [{"view": v, "image": scene.cameras[v].name, "local_id": int(local)}
-                 for v, table in enumerate(scene.links) for local, glob in table.items()
-                 if glob == g]
-        area = sum(int(scene.views[m["view"]].area_px[m["local_id"] - 1]) for m in views)
-        planes.append({"id": g, "normal": [float(x) for x in plane[:3]],
-                       "offset": float(plane[3]), "color": [int(c) for c in colors[g]],
-                       "area_px": area, "views": views})
-    return {
-        "cameras": cams,
-        "planes": planes,
-        "plane_matches": [{"view_i": m.view_i, "plane_i": m.plane_i, "view_j": m.view_j,
-                           "plane_j": m.plane_j, "criterion": m.criterion}
-                          for m in result.plane_matches],
-        "num_points": int(len(result.sfm.points)),
-        "units": result.units,
-        "convention": "world frame of the SfM model; planes satisfy normal . x_world + offset "
-                      "= 0, each normal facing the first camera that sees the plane; "
-                      "x_cam = R x_world + t with OpenCV camera axes; local_id is the view's "
-                      "labels.png value",
-        "unregistered": list(result.unregistered),
-        "unregistered_reasons": dict(result.unregistered_reasons),
-        "adjustment": result.adjustment,
-        "notes": list(result.sfm.notes),
-        "timings_s": {k: round(float(v), 4) for k, v in result.timings.items()},
-        "config": result.config,
-    }
+def scene_document(result: Any) -> dict[str, Any]:
+    """``scene.json`` content of a multi-view result (:func:`planes_document` of it)."""
+    return _multiview_document(result)

@@ -169,16 +169,18 @@ def log_rerun(result: Any, path: str | Path | None = None, *, recording: Any = N
 
 
 def _log_any(rr: ModuleType, stream: Any, result: Any, entity: str) -> None:
+    """Log ``result`` by what its ``result_kind`` says it is."""
     from monoplane.errors import InvalidInput
 
-    if isinstance(result, Reconstruction):
+    kind = getattr(result, "result_kind", "")
+    if kind == "frame":
         log_reconstruction(rr, stream, result, entity)
-    elif isinstance(result, Scene):
+    elif kind == "scene":
         log_scene(rr, stream, result, None, entity)
-    elif isinstance(result, CloudResult):
-        log_cloud(rr, stream, result, entity)
-    elif isinstance(getattr(result, "scene", None), Scene):  # a MultiviewResult
+    elif kind == "multiview":
         log_scene(rr, stream, result.scene, result.sfm.colors, entity)
+    elif kind == "cloud":
+        log_cloud(rr, stream, result, entity)
     else:
         raise InvalidInput(f"log_rerun: cannot log a {type(result).__name__}; give a "
                            "Reconstruction, MultiviewResult, Scene or CloudResult")
@@ -291,7 +293,7 @@ def log_scene(rr: ModuleType, stream: Any, scene: Scene, sfm_colors: np.ndarray 
     log_plane_meshes(rr, stream, scene_mesh(scene), scene.planes, 0, entity)
 
 
-def log_cloud(rr: ModuleType, stream: Any, result: Any, entity: str = "world") -> None:
+def log_cloud(rr: ModuleType, stream: Any, result: CloudResult, entity: str = "world") -> None:
     """Log a point cloud's planes (see the module notes); ``result`` is a CloudResult."""
     stream.log(entity, annotation_context(rr, result.num_planes))
     finite = np.isfinite(result.points).all(axis=1)

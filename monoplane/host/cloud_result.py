@@ -54,16 +54,8 @@ class CloudPlaneResult(CloudResult):
         return cloud_plane_meshes(self, cell)
 
     def planes_document(self) -> dict[str, Any]:
-        """JSON-ready description: one entry per plane (normal, offset, num_points, rmse)."""
-        return {
-            "num_points": int(self.points.shape[0]),
-            "num_planes": self.num_planes,
-            "planes": [
-                {"id": i + 1, "normal": self.planes[i, :3].tolist(),
-                 "offset": float(self.planes[i, 3]), "num_points": int(self.support[i]),
-                 "rmse": float(self.rmse[i]), "centroid": self.centroids[i].tolist()}
-                for i in range(self.num_planes)
-            ],
-            "notes": list(self.notes),
-            "config": self.config,
-        }
+        """Deprecated: :func:`monoplane.export.labels.planes_document`."""
+        from monoplane.export.labels import planes_document
+
+        _moved("planes_document", "monoplane.export.labels.planes_document")
+        return planes_document(self)

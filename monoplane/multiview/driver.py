@@ -9,7 +9,7 @@ from __future__ import annotations
 import contextlib
 import time
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
@@ -77,6 +77,8 @@ class MultiviewResult:
     fused : Scene or None
         The scene as fused, before the adjuster (for evaluation).
     """
+
+    result_kind: ClassVar[str] = "multiview"  # see monoplane.datamodel.PlaneSet
 
     scene: Scene
     sfm: SfmResult
