@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from monoplane.io.frames import check_output_dir
+from monoplane.export.files import check_output_dir
 from monoplane.host.pipeline import Pipeline
 
 

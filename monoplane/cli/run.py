@@ -21,7 +21,8 @@ from monoplane.cli.models import prepare_cue_model
 from monoplane.host.config import load as load_config
 from monoplane.cues import CueNetwork
 from monoplane.errors import ConfigError, InvalidInput
-from monoplane.io.frames import load_frame, save_reconstruction
+from monoplane.export.saving import save
+from monoplane.io.frames import load_frame
 from monoplane.host.pipeline import Pipeline
 from monoplane.host.registry import Registry, get_registry
 from monoplane.stages.base import CueProvider
@@ -75,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
         from monoplane.report import write_frame_report  # loads the plotting libraries
 
         report = functools.partial(write_frame_report, rec, progress=not args.quiet)
-    out = save_reconstruction(rec, args.out, overwrite=args.overwrite, also=report)
+    out = save(rec, args.out, overwrite=args.overwrite, also=report)
     write_rerun_arg(args, rec)
     if not args.quiet:
         for note in rec.frame.notes:

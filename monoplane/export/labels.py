@@ -1,5 +1,11 @@
-"""Label maps and the JSON documents beside them: ``planes.json`` (a frame, a point cloud),
-``scene.json`` and ``cameras.json`` (several views).
+"""The ``labels`` output format: label maps and the JSON documents beside them.
+
+* a frame: ``labels.png`` (uint16, 0 = non-planar, ``i`` = plane ``i`` of ``planes.json``) and
+  ``planes.json``;
+* a point cloud: ``labels.npy`` ((N,) int32 in the input order, 0 = no plane) and
+  ``planes.json``;
+* a multi-view result: ``scene.json``, ``cameras.json`` and in each view folder
+  ``labels_global.png`` (uint16, global plane id + 1, 0 = non-planar).
 
 Every document lists its planes the same way (:func:`plane_entries`): ``id`` (the result's
 ``ids``: label values, or a scene's global ids), ``normal`` and ``offset`` (``normal · X +
@@ -9,13 +15,19 @@ plane. :func:`planes_document` picks the document by the result's ``result_kind`
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from monoplane.datamodel import Camera, CloudResult, PlaneSet, Reconstruction
 from monoplane.errors import InvalidInput
+from monoplane.export.exporter import Exporter
+from monoplane.export.shared import SharedWork
+from monoplane.hookspecs import hookimpl
+from monoplane.version import __version__
 
 
 def plane_entries(result: PlaneSet, columns: dict[str, Sequence[Any]]) -> list[dict[str, Any]]:
@@ -190,3 +202,47 @@ def cameras_document(cameras: list[Camera], registration: list[dict] | None = No
 def scene_document(result: Any) -> dict[str, Any]:
     """``scene.json`` content of a multi-view result (:func:`planes_document` of it)."""
     return _multiview_document(result)
+
+
+def write_json(path: Path, doc: dict[str, Any]) -> None:
+    """Write ``doc`` as indented JSON with a final newline (every JSON file of the outputs)."""
+    path.write_text(json.dumps(doc, indent=2) + "\n")
+
+
+def _write(result: Any, folder: Path, shared: SharedWork) -> None:
+    import cv2
+
+    kind = result.result_kind
+    if kind == "frame":
+        if result.num_planes > np.iinfo(np.uint16).max:
+            raise InvalidInput(f"{result.num_planes} planes do not fit in a uint16 labels.png")
+        cv2.imwrite(str(folder / "labels.png"), result.labels.astype(np.uint16))
+        write_json(folder / "planes.json",
+                   {**planes_document(result), "monoplane_version": __version__})
+    elif kind == "cloud":
+        np.save(folder / "labels.npy", result.labels)
+        write_json(folder / "planes.json", planes_document(result))
+    else:
+        from monoplane.multiview.fusion import global_label_map
+
+        scene = result.scene
+        for v, (rec, links) in enumerate(zip(scene.views, scene.links, strict=True)):
+            cv2.imwrite(str(folder / f"view_{v:03d}" / "labels_global.png"),
+                        global_label_map(rec.labels, links))
+        write_json(folder / "scene.json", planes_document(result))
+        write_json(folder / "cameras.json", cameras_document(scene.cameras, result.registration,
+                                                             result.unregistered))
+
+
+EXPORTER = Exporter(
+    name="labels",
+    files={"frame": ("labels.png", "planes.json"), "cloud": ("labels.npy", "planes.json"),
+           "multiview": ("scene.json", "cameras.json", "view_*/labels_global.png")},
+    write=_write,
+    summary="label maps and the planes as JSON (planes.json, scene.json, cameras.json)",
+)
+
+
+@hookimpl
+def monoplane_register_exporters() -> list[Exporter]:
+    return [EXPORTER]

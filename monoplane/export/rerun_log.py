@@ -1,7 +1,8 @@
 """Rerun recordings of monoplane results: :func:`log_rerun` and the commands' ``--rerun FILE.rrd``.
 
 Rerun (``rerun-sdk``) is an optional extra: ``pip install 'monoplane[rerun]'``. Open a recording
-with ``rerun FILE.rrd``.
+with ``rerun FILE.rrd``. As the ``rerun`` output format (off by default: ``save(...,
+formats=[..., "rerun"])``) it writes ``recording.rrd`` into the output folder.
 
 Entities
 --------
@@ -48,8 +49,11 @@ import numpy as np
 
 from monoplane.datamodel import CloudResult, Reconstruction, Scene
 from monoplane.errors import MonoplaneError
+from monoplane.export.exporter import Exporter
+from monoplane.export.shared import SharedWork
 from monoplane.geometry.cloud_mesh import cloud_mesh
 from monoplane.geometry.polygons import PlaneMesh, reconstruction_mesh
+from monoplane.hookspecs import hookimpl
 
 #: Most points logged per view (depth pixels are taken on a regular grid to stay below it).
 MAX_POINTS = 200_000
@@ -304,3 +308,22 @@ def log_cloud(rr: ModuleType, stream: Any, result: CloudResult, entity: str = "w
                                                colors=colors,
                                                class_ids=result.labels[finite].astype(np.uint16)))
     log_plane_meshes(rr, stream, cloud_mesh(result), result.planes, 1, entity)
+
+
+def _write(result: Any, folder: Path, shared: SharedWork) -> None:
+    log_rerun(result, folder / "recording.rrd")
+
+
+EXPORTER = Exporter(
+    name="rerun",
+    files={"frame": ("recording.rrd",), "cloud": ("recording.rrd",),
+           "multiview": ("recording.rrd",)},
+    write=_write,
+    default=False,  # an optional extra, and a viewer's file rather than a result
+    summary="a Rerun recording, recording.rrd (needs the 'rerun' extra)",
+)
+
+
+@hookimpl
+def monoplane_register_exporters() -> list[Exporter]:
+    return [EXPORTER]

@@ -1,4 +1,4 @@
-"""Reading inputs and writing outputs (the on-disk contract of the command line and API).
+"""Reading inputs (the on-disk contract of the command line and API).
 
 Inputs
 ------
@@ -9,19 +9,21 @@ Inputs
   R, G, B = x, y, z.
 * Intrinsics: ``"fx,fy,cx,cy"`` or a JSON file ``{"fx":…, "fy":…, "cx":…, "cy":…}``.
 
-Outputs (one folder, written atomically: a temporary sibling folder renamed into place)
--------------------------------------------------------------------------------------------
-``labels.png`` (uint16, 0 = non-planar), ``planes.json``, ``planes.ply`` (every plane region
-triangulated on its plane with its holes left open, each face carrying its ``plane_id``; see
-:func:`write_plane_mesh_ply`), ``planes.glb`` (the same triangles, one glTF mesh node per plane;
-see :mod:`monoplane.export.gltf`), ``depth_planar.npy`` and ``config.toml``.
+Outputs are written by :func:`monoplane.export.save` (one module per format in
+:mod:`monoplane.export`). The writers that lived here (:func:`save_reconstruction`,
+:func:`write_reconstruction_files`, ``planes_document``, ``atomic_output_dir``,
+``check_output_dir``, ``write_*_ply``) still work until 0.3.0, with a ``DeprecationWarning``
+naming their replacement.
 """
 
 from __future__ import annotations
 
+import importlib
 import json
+import warnings
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -29,18 +31,7 @@ import numpy as np
 from monoplane.cues.intrinsics import assume_intrinsics
 from monoplane.datamodel import Frame, Reconstruction, intrinsics_matrix
 from monoplane.errors import InvalidInput
-from monoplane.export.files import (  # noqa: F401 - moved there; importable from here too
-    atomic_output_dir,
-    check_output_dir,
-    write_ascii_ply,
-    write_plane_mesh_ply,
-    write_points_ply,
-)
-from monoplane.export.gltf import reconstruction_glb
-from monoplane.export.labels import planes_document
-from monoplane.geometry.polygons import reconstruction_mesh
 from monoplane.io.checks import MAX_MAGNITUDE, load_npy, read_png
-from monoplane.version import __version__
 
 #: Accepted pinhole intrinsics, in pixels. A focal length below 0.1 px is a field of view of
 #: nearly 180 degrees on any image; no sensor is near 1e8 px wide. Beyond these bounds a value
@@ -346,48 +337,41 @@ def load_frame(image: str | Path | None = None, depth: str | Path | None = None,
 
 
 def write_reconstruction_files(rec: Reconstruction, folder: Path) -> None:
-    """Write the single-view outputs into an existing folder (not atomic by itself)."""
-    from monoplane.host.config import dumps_toml  # config imports the plugin registry
+    """Deprecated: :func:`monoplane.export.saving.write_outputs` (the default formats)."""
+    from monoplane.export.saving import select_exporters, write_outputs
 
-    if rec.num_planes > np.iinfo(np.uint16).max:
-        raise InvalidInput(f"{rec.num_planes} planes do not fit in a uint16 labels.png")
-    cv2.imwrite(str(folder / "labels.png"), rec.labels.astype(np.uint16))
-    doc = planes_document(rec)
-    doc["monoplane_version"] = __version__
-    (folder / "planes.json").write_text(json.dumps(doc, indent=2) + "\n")
-    mesh = reconstruction_mesh(rec)
-    write_plane_mesh_ply(folder / "planes.ply", mesh, rec.colors)
-    (folder / "planes.glb").write_bytes(reconstruction_glb(rec, mesh))
-    np.save(folder / "depth_planar.npy", rec.planar_depth())
-    (folder / "config.toml").write_text(
-        "# Resolved monoplane config; rerun with: monoplane run ... --config config.toml\n"
-        + dumps_toml(rec.config))
+    _deprecated("write_reconstruction_files", "monoplane.export.saving.write_outputs")
+    write_outputs(rec, Path(folder), select_exporters("frame"))
 
 
 def save_reconstruction(rec: Reconstruction, out_dir: str | Path, overwrite: bool = False,
                         also: Callable[[Path], object] | None = None) -> Path:
-    """Write a reconstruction's outputs atomically into ``out_dir``.
+    """Deprecated: :func:`monoplane.export.save`, which writes the same folder."""
+    from monoplane.export.saving import save
 
-    Parameters
-    ----------
-    rec : Reconstruction
-        What to write.
-    out_dir : str or Path
-        Target folder; must not exist (or be empty) unless ``overwrite``.
-    overwrite : bool
-        Replace an existing folder.
-    also : callable, optional
-        Writes more files into the folder, given its temporary path, before the folder is put
-        in place, so that they appear with the outputs or not at all (the CLI and the batch
-        pass :func:`monoplane.report.write_frame_report` this way).
+    _deprecated("save_reconstruction", "monoplane.export.save")
+    return save(rec, out_dir, overwrite, also=also)
 
-    Returns
-    -------
-    Path
-        The output folder.
-    """
-    with atomic_output_dir(out_dir, overwrite) as tmp:
-        write_reconstruction_files(rec, tmp)
-        if also is not None:
-            also(tmp)
-    return Path(out_dir)
+
+def _deprecated(old: str, new: str) -> None:
+    warnings.warn(f"monoplane.io.frames.{old} is deprecated; use {new} (the old name goes in "
+                  "0.3.0)", DeprecationWarning, stacklevel=3)
+
+
+#: Writers that moved to :mod:`monoplane.export`: old name -> (module, name).
+_MOVED = {
+    "atomic_output_dir": ("monoplane.export.files", "atomic_output_dir"),
+    "check_output_dir": ("monoplane.export.files", "check_output_dir"),
+    "write_ascii_ply": ("monoplane.export.files", "write_ascii_ply"),
+    "write_plane_mesh_ply": ("monoplane.export.files", "write_plane_mesh_ply"),
+    "write_points_ply": ("monoplane.export.files", "write_points_ply"),
+    "planes_document": ("monoplane.export.labels", "planes_document"),
+}
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _MOVED:
+        raise AttributeError(f"module 'monoplane.io.frames' has no attribute {name!r}")
+    module, new = _MOVED[name]
+    _deprecated(name, f"{module}.{new}")
+    return getattr(importlib.import_module(module), new)
