@@ -11,10 +11,10 @@ import pytest
 from batch_helpers import BROKEN, GOOD, read_labels
 
 from monoplane.batch import run_batch
-from monoplane.export import output_files
 from monoplane.batch.index import write_index
 from monoplane.batch.specs import read_frames
 from monoplane.cli import main
+from monoplane.export import output_files
 
 
 def check_batch_output(out: Path, summary, reference: dict[str, np.ndarray]) -> None:
