@@ -34,7 +34,9 @@ def _imports(path: Path) -> set[str]:
 
 
 #: The stage contracts: the modules of ``monoplane.stages`` that define no stage.
-CONTRACTS = ("monoplane.stages", "monoplane.stages.base", "monoplane.stages.config_fields")
+CONTRACTS = ("monoplane.stages", "monoplane.stages.base", "monoplane.stages.config_fields",
+             "monoplane.stages.contract", "monoplane.stages.frame_contracts",
+             "monoplane.stages.scene_contracts")
 
 MODULES = {_module_name(p): _imports(p) for p in sorted(PACKAGE.rglob("*.py"))}
 
