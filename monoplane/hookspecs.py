@@ -25,6 +25,7 @@ from monoplane.stages.base import KINDS, Stage, StageKind
 
 if TYPE_CHECKING:
     from monoplane.datamodel import Reconstruction
+    from monoplane.export.exporter import Exporter
 
 PROJECT_NAME = "monoplane"
 
@@ -76,4 +77,39 @@ def monoplane_stage_finished(kind: str, name: str, seconds: float, frame_name: s
     """Observe a stage call finishing: its kind, plugin name, wall time and the frame name.
 
     Used by ``monoplane bench`` for per-stage timings; plugins may log or profile with it.
+    """
+
+
+# --- output formats -------------------------------------------------------------------------
+
+
+@hookspec
+def monoplane_register_exporters() -> list[Exporter]:
+    """Output formats: what :func:`monoplane.export.save` (and so ``monoplane run``, ``batch``,
+    ``cloud`` and ``multiview``) can write into a result's folder.
+
+    Return a list of :class:`monoplane.plugin.Exporter`, one per format, each stating:
+
+    * ``name``: unique across plugins, lower-case words joined by ``-``; ``monoplane plugins``
+      lists it and ``save(..., formats=[...])`` selects by it;
+    * ``files``: per result kind it applies to (``"frame"``: a
+      :class:`~monoplane.datamodel.Reconstruction`; ``"cloud"``: a
+      :class:`~monoplane.datamodel.CloudResult`; ``"multiview"``: a
+      :class:`~monoplane.multiview.MultiviewResult`), the paths it writes, relative to the
+      folder. ``monoplane batch`` derives its completeness check from the ``"frame"`` files of
+      the formats on by default, so they must be exactly what ``write`` writes;
+    * ``write(result, folder, shared)``: writes those files into ``folder``, an existing
+      temporary folder that becomes the output only when every format has succeeded (raise to
+      abandon it). It tells result kinds apart by ``result.result_kind``, never by type.
+      ``shared`` (:class:`monoplane.export.shared.SharedWork`) hands out what several formats
+      need, e.g. ``shared.mesh(result)``, the plane meshes, computed once. The views of a
+      multi-view result are written with the ``"frame"`` formats into their own folders
+      (``view_000``, ...) before the ``"multiview"`` formats run;
+    * ``default``: written unless the caller names the formats it wants;
+    * ``summary``: one line for ``monoplane plugins``.
+
+    The built-in formats (``labels``, ``ply``, ``gltf``, ``depth``, ``config``, ``rerun``) are
+    modules of :mod:`monoplane.export` registered through this hook, as a third-party package's
+    are through the ``monoplane`` entry-point group. A malformed statement or a name registered
+    twice raises :class:`~monoplane.errors.PluginError` naming the plugin.
     """

@@ -127,7 +127,7 @@ def _workloads(report: bool = True) -> Iterator[tuple[str, Callable[[], Any]]]:
 
     from monoplane.host import config
     from monoplane.host.detect import detect_planes
-    from monoplane.io.frames import save_reconstruction
+    from monoplane.export.saving import save as save_outputs
     from monoplane.geometry.planes import planes_from_triplets
     from monoplane.host.pipeline import Pipeline
     from monoplane.report.frame import write_frame_report
@@ -143,8 +143,8 @@ def _workloads(report: bool = True) -> Iterator[tuple[str, Callable[[], Any]]]:
     def save() -> None:
         rec = Pipeline.from_preset("monoplane").run(frame)
         with tempfile.TemporaryDirectory() as tmp:
-            save_reconstruction(rec, f"{tmp}/out",
-                                also=functools.partial(write_frame_report, rec) if report else None)
+            save_outputs(rec, f"{tmp}/out",
+                         also=functools.partial(write_frame_report, rec) if report else None)
 
     yield "outputs" + (" and report" if report else ""), save
     # The frame report draws no lines, and --no-report skips it: the rasterizer's kernels get

@@ -68,7 +68,8 @@ def test_the_kinds_list_is_the_one_source():
     import monoplane.hookspecs as hs
 
     specs = {n for n in dir(hs) if n.startswith("monoplane_register_")}
-    assert specs == {k.hook for k in KINDS.values()} | {"monoplane_register_baselines"}
+    assert specs == {k.hook for k in KINDS.values()} | {"monoplane_register_baselines",
+                                                         "monoplane_register_exporters"}
     assert STAGE_KINDS == tuple(k.base.kind for k in KINDS.values())
     lines = DOCS.read_text().splitlines()
     contract_rows = [ln for ln in lines if ln.startswith("| `") and "` | `" in ln
@@ -77,7 +78,7 @@ def test_the_kinds_list_is_the_one_source():
     for row, kind in zip(contract_rows, KINDS.values(), strict=True):
         assert row.split("|")[2].strip() == f"`{kind.base.__name__}`", row
     hook_rows = [ln for ln in lines if ln.startswith("| `monoplane_register_")
-                 and "baselines" not in ln]
+                 and "baselines" not in ln and "exporters" not in ln]
     assert [r.split("`")[1].removesuffix("()") for r in hook_rows] == \
         [k.hook for k in KINDS.values()]
     for row, kind in zip(hook_rows, KINDS.values(), strict=True):

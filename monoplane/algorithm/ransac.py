@@ -463,7 +463,7 @@ class SequentialRansac:
             cloud.all_points, labels.ravel()[cloud.pixel_grid()[2]], int(labels.max(initial=0)))
         params = cloud.plane_to_camera(params)
         return Reconstruction(frame=frame, labels=renumber[labels],
-                              params=orient_towards_camera(params) if len(params)
+                              planes=orient_towards_camera(params) if len(params)
                               else np.zeros((0, 4)),
                               rmse=rmse * cloud.scale, support=support)
 

@@ -68,7 +68,7 @@ def load_frame_output(folder: Path, spec: FrameSpec) -> Reconstruction:
                        depth_scale=spec.depth_scale, nan_as_invalid=spec.nan_as_invalid,
                        depth_kind=spec.depth_kind)
     return Reconstruction(frame=frame.with_(name=spec.name), labels=labels.astype(np.int32),
-                          params=params)
+                          planes=params)
 
 
 def write_batch_recording(path: str | Path, out: str | Path, specs: Sequence[FrameSpec],

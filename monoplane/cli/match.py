@@ -6,7 +6,8 @@ import argparse
 import sys
 
 from monoplane.cli.common import add_pipeline_args, pipeline_from_args
-from monoplane.io.frames import check_output_dir, load_frame
+from monoplane.export.files import check_output_dir
+from monoplane.io.frames import load_frame
 
 DESCRIPTION = """Run the configured matcher (default: pycolmap SIFT + exhaustive matching +
 incremental mapping, on the CPU) on two or more images and write into --out:

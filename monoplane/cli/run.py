@@ -17,9 +17,10 @@ from monoplane.cli.common import (
 from monoplane.cli.models import prepare_cue_model
 from monoplane.cues import CueNetwork
 from monoplane.errors import InvalidInput
+from monoplane.export.saving import save
 from monoplane.host.config import cue_model_overrides
 from monoplane.host.pipeline import Pipeline
-from monoplane.io.frames import load_frame, save_reconstruction
+from monoplane.io.frames import load_frame
 from monoplane.stages.base import CueProvider
 
 DESCRIPTION = """Recover the planes of one image and write labels.png (uint16, 0 = non-planar),
@@ -70,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
         from monoplane.report import write_frame_report  # loads the plotting libraries
 
         report = functools.partial(write_frame_report, rec, progress=not args.quiet)
-    out = save_reconstruction(rec, args.out, overwrite=args.overwrite, also=report)
+    out = save(rec, args.out, overwrite=args.overwrite, also=report)
     write_rerun_arg(args, rec)
     if not args.quiet:
         for note in rec.frame.notes:

@@ -176,8 +176,8 @@ def cloud_reconstruction(frame: Frame, preset: str, overrides: list[str] | None,
     res = detect_planes(points, preset=preset, overrides=overrides)
     flat = np.zeros(frame.height * frame.width, dtype=np.int32)
     flat[valid[order]] = res.labels
-    return Reconstruction(frame=frame, labels=flat.reshape(frame.shape), params=res.planes,
-                          rmse=res.rmse, support=res.num_points)
+    return Reconstruction(frame=frame, labels=flat.reshape(frame.shape), planes=res.planes,
+                          rmse=res.rmse, support=res.support)
 
 
 def _methods(presets: Sequence[str], baselines: Sequence[str], overrides: list[str] | None,

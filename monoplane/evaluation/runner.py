@@ -283,7 +283,7 @@ def score_reconstruction(rec: Reconstruction, gt_labels: np.ndarray, gt_depth: n
 
 def _empty_reconstruction(frame: Frame) -> Reconstruction:
     return Reconstruction(frame=frame, labels=np.zeros(frame.shape, dtype=np.int32),
-                          params=np.zeros((0, 4)))
+                          planes=np.zeros((0, 4)))
 
 
 def parse_size(text: str) -> tuple[int, int]:

@@ -82,7 +82,7 @@ def estimate_normals(points: np.ndarray, cfg: CloudConfig) -> np.ndarray:
 class CloudFit(NamedTuple):
     """The planes of a point cloud in its own frame and units (:meth:`Pipeline.run_cloud
     <monoplane.host.pipeline.Pipeline.run_cloud>`): what
-    :class:`~monoplane.host.detect.CloudPlaneResult` holds, but for the configuration."""
+    :class:`~monoplane.datamodel.CloudResult` holds, but for the configuration."""
 
     points: np.ndarray
     """(N, 3) float64 input points, input order (non-finite ones included)."""

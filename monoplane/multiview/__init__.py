@@ -3,11 +3,12 @@ scale alignment, per-view planes, fusion and joint refinement.
 
 Python API::
 
+    from monoplane.export import save
     from monoplane.host.pipeline import Pipeline
-    from monoplane.multiview import reconstruct_multiview, save_scene
+    from monoplane.multiview import reconstruct_multiview
     pipe = Pipeline.from_preset("monoplane")
     result = reconstruct_multiview([frame_a, frame_b], pipe, progress=True)
-    save_scene(result, "out/")
+    save(result, "out/")
 
 Steps (:func:`~monoplane.multiview.driver.reconstruct_multiview`):
 
@@ -21,7 +22,7 @@ Steps (:func:`~monoplane.multiview.driver.reconstruct_multiview`):
    when every view's depth is metric the world is then expressed in the depth's units;
 4. the fuser (``[fuser]``) matches and fuses planes into a :class:`~monoplane.datamodel.Scene`
    and the adjuster (``[adjuster]``) refines it (:mod:`~monoplane.multiview.global_planes`);
-5. :func:`~monoplane.multiview.writers.save_scene` writes it (:mod:`~monoplane.multiview.writers`).
+5. :func:`monoplane.export.save` writes it (the formats of :mod:`monoplane.export`).
 
 Frames: cameras are world-to-camera ``x_cam = R x_world + t`` with OpenCV axes (x right, y down,
 z forward).

@@ -10,7 +10,7 @@ import contextlib
 import sys
 import time
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
@@ -78,6 +78,8 @@ class MultiviewResult:
     fused : Scene or None
         The scene as fused, before the adjuster (for evaluation).
     """
+
+    result_kind: ClassVar[str] = "multiview"  # see monoplane.datamodel.PlaneSet
 
     scene: Scene
     sfm: SfmResult

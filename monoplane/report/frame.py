@@ -53,13 +53,13 @@ def estimate_up(rec: Reconstruction, max_tilt_deg: float = 35.0) -> np.ndarray:
     camera_up = np.array([0.0, -1.0, 0.0])
     if rec.num_planes == 0:
         return camera_up
-    cos_up = rec.params[:, :3] @ camera_up
+    cos_up = rec.planes[:, :3] @ camera_up
     horizontal = np.abs(cos_up) > np.cos(np.deg2rad(max_tilt_deg))
     if not np.any(horizontal):
         return camera_up
     area = np.where(horizontal, rec.area_px, -1)
     i = int(np.argmax(area))
-    return rec.params[i, :3] * np.sign(cos_up[i])
+    return rec.planes[i, :3] * np.sign(cos_up[i])
 
 
 def frame_views(rec: Reconstruction, out_dir: Path) -> tuple[list[html.Figure], RenderResult]:
@@ -78,7 +78,7 @@ def frame_views(rec: Reconstruction, out_dir: Path) -> tuple[list[html.Figure], 
     if len(triangles) == 0:
         return [], RenderResult({}, "no planar surface to render in 3D", 0.0)
     palette = plane_palette(rec.num_planes) / 255.0
-    by_plane = shade(palette[plane_ids - 1], rec.params[plane_ids - 1, :3])
+    by_plane = shade(palette[plane_ids - 1], rec.planes[plane_ids - 1, :3])
     meshes = [Mesh(vertices, triangles, by_plane), Mesh(vertices, triangles, colors)]
     width, height = render_size(*frame.shape)
     K = frame.K.copy()
@@ -91,7 +91,7 @@ def frame_views(rec: Reconstruction, out_dir: Path) -> tuple[list[html.Figure], 
         ("frontal", "frontal view (the input camera)", K, np.eye(4), None)]
     for vp in orbit_viewpoints(vertices, estimate_up(rec), np.array([0.0, 0.0, 1.0]), width,
                                height)[:2]:
-        facing = facing_triangles(tri_planes, rec.params, vp.eye)
+        facing = facing_triangles(tri_planes, rec.planes, vp.eye)
         vp = zoom_to_fit(vp, vertices[np.unique(triangles[facing])], width, height)
         views.append((vp.name, vp.title, vp.K, vp.world_to_cam, facing))
     shots: list[Shot] = []
@@ -114,7 +114,7 @@ def plane_rows(rec: Reconstruction) -> list[list[str]]:
     rmse, support = np.asarray(rec.rmse), np.asarray(rec.support)  # filled on construction
     rows = []
     for i in range(rec.num_planes):
-        n, d = rec.params[i, :3], rec.params[i, 3]
+        n, d = rec.planes[i, :3], rec.planes[i, 3]
         rows.append([
             f"{html.swatch(palette[i])}{i + 1}",
             "(" + ", ".join(f"{x:+.3f}" for x in n) + ")",

@@ -81,12 +81,12 @@ def fused_view_mesh(rec: Reconstruction, links: dict[int, int], planes_world: np
         (P, 4) the view's planes in world coordinates (after snapping), positive on the side the
         camera saw; row ``local - 1`` is local plane ``local``.
     """
-    params = rec.params.copy()
+    params = rec.planes.copy()
     for local, g in links.items():
         params[local - 1] = plane_to_camera(planes_world[g], R, t)[0]
-    snapped = Reconstruction(frame=rec.frame, labels=rec.labels, params=params)
+    snapped = Reconstruction(frame=rec.frame, labels=rec.labels, planes=params)
     v, tris, colors, local_ids = planar_mesh(snapped, mesh_step(*rec.frame.shape))
-    return (v - t) @ R, tris, colors, local_ids, plane_to_world(snapped.params, R, t)
+    return (v - t) @ R, tris, colors, local_ids, plane_to_world(snapped.planes, R, t)
 
 
 def scene_views(scene: Scene, out_dir: Path) -> tuple[list[html.Figure], RenderResult]:
