@@ -48,6 +48,7 @@ import numpy as np
 from monoplane.datamodel import Camera, Reconstruction, Scene
 from monoplane.geometry.camera import frustum
 from monoplane.geometry.polygons import PlaneMesh, reconstruction_mesh
+from monoplane.palette import plane_palette
 from monoplane.version import __version__
 
 #: Name of the root node that carries the frame conversion.
@@ -252,8 +253,6 @@ def reconstruction_glb(rec: Reconstruction, mesh: PlaneMesh | None = None) -> by
     bytes
         The ``.glb`` file; plane ids are the label values 1..P.
     """
-    from monoplane.report.colors import plane_palette  # imports OpenCV: load it on use
-
     if mesh is None:
         mesh = reconstruction_mesh(rec)
     return planes_glb(mesh, rec.params, plane_palette(rec.num_planes))
@@ -276,7 +275,6 @@ def scene_glb(scene: Scene, mesh: PlaneMesh | None = None) -> bytes:
         The ``.glb`` file; plane ids are the 0-based global ids of ``scene.json``.
     """
     from monoplane.multiview.fusion import scene_mesh
-    from monoplane.report.colors import plane_palette
 
     if mesh is None:
         mesh = scene_mesh(scene)

@@ -32,6 +32,7 @@ from monoplane.geometry.orientation import orient_normals
 from monoplane.geometry.planes import fit_planes_per_label
 from monoplane.geometry.polygons import PlaneMesh, points_plane_mesh
 from monoplane.io.checks import MAX_MAGNITUDE
+from monoplane.palette import NON_PLANAR, plane_palette
 
 
 @dataclass
@@ -81,8 +82,6 @@ class CloudPlaneResult:
 
     def plane_colors(self) -> np.ndarray:
         """(P + 1, 3) float colours in [0, 1]: row 0 (no plane) grey, then one per plane."""
-        from monoplane.report.colors import NON_PLANAR, plane_palette
-
         lut = np.vstack([NON_PLANAR[None], plane_palette(self.num_planes)])
         return lut.astype(np.float64) / 255.0
 
