@@ -7,13 +7,13 @@
 * :func:`run_batch` reads a folder of frame folders or a manifest (:mod:`.specs`), skips frames
   already done, runs the rest with :func:`process_frame` on an engine (:mod:`.engines`: a local
   process pool or Ray) and writes ``summary.json`` (and ``index.html``).
-* :func:`map_ordered` and :class:`WorkerPool` (:mod:`.pool`) are the local worker pool on its
+* :func:`map_ordered` and :class:`WorkerPool` (:mod:`monoplane.host.pool`) are the local worker pool on its
   own: a picklable function over items with a per-worker initializer, for any parallel work.
 """
 
 from monoplane.batch.engines import ENGINES, EngineError
 from monoplane.batch.frame import BatchJob, FrameResult, process_frame
-from monoplane.batch.pool import (
+from monoplane.host.pool import (
     TaskOutcome,
     WorkerDied,
     WorkerInitError,

@@ -31,7 +31,7 @@ from monoplane.batch.frame import (
     pipeline_for,
     process_frame,
 )
-from monoplane.batch.pool import WorkerPool
+from monoplane.host.pool import WorkerPool
 from monoplane.batch.specs import FrameSpec
 from monoplane.errors import InvalidInput, MonoplaneError
 
@@ -63,11 +63,11 @@ def run_local(job: BatchJob, specs: Sequence[FrameSpec], workers: int
     """Run frames on ``workers`` local processes (never more than there are frames)."""
     if not specs:
         return
-    from monoplane.batch.pool import WorkerInitError, fork_if_available
+    from monoplane.host.pool import WorkerInitError, fork_if_available
 
     try:
         # The batch driver only reads files and resolves the config, so its workers may fork
-        # from it and skip re-importing everything (see monoplane.batch.pool). Not when this
+        # from it and skip re-importing everything (see monoplane.host.pool). Not when this
         # process has built a pipeline itself (Python API use): its ONNX sessions' threads
         # would not exist in the children.
         method = "spawn" if has_pipeline() else fork_if_available()
@@ -288,7 +288,7 @@ def run_engine(engine: str, job: BatchJob, specs: Sequence[FrameSpec], workers: 
                ray_address: str | None = None, notes: list[str] | None = None
                ) -> Iterator[FrameResult]:
     """Dispatch to :func:`run_local` or :func:`run_ray` (``notes``: see :func:`run_ray`)."""
-    from monoplane.batch.pool import default_workers
+    from monoplane.host.pool import default_workers
 
     check_engine(engine, ray_address)
     if engine == "local":
