@@ -1,4 +1,6 @@
 import dataclasses
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -16,6 +18,23 @@ def test_every_kind_has_builtins_from_monoplane():
     for kind in STAGE_KINDS:
         assert reg.names(kind), f"no built-in {kind}"
     assert all(i.provider == "monoplane" for i in reg.all())
+
+
+def test_the_core_registry_loads_no_evaluation_module():
+    """Baselines are evaluation's: the core plugin manager registers stages only, and the
+    evaluation code adds its built-in baseline when it looks baselines up."""
+    code = ("import sys; from monoplane.host.registry import get_plugin_manager, get_registry; "
+            "get_registry(get_plugin_manager(autoload=False)); "
+            "print(sorted(m for m in sys.modules if m.startswith('monoplane.evaluation')))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True)
+    assert out.stdout.strip() == "[]"
+    from monoplane.evaluation.baselines import BUILTIN_BASELINES, baseline_names
+
+    pm = get_plugin_manager(autoload=False)
+    assert "open3d-ransac" in baseline_names(pm)
+    assert [pm.get_plugin(name) is not None for name in BUILTIN_BASELINES] == [True]
+    assert "open3d-ransac" in baseline_names(pm)  # registering twice is harmless
 
 
 @pytest.mark.parametrize("info", get_registry(get_plugin_manager(autoload=False)).all(),
