@@ -81,6 +81,25 @@ def test_plugin_guide_documents_every_hook():
     assert not missing, f"docs/plugins.md does not document: {missing}"
 
 
+@pytest.mark.parametrize("kind", KINDS.values(), ids=lambda k: k.name)
+def test_each_kind_has_its_written_out_hookspec(kind):
+    """Each registration hook is a function of its own in hookspecs.py (greppable, documented
+    as pytest's are), named as the kind says, stating its summary, table and contract."""
+    import inspect
+
+    import monoplane.hookspecs as hs
+
+    spec = getattr(hs, kind.hook)
+    assert getattr(spec, "monoplane_spec", None) is not None, f"{kind.hook} is no hookspec"
+    assert spec.__name__ == kind.hook and spec.__module__ == hs.__name__
+    assert f"def {kind.hook}()" in inspect.getsource(hs)  # written out, not generated
+    doc = " ".join(inspect.getdoc(spec).split())
+    assert doc.startswith(kind.summary)
+    assert f"Config table ``[{kind.name}]``" in doc
+    assert f":class:`monoplane.stages.base.{kind.base.__name__}`" in doc
+    assert inspect.signature(spec).return_annotation == f"list[type[{kind.base.__name__}]]"
+
+
 def test_the_kinds_list_is_the_one_source():
     """Hookspecs, registry, config tables and the plugin guide's two tables all follow
     ``KINDS``: one registration hook per kind, one row per kind in each table, in order."""
