@@ -31,9 +31,9 @@ from monoplane.batch.frame import (
     pipeline_for,
     process_frame,
 )
-from monoplane.host.pool import WorkerPool
 from monoplane.batch.specs import FrameSpec
 from monoplane.errors import InvalidInput, MonoplaneError
+from monoplane.host.pool import WorkerInitError, WorkerPool, default_workers, fork_if_available
 
 ENGINES = ("local", "ray")
 
@@ -63,8 +63,6 @@ def run_local(job: BatchJob, specs: Sequence[FrameSpec], workers: int
     """Run frames on ``workers`` local processes (never more than there are frames)."""
     if not specs:
         return
-    from monoplane.host.pool import WorkerInitError, fork_if_available
-
     try:
         # The batch driver only reads files and resolves the config, so its workers may fork
         # from it and skip re-importing everything (see monoplane.host.pool). Not when this
@@ -288,8 +286,6 @@ def run_engine(engine: str, job: BatchJob, specs: Sequence[FrameSpec], workers: 
                ray_address: str | None = None, notes: list[str] | None = None
                ) -> Iterator[FrameResult]:
     """Dispatch to :func:`run_local` or :func:`run_ray` (``notes``: see :func:`run_ray`)."""
-    from monoplane.host.pool import default_workers
-
     check_engine(engine, ray_address)
     if engine == "local":
         return run_local(job, specs, workers or default_workers())

@@ -151,6 +151,8 @@ def run_batch(source: str | Path | Sequence[FrameSpec], out: str | Path,
     KeyboardInterrupt
         After stopping the workers and writing ``summary.json`` (``interrupted: true``).
     """
+    # numba, SciPy and OpenCV load with the pipeline, when a batch runs: importing
+    # monoplane.batch for its specs or pool stays light
     from monoplane.host.pipeline import Pipeline
 
     start = time.perf_counter()
@@ -209,7 +211,7 @@ def run_batch(source: str | Path | Sequence[FrameSpec], out: str | Path,
             summary.seconds = time.perf_counter() - start
             write_json_atomic(out / "summary.json", summary.to_dict())
         if report:
-            from monoplane.batch.index import write_index
+            from monoplane.batch.index import write_index  # loads OpenCV and the report
 
             write_index(summary, specs, out)
     return summary

@@ -20,11 +20,11 @@ import contextlib
 from collections.abc import Callable, Iterator
 from typing import TYPE_CHECKING, Any
 
+from monoplane.host.pipeline import Pipeline
 from monoplane.host.pool import WorkerInitError, WorkerPool, default_workers
 
 if TYPE_CHECKING:
     from monoplane.datamodel import Frame, Reconstruction
-    from monoplane.host.pipeline import Pipeline
 
 # Each worker builds the pipeline once from the config (initializer), then takes one view per task.
 _PIPE: Pipeline | None = None
@@ -35,8 +35,6 @@ VIEW_STAGES = ("cues", "ransac", "refiner")
 
 def _init_view_worker(config: dict[str, Any]) -> None:
     """Worker initializer: build this worker's pipeline from the resolved config."""
-    from monoplane.host.pipeline import Pipeline
-
     global _PIPE
     _PIPE = Pipeline.from_config(config)
 
