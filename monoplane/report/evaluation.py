@@ -20,6 +20,7 @@ from tqdm import tqdm
 from monoplane.errors import MonoplaneError
 from monoplane.report import figures as fig
 from monoplane.report import html
+from monoplane.synth import generate
 
 if TYPE_CHECKING:
     from monoplane.evaluation.runner import EvalResults, FrameResult, Method, MethodResult
@@ -85,8 +86,6 @@ def write_eval_report(results: EvalResults, out_dir: Path,
     pathlib.Path
         Path of ``report.html``.
     """
-    from monoplane.synth import generate
-
     if metric not in RANKING:
         raise ValueError(f"metric must be one of {', '.join(RANKING)}, got {metric!r}")
     start = time.perf_counter()
