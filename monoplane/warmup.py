@@ -1,9 +1,9 @@
 """Compile every numba kernel once, so that the first real run loads them from the disk cache.
 
-monoplane's kernels (:mod:`monoplane.jit`, :mod:`monoplane.algorithm.lattice_kernels`) compile on their
-first call and cache the machine code on disk. Without a warm-up, the first ``monoplane run``
-on a machine spends 20-30 s compiling; ``setup.sh`` runs this module instead, so the user's
-first run costs what every later run does::
+monoplane's kernels (:mod:`monoplane.jit`, :mod:`monoplane.algorithm.lattice_kernels`) compile
+on their first call and cache the machine code on disk. Without a warm-up, the first
+``monoplane run`` on a machine spends 20-30 s compiling; ``setup.sh`` runs this module instead,
+so the user's first run costs what every later run does::
 
     python3 -m monoplane.warmup
 

@@ -66,7 +66,7 @@ def test_geometry_imports_only_the_data_model_and_kernels(module: str) -> None:
 @pytest.mark.parametrize("module", sorted(m for m in MODULES
                                           if _within(m, ("monoplane.stages",))))
 def test_stages_import_no_other_stage_and_no_host_driver(module: str) -> None:
-    forbidden = ("monoplane.cli", "monoplane.host.pipeline", "monoplane.batch", "monoplane.evaluation.bench",
+    forbidden = ("monoplane.cli", "monoplane.host.pipeline", "monoplane.batch",
                  "monoplane.evaluation", "monoplane.report", "monoplane.multiview")
     bad = {n for n in _ours(MODULES[module])
            if _within(n, forbidden)

@@ -7,12 +7,15 @@
 * :func:`run_batch` reads a folder of frame folders or a manifest (:mod:`.specs`), skips frames
   already done, runs the rest with :func:`process_frame` on an engine (:mod:`.engines`: a local
   process pool or Ray) and writes ``summary.json`` (and ``index.html``).
-* :func:`map_ordered` and :class:`WorkerPool` (:mod:`monoplane.host.pool`) are the local worker pool on its
-  own: a picklable function over items with a per-worker initializer, for any parallel work.
+* :func:`map_ordered` and :class:`WorkerPool` (:mod:`monoplane.host.pool`, re-exported here)
+  are the local worker pool on its own: a picklable function over items with a per-worker
+  initializer, for any parallel work.
 """
 
 from monoplane.batch.engines import ENGINES, EngineError
 from monoplane.batch.frame import BatchJob, FrameResult, process_frame
+from monoplane.batch.runner import BatchSummary, run_batch
+from monoplane.batch.specs import MANIFEST_COLUMNS, FrameSpec, read_frames
 from monoplane.host.pool import (
     TaskOutcome,
     WorkerDied,
@@ -21,8 +24,6 @@ from monoplane.host.pool import (
     default_workers,
     map_ordered,
 )
-from monoplane.batch.runner import BatchSummary, run_batch
-from monoplane.batch.specs import MANIFEST_COLUMNS, FrameSpec, read_frames
 
 __all__ = [
     "ENGINES", "MANIFEST_COLUMNS", "BatchJob", "BatchSummary", "EngineError", "FrameResult",
