@@ -14,7 +14,7 @@
 
 from monoplane.batch.engines import ENGINES, EngineError
 from monoplane.batch.frame import BatchJob, FrameResult, process_frame
-from monoplane.batch.runner import BatchSummary, run_batch
+from monoplane.batch.runner import BatchOptions, BatchSummary, run_batch
 from monoplane.batch.specs import MANIFEST_COLUMNS, FrameSpec, read_frames
 from monoplane.host.pool import (
     TaskOutcome,
@@ -26,7 +26,7 @@ from monoplane.host.pool import (
 )
 
 __all__ = [
-    "ENGINES", "MANIFEST_COLUMNS", "BatchJob", "BatchSummary", "EngineError", "FrameResult",
-    "FrameSpec", "TaskOutcome", "WorkerDied", "WorkerInitError", "WorkerPool",
+    "ENGINES", "MANIFEST_COLUMNS", "BatchJob", "BatchOptions", "BatchSummary", "EngineError",
+    "FrameResult", "FrameSpec", "TaskOutcome", "WorkerDied", "WorkerInitError", "WorkerPool",
     "default_workers", "map_ordered", "process_frame", "read_frames", "run_batch",
 ]
