@@ -425,3 +425,22 @@ def test_an_import_inside_a_function_says_what_it_defers() -> None:
               if not said and f not in DEFERS_EVERYTHING and f not in UNREVIEWED]
     assert silent == [], "say in a comment what each of these defers, or move it to the top"
 
+
+# --- names ------------------------------------------------------------------------------------
+
+#: Names many modules define on purpose: hook implementations, the CLI's subcommand protocol
+#: (``add_parser``, ``run``) and scripts' ``main``.
+_PROTOCOL = re.compile(r"monoplane_\w+|add_parser|run|main")
+
+
+def test_public_names_do_not_collide() -> None:
+    """No two modules define a public function or class of the same name (one name, one
+    meaning; ``orient_normals`` and ``FrameResult`` each named two different things)."""
+    where: dict[str, list[str]] = {}
+    for path in sorted(PACKAGE.rglob("*.py")):
+        for node in ast.parse(path.read_text()).body:
+            if (isinstance(node, (ast.FunctionDef, ast.ClassDef))
+                    and not node.name.startswith("_") and not _PROTOCOL.fullmatch(node.name)):
+                where.setdefault(node.name, []).append(_module_name(path))
+    assert {n: m for n, m in where.items() if len(m) > 1} == {}
+

@@ -23,18 +23,18 @@ from monoplane.report import html
 from monoplane.synth import generate
 
 if TYPE_CHECKING:
-    from monoplane.evaluation.runner import EvalResults, FrameResult, Method, MethodResult
+    from monoplane.evaluation.runner import EvalResults, FrameScores, Method, MethodResult
 
 #: Metrics a case can be ranked by, and whether higher is better.
 RANKING = {"sc": True, "ri": True, "voi": False}
 
 
-def pick_cases(method: MethodResult, metric: str = "sc") -> list[tuple[str, FrameResult]]:
+def pick_cases(method: MethodResult, metric: str = "sc") -> list[tuple[str, FrameScores]]:
     """The best and the worst frame of a method by one metric.
 
     Returns
     -------
-    list of (str, FrameResult)
+    list of (str, FrameScores)
         ``[("best", frame), ("worst", frame)]``; one entry when the method saw one frame, none
         when it saw none. Frames with a NaN score are skipped.
     """
