@@ -104,6 +104,16 @@ def _plugin_package_files(part: str) -> list[Path]:
     return sorted((PACKAGE.parent / "plugins").glob(f"*/{part}/**/*.py"))
 
 
+def _references(path: Path) -> set[str]:
+    """Our modules a file names in any form: imports anywhere in it (at the top, in functions,
+    under ``TYPE_CHECKING``) and ``"monoplane.x"`` / ``"monoplane.x:Name"`` strings used to
+    load a module by name."""
+    strings = {node.value.partition(":")[0] for node in ast.walk(ast.parse(path.read_text()))
+               if isinstance(node, ast.Constant) and isinstance(node.value, str)
+               and _MODULE_REFERENCE.fullmatch(node.value)}
+    return _ours(_imports(path) | strings)
+
+
 @pytest.mark.parametrize("part, allowed", [
     ("src", {"monoplane.plugin"}),
     # A plugin's tests may also use the pytest plugin's helpers and fixtures.
@@ -113,9 +123,17 @@ def test_plugin_packages_import_only_the_public_plugin_api(part: str,
                                                            allowed: set[str]) -> None:
     files = _plugin_package_files(part)
     assert len({f.relative_to(PACKAGE.parent).parts[1] for f in files}) >= 2
-    bad = {str(f.relative_to(PACKAGE.parent)): sorted(_ours(_imports(f)) - allowed)
-           for f in files if _ours(_imports(f)) - allowed}
+    bad = {str(f.relative_to(PACKAGE.parent)): sorted(_references(f) - allowed)
+           for f in files if _references(f) - allowed}
     assert bad == {}
+
+
+def test_the_plugin_check_sees_every_form(tmp_path: Path) -> None:
+    probe = tmp_path / "probe.py"
+    probe.write_text('def f():\n    from monoplane.stages.base import Stage\n'
+                     'X = "monoplane.host.registry:get_registry"\n"""monoplane.errors is a '
+                     'docstring"""\n')
+    assert _references(probe) == {"monoplane.stages.base", "monoplane.host.registry"}
 
 
 def test_the_public_plugin_api_is_imported_by_nothing_inside() -> None:
