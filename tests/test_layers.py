@@ -269,7 +269,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     # detect_planes shares with the file readers
     ("kernels", ("monoplane.geometry", "monoplane.algorithm", "monoplane.io.checks")),
     ("cue and feature libraries", ("monoplane.cues", "monoplane.features")),
-    ("stage contracts", ("monoplane.stages.base", "monoplane.stages.config_fields",
+    ("stage contracts", (*(c for c in CONTRACTS if c != "monoplane.stages"),
                          "monoplane.hookspecs")),
     # model profiles are read into dataclasses with the contracts' config fields
     ("model catalogue", ("monoplane.cues.profile_files", "monoplane.models")),
@@ -347,6 +347,12 @@ def test_every_module_has_a_layer() -> None:
         "monoplane.algorithm.graphcut": "kernels"}
     for module in _FILES:
         _layer(module)
+
+
+def test_every_layer_entry_names_a_module_or_package() -> None:
+    stale = [e for _, entries in LAYERS for e in entries
+             if not any(m == e or m.startswith(e + ".") for m in _FILES)]
+    assert stale == [], "LAYERS names modules that no longer exist"
 
 
 def test_the_layer_check_sees_an_import_back_up() -> None:
