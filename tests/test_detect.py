@@ -11,7 +11,7 @@ from monoplane.errors import ConfigError, InvalidInput, StageError
 from monoplane.hookspecs import hookimpl
 from monoplane.host.pipeline import Pipeline
 from monoplane.host.registry import get_plugin_manager
-from monoplane.stages.base import Refiner
+from monoplane.stages.base import Refiner, Sampler
 from monoplane.testing import box_frame
 
 
@@ -214,3 +214,31 @@ def test_a_failing_stage_of_a_cloud_run_is_a_stage_error():
     points, _ = two_coplanar_tops()
     with pytest.raises(StageError, match="refiner.*failing.*boom"):
         detect_planes(points, overrides=[*VIEW, "refiner.plugin=failing"], pm=pm)
+
+
+class _BrokenSampler(Sampler):
+    """A sampler that fails, as a plugin's bug would; it states no draw, so it is called."""
+
+    name = "broken-sampler"
+
+    def sample(self, cloud, pool, count, rng, params):
+        raise RuntimeError("no triplets today")
+
+
+class _BrokenSamplerPlugin:
+    @hookimpl
+    def monoplane_register_samplers(self):
+        return [_BrokenSampler]
+
+
+def test_a_failing_sampler_is_named_alike_in_cloud_and_frame_runs():
+    # Frames and clouds share the driver and the one StageError wrapper: the innermost
+    # failing stage is named, not the RANSAC that called it.
+    pm = get_plugin_manager(autoload=False, extra_plugins=(_BrokenSamplerPlugin(),))
+    message = "sampler stage 'broken-sampler' failed: no triplets today"
+    points, _ = two_coplanar_tops()
+    with pytest.raises(StageError, match=message):
+        detect_planes(points, overrides=[*VIEW, "sampler.plugin=broken-sampler"], pm=pm)
+    with pytest.raises(StageError, match=message):
+        Pipeline.from_preset("monoplane-nocrf", overrides=["sampler.plugin=broken-sampler"],
+                             pm=pm).run(box_frame()[0])

@@ -3,12 +3,13 @@
 import numpy as np
 import pytest
 
+from monoplane.algorithm.ransac import RansacConfig, SequentialRansac
 from monoplane.datamodel import Frame, default_intrinsics, orient_towards_camera, pixel_rays
-from monoplane.errors import InvalidInput, StageError
+from monoplane.errors import InvalidInput, PluginError, StageError
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
-from monoplane.geometry.hypotheses import needed_samples
-from monoplane.algorithm.ransac import RansacConfig, SequentialRansac
+from monoplane.geometry.hypotheses import draw_triplets, needed_samples
+from monoplane.stages.base import Sampler
 from monoplane.stages.labelers import GraphCutLabeler, ProximityGraphCutLabeler, ThresholdLabeler
 from monoplane.stages.samplers import NormalConsistentSampler, UniformSampler
 from monoplane.stages.scorers import InlierCountScorer, MsacNormalScorer, MsacScorer
@@ -238,8 +239,10 @@ def test_run_cloud_rejects_a_graph_of_another_cloud():
 
 
 class _BatchByBatch:
-    """A sampler or scorer seen through a wrapper that hides its compiled form, so that the
-    driver calls it batch by batch."""
+    """A sampler or scorer seen through a wrapper that states nothing, so that the driver
+    calls it batch by batch."""
+
+    draws = scores = None
 
     def __init__(self, stage):
         self._stage = stage
@@ -247,12 +250,6 @@ class _BatchByBatch:
 
     def __getattr__(self, attr):
         return getattr(self._stage, attr)
-
-    def triplet_draws(self, count, params):
-        return None
-
-    def binned_points(self, cloud, pool, params):
-        return None
 
 
 @pytest.mark.parametrize("sampler", [NormalConsistentSampler, UniformSampler])
@@ -266,6 +263,7 @@ def test_the_compiled_search_equals_the_batch_by_batch_loop(sampler):
     fused = SequentialRansac(sampler(), MsacNormalScorer(), ThresholdLabeler())
     looped = SequentialRansac(_BatchByBatch(fused.sampler), _BatchByBatch(fused.scorer),
                               fused.labeler)
+    assert fused.compiled_search and not looped.compiled_search
     params = fused.config.params
     pools = [np.arange(cloud.size), np.flatnonzero(np.arange(cloud.size) % 3 != 1),
              np.arange(0, cloud.size, 7)[:40]]
@@ -277,6 +275,85 @@ def test_the_compiled_search_equals_the_batch_by_batch_loop(sampler):
         np.testing.assert_array_equal(a[0], b[0])
         np.testing.assert_array_equal(a[1], b[1])
         assert rng_a.bit_generator.state == rng_b.bit_generator.state
+
+
+class _PluginUniform(Sampler):
+    """A third-party sampler that draws as the built-in uniform one does, and says so."""
+
+    name = "plugin-uniform"
+    draws = "uniform"
+
+    def __init__(self, config=None):
+        super().__init__(config)
+        self.calls = 0
+
+    def sample(self, cloud, pool, count, rng, params):
+        self.calls += 1
+        return draw_triplets(rng, pool, count, count, count)
+
+
+class _OwnUniform(UniformSampler):
+    """A subclass of the built-in sampler with its own sample(), which states nothing."""
+
+    name = "own-uniform"
+
+    def __init__(self, config=None):
+        super().__init__(config)
+        self.calls = 0
+
+    def sample(self, cloud, pool, count, rng, params):
+        self.calls += 1
+        return super().sample(cloud, pool, count, rng, params)
+
+
+def _room_planes_recovered(rec, labels, planes):
+    ids = match(rec, labels, planes)
+    assert rec.num_planes == len(planes) and len(set(ids.tolist())) == len(planes)
+    est = rec.params[ids - 1]
+    assert np.degrees(np.arccos(np.clip((est[:, :3] * planes[:, :3]).sum(1), -1, 1))).max() < 1e-3
+    np.testing.assert_allclose(est[:, 3], planes[:, 3], atol=1e-5 * planes[:, 3].max())
+
+
+def test_a_sampler_stating_its_draw_gets_the_compiled_search():
+    frame, labels, planes = room()
+    sampler = _PluginUniform()
+    ransac = SequentialRansac(sampler, MsacNormalScorer(), ProximityGraphCutLabeler())
+    assert ransac.compiled_search
+    rec = ransac.run(frame)
+    assert sampler.calls == 0  # the host drew its samples in the compiled search
+    _room_planes_recovered(rec, labels, planes)
+    builtin = SequentialRansac(UniformSampler(), MsacNormalScorer(),
+                               ProximityGraphCutLabeler()).run(frame)
+    np.testing.assert_array_equal(rec.labels, builtin.labels)
+
+
+def test_a_subclass_overriding_sample_without_stating_is_called_batch_by_batch():
+    assert UniformSampler.draws == "uniform" and _OwnUniform.draws is None
+    frame, labels, planes = room()
+    sampler = _OwnUniform()
+    ransac = SequentialRansac(sampler, MsacNormalScorer(), ProximityGraphCutLabeler())
+    assert not ransac.compiled_search
+    rec = ransac.run(frame)
+    assert sampler.calls > 0
+    _room_planes_recovered(rec, labels, planes)
+    # Its sample() draws what the built-in one does: batch by batch gives the compiled labels.
+    builtin = SequentialRansac(UniformSampler(), MsacNormalScorer(),
+                               ProximityGraphCutLabeler()).run(frame)
+    np.testing.assert_array_equal(rec.labels, builtin.labels)
+
+
+def test_statements_are_checked_and_kept_by_subclasses_that_do_not_override():
+    with pytest.raises(PluginError, match="draws = 'gaussian'"):
+        type("Gaussian", (Sampler,), {"draws": "gaussian"})
+
+    class Thrifty(NormalConsistentSampler):
+        def draw_budget(self, count):
+            return 4 * count
+
+    assert Thrifty.draws == "normal-consistent"
+    assert SequentialRansac(Thrifty(), MsacNormalScorer(), ThresholdLabeler()).compiled_search
+    # A scorer that states another cost keeps the batch-by-batch search.
+    assert not SequentialRansac(UniformSampler(), MsacScorer(), ThresholdLabeler()).compiled_search
 
 
 @pytest.mark.parametrize("rejections", [0, 1])

@@ -5,7 +5,8 @@ One plane at a time, on the points not yet assigned (the *pool*):
 1. the sampler draws minimal samples in batches and the scorer scores the exact 3-point planes
    on the pool, vectorised; the number of batches adapts to the best inlier ratio w so far,
    ``log(1 - confidence) / log(1 - w³)``, between ``min_iterations`` and ``max_iterations``
-   (when the sampler and scorer describe themselves, the whole search is one compiled call,
+   (when the sampler and scorer state what they draw and score, ``Sampler.draws`` and
+   ``Scorer.scores``, the whole search is one compiled call,
    :func:`monoplane.geometry.hypotheses.search_batches`, with the same result);
 2. the labeler labels the pool for the best hypothesis (threshold or graph cut on the kNN
    subgraph of the pool);
@@ -41,20 +42,23 @@ from typing import Any, NamedTuple, TypeVar
 import numpy as np
 
 from monoplane.datamodel import Frame, Reconstruction, orient_towards_camera
-from monoplane.errors import InvalidInput, StageError, check_config
+from monoplane.errors import InvalidInput, check_config
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.geometry.hypotheses import (
+    SearchRule,
     inlier_ratio,
     needed_samples,
     refit_hypothesis,
     sample_hypotheses,
     search_batches,
 )
+from monoplane.geometry.normal_bins import bin_points
 from monoplane.geometry.planes import fit_planes_per_label
 from monoplane.geometry.sensor_noise import noise_limited_epsilon, plane_residual_sigma
 from monoplane.jit import in_background
 from monoplane.stages.base import (
+    SAMPLER_DRAWS,
     Labeler,
     Labeling,
     LabelingContext,
@@ -62,7 +66,9 @@ from monoplane.stages.base import (
     Sampler,
     Scorer,
     Stage,
+    TripletDraws,
     param,
+    run_stage,
 )
 
 T = TypeVar("T")
@@ -148,13 +154,8 @@ class RansacConfig:
 
 
 def _call(stage: Stage, fn: Callable[..., T], *args: Any) -> T:
-    """Run one stage method, reporting a failure with the stage's kind and plugin name."""
-    try:
-        return fn(*args)
-    except StageError:
-        raise
-    except Exception as exc:
-        raise StageError(stage.kind, stage.name, exc) from exc
+    """Run one stage method; a failure names the stage's kind and plugin (:func:`run_stage`)."""
+    return run_stage(stage.kind, stage.name, fn, *args)
 
 
 class SequentialRansac:
@@ -174,6 +175,11 @@ class SequentialRansac:
         self.scorer = scorer
         self.labeler = labeler
         self.config = RansacConfig() if config is None else config
+        #: Each plane search runs in one compiled call (:func:`search_batches`) when the
+        #: sampler states a draw it runs and the scorer states the cost it scores; else the
+        #: sampler and scorer are called batch by batch.
+        self.compiled_search = (sampler.draws in SAMPLER_DRAWS
+                                and scorer.scores == "msac-normal")
         #: The thresholds the last :meth:`run` labelled with: the configured ones, or ε lowered
         #: to the frame's depth noise (``noise_factor``); later stages use these.
         self.params_used = self.config.params
@@ -372,17 +378,12 @@ class SequentialRansac:
             drawn_at = np.zeros(pool.size, dtype=bool)
             drawn_at[rng.choice(pool.size, size=cfg.score_points, replace=False)] = True
             scored = pool[drawn_at]
-        draws = _call(self.sampler, self.sampler.triplet_draws, cfg.batch_size, params)
-        binned = (None if draws is None else
-                  _call(self.scorer, self.scorer.binned_points, cloud, scored, params))
-        if draws is not None and binned is not None:
+        if self.compiled_search:
             # The whole search in one compiled call: what the loop below does batch by batch.
             found, plane, normal = search_batches(
                 rng, cloud.points, cloud.normals, pool, np.ascontiguousarray(scored),
-                cfg.batch_size, draws.first, max(draws.first, draws.budget),
-                draws.cos_min is not None, -2.0 if draws.cos_min is None else draws.cos_min,
-                *binned, params.epsilon, params.epsilon_n, cfg.min_iterations,
-                cfg.max_iterations, cfg.confidence)
+                bin_points(cloud.points, cloud.normals, scored, params.epsilon_n),
+                self._search_rule(params))
             return (plane, normal) if found else None
         best_cost = math.inf
         best: tuple[np.ndarray, np.ndarray] | None = None
@@ -409,6 +410,24 @@ class SequentialRansac:
                     inlier_ratio(cloud.points, scored, planes[i], params.epsilon),
                     cfg.confidence)
         return best
+
+    def _search_rule(self, params: RansacParams) -> SearchRule:
+        """The scalars of a compiled search: the stated draw's rounds (:class:`TripletDraws`),
+        the thresholds and the stopping rule (typed as the kernel was compiled for)."""
+        cfg = self.config
+        count = cfg.batch_size
+        draws = self.sampler.draws
+        assert draws is not None  # compiled_search: the sampler stated its draw
+        budget = (count if draws == "uniform" else
+                  _call(self.sampler, self.sampler.draw_budget, count))
+        first, budget, cos_min = TripletDraws.stated(draws, count, budget, params.epsilon_n)
+        return SearchRule(batch=int(count), first=int(first), budget=int(max(first, budget)),
+                          check=cos_min is not None,
+                          cos_min=-2.0 if cos_min is None else float(cos_min),
+                          epsilon=float(params.epsilon), epsilon_n=float(params.epsilon_n),
+                          min_iterations=int(cfg.min_iterations),
+                          max_iterations=int(cfg.max_iterations),
+                          confidence=float(cfg.confidence))
 
     def _label(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray,
                plane: np.ndarray, model_normal: np.ndarray, params: RansacParams,
@@ -440,15 +459,42 @@ class SequentialRansac:
         already; a total-least-squares fit commutes with the similarity that maps them back
         to the camera frame, where planes and RMSE are then expressed.
         """
-        params, rmse, support = fit_planes_per_label(
+        renumber, params, rmse, support = refit_and_renumber(
             cloud.all_points, labels.ravel()[cloud.pixel_grid()[2]], int(labels.max(initial=0)))
         params = cloud.plane_to_camera(params)
-        rmse = rmse * cloud.scale
-        kept = ~np.isnan(rmse)
-        # Labels too small to fit a plane become non-planar; the others are renumbered 1..P.
-        renumber = np.zeros(len(kept) + 1, dtype=np.int32)
-        renumber[1:][kept] = np.arange(1, kept.sum() + 1)
         return Reconstruction(frame=frame, labels=renumber[labels],
-                              params=orient_towards_camera(params[kept]) if kept.any()
+                              params=orient_towards_camera(params) if len(params)
                               else np.zeros((0, 4)),
-                              rmse=rmse[kept], support=support[kept])
+                              rmse=rmse * cloud.scale, support=support)
+
+
+def refit_and_renumber(points: np.ndarray, labels: np.ndarray, count: int
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Least-squares plane of each label on all its points; labels too small to fit a plane
+    become non-planar and the others are renumbered 1..P in their order.
+
+    Parameters
+    ----------
+    points : numpy.ndarray
+        (V, 3) float64 points, any frame and unit.
+    labels : numpy.ndarray
+        (V,) int label of each point, 0 = none, at most ``count``.
+    count : int
+        Number of labels.
+
+    Returns
+    -------
+    renumber : numpy.ndarray
+        (count + 1,) int32 new label of each old one (0 for the dropped ones).
+    planes : numpy.ndarray
+        (P, 4) float64 unit-normal planes in the points' frame, not oriented.
+    rmse : numpy.ndarray
+        (P,) RMS point-to-plane distance, the points' unit.
+    support : numpy.ndarray
+        (P,) int64 points per plane.
+    """
+    planes, rmse, support = fit_planes_per_label(points, labels, count)
+    kept = ~np.isnan(rmse)
+    renumber = np.zeros(count + 1, dtype=np.int32)
+    renumber[1:][kept] = np.arange(1, int(kept.sum()) + 1)
+    return renumber, planes[kept], rmse[kept], support[kept]

@@ -35,6 +35,7 @@ import numpy as np
 
 from monoplane.datamodel import Frame
 from monoplane.errors import InvalidInput
+from monoplane.geometry.distance_transform import nearest_true_pixel
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.geometry.neighbours import PointIndex
 from monoplane.jit import chunks, kernel, run_threaded
@@ -85,6 +86,9 @@ class PlaneCloud:
         subsampling happened; ``points`` without an image).
     all_pixels : numpy.ndarray or None
         (V,) int64 flat pixel index of every valid pixel, ascending; None without an image.
+    sampled : numpy.ndarray or None
+        (N,) int64 row of ``all_points`` of each point of a subsampled cloud without an image
+        (a frame's cloud says it with ``pixels``); None otherwise.
     """
 
     points: np.ndarray
@@ -96,6 +100,7 @@ class PlaneCloud:
     shape: tuple[int, int] | None
     all_points: np.ndarray
     all_pixels: np.ndarray | None
+    sampled: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         n = self.points.shape[0]
@@ -108,6 +113,8 @@ class PlaneCloud:
             raise InvalidInput("pixels, shape and all_pixels must be all given or all None")
         if self.pixels is not None and self.pixels.shape != (n,):
             raise InvalidInput("pixels must have shape (N,)")
+        if self.sampled is not None and self.sampled.shape != (n,):
+            raise InvalidInput("sampled must have shape (N,)")
         if not self.scale > 0:
             raise InvalidInput(f"scale must be positive, got {self.scale}")
 
@@ -218,8 +225,10 @@ class PlaneCloud:
 
     @classmethod
     def from_points(cls, points: np.ndarray, normals: np.ndarray, colors: np.ndarray | None,
-                    center: np.ndarray, scale: float) -> PlaneCloud:
-        """A cloud without an image, from points already normalised into the unit sphere.
+                    center: np.ndarray, scale: float, all_points: np.ndarray | None = None,
+                    sampled: np.ndarray | None = None) -> PlaneCloud:
+        """A cloud without an image, from points already normalised into the unit sphere
+        (:func:`normalised_cloud`).
 
         Parameters
         ----------
@@ -233,10 +242,18 @@ class PlaneCloud:
             (3,) centre subtracted before scaling, in the input's frame and units.
         scale : float
             Input units per normalised unit.
+        all_points, sampled : numpy.ndarray, optional
+            When ``points`` are a subsample: the (V, 3) normalised points they were drawn
+            from and the (N,) int64 row of each point among them; :meth:`propagate` labels
+            them all.
         """
         points = np.ascontiguousarray(points, dtype=np.float64)
+        if (all_points is None) != (sampled is None):
+            raise InvalidInput("all_points and sampled must be given together")
         return cls(points=points, normals=normals, colors=colors, pixels=None, center=center,
-                   scale=scale, shape=None, all_points=points, all_pixels=None)
+                   scale=scale, shape=None,
+                   all_points=points if all_points is None else all_points, all_pixels=None,
+                   sampled=sampled)
 
     def plane_to_camera(self, planes: np.ndarray) -> np.ndarray:
         """Express normalised-frame planes in the camera frame and depth units.
@@ -280,7 +297,8 @@ class PlaneCloud:
     def propagate(self, labels: np.ndarray, planes: np.ndarray | None = None,
                   spacing: float | None = None, tolerance: float = 0.0,
                   graph: NeighbourGraph | None = None) -> np.ndarray:
-        """Carry per-point labels of the (possibly subsampled) cloud to the full image.
+        """Carry per-point labels of the (possibly subsampled) cloud to the full image, or to
+        all the points of a cloud without an image.
 
         Parameters
         ----------
@@ -306,9 +324,13 @@ class PlaneCloud:
         -------
         numpy.ndarray
             (H, W) int32 label image; invalid pixels are 0. See the module docstring for the
-            nearest-sample rule used on pixels that were not sampled.
+            nearest-sample rule used on pixels that were not sampled. For a cloud without an
+            image, (V,) int32 labels of ``all_points`` (:meth:`label_points` for those left
+            out of the sample, within the radius; ``tolerance`` does not apply).
         """
         labels = np.ascontiguousarray(labels, dtype=np.int32)
+        if self.pixels is None:
+            return self._propagate_points(labels, planes, spacing, graph)
         pixels, (h, w), all_pixels = self.pixel_grid()
         out = np.zeros(h * w, dtype=np.int32)
         if not self.subsampled:
@@ -342,6 +364,21 @@ class PlaneCloud:
         out[pixels] = labels
         return out.reshape(h, w)
 
+    def _propagate_points(self, labels: np.ndarray, planes: np.ndarray | None,
+                          spacing: float | None, graph: NeighbourGraph | None) -> np.ndarray:
+        """:meth:`propagate` for a cloud without an image: (V,) int32 labels of all points."""
+        if self.sampled is None:
+            return labels.copy()
+        if spacing is None:
+            if graph is None:
+                graph = NeighbourGraph.build(self.points, PROPAGATION_GRAPH_K, tree=self.tree)
+            spacing = graph.spacing
+        p = np.zeros((0, 4)) if planes is None else np.asarray(planes, dtype=np.float64)
+        out = self.label_points(self.all_points, labels, p.reshape(-1, 4),
+                                PROPAGATION_RADIUS_FACTOR * max(spacing, 1e-12))
+        out[self.sampled] = labels  # sampled points keep their own label
+        return out
+
     def label_points(self, queries: np.ndarray, labels: np.ndarray, planes: np.ndarray,
                      radius: float) -> np.ndarray:
         """Labels of any points from the labels of this cloud's points (grid kNN index).
@@ -350,8 +387,8 @@ class PlaneCloud:
         non-planar or there is none; otherwise it takes, among the planar labels of its
         :data:`PROPAGATION_NEIGHBOURS` nearest cloud points within ``radius``, the plane it is
         closest to. :meth:`propagate` uses it for the pixels across a depth jump from their
-        image-nearest sample, and :func:`monoplane.detect_planes` for the points of a cloud
-        left out of the search.
+        image-nearest sample and for the points of a cloud without an image left out of the
+        search.
 
         Parameters
         ----------
@@ -382,80 +419,38 @@ class PlaneCloud:
         return out
 
 
-def nearest_true_pixel(mask: np.ndarray) -> np.ndarray:
-    """Flat index of the nearest True pixel of every pixel (exact Euclidean distance transform).
+def normalised_cloud(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """Distinct points normalised into the unit ball: ``(X - center) / scale``.
 
     Parameters
     ----------
-    mask : numpy.ndarray
-        (H, W) bool image with at least one True pixel.
+    points : numpy.ndarray
+        (V, 3) float64 finite distinct points, any frame and unit.
 
     Returns
     -------
-    numpy.ndarray
-        (H * W,) int64 flat index ``v * W + u`` of a True pixel at the smallest Euclidean
-        distance (ties broken arbitrarily), -1 everywhere when ``mask`` has no True pixel.
+    normalised : numpy.ndarray
+        (V, 3) float64 points, the farthest at distance 1 from the origin.
+    center : numpy.ndarray
+        (3,) centroid of ``points``.
+    scale : float
+        Largest distance of a point from ``center``, the points' unit.
+
+    Raises
+    ------
+    InvalidInput
+        When the points lie too close together to be normalised in float64.
     """
-    return _nearest_true_pixel(np.ascontiguousarray(mask, dtype=np.bool_))
-
-
-@kernel
-def _nearest_true_pixel(mask: np.ndarray) -> np.ndarray:
-    """:func:`nearest_true_pixel`: per column the nearest True row, then per row the lower
-    envelope of the parabolas (x - x')² + dy(x')² (Felzenszwalb and Huttenlocher)."""
-    h, w = mask.shape
-    far = np.inf
-    row = np.empty((h, w), dtype=np.int64)  # nearest True row in the pixel's column
-    dy2 = np.full((h, w), far)
-    last = np.full(w, -1, dtype=np.int64)
-    for y in range(h):  # row by row, all columns at once (memory order)
-        for x in range(w):
-            if mask[y, x]:
-                last[x] = y
-            row[y, x] = last[x]
-    last[:] = -1
-    for y in range(h - 1, -1, -1):
-        for x in range(w):
-            if mask[y, x]:
-                last[x] = y
-            up, down = row[y, x], last[x]
-            if down >= 0 and (up < 0 or down - y < y - up):
-                row[y, x] = down
-            if row[y, x] >= 0:
-                dy2[y, x] = (row[y, x] - y) ** 2
-    out = np.full(h * w, -1, dtype=np.int64)
-    v = np.empty(w, dtype=np.int64)
-    z = np.empty(w + 1)
-    for y in range(h):
-        k = -1
-        for q in range(w):
-            fq = dy2[y, q]
-            if fq == far:
-                continue
-            if k < 0:
-                k = 0
-                v[0] = q
-                z[0] = -far
-                z[1] = far
-                continue
-            while True:
-                p = v[k]
-                s = ((fq + q * q) - (dy2[y, p] + p * p)) / (2.0 * (q - p))
-                if s > z[k]:
-                    break
-                k -= 1
-            k += 1
-            v[k] = q
-            z[k] = s
-            z[k + 1] = far
-        if k < 0:
-            continue
-        k = 0
-        for x in range(w):
-            while z[k + 1] < x:
-                k += 1
-            out[y * w + x] = row[y, v[k]] * w + v[k]
-    return out
+    center = points.mean(axis=0)
+    extent = float(np.abs(points - center).max())
+    # Points closer together than float64 resolves at their magnitude, or so close that their
+    # squared distances underflow, cannot be put into the unit sphere.
+    if not extent > max(1e-150, 1e-12 * float(np.abs(center).max())):
+        raise InvalidInput(f"the cloud's {len(points)} distinct points lie within {extent:.3g} "
+                           f"of their centre {center.tolist()}: too close together to fit "
+                           "planes to")
+    scale = float(np.sqrt(((points - center) ** 2).sum(axis=1).max()))
+    return (points - center) / scale, center, scale
 
 
 @kernel

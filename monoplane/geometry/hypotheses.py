@@ -7,10 +7,10 @@
   of points; :func:`bin_by_normal` and :func:`binned_costs`: the MSAC-plus-normal cost on points
   grouped by normal direction, visiting only the groups a hypothesis' normal can reach;
 * :func:`search_batches`: a whole plane search, batch after batch with the adaptive stopping
-  rule :func:`needed_samples`, in one call. The RANSAC driver uses it when its sampler and
-  scorer are of the kinds above (:meth:`monoplane.stages.base.Sampler.triplet_draws`,
-  :meth:`monoplane.stages.base.Scorer.binned_points`); it gives what calling them batch by batch
-  gives, without the interpreter between batches.
+  rule :func:`needed_samples`, in one call, its scalars in one :class:`SearchRule`. The RANSAC
+  driver uses it when its sampler and scorer state that they draw and score as above
+  (:attr:`monoplane.stages.base.Sampler.draws`, :attr:`monoplane.stages.base.Scorer.scores`);
+  it gives what calling them batch by batch gives, without the interpreter between batches.
 
 Why one module: numba inlines the helpers a kernel calls and caches the kernel by its own source
 file, so a helper must live beside every kernel that inlines it.
@@ -22,10 +22,15 @@ with ``n · X + d = 0``, ``|n| = 1`` and ``d >= 0``.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
 from monoplane.errors import InvalidInput
+from monoplane.geometry.normal_bins import (
+    BinnedPoints,
+    bin_by_normal,  # noqa: F401  (re-exported)
+)
 from monoplane.jit import inline, kernel
 
 #: Cost kinds of :func:`hypothesis_costs`.
@@ -240,50 +245,6 @@ def _sum4(term: np.ndarray, n: int) -> float:
         total += term[j]
         j += 1
     return total
-
-
-@kernel
-def bin_by_normal(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, cells: int
-                   ) -> tuple[np.ndarray, np.ndarray]:
-    """The (M,) ``pool`` points grouped by cube-map cell of their normal.
-
-    The cell of a normal n: its face is the axis of its largest component and that
-    component's sign (face ``2 axis + (sign < 0)``), its position on the face the other two
-    components divided by the largest (in [-1, 1]), cut into ``cells`` x ``cells``.
-    Returns (6, M) float64 coordinates ``x, y, z, nx, ny, nz`` ordered by cell (pool order
-    within one) and the (6 cells² + 1,) start of each cell's run.
-    """
-    m = pool.shape[0]
-    count = 6 * cells * cells
-    cell = np.empty(m, dtype=np.int64)
-    start = np.zeros(count + 1, dtype=np.int64)
-    for i in range(m):
-        p = pool[i]
-        axis = 0
-        for k in range(1, 3):
-            if abs(normals[p, k]) > abs(normals[p, axis]):
-                axis = k
-        top = normals[p, axis]
-        a = 1 if axis == 0 else 0
-        b = 1 if axis == 2 else 2
-        scale = 1.0 / abs(top) if top != 0.0 else 0.0
-        iu = min(max(int((normals[p, a] * scale + 1.0) * 0.5 * cells), 0), cells - 1)
-        iv = min(max(int((normals[p, b] * scale + 1.0) * 0.5 * cells), 0), cells - 1)
-        face = 2 * axis + (1 if top < 0.0 else 0)
-        cell[i] = (face * cells + iu) * cells + iv
-        start[cell[i] + 1] += 1
-    for c in range(count):
-        start[c + 1] += start[c]
-    fill = start[:-1].copy()
-    coords = np.empty((6, m))
-    for i in range(m):
-        j = fill[cell[i]]
-        fill[cell[i]] += 1
-        p = pool[i]
-        for k in range(3):
-            coords[k, j] = points[p, k]
-            coords[3 + k, j] = normals[p, k]
-    return coords, start
 
 
 @inline
@@ -525,24 +486,54 @@ def inlier_ratio(points: np.ndarray, subset: np.ndarray, plane: np.ndarray,
     return _ratio_within(points, subset, plane, epsilon)
 
 
+class SearchRule(NamedTuple):
+    """The scalars of one plane search (:func:`search_batches`): how it draws, scores and
+    stops."""
+
+    batch: int
+    """Samples wanted per batch."""
+    first: int
+    """Candidates drawn first in a batch (see :func:`draw_triplets`)."""
+    budget: int
+    """Candidates drawn at most in a batch, ``>= first``."""
+    check: bool
+    """Keep only candidates whose normals agree (``cos_min``)."""
+    cos_min: float
+    """Least pairwise dot product of a kept candidate's normals, with ``check``."""
+    epsilon: float
+    """Inlier distance ε, the points' unit."""
+    epsilon_n: float
+    """Normal threshold ε_n, radians."""
+    min_iterations: int
+    """Fewest candidates drawn."""
+    max_iterations: int
+    """Most candidates drawn."""
+    confidence: float
+    """Wanted probability of an all-inlier sample (:func:`needed_samples`)."""
+
+
 @kernel
 def search_batches(rng: np.random.Generator, points: np.ndarray, normals: np.ndarray,
-                   pool: np.ndarray, scored: np.ndarray, batch: int, first: int, budget: int,
-                   check: bool, cos_min: float, coords: np.ndarray, start: np.ndarray,
-                   centres: np.ndarray, cos_reach: np.ndarray, epsilon: float,
-                   epsilon_n: float, min_iterations: int, max_iterations: int,
-                   confidence: float) -> tuple[bool, np.ndarray, np.ndarray]:
+                   pool: np.ndarray, scored: np.ndarray, binned: BinnedPoints,
+                   rule: SearchRule) -> tuple[bool, np.ndarray, np.ndarray]:
     """One plane search: batches of samples until the stopping rule is met.
 
-    Each batch is what :func:`draw_triplets` draws (``first``, ``budget``, ``batch`` wanted,
-    ``check`` / ``cos_min`` as its normal test) from the (M,) int64 ``pool``, turned into
-    hypotheses by :func:`sample_hypotheses` and scored by :func:`binned_costs` on the points
-    ``coords`` / ``start`` binned from ``scored`` ((K,) int64). The best hypothesis so far
-    sets the number of samples needed (:func:`needed_samples` of its inlier ratio on
-    ``scored``), kept between ``min_iterations`` and ``max_iterations``; every candidate
-    drawn counts, rejected or not. Returns whether a hypothesis was found, its (4,) plane and
-    its (3,) model normal.
+    Each batch is what :func:`draw_triplets` draws (``rule.first``, ``rule.budget``,
+    ``rule.batch`` wanted, ``rule.check`` / ``rule.cos_min`` as its normal test) from the
+    (M,) int64 ``pool`` of the (N, 3) float64 ``points`` and unit ``normals``, turned into
+    hypotheses by :func:`sample_hypotheses` and scored by :func:`binned_costs` on ``binned``,
+    the points of ``scored`` ((K,) int64) grouped by
+    :func:`~monoplane.geometry.normal_bins.bin_points`. The best hypothesis so far sets the
+    number of samples needed (:func:`needed_samples` of its inlier ratio on ``scored``), kept
+    between ``rule.min_iterations`` and ``rule.max_iterations``; every candidate drawn
+    counts, rejected or not. Returns whether a hypothesis was found, its (4,) plane and its (3,)
+    model normal.
     """
+    batch, first, budget = rule.batch, rule.first, rule.budget
+    check, cos_min = rule.check, rule.cos_min
+    epsilon, epsilon_n = rule.epsilon, rule.epsilon_n
+    min_iterations, max_iterations = rule.min_iterations, rule.max_iterations
+    coords, start, centres, cos_reach = binned
     best_plane = np.zeros(4)
     best_normal = np.zeros(3)
     found = False
@@ -576,5 +567,5 @@ def search_batches(rng: np.random.Generator, points: np.ndarray, normals: np.nda
             best_normal[:] = model[i]
             found = True
             needed = needed_samples(_ratio_within(points, scored, planes[i], epsilon),
-                                    confidence, 3)
+                                    rule.confidence, 3)
     return found, best_plane, best_normal

@@ -1,7 +1,9 @@
-"""The ``[cloud]`` config table: how :func:`monoplane.host.detect.detect_planes` prepares a cloud.
+"""The ``[cloud]`` config table: how a point cloud is prepared for the search
+(:func:`monoplane.host.cloud_input.prepare_cloud`).
 
-It lives apart from :mod:`monoplane.host.detect` because :mod:`monoplane.host.config` loads it to check the
-table, and :mod:`monoplane.host.detect` drives the pipeline, which imports :mod:`monoplane.host.config`.
+It lives apart from :mod:`monoplane.host.cloud_input` because :mod:`monoplane.host.config`
+loads it to check the table, and the pipeline, which imports :mod:`monoplane.host.config`,
+imports :mod:`monoplane.host.cloud_input`.
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ from monoplane.stages.base import param
 
 @dataclass
 class CloudConfig:
-    """How :func:`detect_planes` prepares a cloud (config table ``[cloud]``).
+    """How a point cloud is prepared for the search (config table ``[cloud]``).
 
     Normal orientation matters: the sampler, scorer and labeler compare signed normals.
 

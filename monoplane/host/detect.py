@@ -1,19 +1,15 @@
 """Planes of a point cloud: :func:`detect_planes` for Open3D clouds and (N, 3) arrays.
 
-The cloud goes through the same stages as an image, without the pixel grid:
-
-1. non-finite points are set aside (label 0) and exact duplicates collapsed, so neither can
-   break the search or the normal estimation;
-2. the unique points are normalised into the unit sphere (``ransac.epsilon`` keeps its
-   meaning) and, for the search, subsampled to ``ransac.max_points``;
-3. missing normals are estimated with Open3D (PCA over ``cloud.normals_knn`` neighbours) and
-   oriented (``cloud.orient``, see :class:`CloudConfig`);
-4. the sequential graph-cut RANSAC (:meth:`monoplane.algorithm.ransac.SequentialRansac.run_cloud`) runs
-   on the subsample's kNN graph, then the configured refiner's :meth:`refine_cloud` (which
-   must not need pixels; the ``cloud`` preset uses ``graph-crf``);
-5. every input point is labelled: a point takes, among the planes of its few nearest sampled
-   points, the one it is closest to, if its nearest sample is planar and near enough; planes
-   are refit by least squares on all their points, in the cloud's own frame and units.
+The cloud goes through the same pipeline as an image, without the pixel grid
+(:meth:`monoplane.host.pipeline.Pipeline.run_cloud`): its distinct finite points are
+normalised into the unit sphere and subsampled to ``ransac.max_points``, missing normals are
+estimated and oriented (``[cloud]``, :class:`~monoplane.host.cloud_config.CloudConfig`;
+:mod:`monoplane.host.cloud_input`), the sequential RANSAC, the refiner's ``refine_cloud``
+(which must not need pixels; the ``cloud`` preset uses ``graph-crf``) and the planarity test
+run on the subsample's kNN graph, and every input point is labelled: a point takes, among the
+planes of its few nearest sampled points, the one it is closest to, if its nearest sample is
+planar and near enough. Planes are refit by least squares on all their points, in the cloud's
+own frame and units.
 """
 
 from __future__ import annotations
@@ -23,15 +19,9 @@ from typing import Any
 
 import numpy as np
 
-from monoplane.host.cloud_config import CloudConfig
-from monoplane.errors import InvalidInput
-from monoplane.geometry.cloud import PROPAGATION_RADIUS_FACTOR, PlaneCloud
-from monoplane.geometry.graph import NeighbourGraph
 from monoplane.geometry.neighbours import PointIndex
-from monoplane.geometry.orientation import orient_normals
-from monoplane.geometry.planes import fit_planes_per_label
 from monoplane.geometry.polygons import PlaneMesh, points_plane_mesh
-from monoplane.io.checks import MAX_MAGNITUDE
+from monoplane.host.pipeline import Pipeline
 from monoplane.palette import NON_PLANAR, plane_palette
 
 
@@ -162,70 +152,6 @@ class CloudPlaneResult:
         }
 
 
-def _as_arrays(cloud: Any) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
-    """(N, 3) points, optional normals and colours of any supported cloud type."""
-    import open3d as o3d
-
-    normals = colors = None
-    if isinstance(cloud, o3d.geometry.PointCloud):
-        points = np.asarray(cloud.points, dtype=np.float64)
-        if cloud.has_normals():
-            normals = np.asarray(cloud.normals, dtype=np.float64)
-        if cloud.has_colors():
-            colors = np.asarray(cloud.colors, dtype=np.float64)
-    elif isinstance(cloud, o3d.t.geometry.PointCloud):
-        if "positions" not in cloud.point:
-            raise InvalidInput("the tensor point cloud has no 'positions' attribute")
-        points = cloud.point.positions.numpy().astype(np.float64)
-        if "normals" in cloud.point:
-            normals = cloud.point.normals.numpy().astype(np.float64)
-        if "colors" in cloud.point:
-            colors = cloud.point.colors.numpy().astype(np.float64)
-            if colors.size and colors.max() > 1.0:  # 8-bit colours
-                colors = colors / 255.0
-    else:
-        try:
-            points = np.asarray(cloud, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise InvalidInput(
-                f"cloud must be an open3d PointCloud (legacy or tensor) or an (N, 3) array, "
-                f"got {type(cloud).__name__}") from None
-    if points.ndim != 2 or points.shape[1] != 3:
-        raise InvalidInput(f"points must have shape (N, 3), got {points.shape}")
-    return points, normals, colors
-
-
-def _estimate_normals(points: np.ndarray, cfg: CloudConfig) -> np.ndarray:
-    """Unit normals of ``points`` by Open3D PCA, oriented as ``cfg.orient`` says."""
-    import open3d as o3d
-
-    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
-    k = min(cfg.normals_knn, len(points))
-    pcd.estimate_normals(o3d.geometry.KDTreeSearchParamKNN(knn=k))
-    if cfg.orient == "consistent" and len(points) > 3:
-        pcd.orient_normals_consistent_tangent_plane(min(15, len(points) - 1))
-        return np.asarray(pcd.normals, dtype=np.float64)
-    normals = np.asarray(pcd.normals, dtype=np.float64)
-    if cfg.orient == "auto":
-        return orient_normals(points, normals, np.asarray(cfg.viewpoint, dtype=np.float64))
-    towards = np.asarray(cfg.viewpoint, dtype=np.float64) - points
-    return np.where(((normals * towards).sum(axis=1) < 0)[:, None], -normals, normals)
-
-
-def _propagate(cloud: PlaneCloud, points: np.ndarray, sample: np.ndarray, labels: np.ndarray,
-               planes: np.ndarray, spacing: float) -> np.ndarray:
-    """Labels of all (normalised) ``points`` from the labelled ``sample`` of them that
-    ``cloud`` holds (see the module docstring and :meth:`PlaneCloud.label_points`)."""
-    if sample.size == points.shape[0]:
-        out = np.zeros(points.shape[0], dtype=np.int32)
-        out[sample] = labels
-        return out
-    out = cloud.label_points(points, labels, planes,
-                             PROPAGATION_RADIUS_FACTOR * max(spacing, 1e-12))
-    out[sample] = labels
-    return out
-
-
 def detect_planes(cloud: Any, preset: str = "cloud",
                   overrides: dict[str, Any] | list[str] | None = None,
                   pm: Any | None = None) -> CloudPlaneResult:
@@ -236,7 +162,8 @@ def detect_planes(cloud: Any, preset: str = "cloud",
     cloud : open3d.geometry.PointCloud, open3d.t.geometry.PointCloud or array_like
         (N, 3) points in any frame and unit; normals and colours (in [0, 1], or 8-bit for
         tensor clouds) are used when present. Without normals they are estimated (see
-        :class:`CloudConfig`); without colours the colour term is dropped.
+        :class:`~monoplane.host.cloud_config.CloudConfig`); without colours the colour term
+        is dropped.
     preset : str
         Config preset (default ``cloud``); its refiner must work without pixels.
     overrides : dict or list of str, optional
@@ -256,125 +183,9 @@ def detect_planes(cloud: Any, preset: str = "cloud",
     ConfigError
         Bad overrides, or a refiner that needs pixels (e.g. ``dense-crf``).
     """
-    import time
-
-    from monoplane.host import config as config_mod
-    from monoplane.host.pipeline import Pipeline
-
-    timings: dict[str, float] = {}
-    t0 = time.perf_counter()
     pipe = Pipeline.from_preset(preset, overrides=overrides, pm=pm)
-    pipe.cloud_refiner()  # a refiner that needs pixels fails before any work
-    cfg: CloudConfig = pipe.config.host["cloud"]
-    rcfg = pipe.config.host["ransac"]
-    points, normals, colors = _as_arrays(cloud)
-    n_in = points.shape[0]
-    notes: list[str] = []
-    for what, arr in (("normals", normals), ("colors", colors)):
-        if arr is not None and arr.shape != points.shape:
-            raise InvalidInput(f"{what} must have shape {points.shape}, got {arr.shape}")
-    finite = np.isfinite(points).all(axis=1)
-    huge = finite & (np.abs(points) > MAX_MAGNITUDE).any(axis=1)
-    if huge.any():
-        first = int(np.argmax(huge))
-        raise InvalidInput(f"{int(huge.sum())} point(s) have coordinates beyond "
-                           f"±{MAX_MAGNITUDE:.3g} (the first is point {first})")
-    if normals is not None:
-        # Judged by the largest component: squaring one near 1e300 would overflow.
-        size = np.abs(normals).max(axis=1)
-        ok_n = np.isfinite(normals).all(axis=1) & (size > 1e-12) & (size <= MAX_MAGNITUDE)
-        if not ok_n[finite].all():
-            notes.append("some given normals are zero, non-finite or absurdly long: all "
-                         "normals re-estimated")
-            normals = None
-    if colors is not None and not ((colors[finite] >= 0) & (colors[finite] <= 1)).all():
-        notes.append("colours outside [0, 1] or not finite: colour term dropped")
-        colors = None
-    if not finite.all():
-        notes.append(f"{int((~finite).sum())} NaN/inf points left unlabelled")
-    finite_idx = np.flatnonzero(finite)
-    unique, first, inverse = np.unique(points[finite_idx], axis=0, return_index=True,
-                                       return_inverse=True)
-    inverse = inverse.ravel()
-    if len(unique) < 3:
-        raise InvalidInput(f"the cloud has {len(unique)} distinct finite point(s); a plane "
-                           "needs at least 3")
-    if len(unique) < len(finite_idx):
-        notes.append(f"{len(finite_idx) - len(unique)} duplicate points share their twin's label")
-    u_normals = normals[finite_idx[first]] if normals is not None else None
-    u_colors = colors[finite_idx[first]] if colors is not None else None
-
-    center = unique.mean(axis=0)
-    extent = float(np.abs(unique - center).max())
-    # Points closer together than float64 resolves at their magnitude, or so close that their
-    # squared distances underflow, cannot be put into the unit sphere.
-    if not extent > max(1e-150, 1e-12 * float(np.abs(center).max())):
-        raise InvalidInput(f"the cloud's {len(unique)} distinct points lie within {extent:.3g} "
-                           f"of their centre {center.tolist()}: too close together to fit "
-                           "planes to")
-    scale = float(np.sqrt(((unique - center) ** 2).sum(axis=1).max()))
-    norm_pts = (unique - center) / scale
-    rng = np.random.default_rng(rcfg.seed)
-    sample = np.arange(len(unique))
-    if len(unique) > rcfg.max_points:
-        sample = np.sort(rng.choice(len(unique), size=rcfg.max_points, replace=False))
-        notes.append(f"search on {rcfg.max_points} of {len(unique)} points; all labelled")
-    timings["prepare"] = time.perf_counter() - t0
-
-    t = time.perf_counter()
-    if u_normals is None:
-        s_normals = _estimate_normals(unique[sample], cfg)
-        notes.append(f"normals estimated (PCA, {cfg.normals_knn} neighbours, "
-                     f"oriented: {cfg.orient})")
-    else:
-        s_normals = u_normals[sample] / np.linalg.norm(u_normals[sample], axis=1, keepdims=True)
-    timings["normals"] = time.perf_counter() - t
-
-    pc = PlaneCloud.from_points(norm_pts[sample], s_normals,
-                                None if u_colors is None else u_colors[sample], center, scale)
-    t = time.perf_counter()
-    graph = NeighbourGraph.build(pc.points, rcfg.knn, tree=pc.tree)
-    timings["graph"] = time.perf_counter() - t
-    # The RANSAC stages and the refiner, with the pipeline's hooks and error wrapping; they
-    # add their seconds to timings["ransac"] and timings["refiner"].
-    labels, planes = pipe.segment_cloud(pc, graph, rng, "cloud", timings,
-                                        own_normals=u_normals is not None)
-
-    t = time.perf_counter()
-    u_labels = _propagate(pc, norm_pts, sample, np.asarray(labels, dtype=np.int32),
-                          np.asarray(planes, dtype=np.float64).reshape(-1, 4), graph.spacing)
-    num = int(u_labels.max(initial=0))
-    params, rmse, support = fit_planes_per_label(unique, u_labels, num)
-    kept = ~np.isnan(rmse)
-    renumber = np.zeros(num + 1, dtype=np.int32)
-    renumber[1:][kept] = np.arange(1, int(kept.sum()) + 1)
-    u_labels = renumber[u_labels]
-    params, rmse, support = params[kept], rmse[kept], support[kept]
-    p = params.shape[0]
-    centroids = np.zeros((p, 3))
-    mean_normal = np.zeros((p, 3))
-    if p:
-        np.add.at(centroids, u_labels[u_labels > 0] - 1, unique[u_labels > 0])
-        centroids /= support[:, None]
-        all_normals = None
-        if u_normals is not None:
-            all_normals = u_normals
-        elif sample.size == len(unique):
-            all_normals = np.empty_like(unique)
-            all_normals[sample] = s_normals
-        if all_normals is not None:
-            np.add.at(mean_normal, u_labels[u_labels > 0] - 1, all_normals[u_labels > 0])
-        else:
-            lab_s = u_labels[sample]
-            np.add.at(mean_normal, lab_s[lab_s > 0] - 1, s_normals[lab_s > 0])
-        flip = (mean_normal * params[:, :3]).sum(axis=1) < 0
-        params[flip] *= -1
-    out = np.zeros(n_in, dtype=np.int32)
-    out[finite_idx] = u_labels[inverse]
-    timings["finalize"] = time.perf_counter() - t
-    timings["total"] = time.perf_counter() - t0
-    return CloudPlaneResult(points=points, labels=out, planes=params.reshape(-1, 4),
-                            rmse=rmse, num_points=support, centroids=centroids,
-                            colors=colors, notes=notes,
-                            config=config_mod.ResolvedConfig.to_dict(pipe.config),
-                            timings=timings)
+    fit = pipe.run_cloud(cloud)
+    return CloudPlaneResult(points=fit.points, labels=fit.labels, planes=fit.planes,
+                            rmse=fit.rmse, num_points=fit.support, centroids=fit.centroids,
+                            colors=fit.colors, notes=fit.notes, config=pipe.config.to_dict(),
+                            timings=fit.timings)

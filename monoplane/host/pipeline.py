@@ -8,6 +8,10 @@ Python API first::
     rec = pipe.run(monoplane.load_frame("rgb.png", depth="depth.npy", intrinsics="K.json"))
     monoplane.save_reconstruction(rec, "out/")
 
+A point cloud goes through the same stages without the pixel grid (:meth:`Pipeline.run_cloud`,
+which :func:`monoplane.detect_planes` calls); frames and clouds share the RANSAC driver's
+construction and call (:meth:`Pipeline._ransac`).
+
 A stage that raises is reported as a :class:`~monoplane.errors.StageError` naming its kind and
 plugin. Per-stage wall times land in ``rec.timings`` and are announced through the
 ``monoplane_stage_finished`` hook.
@@ -18,22 +22,31 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import Any, TypeVar
 
 import numpy as np
 import pluggy
 
-from monoplane.host import config as config_mod
+from monoplane.algorithm.planarity import check_cloud, check_image
+from monoplane.algorithm.ransac import SequentialRansac
 from monoplane.cues.given import use_given_cues
 from monoplane.datamodel import Frame, Reconstruction
-from monoplane.errors import ConfigError, StageError
-from monoplane.algorithm.planarity import check_cloud, check_image
+from monoplane.errors import ConfigError
+from monoplane.geometry.cloud import PlaneCloud
+from monoplane.geometry.graph import NeighbourGraph
+from monoplane.host import config as config_mod
+from monoplane.host.cloud_input import CloudFit, prepare_cloud
 from monoplane.host.registry import get_plugin_manager, get_registry
-from monoplane.stages.base import CueProvider, Labeler, Refiner, Sampler, Scorer, Stage
-
-if TYPE_CHECKING:
-    from monoplane.geometry.cloud import PlaneCloud
-    from monoplane.geometry.graph import NeighbourGraph
+from monoplane.stages.base import (
+    CueProvider,
+    Labeler,
+    RansacParams,
+    Refiner,
+    Sampler,
+    Scorer,
+    Stage,
+    run_stage,
+)
 
 T = TypeVar("T")
 S = TypeVar("S", bound=Stage)
@@ -96,14 +109,10 @@ class Pipeline:
 
     def call(self, kind: str, label: str, fn: Callable[[], T], frame_name: str,
              timings: dict[str, float]) -> T:
-        """Run one stage call, timing it and wrapping any failure in a :class:`StageError`."""
+        """Run one stage call, timing it and wrapping any failure in a :class:`StageError`
+        (:func:`~monoplane.stages.base.run_stage`)."""
         start = time.perf_counter()
-        try:
-            result = fn()
-        except StageError:
-            raise
-        except Exception as exc:
-            raise StageError(kind, label, exc) from exc
+        result = run_stage(kind, label, fn)
         seconds = time.perf_counter() - start
         timings[kind] = timings.get(kind, 0.0) + seconds
         self.pm.hook.monoplane_stage_finished(kind=kind, name=label, seconds=seconds,
@@ -127,21 +136,14 @@ class Pipeline:
 
     def segment(self, frame: Frame, timings: dict[str, float] | None = None) -> Reconstruction:
         """Sequential RANSAC then the refiner, on a frame that already has its cues."""
-        from monoplane.algorithm.ransac import SequentialRansac
-
         timings = {} if timings is None else timings
-        sampler = self.stage("sampler", Sampler)
-        scorer = self.stage("scorer", Scorer)
-        labeler = self.stage("labeler", Labeler)
-        driver = SequentialRansac(sampler, scorer, labeler, self.config.host["ransac"])
-        label = f"{sampler.name} + {scorer.name} + {labeler.name}"
         refiner = self.stage("refiner", Refiner)
         # The refiner's label-independent work runs in the background during the RANSAC.
-        rec = self.call("ransac", label,
-                        lambda: driver.run(frame, meanwhile=lambda: refiner.prepare(frame)),
-                        frame.name, timings)
-        # The thresholds the RANSAC used (ε may have been lowered to the sensor's noise).
-        params = driver.params_used
+        rec, params = self._ransac(
+            frame.name, timings,
+            lambda driver: driver.run(frame, meanwhile=lambda: refiner.prepare(frame)))
+        # params: the thresholds the RANSAC used (ε may have been lowered to the sensor's
+        # noise).
         rec = self.call("refiner", refiner.name, lambda: refiner.refine(rec, params),
                         frame.name, timings)
         planarity = self.config.host["planarity"]
@@ -150,6 +152,21 @@ class Pipeline:
         rec.config = self.config.to_dict()
         rec.timings = {**rec.timings, **timings}
         return rec
+
+    def _ransac(self, name: str, timings: dict[str, float],
+                search: Callable[[SequentialRansac], T]) -> tuple[T, RansacParams]:
+        """The RANSAC stages' driver, built here for frames and clouds alike, run by
+        ``search`` as the ``ransac`` stage (timed, hooked, failures wrapped).
+
+        Returns what ``search`` returns and the thresholds the driver labelled with.
+        """
+        sampler = self.stage("sampler", Sampler)
+        scorer = self.stage("scorer", Scorer)
+        labeler = self.stage("labeler", Labeler)
+        driver = SequentialRansac(sampler, scorer, labeler, self.config.host["ransac"])
+        found = self.call("ransac", f"{sampler.name} + {scorer.name} + {labeler.name}",
+                          lambda: search(driver), name, timings)
+        return found, driver.params_used
 
     def cloud_refiner(self) -> Refiner:
         """The configured refiner, checked to work without pixels (:meth:`segment_cloud`).
@@ -165,15 +182,56 @@ class Pipeline:
                               "a point cloud; use refiner.plugin=graph-crf or none")
         return refiner
 
+    def run_cloud(self, cloud: Any) -> CloudFit:
+        """Planes of a point cloud: :func:`~monoplane.host.cloud_input.prepare_cloud`, the
+        RANSAC, refiner and planarity test on its subsample (:meth:`segment_cloud`), the labels
+        carried to every point (:meth:`PlaneCloud.propagate
+        <monoplane.geometry.cloud.PlaneCloud.propagate>`) and the planes refit on them
+        (:meth:`~monoplane.host.cloud_input.CloudInput.fit`).
+
+        Parameters
+        ----------
+        cloud : open3d.geometry.PointCloud, open3d.t.geometry.PointCloud or array_like
+            (N, 3) points in any frame and unit, with optional normals and colours.
+
+        Returns
+        -------
+        CloudFit
+            Labels in the input order, planes in the cloud's frame and units.
+        """
+        start = time.perf_counter()
+        self.cloud_refiner()  # a refiner that needs pixels fails before any work
+        rcfg = self.config.host["ransac"]
+        rng = np.random.default_rng(rcfg.seed)
+        timings: dict[str, float] = {}
+        prepared = prepare_cloud(cloud, self.config.host["cloud"], rcfg.max_points, rng, timings)
+        t = time.perf_counter()
+        graph = self.neighbour_graph(prepared.cloud)
+        timings["graph"] = time.perf_counter() - t
+        labels, planes = self.segment_cloud(prepared.cloud, graph, rng, "cloud", timings,
+                                            own_normals=prepared.own_normals)
+        t = time.perf_counter()
+        fit = prepared.fit(prepared.cloud.propagate(labels, planes, graph=graph), timings)
+        timings["finalize"] = time.perf_counter() - t
+        timings["total"] = time.perf_counter() - start
+        return fit
+
+    def neighbour_graph(self, cloud: PlaneCloud) -> NeighbourGraph:
+        """The kNN graph (``ransac.knn`` neighbours) over a cloud's points that the RANSAC's
+        labeler and a cloud refiner work on."""
+        return NeighbourGraph.build(cloud.points, self.config.host["ransac"].knn,
+                                    tree=cloud.tree)
+
     def segment_cloud(self, cloud: PlaneCloud, graph: NeighbourGraph, rng: np.random.Generator,
                       name: str = "cloud", timings: dict[str, float] | None = None,
                       own_normals: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """Sequential RANSAC, the refiner and the planarity test on a cloud without pixels
-        (:func:`detect_planes`).
+        (:meth:`run_cloud`).
 
-        The same stages, ``monoplane_stage_finished`` hooks and :class:`StageError` wrapping as
-        :meth:`segment`: the RANSAC's :meth:`~monoplane.algorithm.ransac.SequentialRansac.run_cloud` and
-        the refiner's :meth:`~monoplane.stages.base.Refiner.refine_cloud`.
+        The same driver (:meth:`_ransac`), hooks and :class:`StageError` wrapping as
+        :meth:`segment`: the RANSAC's
+        :meth:`~monoplane.algorithm.ransac.SequentialRansac.run_cloud` and the refiner's
+        :meth:`~monoplane.stages.base.Refiner.refine_cloud`.
 
         Parameters
         ----------
@@ -181,7 +239,7 @@ class Pipeline:
             Normalised oriented cloud (unit sphere); only its points, normals and colours are
             used.
         graph : NeighbourGraph
-            kNN graph over ``cloud.points`` (``ransac.knn`` neighbours).
+            kNN graph over ``cloud.points`` (:meth:`neighbour_graph`).
         rng : numpy.random.Generator
             Source of the RANSAC's randomness.
         name : str
@@ -200,26 +258,19 @@ class Pipeline:
         planes : numpy.ndarray
             (P, 4) float64 planes ``n . x + d = 0`` in the normalised frame.
         """
-        from monoplane.algorithm.ransac import SequentialRansac
-
         timings = {} if timings is None else timings
         refiner = self.cloud_refiner()
-        sampler = self.stage("sampler", Sampler)
-        scorer = self.stage("scorer", Scorer)
-        labeler = self.stage("labeler", Labeler)
-        rcfg = self.config.host["ransac"]
-        driver = SequentialRansac(sampler, scorer, labeler, rcfg)
-        found = self.call("ransac", f"{sampler.name} + {scorer.name} + {labeler.name}",
-                          lambda: driver.run_cloud(cloud, graph, rng), name, timings)
+        found, params = self._ransac(name, timings,
+                                     lambda driver: driver.run_cloud(cloud, graph, rng))
         labels, planes = self.call(
             "refiner", refiner.name,
-            lambda: refiner.refine_cloud(cloud, graph, found.labels, found.planes, rcfg.params),
+            lambda: refiner.refine_cloud(cloud, graph, found.labels, found.planes, params),
             name, timings)
         planes = np.asarray(planes, dtype=np.float64).reshape(-1, 4)
         labels, kept = self.call(
             "planarity", "planarity test",
             lambda: check_cloud(cloud.points, cloud.normals if own_normals else None, labels,
-                                graph.edges, planes, rcfg.epsilon,
+                                graph.edges, planes, params.epsilon,
                                 self.config.host["planarity"]), name, timings)
         planes = planes[kept]
         return (np.asarray(labels, dtype=np.int32),

@@ -24,6 +24,7 @@ class UniformSampler(Sampler):
     """Three distinct points drawn uniformly from the remaining pool."""
 
     name = "uniform"
+    draws = "uniform"
 
     def sample(self, cloud: PlaneCloud, pool: np.ndarray, count: int,
                rng: np.random.Generator, params: RansacParams) -> np.ndarray:
@@ -31,13 +32,6 @@ class UniformSampler(Sampler):
         if pool.size < 3 or count <= 0:
             return np.zeros((0, 3), dtype=np.int64)
         return draw_triplets(rng, pool, count, count, count)
-
-    def triplet_draws(self, count: int, params: RansacParams) -> TripletDraws | None:
-        """See :meth:`monoplane.stages.base.Sampler.triplet_draws`: ``count`` candidates, all
-        kept (None for a subclass that draws otherwise)."""
-        if type(self).sample is not UniformSampler.sample:
-            return None
-        return TripletDraws(count, count, None)
 
 
 @dataclass
@@ -53,6 +47,7 @@ class NormalConsistentSampler(Sampler):
 
     name = "normal-consistent"
     Config = NormalConsistentConfig
+    draws = "normal-consistent"
 
     def sample(self, cloud: PlaneCloud, pool: np.ndarray, count: int,
                rng: np.random.Generator, params: RansacParams) -> np.ndarray:
@@ -64,21 +59,15 @@ class NormalConsistentSampler(Sampler):
         """
         if pool.size < 3 or count <= 0:
             return np.zeros((0, 3), dtype=np.int64)
-        first, budget, cos_min = self._draws(count, params)
+        first, budget, cos_min = TripletDraws.stated("normal-consistent", count,
+                                                     self.draw_budget(count), params.epsilon_n)
         return draw_triplets(rng, pool, first, budget, count, cloud.normals,
                              -2.0 if cos_min is None else cos_min)
 
-    def triplet_draws(self, count: int, params: RansacParams) -> TripletDraws | None:
-        """See :meth:`monoplane.stages.base.Sampler.triplet_draws` (None for a subclass that
-        draws otherwise)."""
-        if type(self).sample is not NormalConsistentSampler.sample:
-            return None
-        return self._draws(count, params)
-
-    def _draws(self, count: int, params: RansacParams) -> TripletDraws:
-        """``2 * count`` candidates first, ``max_draw_factor * count`` at most."""
-        budget = self.config.max_draw_factor * count
-        return TripletDraws(min(2 * count, budget), budget, float(np.cos(params.epsilon_n)))
+    def draw_budget(self, count: int) -> int:
+        """``max_draw_factor * count`` candidates at most (see
+        :meth:`monoplane.stages.base.Sampler.draw_budget`)."""
+        return self.config.max_draw_factor * count
 
 
 @dataclass

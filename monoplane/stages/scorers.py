@@ -17,13 +17,12 @@ direction of their normal (``bin_by_normal``, the cells of a cube map), and a ce
 cone of directions lies farther than ε_n from the model normal is counted, not visited
 (``binned_costs``). A hypothesis of one orientation in a scene of several thus reads a
 fraction of the points; the sum comes out equal up to the order of its additions. Because it
-answers :meth:`~monoplane.stages.base.Scorer.binned_points`, the RANSAC driver runs its whole
-search in one compiled call when the sampler allows it too.
+states ``scores = "msac-normal"`` (:attr:`~monoplane.stages.base.Scorer.scores`), the RANSAC
+driver runs its whole search in one compiled call when the sampler states its draw too.
 """
 
 from __future__ import annotations
 
-import functools
 from typing import ClassVar
 
 import numpy as np
@@ -33,18 +32,12 @@ from monoplane.geometry.hypotheses import (
     INLIERS,
     MSAC,
     MSAC_NORMAL,
-    bin_by_normal,
     binned_costs,
     hypothesis_costs,
 )
+from monoplane.geometry.normal_bins import BinnedPoints, bin_points
 from monoplane.hookspecs import hookimpl
-from monoplane.stages.base import BinnedPoints, RansacParams, Scorer, Stage
-
-#: Cells per cube-map face side of the normal directions :func:`bin_by_normal` groups by.
-NORMAL_CELLS = 4
-#: Angle (radians) added to a cell's radius before its points are counted instead of visited:
-#: far wider than the rounding of a cosine, so no point the full test would visit is skipped.
-_SKIP_MARGIN = 1e-6
+from monoplane.stages.base import RansacParams, Scorer, Stage
 
 
 class _KernelScorer(Scorer):
@@ -67,6 +60,7 @@ class InlierCountScorer(_KernelScorer):
     """Vanilla RANSAC: the negated number of points closer than ε."""
 
     name = "inliers"
+    scores = "inliers"
     cost_kind = INLIERS
 
 
@@ -74,6 +68,7 @@ class MsacScorer(_KernelScorer):
     """MSAC: truncated quadratic cost Σ min(φ²/ε², 1)."""
 
     name = "msac"
+    scores = "msac"
     cost_kind = MSAC
 
 
@@ -81,6 +76,7 @@ class MsacNormalScorer(_KernelScorer):
     """MSAC plus the normal cost g of E_n: Σ min(φ²/ε² + g(1, p), 1)."""
 
     name = "msac-normal"
+    scores = "msac-normal"
     cost_kind = MSAC_NORMAL
     _last: tuple[np.ndarray, np.ndarray, float, BinnedPoints] | None = None
 
@@ -92,14 +88,6 @@ class MsacNormalScorer(_KernelScorer):
                             np.ascontiguousarray(model_normals, dtype=np.float64),
                             float(params.epsilon), float(params.epsilon_n))
 
-    def binned_points(self, cloud: PlaneCloud, pool: np.ndarray, params: RansacParams
-                      ) -> BinnedPoints | None:
-        """See :meth:`monoplane.stages.base.Scorer.binned_points` (None for a subclass that
-        scores otherwise)."""
-        if type(self).score is not MsacNormalScorer.score:
-            return None
-        return self._binned(cloud, pool, params)
-
     def _binned(self, cloud: PlaneCloud, pool: np.ndarray, params: RansacParams
                 ) -> BinnedPoints:
         """The pool's points binned by normal direction, kept for the next call with the same
@@ -107,53 +95,10 @@ class MsacNormalScorer(_KernelScorer):
         last = self._last  # one read: a search ahead on another thread may replace it
         if (last is None or last[0] is not pool or last[1] is not cloud.points
                 or last[2] != params.epsilon_n):
-            coords, start = bin_by_normal(cloud.points, cloud.normals,
-                                          np.ascontiguousarray(pool, dtype=np.int64),
-                                          NORMAL_CELLS)
-            centres, cos_reach = _cell_reach(NORMAL_CELLS, params.epsilon_n)
             last = self._last = (pool, cloud.points, params.epsilon_n,
-                                 BinnedPoints(coords, start, centres, cos_reach))
+                                 bin_points(cloud.points, cloud.normals, pool,
+                                            params.epsilon_n))
         return last[3]
-
-
-@functools.cache
-def _cell_cones(cells: int) -> tuple[np.ndarray, np.ndarray]:
-    """Unit centre direction (6 c², 3) and angular radius (6 c²,) in radians of each cube-map
-    cell of :func:`bin_by_normal`: the largest angle from the centre to a corner of the cell
-    (the farthest point of a cell, which is convex on the sphere)."""
-    edges = np.linspace(-1.0, 1.0, cells + 1)
-    mids = (edges[:-1] + edges[1:]) / 2
-    centres, radii = [], []
-    for face in range(6):
-        for iu in range(cells):
-            for iv in range(cells):
-                c = _face_direction(face, mids[iu], mids[iv])
-                corners = [_face_direction(face, edges[iu + du], edges[iv + dv])
-                           for du in (0, 1) for dv in (0, 1)]
-                centres.append(c)
-                radii.append(max(np.arccos(np.clip(c @ k, -1.0, 1.0)) for k in corners))
-    return np.array(centres), np.array(radii)
-
-
-@functools.lru_cache(maxsize=8)
-def _cell_reach(cells: int, epsilon_n: float) -> tuple[np.ndarray, np.ndarray]:
-    """Centre directions (6 c², 3) of the cells of :func:`_cell_cones` and the cosine of
-    their radius plus ε_n (radians) plus a margin: the test by which
-    :func:`~monoplane.geometry.hypotheses.binned_costs` skips cells (asked once per pool, with
-    the same ε_n all frame long)."""
-    centres, radii = _cell_cones(cells)
-    return centres, np.cos(np.minimum(epsilon_n + radii + _SKIP_MARGIN, np.pi))
-
-
-def _face_direction(face: int, u: float, v: float) -> np.ndarray:
-    """Unit direction at position (u, v) of cube-map face ``face`` (see
-    :func:`~monoplane.geometry.hypotheses.bin_by_normal`: axis ``face // 2``, negative when
-    ``face`` is odd; u and v along the other two axes)."""
-    axis = face // 2
-    a, b = [k for k in range(3) if k != axis]
-    d = np.zeros(3)
-    d[axis], d[a], d[b] = 1.0 - 2.0 * (face % 2), u, v
-    return d / np.linalg.norm(d)
 
 
 @hookimpl

@@ -9,8 +9,8 @@ from monoplane.geometry.cloud import (
     PROPAGATION_NEIGHBOURS,
     PROPAGATION_RADIUS_FACTOR,
     PlaneCloud,
-    nearest_true_pixel,
 )
+from monoplane.geometry.distance_transform import nearest_true_pixel
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.testing import ROOM, room_cues
 
@@ -241,12 +241,36 @@ def test_a_cloud_without_an_image_has_no_pixel_grid_and_labels_points_in_3d():
     assert cloud.pixels is None and cloud.shape is None and not cloud.subsampled
     with pytest.raises(InvalidInput, match="no pixel grid"):
         cloud.pixel_grid()
-    with pytest.raises(InvalidInput, match="no pixel grid"):
-        cloud.propagate(np.zeros(400, dtype=np.int32))
     labels = np.where(xy[:, 0] < 0, 1, 2).astype(np.int32)
     planes = np.array([[0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 1.0, -0.3]])
+    # Not subsampled: every point keeps its own label.
+    np.testing.assert_array_equal(cloud.propagate(labels, planes), labels)
     queries = np.array([[-0.2, 0.0, 0.01], [0.2, 0.0, 0.29], [5.0, 5.0, 5.0]])
     assert cloud.label_points(queries, labels, planes, radius=0.2).tolist() == [1, 2, 0]
+
+
+def test_a_subsampled_cloud_without_an_image_propagates_to_all_its_points():
+    rng = np.random.default_rng(1)
+    xy = rng.uniform(-0.5, 0.5, (2000, 2))
+    points = np.column_stack([xy, np.where(xy[:, 0] < 0, 0.0, 0.3)])  # two parallel planes
+    points[0] = [5.0, 5.0, 5.0]  # far from every sample
+    truth = np.where(xy[:, 0] < 0, 1, 2).astype(np.int32)
+    sampled = np.sort(rng.choice(np.arange(1, 2000), 300, replace=False))
+    cloud = PlaneCloud.from_points(points[sampled], np.tile([0.0, 0.0, 1.0], (300, 1)), None,
+                                   np.zeros(3), 1.0, all_points=points, sampled=sampled)
+    assert cloud.subsampled and cloud.pixels is None
+    planes = np.array([[0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 1.0, -0.3]])
+    out = cloud.propagate(truth[sampled], planes)
+    assert out.shape == (2000,) and out.dtype == np.int32
+    assert out[0] == 0  # no sample within the radius
+    np.testing.assert_array_equal(out[1:], truth[1:])
+    # A sampled point keeps its own label, even one its neighbours contradict.
+    wrong = truth[sampled].copy()
+    wrong[5] = 3 - wrong[5]
+    assert cloud.propagate(wrong, planes)[sampled[5]] == wrong[5]
+    with pytest.raises(InvalidInput, match="given together"):
+        PlaneCloud.from_points(points[sampled], np.zeros((300, 3)), None, np.zeros(3), 1.0,
+                               all_points=points)
 
 
 def test_pixel_fields_come_all_or_none():

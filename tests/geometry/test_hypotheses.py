@@ -4,7 +4,13 @@ import numpy as np
 import pytest
 
 from monoplane.errors import InvalidInput
-from monoplane.geometry.hypotheses import refit_hypothesis, sample_hypotheses
+from monoplane.geometry.hypotheses import (
+    SearchRule,
+    refit_hypothesis,
+    sample_hypotheses,
+    search_batches,
+)
+from monoplane.geometry.normal_bins import bin_points
 from monoplane.geometry.planes import fit_plane, planes_from_triplets
 
 
@@ -56,3 +62,41 @@ def test_refit_hypothesis_is_the_plane_fit_and_the_mean_normal_of_the_members():
     np.testing.assert_array_equal(model, [0.0, 0.0, 1.0])
     with pytest.raises(InvalidInput, match="at least 3"):
         refit_hypothesis(exact, normals, members[:2], np.zeros(3))
+
+
+def _plane_and_clutter(rng):
+    """400 points on z = 0.2 (normal +z) and 200 scattered points with random normals."""
+    on = np.column_stack([rng.uniform(-0.5, 0.5, (400, 2)), np.full(400, 0.2)])
+    off = rng.uniform(-0.5, 0.5, (200, 3))
+    normals = np.vstack([np.tile([0.0, 0.0, 1.0], (400, 1)), rng.normal(size=(200, 3))])
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    return np.vstack([on, off]), normals
+
+
+def _rule(**changes):
+    rule = SearchRule(batch=50, first=100, budget=1000, check=True, cos_min=float(np.cos(0.2)),
+                      epsilon=0.01, epsilon_n=0.2, min_iterations=100, max_iterations=1000,
+                      confidence=0.99)
+    return rule._replace(**changes)
+
+
+def test_search_batches_takes_its_scalars_in_one_rule_and_finds_the_plane():
+    rng = np.random.default_rng(0)
+    points, normals = _plane_and_clutter(rng)
+    pool = np.arange(len(points), dtype=np.int64)
+    binned = bin_points(points, normals, pool, 0.2)
+    found, plane, model = search_batches(np.random.default_rng(1), points, normals, pool, pool,
+                                         binned, _rule())
+    assert found
+    # Any all-inlier sample spans the plane exactly: n = ±z, d = ∓0.2 with d >= 0.
+    np.testing.assert_allclose(plane, [0.0, 0.0, -1.0, 0.2], atol=1e-12)
+    np.testing.assert_allclose(model, [0.0, 0.0, 1.0], atol=1e-12)
+    # A normal test nothing passes finds nothing; the rule's other fields are its own.
+    found, _, _ = search_batches(np.random.default_rng(1), points, normals, pool, pool, binned,
+                                 _rule(cos_min=1.5))
+    assert not found
+    # Without the normal test the draw is uniform and still finds the plane.
+    found, plane, _ = search_batches(np.random.default_rng(1), points, normals, pool, pool,
+                                     binned, _rule(check=False, cos_min=-2.0, first=50,
+                                                   budget=50))
+    assert found and abs(plane[2]) > 1 - 1e-12

@@ -66,8 +66,8 @@ def test_normal_term_penalises_a_wrong_model_normal(setup):
 
 
 def test_normal_cells_bound_their_normals_and_skipping_changes_nothing():
-    from monoplane.geometry.hypotheses import MSAC_NORMAL, bin_by_normal, hypothesis_costs
-    from monoplane.stages.scorers import NORMAL_CELLS, _cell_cones
+    from monoplane.geometry.hypotheses import MSAC_NORMAL, hypothesis_costs
+    from monoplane.geometry.normal_bins import NORMAL_CELLS, bin_by_normal, cell_cones
 
     rng = np.random.default_rng(3)
     n = 4000
@@ -81,7 +81,7 @@ def test_normal_cells_bound_their_normals_and_skipping_changes_nothing():
     cloud = cloud_from_arrays(pts, nrm)
     pool = np.sort(rng.choice(n, 3000, replace=False)).astype(np.int64)
     coords, start = bin_by_normal(cloud.points, cloud.normals, pool, NORMAL_CELLS)
-    centres, radii = _cell_cones(NORMAL_CELLS)
+    centres, radii = cell_cones(NORMAL_CELLS)
     # Every point lies in its cell's cone, and the cells hold every pool point once.
     cell = np.repeat(np.arange(len(radii)), np.diff(start))
     angle = np.arccos(np.clip(np.einsum("ij,ij->i", coords[3:].T, centres[cell]), -1, 1))

@@ -1,0 +1,217 @@
+"""The terms of the graph-cut energies (paper §III-B): data costs and pairwise cut costs.
+
+* f: MSAC truncated-L2 data cost, :func:`msac_costs`; g: the normal data cost of E_n,
+  :func:`normal_costs` of :func:`normal_angles`; :func:`data_costs` gives f and f + g of a
+  whole pool for one hypothesis in one compiled pass;
+* w_pq: the proximity-guided cut cost of an edge, 0.5 + k_p + k_c + k_n
+  (:func:`proximity_weights`), computed on the frame's threads.
+
+:mod:`monoplane.algorithm.graphcut` assembles them into binary energies and minimises those.
+Positions are in the caller's (normalised) frame, angles in radians.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from monoplane.jit import chunks, kernel, run_threaded
+
+#: Edges per thread below which proximity weights are computed on one thread.
+THREADED_EDGES = 20_000
+
+
+def msac_costs(dist: np.ndarray, epsilon: float) -> tuple[np.ndarray, np.ndarray]:
+    """Truncated-L2 data costs f(0, p) and f(1, p) of the paper's GC-RANSAC data term.
+
+    Parameters
+    ----------
+    dist : numpy.ndarray
+        (M,) point-to-plane distances φ(p, θ) (any unit, same as ``epsilon``).
+    epsilon : float
+        Inlier threshold ε.
+
+    Returns
+    -------
+    f0, f1 : numpy.ndarray
+        (M,) float64 costs of labelling each point outlier / inlier.
+    """
+    r = (np.asarray(dist, dtype=np.float64) / epsilon) ** 2
+    inside = r < 1.0
+    f0 = np.where(inside, 1.0 - r, 0.0)
+    f1 = np.where(inside, 0.0, r)
+    return f0, f1
+
+
+def normal_angles(normals: np.ndarray, model_normal: np.ndarray) -> np.ndarray:
+    """Angle ρ(p, θ_n) between each point normal and the model normal.
+
+    Parameters
+    ----------
+    normals : numpy.ndarray
+        (M, 3) unit normals.
+    model_normal : numpy.ndarray
+        (3,) unit model normal θ_n (same orientation convention as ``normals``).
+
+    Returns
+    -------
+    numpy.ndarray
+        (M,) float64 angles in radians, in [0, π].
+    """
+    cos = np.clip(np.asarray(normals, dtype=np.float64) @ np.asarray(model_normal), -1.0, 1.0)
+    return np.arccos(cos)
+
+
+def normal_costs(angles: np.ndarray, epsilon_n: float) -> np.ndarray:
+    """Normal data cost g(1, p) of E_n (g(0, p) is 0).
+
+    Parameters
+    ----------
+    angles : numpy.ndarray
+        (M,) normal errors ρ in radians.
+    epsilon_n : float
+        Normal threshold ε_n in radians.
+
+    Returns
+    -------
+    numpy.ndarray
+        (M,) float64 ``exp(ρ / ε_n - 1)`` where ``ρ >= ε_n``, else 0.
+    """
+    a = np.asarray(angles, dtype=np.float64)
+    return np.where(a >= epsilon_n, np.exp(a / epsilon_n - 1.0), 0.0)
+
+
+def data_costs(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, plane: np.ndarray,
+               model_normal: np.ndarray | None, epsilon: float, epsilon_n: float = np.pi
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """Data costs f(0, p) and f(1, p) + g(1, p) of a pool for one hypothesis, in one pass.
+
+    :func:`msac_costs` of the point-to-plane distances, plus :func:`normal_costs` of the
+    angles to the model normal when one is given.
+
+    Parameters
+    ----------
+    points, normals : numpy.ndarray
+        (N, 3) float64 cloud points and unit normals.
+    pool : numpy.ndarray
+        (M,) int64 indices of the points to label.
+    plane : numpy.ndarray
+        (4,) unit-normal plane in the points' frame.
+    model_normal : numpy.ndarray or None
+        (3,) unit model normal θ_n; ``None`` leaves out E_n.
+    epsilon, epsilon_n : float
+        Distance threshold ε (points' unit) and normal threshold ε_n (radians).
+
+    Returns
+    -------
+    f0, data1 : numpy.ndarray
+        (M,) float64 costs of the outlier and the inlier label.
+    """
+    use_normal = model_normal is not None
+    mn = np.zeros(3) if model_normal is None else np.asarray(model_normal, dtype=np.float64)
+    return _data_costs(points, normals, np.ascontiguousarray(pool, dtype=np.int64),
+                       np.asarray(plane, dtype=np.float64), mn, float(epsilon),
+                       float(epsilon_n), use_normal)
+
+
+@kernel
+def _data_costs(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, plane: np.ndarray,
+                model_normal: np.ndarray, epsilon: float, epsilon_n: float, use_normal: bool
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`data_costs` (``use_normal`` False ignores ``model_normal``)."""
+    m = pool.shape[0]
+    f0 = np.zeros(m)
+    data1 = np.empty(m)
+    # arccos only where the angle can reach ε_n: above this cosine it is surely smaller (the
+    # margin is far wider than arccos's rounding), so the result is that of testing every point.
+    cos_skip = np.cos(epsilon_n) + 1e-9
+    for i in range(m):
+        p = pool[i]
+        phi = (plane[0] * points[p, 0] + plane[1] * points[p, 1] + plane[2] * points[p, 2]
+               + plane[3])
+        r = (phi / epsilon) ** 2
+        if r < 1.0:
+            f0[i] = 1.0 - r
+            data1[i] = 0.0
+        else:
+            data1[i] = r
+        if use_normal:
+            cos = (model_normal[0] * normals[p, 0] + model_normal[1] * normals[p, 1]
+                   + model_normal[2] * normals[p, 2])
+            if cos < cos_skip:
+                rho = np.arccos(min(max(cos, -1.0), 1.0))
+                if rho >= epsilon_n:
+                    data1[i] += np.exp(rho / epsilon_n - 1.0)
+    return f0, data1
+
+
+def proximity_weights(points: np.ndarray, edges: np.ndarray, normals: np.ndarray | None = None,
+                      colors: np.ndarray | None = None, alpha_p2: float = 0.005,
+                      alpha_c2: float = 0.1, alpha_n2: float = 5.0, w_p: float = 1.0,
+                      w_c: float = 1.0, w_n: float = 1.0) -> np.ndarray:
+    """Cost of cutting each edge in the proximity-guided pairwise term, 0.5 + k_p + k_c + k_n.
+
+    k_p = w_p exp(-|p_i - p_j|² / 2α_p²)  (eq. kp),
+    k_c = w_c exp(-|p_i - p_j|² / 2α_p² - |I_i - I_j|² / 2α_c²)  (eq. kc),
+    k_n = w_n exp(-|p_i - p_j|² / 2α_p² - arccos(n_i · n_j) / 2α_n²)  (eq. kn; the angle is
+    not squared, as written in the paper).
+
+    Parameters
+    ----------
+    points : numpy.ndarray
+        (N, 3) normalised positions.
+    edges : numpy.ndarray
+        (E, 2) int node pairs.
+    normals : numpy.ndarray, optional
+        (N, 3) unit normals; ``None`` drops k_n.
+    colors : numpy.ndarray, optional
+        (N, 3) RGB in [0, 1]; ``None`` (depth-only or grey input) drops k_c.
+    alpha_p2, alpha_c2, alpha_n2 : float
+        Squared bandwidths α_p², α_c², α_n² (paper: 0.005, 0.1, 5.0).
+    w_p, w_c, w_n : float
+        Term weights (paper: 1).
+
+    Returns
+    -------
+    numpy.ndarray
+        (E,) float64 cut costs, all >= 0.5.
+    """
+    none = np.zeros((0, 3))
+    pts = np.ascontiguousarray(points, dtype=np.float64)
+    pairs = np.ascontiguousarray(np.asarray(edges, dtype=np.int64).reshape(-1, 2))
+    nor = none if normals is None else np.ascontiguousarray(normals, dtype=np.float64)
+    col = none if colors is None else np.ascontiguousarray(colors, dtype=np.float64)
+    # Each edge's weight is computed alone: chunks of edges on parallel threads change nothing.
+    parts = run_threaded([
+        lambda a=a, b=b: _proximity_weights(pts, pairs[a:b], nor, col, float(alpha_p2),
+                                            float(alpha_c2), float(alpha_n2), float(w_p),
+                                            float(w_c), float(w_n))
+        for a, b in chunks(pairs.shape[0], THREADED_EDGES)])
+    return np.concatenate(parts) if len(parts) > 1 else parts[0]
+
+
+@kernel
+def _proximity_weights(points: np.ndarray, edges: np.ndarray, normals: np.ndarray,
+                       colors: np.ndarray, alpha_p2: float, alpha_c2: float, alpha_n2: float,
+                       w_p: float, w_c: float, w_n: float) -> np.ndarray:
+    """:func:`proximity_weights` in one pass; empty (0, 3) ``normals``/``colors`` drop a term."""
+    use_n, use_c = normals.shape[0] > 0, colors.shape[0] > 0
+    out = np.empty(edges.shape[0])
+    for e in range(edges.shape[0]):
+        i, j = edges[e, 0], edges[e, 1]
+        d2 = 0.0
+        for c in range(3):
+            d2 += (points[i, c] - points[j, c]) ** 2
+        pos = -d2 / (2.0 * alpha_p2)
+        w = 0.5 + w_p * np.exp(pos)
+        if use_c:
+            c2 = 0.0
+            for c in range(3):
+                c2 += (colors[i, c] - colors[j, c]) ** 2
+            w += w_c * np.exp(pos - c2 / (2.0 * alpha_c2))
+        if use_n:
+            dot = 0.0
+            for c in range(3):
+                dot += normals[i, c] * normals[j, c]
+            w += w_n * np.exp(pos - np.arccos(min(max(dot, -1.0), 1.0)) / (2.0 * alpha_n2))
+        out[e] = w
+    return out
