@@ -5,8 +5,7 @@ result's folder exactly as the command line does, atomically. The formats are pl
 ``monoplane_register_exporters`` hook (:mod:`monoplane.hookspecs`); the built-in ones are the
 modules :mod:`.labels` (label maps, ``planes.json``, ``scene.json``), :mod:`.ply`, :mod:`.gltf`,
 :mod:`.depth`, :mod:`.config_file` and :mod:`.rerun_log` (optional extra ``rerun``), over the
-shared writers of :mod:`.files`. :mod:`.open3d_objects` turns a cloud's planes into Open3D
-objects.
+shared writers of :mod:`.files`.
 
 The names below are loaded on first use, so that importing one format's module does not load
 the plugin system.

@@ -53,6 +53,7 @@ from monoplane.export.shared import SharedWork
 from monoplane.geometry.camera import frustum
 from monoplane.geometry.polygons import PlaneMesh, reconstruction_mesh
 from monoplane.hookspecs import hookimpl
+from monoplane.palette import plane_palette
 from monoplane.version import __version__
 
 #: Name of the root node that carries the frame conversion.
@@ -257,8 +258,6 @@ def reconstruction_glb(rec: Reconstruction, mesh: PlaneMesh | None = None) -> by
     bytes
         The ``.glb`` file; plane ids are the label values 1..P.
     """
-    from monoplane.report.colors import plane_palette  # imports OpenCV: load it on use
-
     if mesh is None:
         mesh = reconstruction_mesh(rec)
     return planes_glb(mesh, rec.planes, plane_palette(rec.num_planes))
@@ -281,7 +280,6 @@ def scene_glb(scene: Scene, mesh: PlaneMesh | None = None) -> bytes:
         The ``.glb`` file; plane ids are the 0-based global ids of ``scene.json``.
     """
     from monoplane.geometry.mesh import scene_mesh
-    from monoplane.report.colors import plane_palette
 
     if mesh is None:
         mesh = scene_mesh(scene)
@@ -295,9 +293,6 @@ def cloud_glb(result: CloudResult, mesh: PlaneMesh | None = None) -> bytes:
     ``mesh`` is :func:`~monoplane.geometry.cloud_mesh.cloud_mesh` of the result when the caller
     already has it.
     """
-    from monoplane.geometry.cloud_mesh import cloud_mesh
-    from monoplane.report.colors import plane_palette
-
     if mesh is None:
         mesh = cloud_mesh(result)
     return planes_glb(mesh, result.planes, plane_palette(result.num_planes), double_sided=True)

@@ -30,7 +30,7 @@ def _write(result: Any, folder: Path, shared: SharedWork) -> None:
     elif kind == "cloud":
         import open3d as o3d
 
-        from monoplane.export.open3d_objects import cloud_plane_colors, cloud_to_open3d
+        from monoplane.geometry.open3d_objects import cloud_plane_colors, cloud_to_open3d
 
         if not o3d.io.write_point_cloud(str(folder / "labelled.ply"), cloud_to_open3d(result)):
             raise InvalidInput(f"cannot write {folder / 'labelled.ply'}")

@@ -54,6 +54,7 @@ from monoplane.export.shared import SharedWork
 from monoplane.geometry.cloud_mesh import cloud_mesh
 from monoplane.geometry.polygons import PlaneMesh, reconstruction_mesh
 from monoplane.hookspecs import hookimpl
+from monoplane.palette import NON_PLANAR, plane_palette
 
 #: Most points logged per view (depth pixels are taken on a regular grid to stay below it).
 MAX_POINTS = 200_000
@@ -197,8 +198,6 @@ def annotation_context(rr: ModuleType, num_planes: int, first_id: int = 1) -> An
     ``plane_<i + first_id>`` (``first_id`` 1 for label values, 0 for a scene's global planes,
     whose label maps hold global id + 1).
     """
-    from monoplane.report.colors import NON_PLANAR, plane_palette
-
     classes = [rr.AnnotationInfo(id=0, label="non-planar", color=NON_PLANAR.tolist())]
     classes += [rr.AnnotationInfo(id=i + 1, label=f"plane_{i + first_id}", color=rgb.tolist())
                 for i, rgb in enumerate(plane_palette(num_planes))]
@@ -215,8 +214,6 @@ def log_plane_meshes(rr: ModuleType, stream: Any, mesh: PlaneMesh, planes: np.nd
     """Log ``entity/planes/plane_<id>``, one mesh per plane in its palette colour, after
     clearing ``entity/planes`` (so that a frame logged after another keeps none of its
     planes)."""
-    from monoplane.report.colors import plane_palette
-
     palette = plane_palette(len(planes))
     stream.log(f"{entity}/planes", rr.Clear(recursive=True))
     for row, plane in enumerate(planes):

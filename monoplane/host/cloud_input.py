@@ -21,7 +21,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from monoplane.algorithm.ransac import refit_planes
+from monoplane.algorithm.ransac import refit_and_renumber
 from monoplane.errors import InvalidInput
 from monoplane.geometry.cloud import PlaneCloud, normalised_cloud
 from monoplane.geometry.orientation import orient_normals
@@ -155,8 +155,8 @@ class CloudInput:
         timings : dict
             Seconds per step, returned with the fit.
         """
-        renumber, params, rmse, support = refit_planes(self.unique, labels,
-                                                       int(labels.max(initial=0)))
+        renumber, params, rmse, support = refit_and_renumber(self.unique, labels,
+                                                             int(labels.max(initial=0)))
         labels = renumber[labels]
         centroids = np.zeros((params.shape[0], 3))
         if params.shape[0]:

@@ -14,6 +14,12 @@ from typing import Any
 import numpy as np
 
 from monoplane.datamodel import CloudResult
+from monoplane.geometry.cloud_mesh import cloud_mesh
+from monoplane.geometry.open3d_objects import (
+    cloud_plane_colors,
+    cloud_plane_meshes,
+    cloud_to_open3d,
+)
 
 
 def _moved(method: str, new: str) -> None:
@@ -26,36 +32,38 @@ class CloudPlaneResult(CloudResult):
     is now ``support``), with its former methods."""
 
     def plane_colors(self) -> np.ndarray:
-        """Deprecated: :func:`monoplane.export.open3d_objects.cloud_plane_colors`."""
-        from monoplane.export.open3d_objects import cloud_plane_colors
-
-        _moved("plane_colors", "monoplane.export.open3d_objects.cloud_plane_colors")
+        """Deprecated: :func:`monoplane.geometry.open3d_objects.cloud_plane_colors`."""
+        _moved("plane_colors", "monoplane.geometry.open3d_objects.cloud_plane_colors")
         return cloud_plane_colors(self)
 
     def to_open3d(self):  # -> open3d.geometry.PointCloud
-        """Deprecated: :func:`monoplane.export.open3d_objects.cloud_to_open3d`."""
-        from monoplane.export.open3d_objects import cloud_to_open3d
-
-        _moved("to_open3d", "monoplane.export.open3d_objects.cloud_to_open3d")
+        """Deprecated: :func:`monoplane.geometry.open3d_objects.cloud_to_open3d`."""
+        _moved("to_open3d", "monoplane.geometry.open3d_objects.cloud_to_open3d")
         return cloud_to_open3d(self)
 
     def plane_mesh(self, cell: float | None = None):  # -> PlaneMesh
         """Deprecated: :func:`monoplane.geometry.cloud_mesh.cloud_mesh`."""
-        from monoplane.geometry.cloud_mesh import cloud_mesh
-
         _moved("plane_mesh", "monoplane.geometry.cloud_mesh.cloud_mesh")
         return cloud_mesh(self, cell)
 
     def plane_meshes(self, cell: float | None = None) -> list:
-        """Deprecated: :func:`monoplane.export.open3d_objects.cloud_plane_meshes`."""
-        from monoplane.export.open3d_objects import cloud_plane_meshes
-
-        _moved("plane_meshes", "monoplane.export.open3d_objects.cloud_plane_meshes")
+        """Deprecated: :func:`monoplane.geometry.open3d_objects.cloud_plane_meshes`."""
+        _moved("plane_meshes", "monoplane.geometry.open3d_objects.cloud_plane_meshes")
         return cloud_plane_meshes(self, cell)
 
     def planes_document(self) -> dict[str, Any]:
-        """Deprecated: :func:`monoplane.export.labels.planes_document`."""
-        from monoplane.export.labels import planes_document
-
-        _moved("planes_document", "monoplane.export.labels.planes_document")
-        return planes_document(self)
+        """Deprecated: the document the former method gave (``planes.json`` of ``monoplane
+        cloud`` is now written by the ``labels`` format, with more fields)."""
+        _moved("planes_document", "the labels format's planes_document (monoplane.export)")
+        return {
+            "num_points": int(self.points.shape[0]),
+            "num_planes": self.num_planes,
+            "planes": [
+                {"id": i + 1, "normal": self.planes[i, :3].tolist(),
+                 "offset": float(self.planes[i, 3]), "num_points": int(self.support[i]),
+                 "rmse": float(self.rmse[i]), "centroid": self.centroids[i].tolist()}
+                for i in range(self.num_planes)
+            ],
+            "notes": list(self.notes),
+            "config": self.config,
+        }

@@ -14,7 +14,7 @@ Steps (:func:`~monoplane.multiview.driver.reconstruct_multiview`):
 
 1. the configured matcher (``[matcher]``) gives cameras, sparse points and keypoint matches;
 2. the cue provider fills each view's depth and normals and the single-view pipeline segments
-   each view (in the view pool of :mod:`monoplane.batch.views`, while SfM runs when the
+   each view (in the view pool of :mod:`monoplane.host.view_pool`, while SfM runs when the
    matcher keeps every ``K`` as given: neither depends on the depth's scale);
 3. each registered view's depth is scaled onto the SfM points
    (:mod:`~monoplane.multiview.registration`); the registrar (``[registrar]``) places the views

@@ -14,8 +14,8 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from monoplane.batch.pool import default_workers
-from monoplane.batch.views import VIEW_STAGES, ViewPool, process_view
+from monoplane.host.pool import default_workers
+from monoplane.host.view_pool import VIEW_STAGES, ViewPool, process_view
 from monoplane.datamodel import Frame, Reconstruction, Scene, SfmResult
 from monoplane.errors import InvalidInput, StageError
 from monoplane.geometry.alignment import ScaleAlignment

@@ -101,7 +101,7 @@ def cgal_efficient_ransac(frame: Frame, *, seed: int = 0, **options: Any) -> Rec
 
     Raises
     ------
-    monoplane.errors.ConfigError
+    monoplane.plugin.ConfigError
         On an unknown option or an ill-typed value (the message lists the valid options).
     """
     from CGAL import CGAL_Shape_detection

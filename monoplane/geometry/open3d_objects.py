@@ -6,12 +6,11 @@ import numpy as np
 
 from monoplane.datamodel import CloudResult
 from monoplane.geometry.cloud_mesh import cloud_mesh
+from monoplane.palette import NON_PLANAR, plane_palette
 
 
 def cloud_plane_colors(result: CloudResult) -> np.ndarray:
     """(P + 1, 3) float colours in [0, 1]: row 0 (no plane) grey, then one per plane."""
-    from monoplane.report.colors import NON_PLANAR, plane_palette
-
     lut = np.vstack([NON_PLANAR[None], plane_palette(result.num_planes)])
     return lut.astype(np.float64) / 255.0
 
