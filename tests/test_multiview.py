@@ -29,7 +29,7 @@ def synth_pair():
 
 def _oracle_result(synth) -> MultiviewResult:
     sfm = ground_truth_sfm(synth)
-    views = [Reconstruction(frame=v.frame, labels=v.gt_labels, params=v.gt_params)
+    views = [Reconstruction(frame=v.frame, labels=v.gt_labels, planes=v.gt_params)
              for v in synth.views]
     scene, matches = AverageFuser().fuse_with_matches(views, sfm)
     scene.scales = [1.0, 1.0]

@@ -34,10 +34,10 @@ def test_default_pipeline_recovers_the_big_planes(clean_view):
         pred = np.bincount(rec.labels[gt == gid], minlength=rec.num_planes + 1)
         pid = int(np.argmax(pred[1:])) + 1
         assert pred[pid] > 0.8 * areas[gid]
-        assert normal_angle_deg(rec.params[pid - 1, :3], clean_view.gt_params[gid - 1, :3]) < 2
-        assert abs(rec.params[pid - 1, 3] - clean_view.gt_params[gid - 1, 3]) < 0.02 * \
+        assert normal_angle_deg(rec.planes[pid - 1, :3], clean_view.gt_params[gid - 1, :3]) < 2
+        assert abs(rec.planes[pid - 1, 3] - clean_view.gt_params[gid - 1, 3]) < 0.02 * \
             clean_view.gt_params[gid - 1, 3] + 0.01
-    assert np.all(rec.params[:, 3] >= 0), "normals must face the camera"
+    assert np.all(rec.planes[:, 3] >= 0), "normals must face the camera"
     m = segmentation_scores(rec.labels, gt)
     assert m.ri > 0.9 and m.sc > 0.8
 
@@ -45,7 +45,7 @@ def test_default_pipeline_recovers_the_big_planes(clean_view):
 def test_run_is_deterministic_for_a_seed(clean_view):
     a = Pipeline.from_preset("monoplane-nocrf").run(clean_view.frame)
     b = Pipeline.from_preset("monoplane-nocrf").run(clean_view.frame)
-    assert np.array_equal(a.labels, b.labels) and np.allclose(a.params, b.params)
+    assert np.array_equal(a.labels, b.labels) and np.allclose(a.planes, b.planes)
 
 
 def test_outputs_follow_the_on_disk_contract(clean_view, tmp_path):

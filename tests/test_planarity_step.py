@@ -67,7 +67,7 @@ def test_check_image_renumbers_and_keeps_the_planes_of_the_others() -> None:
                                          ).run(view.frame)
     out = check_image(rec, PlanarityConfig())
     kept = [k for k in range(rec.num_planes)
-            if np.any(np.all(np.isclose(out.params, rec.params[k]), axis=1))]
+            if np.any(np.all(np.isclose(out.planes, rec.planes[k]), axis=1))]
     assert len(kept) == out.num_planes
     for new, old in enumerate(kept, start=1):
         np.testing.assert_array_equal(out.labels == new, rec.labels == old + 1)
@@ -168,7 +168,7 @@ def test_inlier_band_keeps_a_desk_top_with_objects_on_it() -> None:
     depth = np.where(boxes, 0.9 * z, np.where(desk, z, 0.0)).astype(np.float32)
     labels = desk.astype(np.int32)
     rec = Reconstruction(frame=Frame(rgb=None, K=K, depth=depth), labels=labels,
-                         params=np.array([[0.0, -1.0, 0.0, 1.0]]), rmse=np.zeros(1),
+                         planes=np.array([[0.0, -1.0, 0.0, 1.0]]), rmse=np.zeros(1),
                          support=np.array([labels.sum()]))
     cfg = PlanarityConfig(quadric_ratio=1.5)
     assert check_image(rec, cfg).num_planes == 0

@@ -82,11 +82,11 @@ def test_recovers_the_room_planes(stack, angle_tol, offset_tol):
     assert rec.num_planes == len(planes)
     ids = match(rec, labels, planes)
     assert len(set(ids.tolist())) == len(planes)
-    est = rec.params[ids - 1]
+    est = rec.planes[ids - 1]
     angle = np.degrees(np.arccos(np.clip((est[:, :3] * planes[:, :3]).sum(1), -1, 1)))
     assert angle.max() < angle_tol
     np.testing.assert_allclose(est[:, 3], planes[:, 3], atol=offset_tol * planes[:, 3].max())
-    assert np.all(rec.params[:, 3] > 0)  # normals face the camera
+    assert np.all(rec.planes[:, 3] > 0)  # normals face the camera
     np.testing.assert_array_equal(rec.support, rec.area_px)
     # Pixel accuracy of the segmentation.
     agree = np.mean(ids[labels - 1] == rec.labels)
@@ -106,7 +106,7 @@ def test_same_seed_same_result():
     a = make("monoplane-nocrf", max_points=3000).run(frame)
     b = make("monoplane-nocrf", max_points=3000).run(frame)
     np.testing.assert_array_equal(a.labels, b.labels)
-    np.testing.assert_array_equal(a.params, b.params)
+    np.testing.assert_array_equal(a.planes, b.planes)
 
 
 def test_meanwhile_runs_once_with_the_graph_under_way():
@@ -139,7 +139,7 @@ def test_depth_only_input_without_colour():
     rec = make("monoplane-nocrf").run(frame)
     assert rec.num_planes == len(planes)
     ids = match(rec, labels, planes)
-    np.testing.assert_allclose(rec.params[ids - 1], planes, atol=1e-4)
+    np.testing.assert_allclose(rec.planes[ids - 1], planes, atol=1e-4)
 
 
 def test_planes_come_back_in_the_depth_units():
@@ -148,8 +148,8 @@ def test_planes_come_back_in_the_depth_units():
     a = make("monoplane-nocrf").run(frame)
     b = make("monoplane-nocrf").run(mm)
     np.testing.assert_array_equal(a.labels, b.labels)
-    np.testing.assert_allclose(b.params[:, :3], a.params[:, :3], atol=1e-6)
-    np.testing.assert_allclose(b.params[:, 3], 1000.0 * a.params[:, 3], rtol=1e-5)
+    np.testing.assert_allclose(b.planes[:, :3], a.planes[:, :3], atol=1e-6)
+    np.testing.assert_allclose(b.planes[:, 3], 1000.0 * a.planes[:, 3], rtol=1e-5)
     np.testing.assert_allclose(b.rmse, 1000.0 * a.rmse, atol=1e-3)
 
 
@@ -163,7 +163,7 @@ def test_subsampled_run_labels_every_valid_pixel_of_the_planes():
     ids = match(rec, labels, planes)
     valid = frame.valid
     assert np.mean(ids[labels[valid] - 1] == rec.labels[valid]) > 0.97
-    np.testing.assert_allclose(rec.params[ids - 1], planes, atol=5e-3)
+    np.testing.assert_allclose(rec.planes[ids - 1], planes, atol=5e-3)
 
 
 def test_max_planes_and_min_support_stop_the_search():
@@ -210,7 +210,7 @@ def test_split_components_separates_two_coplanar_patches(split):
     assert len(np.unique(left)) == 1 and len(np.unique(right)) == 1
     assert rec.num_planes == (2 if split else 1)
     assert (left[0, 0] != right[0, 0]) == split
-    np.testing.assert_allclose(rec.params[:, 3], 3.0, rtol=1e-6)
+    np.testing.assert_allclose(rec.planes[:, 3], 3.0, rtol=1e-6)
 
 
 def test_run_cloud_is_the_core_of_run():
@@ -227,7 +227,7 @@ def test_run_cloud_is_the_core_of_run():
     rec = ransac.run(frame)
     np.testing.assert_array_equal(rec.labels.ravel()[cloud.pixels], point_labels)
     cam = orient_towards_camera(cloud.plane_to_camera(found))
-    np.testing.assert_allclose(cam, rec.params, atol=1e-6)
+    np.testing.assert_allclose(cam, rec.planes, atol=1e-6)
 
 
 def test_run_cloud_rejects_a_graph_of_another_cloud():
@@ -309,7 +309,7 @@ class _OwnUniform(UniformSampler):
 def _room_planes_recovered(rec, labels, planes):
     ids = match(rec, labels, planes)
     assert rec.num_planes == len(planes) and len(set(ids.tolist())) == len(planes)
-    est = rec.params[ids - 1]
+    est = rec.planes[ids - 1]
     assert np.degrees(np.arccos(np.clip((est[:, :3] * planes[:, :3]).sum(1), -1, 1))).max() < 1e-3
     np.testing.assert_allclose(est[:, 3], planes[:, 3], atol=1e-5 * planes[:, 3].max())
 
@@ -375,7 +375,7 @@ def test_max_rejections_passes_over_a_plane_that_falls_apart(rejections):
     assert rec.num_planes == rejections
     if rejections:
         assert np.all(rec.labels[:24, 80:] == 1) and np.all(rec.labels[:, :64] == 0)
-        np.testing.assert_allclose(rec.params[0, 3], 2.0, rtol=1e-6)
+        np.testing.assert_allclose(rec.planes[0, 3], 2.0, rtol=1e-6)
 
 
 def test_noise_factor_lowers_epsilon_to_the_depth_noise():
@@ -397,4 +397,4 @@ def test_noise_factor_lowers_epsilon_to_the_depth_noise():
     assert tight.params_used.epsilon < 0.2 * tight.config.epsilon
     box, wall = rec.labels[21:39, 31:49], rec.labels[45:, 5:75]
     assert np.all(box == box[0, 0]) and np.all(wall == wall[0, 0]) and box[0, 0] != wall[0, 0]
-    np.testing.assert_allclose(rec.params[box[0, 0] - 1, 3], 1.95, atol=2e-3)
+    np.testing.assert_allclose(rec.planes[box[0, 0] - 1, 3], 1.95, atol=2e-3)

@@ -23,7 +23,7 @@ def check_planes_explain_depth(rec):
     assert np.median(rel) < 0.01, "planes must agree with the sensor depth on their pixels"
     big = np.argsort(rec.area_px)[::-1][:3]
     assert np.all(rec.rmse[big] < 0.03), "the largest planes fit to a few centimetres (metres)"
-    assert np.all(rec.params[:, 3] > 0), "normals face the camera"
+    assert np.all(rec.planes[:, 3] > 0), "normals face the camera"
 
 
 @pytest.fixture(scope="module")
@@ -161,7 +161,7 @@ def coverage(rec, name: str) -> dict[str, tuple[float, float]]:
         truth, normal = surface_truth(points, mask)
         counts = np.bincount(rec.labels[truth], minlength=rec.num_planes + 1)[1:]
         best = int(np.argmax(counts))
-        cos = abs(rec.params[best, :3] @ normal)
+        cos = abs(rec.planes[best, :3] @ normal)
         out[surface] = (counts[best] / truth.sum(), float(np.degrees(np.arccos(min(cos, 1.0)))))
     return out
 

@@ -135,7 +135,7 @@ def test_clean_regions_splits_filters_and_refits():
     observed[:, 29:31] = 0
     observed[0:2, 0:2] = 2
     rec = Reconstruction(frame=frame, labels=observed,
-                         params=np.array([[0.0, 0.0, -1.0, 2.5], [0.0, 0.0, -1.0, 9.0]]),
+                         planes=np.array([[0.0, 0.0, -1.0, 2.5], [0.0, 0.0, -1.0, 9.0]]),
                          config={"refiner": {"plugin": "x"}}, timings={"ransac": 1.0})
     out = clean_regions(rec, observed, min_area=10, connectivity=8)
     assert out.num_planes == 2
@@ -144,7 +144,7 @@ def test_clean_regions_splits_filters_and_refits():
     expected[:, 31:] = 2
     expected[0:2, 0:2] = 0
     np.testing.assert_array_equal(out.labels, expected)
-    np.testing.assert_allclose(out.params, planes, atol=1e-5)  # float32 depth
+    np.testing.assert_allclose(out.planes, planes, atol=1e-5)  # float32 depth
     assert np.all(out.rmse < 1e-5)
     np.testing.assert_array_equal(out.support, [40 * 29 - 4, 40 * 29])
     assert out.config == rec.config and out.timings == rec.timings
@@ -154,10 +154,10 @@ def test_clean_regions_splits_filters_and_refits():
 def test_clean_regions_with_nothing_left():
     frame, labels, _ = two_plane_frame()
     rec = Reconstruction(frame=frame, labels=labels,
-                         params=np.array([[0.0, 0.0, -1.0, 2.5], [0.0, 0.0, -1.0, 9.0]]))
+                         planes=np.array([[0.0, 0.0, -1.0, 2.5], [0.0, 0.0, -1.0, 9.0]]))
     out = clean_regions(rec, labels, min_area=10_000)
     assert out.num_planes == 0 and not out.labels.any()
-    assert out.params.shape == (0, 4) and out.rmse.shape == (0,)
+    assert out.planes.shape == (0, 4) and out.rmse.shape == (0,)
 
 
 def test_clean_regions_without_split_keeps_one_plane_per_label():
@@ -171,7 +171,7 @@ def test_clean_regions_without_split_keeps_one_plane_per_label():
     observed[:2, :2] = 1  # the fragment, cut off by a one-pixel non-planar L
     observed[35:40, 50:55] = 2
     params = np.array([[0.0, 0.0, -1.0, 2.5], [0.0, 0.0, -1.0, 9.0]])
-    rec = Reconstruction(frame=frame, labels=observed, params=params)
+    rec = Reconstruction(frame=frame, labels=observed, planes=params)
     out = clean_regions(rec, observed, min_area=10, split=False)
     expected = observed.copy()
     expected[:2, :2] = 0
@@ -292,14 +292,14 @@ def test_clean_regions_merge_and_absorb_on_one_plane_cut_by_an_occluder():
     observed[18:22, :30] = 0
     observed[0:2, 0:2] = 2
     params = planes.copy()
-    rec = Reconstruction(frame=frame, labels=observed, params=params)
+    rec = Reconstruction(frame=frame, labels=observed, planes=params)
     paper = clean_regions(rec, observed, min_area=10)
     assert paper.num_planes == 3 and not paper.labels[0:2, 0:2].any()
     out = clean_regions(rec, observed, min_area=10, merge=True, absorb=True)
     expected = labels.copy()
     expected[18:22, :30] = 0
     np.testing.assert_array_equal(out.labels, expected)
-    np.testing.assert_allclose(out.params, planes, atol=1e-5)
+    np.testing.assert_allclose(out.planes, planes, atol=1e-5)
 
 
 def _reference_moments(points, valid, labels, num):

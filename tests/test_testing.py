@@ -97,9 +97,9 @@ def test_baseline_contract_accepts_the_builtin_and_rejects_a_broken_one() -> Non
 
     def floor_only(frame, *, seed=0):
         rec = open3d_ransac(frame, seed=seed)
-        keep = int(np.argmin(np.abs(rec.params[:, 1] + 1)))  # the plane facing up
+        keep = int(np.argmin(np.abs(rec.planes[:, 1] + 1)))  # the plane facing up
         labels = np.where(rec.labels == keep + 1, 1, 0)
-        return Reconstruction(frame=rec.frame, labels=labels, params=rec.params[keep:keep + 1])
+        return Reconstruction(frame=rec.frame, labels=labels, planes=rec.planes[keep:keep + 1])
 
     with pytest.raises(AssertionError, match="misses the back wall"):
         check_baseline_contract(floor_only)

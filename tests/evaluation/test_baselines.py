@@ -34,7 +34,7 @@ def test_open3d_ransac_finds_the_planes_of_an_exact_box() -> None:
     assert seg.sc > 0.97
     # Each true plane is found once, in the camera frame and metres.
     for plane in BOX_PLANES:
-        err = np.abs(rec.params - plane).max(axis=1)
+        err = np.abs(rec.planes - plane).max(axis=1)
         assert err.min() < 5e-3  # inliers within ε of a neighbour plane pull the fit a little
     assert np.all(rec.rmse < 0.02)
 
@@ -45,7 +45,7 @@ def test_open3d_ransac_respects_plane_limits() -> None:
     # The floor and the left wall are smaller than 40 % of the pixels; the back wall is not.
     big_only = open3d_ransac(frame, min_support=0.4)
     assert big_only.num_planes == 1
-    np.testing.assert_allclose(big_only.params[0], BOX_PLANES[0], atol=1e-4)
+    np.testing.assert_allclose(big_only.planes[0], BOX_PLANES[0], atol=1e-4)
 
 
 def test_builtin_baseline_registers_through_the_hook_and_times_its_call() -> None:

@@ -25,7 +25,7 @@ SIZE = (128, 96)
 def oracle(frame: Frame, seed: int) -> Reconstruction:
     """Returns the exact ground truth of the scene the frame came from (seed = scene seed)."""
     view = generate(seed, "mild", width=frame.width, height=frame.height).views[0]
-    return Reconstruction(frame=frame, labels=view.gt_labels, params=view.gt_params)
+    return Reconstruction(frame=frame, labels=view.gt_labels, planes=view.gt_params)
 
 
 def broken(frame: Frame, seed: int) -> Reconstruction:
@@ -68,7 +68,7 @@ def merge_all(frame: Frame, seed: int) -> Reconstruction:
     """One plane over the whole image: scores depend on the scene only."""
     view = generate(seed, "mild", width=frame.width, height=frame.height).views[0]
     return Reconstruction(frame=frame, labels=np.ones(frame.shape, dtype=np.int32),
-                          params=view.gt_params[:1])
+                          planes=view.gt_params[:1])
 
 
 def test_same_arguments_give_the_same_scores() -> None:

@@ -30,7 +30,7 @@ def test_similarity_recovers_a_known_transform() -> None:
 def test_exact_scene_is_consistent_with_zero_plane_error() -> None:
     synth = generate_sequence(3, 3, "star", level="clean", width=128, height=96)
     sfm = ground_truth_sfm(synth)
-    views = [Reconstruction(frame=v.frame, labels=v.gt_labels, params=v.gt_params)
+    views = [Reconstruction(frame=v.frame, labels=v.gt_labels, planes=v.gt_params)
              for v in synth.views]
     scene = AverageFuser().fuse(views, sfm)
     good, total = consistency(scene, synth.views, synth.view_to_global)
@@ -62,7 +62,7 @@ def test_planes_seen_and_curved_global_planes_on_known_labels() -> None:
         labels = np.where(g > 0, 1, 2).astype(np.int32)
         labels[9, 3:] = 0
         recs.append(Reconstruction(frame=Frame(rgb=None, K=K, depth=np.ones((10, 10))),
-                                   labels=labels, params=[[0, 0, -1, 1.0]] * 2))
+                                   labels=labels, planes=[[0, 0, -1, 1.0]] * 2))
     cams = [Camera(K=K, R=np.eye(3), t=np.zeros(3), width=10, height=10) for _ in gt]
     scene = Scene(cameras=cams, views=recs, planes=[[0, 0, -1, 1.0]] * 2,
                   links=[{1: 0, 2: 1}, {1: 0, 2: 1}])

@@ -73,7 +73,7 @@ def test_each_truth_matched_once_and_failures_count_as_misses() -> None:
 
 def test_ground_truth_scene_scores_perfectly() -> None:
     synth = generate(5, level="clean", n_views=2)
-    views = [Reconstruction(frame=v.frame, labels=v.gt_labels, params=v.gt_params)
+    views = [Reconstruction(frame=v.frame, labels=v.gt_labels, planes=v.gt_params)
              for v in synth.views]
     cams = [Camera(v.frame.K, v.R, v.t, v.frame.width, v.frame.height) for v in synth.views]
     scene = Scene(cameras=cams, views=views, planes=synth.gt_planes_world,

@@ -15,7 +15,7 @@ K = intrinsics_matrix(20.0, 20.0, (W - 1) / 2, (H - 1) / 2)
 def _rec(labels: np.ndarray, params: np.ndarray, depth: float | None = 2.0) -> Reconstruction:
     rgb = np.random.default_rng(1).integers(0, 255, (H, W, 3), dtype=np.uint8)
     d = None if depth is None else np.full((H, W), depth, np.float32)
-    return Reconstruction(frame=Frame(rgb=rgb, K=K, depth=d), labels=labels, params=params)
+    return Reconstruction(frame=Frame(rgb=rgb, K=K, depth=d), labels=labels, planes=params)
 
 
 def test_fronto_parallel_plane_full_grid() -> None:
@@ -44,7 +44,7 @@ def test_triangles_never_span_two_labels_and_vertices_lie_on_planes() -> None:
     assert np.all(ids[t[:, 0]] == ids[t[:, 1]]) and np.all(ids[t[:, 0]] == ids[t[:, 2]])
     # Cells fully inside a region: 2 triangles each; (H-3-1) rows of cells, (7-1) and (9-1) cols.
     assert len(t) == 2 * (H - 4) * (6 + 8)
-    p = rec.params[ids - 1]
+    p = rec.planes[ids - 1]
     np.testing.assert_allclose(np.einsum("ij,ij->i", v, p[:, :3]) + p[:, 3], 0.0, atol=1e-9)
     n = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
     assert np.all(np.einsum("ij,ij->i", n, p[t[:, 0], :3]) > 0)

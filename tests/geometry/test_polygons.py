@@ -114,7 +114,7 @@ def test_reconstruction_mesh_tags_faces_with_their_planes() -> None:
     K, wall, labels, _ = _wall_with_box()
     front = np.array([0.0, 0.0, -1.0, 2.0])
     frame = Frame(rgb=np.zeros((*labels.shape, 3), np.uint8), K=K)
-    rec = Reconstruction(frame=frame, labels=labels, params=np.stack([wall, front]))
+    rec = Reconstruction(frame=frame, labels=labels, planes=np.stack([wall, front]))
     mesh = reconstruction_mesh(rec)
     assert set(mesh.plane_ids.tolist()) == {1, 2}
     for pid, plane in ((1, wall), (2, front)):

@@ -74,7 +74,7 @@ def test_single_view_stages_are_free_of_the_depth_scale(walk) -> None:
             rescaled = rescale_reconstruction(base, scaled, s)
             assert rescaled.frame is scaled
             np.testing.assert_array_equal(rescaled.labels, direct.labels)
-            np.testing.assert_allclose(rescaled.params, direct.params, rtol=1e-5, atol=1e-4)
+            np.testing.assert_allclose(rescaled.planes, direct.planes, rtol=1e-5, atol=1e-4)
             np.testing.assert_allclose(rescaled.rmse, direct.rmse, rtol=1e-4, atol=1e-9)
 
 
@@ -88,7 +88,7 @@ def test_early_views_equal_segmenting_the_aligned_depth(walk) -> None:
         # The aligned frame, segmented from scratch, gives exactly the same labels.
         direct = pipe.segment(rec.frame)
         np.testing.assert_array_equal(rec.labels, direct.labels)
-        np.testing.assert_allclose(rec.params, direct.params, rtol=1e-5, atol=1e-4)
+        np.testing.assert_allclose(rec.planes, direct.planes, rtol=1e-5, atol=1e-4)
         assert s != pytest.approx(1.0, abs=1e-3)  # mild cues: the scale really changed
 
 
@@ -102,7 +102,7 @@ def test_a_view_whose_k_changed_is_segmented_again(walk) -> None:
     np.testing.assert_allclose(rec.frame.K, K)
     direct = pipe.segment(pipe.prepare(rec.frame))
     np.testing.assert_array_equal(rec.labels, direct.labels)
-    np.testing.assert_allclose(rec.params, direct.params, rtol=1e-5, atol=1e-4)
+    np.testing.assert_allclose(rec.planes, direct.planes, rtol=1e-5, atol=1e-4)
 
 
 def test_matcher_keeps_intrinsics_follows_its_config() -> None:

@@ -141,7 +141,7 @@ def test_planes_of_one_view_share_a_global_plane_only_when_coplanar(star) -> Non
         normal = scene.planes[glob, :3]
         for v, local in nodes:
             cam = scene.cameras[v]
-            n = plane_to_world(scene.views[v].params[local - 1:local], cam.R, cam.t)[0, :3]
+            n = plane_to_world(scene.views[v].planes[local - 1:local], cam.R, cam.t)[0, :3]
             assert np.degrees(np.arccos(min(1.0, abs(n @ normal)))) <= max_angle
     assert any(len({v for v, _ in nodes}) == 3 for nodes in members.values())  # seen by all
     adj = out.adjustment

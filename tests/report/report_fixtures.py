@@ -52,7 +52,7 @@ def make_room(width: int = 160, height: int = 120, pitch_deg: float = 6.0) -> Re
     labels[blob] = 0
     rgb = np.clip(rgb, 0, 255).astype(np.uint8)
     frame = scene.frame.with_(rgb=rgb, name="room", notes=["synthetic test room"])
-    return Reconstruction(frame=frame, labels=labels, params=scene.planes,
+    return Reconstruction(frame=frame, labels=labels, planes=scene.planes,
                           rmse=np.full(len(planes), 0.004), timings={"total": 1.25})
 
 
@@ -66,7 +66,7 @@ def make_scene(n_views: int) -> Scene:
     for i, v in enumerate(sc.views):
         f = v.frame.with_(depth=v.gt_depth, normals=v.gt_normals, depth_kind="metric",
                           name=f"view{i}")
-        views.append(Reconstruction(frame=f, labels=v.gt_labels, params=v.gt_params))
+        views.append(Reconstruction(frame=f, labels=v.gt_labels, planes=v.gt_params))
         cams.append(Camera(K=f.K, R=v.R, t=v.t, width=f.width, height=f.height, name=f"v{i}"))
     links = [dict(d) for d in sc.view_to_global]
     del links[1][min(links[1])]  # one plane that only view 2 has

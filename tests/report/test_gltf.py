@@ -100,7 +100,7 @@ def test_glb_layout_is_valid_binary_gltf(room) -> None:
 
 def test_a_reconstruction_without_planes_gives_a_valid_empty_scene(room, tmp_path: Path) -> None:
     empty = Reconstruction(frame=room.frame, labels=np.zeros(room.frame.shape, np.int32),
-                           params=np.zeros((0, 4)))
+                           planes=np.zeros((0, 4)))
     (tmp_path / "e.glb").write_bytes(reconstruction_glb(empty))
     scene, gltf = _load(tmp_path / "e.glb")
     assert len(scene.geometry) == 0 and len(gltf.nodes) == 1
@@ -139,7 +139,7 @@ def test_planes_are_one_sided_for_cameras_and_two_sided_for_clouds(room, double_
                                                                     ) -> None:
     from monoplane.export.gltf import planes_glb
 
-    data = planes_glb(reconstruction_mesh(room), room.params, plane_palette(room.num_planes),
+    data = planes_glb(reconstruction_mesh(room), room.planes, plane_palette(room.num_planes),
                       double_sided=double_sided)
     gltf = pygltflib.GLTF2.load_from_bytes(data)
     assert gltf.materials[0].doubleSided is double_sided

@@ -256,11 +256,11 @@ def room_job(room):
     w, h = 320, 240
     v, t, _, ids = planar_mesh(room, step=1)
     expected = shade(plane_palette(room.num_planes)[ids - 1] / 255.0,
-                     room.params[ids - 1, :3])
+                     room.planes[ids - 1, :3])
     K_room = room.frame.K.copy()
     K_room[:2] *= w / room.frame.width
     bird = orbit_viewpoints(v, np.array([0.0, -1.0, 0.0]), np.array([0.0, 0.0, 1.0]), w, h)[0]
-    keep = facing_triangles(ids[t[:, 0]] - 1, room.params, bird.eye)
+    keep = facing_triangles(ids[t[:, 0]] - 1, room.planes, bird.eye)
     shots = [Shot("frontal", K_room, np.eye(4), {0: None}),
              Shot("bird", bird.K, bird.world_to_cam, {0: keep})]
     return [Mesh(v, t, expected)], shots, w, h
@@ -281,7 +281,7 @@ def test_rendered_planes_match_labels_and_colours(room, room_job, tmp_path: Path
         inner = cv2.erode((labels == i + 1).astype(np.uint8), np.ones((7, 7), np.uint8)) > 0
         if inner.sum() < 50:
             continue
-        want = np.rint(255 * shade(palette[i][None], room.params[i, :3][None])[0])
+        want = np.rint(255 * shade(palette[i][None], room.planes[i, :3][None])[0])
         assert np.abs(np.median(img[inner], axis=0) - want).max() <= 1, (i + 1, want)
         found += 1
     assert found >= 6

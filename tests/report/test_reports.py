@@ -104,7 +104,7 @@ def test_eval_report(tmp_path: Path) -> None:
 
         plane, rmse = fit_plane(frame.points()[frame.valid])
         return Reconstruction(frame=frame, labels=frame.valid.astype(np.int32),
-                              params=plane[None], rmse=np.array([rmse]))
+                              planes=plane[None], rmse=np.array([rmse]))
 
     methods = [Method("one-plane", "baseline", everything_one_plane)]
     results = evaluate(methods, n=3, level="mild", size=(64, 48), progress=False)
@@ -122,7 +122,7 @@ def test_eval_report(tmp_path: Path) -> None:
 def test_frame_report_without_planes_or_colour(room, tmp_path: Path) -> None:
     frame = room.frame.with_(rgb=None)
     empty = Reconstruction(frame=frame, labels=np.zeros(frame.shape, np.int32),
-                           params=np.zeros((0, 4)))
+                           planes=np.zeros((0, 4)))
     text = _assert_links_resolve(write_frame_report(empty, tmp_path))
     assert "no planar surface to render in 3D" in text
     assert "0 planes" in text

@@ -92,7 +92,7 @@ def test_reprojection_iou_identity_and_shift() -> None:
 def test_exact_planes_fuse_to_ground_truth(n_views: int) -> None:
     synth = generate(3, level="clean", n_views=n_views)
     sfm = ground_truth_sfm(synth, seed=0)
-    views = [Reconstruction(frame=v.frame, labels=v.gt_labels, params=v.gt_params)
+    views = [Reconstruction(frame=v.frame, labels=v.gt_labels, planes=v.gt_params)
              for v in synth.views]
     scene = AverageFuser().fuse(views, sfm)
     gt = synth.gt_planes_world
@@ -124,8 +124,8 @@ def _merge_into_neighbour(rec: Reconstruction, local: int) -> Reconstruction:
     labels = rec.labels.copy()
     labels[mask] = neighbour
     labels[labels > local] -= 1
-    params = np.delete(rec.params, local - 1, axis=0)
-    return Reconstruction(frame=rec.frame, labels=labels, params=params)
+    params = np.delete(rec.planes, local - 1, axis=0)
+    return Reconstruction(frame=rec.frame, labels=labels, planes=params)
 
 
 def test_a_plane_merged_away_in_one_view_is_recovered_from_the_others() -> None:
@@ -133,7 +133,7 @@ def test_a_plane_merged_away_in_one_view_is_recovered_from_the_others() -> None:
 
     synth = generate_sequence(2, 3, "walk", level="clean")
     sfm = ground_truth_sfm(synth, seed=0)
-    views = [Reconstruction(frame=v.frame, labels=v.gt_labels, params=v.gt_params)
+    views = [Reconstruction(frame=v.frame, labels=v.gt_labels, planes=v.gt_params)
              for v in synth.views]
     # A true plane every view sees, small in view 0: view 0 merges it into a neighbour.
     seen_by_all = set.intersection(*[set(t.values()) for t in synth.view_to_global])
@@ -166,7 +166,7 @@ def test_no_recovery_without_enough_views_or_on_exact_segmentations() -> None:
 
     synth = generate_sequence(2, 3, "walk", level="clean")
     sfm = ground_truth_sfm(synth, seed=0)
-    views = [Reconstruction(frame=v.frame, labels=v.gt_labels, params=v.gt_params)
+    views = [Reconstruction(frame=v.frame, labels=v.gt_labels, planes=v.gt_params)
              for v in synth.views]
     exact = AverageFuser().fuse(views, sfm)
     assert [r.num_planes for r in exact.views] == [r.num_planes for r in views]

@@ -115,7 +115,7 @@ def _view(cam: Camera, prims: list, labelling: list[tuple[int, np.ndarray | None
         centre = x.mean(0)
         normal = np.linalg.svd(x - centre, full_matrices=False)[2][-1]
         params.append([*normal, -normal @ centre])
-    return Reconstruction(frame=frame, labels=labels, params=orient_towards_camera(
+    return Reconstruction(frame=frame, labels=labels, planes=orient_towards_camera(
         np.array(params)))
 
 
@@ -243,9 +243,9 @@ def test_a_fragment_with_a_bad_fit_is_absorbed_by_the_plane_it_lies_on() -> None
     # The fragment's own fit is tilted by 25 degrees about its centre.
     centre = (pixel_rays(K, H, W)[piece] * 3.0).mean(0)
     normal = _yaw(25.0) @ np.array([0.0, 0.0, -1.0])
-    params = a.params.copy()
+    params = a.planes.copy()
     params[2] = [*normal, -normal @ centre]
-    a = Reconstruction(frame=a.frame, labels=a.labels, params=orient_towards_camera(params))
+    a = Reconstruction(frame=a.frame, labels=a.labels, planes=orient_towards_camera(params))
     b = _view(CAMERAS[1], prims, [(0, None), (1, None)])
     scene = AverageFuser().fuse([a, b], _sfm())
     wall = scene.links[1][1]
@@ -253,5 +253,5 @@ def test_a_fragment_with_a_bad_fit_is_absorbed_by_the_plane_it_lies_on() -> None
     # Absorbed: it now is the wall in its camera, and the wall keeps its parameters.
     expected = orient_towards_camera(plane_to_camera(scene.planes[wall], CAMERAS[0].R,
                                                      CAMERAS[0].t))[0]
-    np.testing.assert_allclose(scene.views[0].params[2], expected, atol=1e-9)
+    np.testing.assert_allclose(scene.views[0].planes[2], expected, atol=1e-9)
     np.testing.assert_allclose(np.abs(scene.planes[wall]), [0, 0, 1, 3], atol=1e-6)

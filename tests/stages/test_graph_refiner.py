@@ -188,7 +188,7 @@ def test_the_threaded_mean_field_does_not_depend_on_the_threads(monkeypatch):
     monkeypatch.setenv("OMP_NUM_THREADS", "2")
     two = refiner.refine(rec, PARAMS)
     np.testing.assert_array_equal(one.labels, two.labels)
-    np.testing.assert_array_equal(one.params, two.params)
+    np.testing.assert_array_equal(one.planes, two.planes)
 
 
 def test_touching_pairs_and_label_order_match_numpy():

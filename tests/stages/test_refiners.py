@@ -32,7 +32,7 @@ def noisy_reconstruction(frame: Frame, gt: np.ndarray, seed: int = 1) -> Reconst
     labels[40:44, 60:64] = 1
     params = ROOM.copy()
     params[:, 3] *= 1.05
-    return Reconstruction(frame=frame, labels=labels.astype(np.int32), params=params)
+    return Reconstruction(frame=frame, labels=labels.astype(np.int32), planes=params)
 
 
 def test_registration_and_contract(synthetic_view):
@@ -52,7 +52,7 @@ def test_dense_crf_work_prepared_in_the_background_changes_nothing(monkeypatch):
     out = refiner.refine(rec, PARAMS)
     assert refiner._pending is None  # picked up
     np.testing.assert_array_equal(out.labels, expected.labels)
-    np.testing.assert_array_equal(out.params, expected.params)
+    np.testing.assert_array_equal(out.planes, expected.planes)
     # Work prepared for another frame is not used (and not kept).
     refiner.prepare(room(seed=1)[0])
     np.testing.assert_array_equal(refiner.refine(rec, PARAMS).labels, expected.labels)
@@ -84,8 +84,8 @@ def test_dense_crf_refiner_recovers_the_room():
         assert count == 1
     assert out.area_px.min() >= min_area
     # Planes refit on the final pixels: exact up to the float32 depth and the few wrong pixels.
-    np.testing.assert_allclose(out.params[:, :3], ROOM[:, :3], atol=2e-3)
-    np.testing.assert_allclose(out.params[:, 3], ROOM[:, 3], rtol=2e-3)
+    np.testing.assert_allclose(out.planes[:, :3], ROOM[:, :3], atol=2e-3)
+    np.testing.assert_allclose(out.planes[:, 3], ROOM[:, 3], rtol=2e-3)
     # Planes are fit on the RANSAC's planar pixels only (fit_inliers_only): the support counts
     # those; in the paper's mode it counts every pixel of the region.
     inliers = np.bincount(out.labels[rec.labels > 0], minlength=6)[1:]
@@ -110,7 +110,7 @@ def test_small_regions_and_splits_without_crf():
     labels[:, 60:64] = 0               # cuts the floor, ceiling and back wall in two
     labels[10:14, 10:14] = 0
     labels[10:13, 10:13] = 3           # 9-px fragment of the back wall inside the left wall
-    rec = Reconstruction(frame=frame, labels=labels, params=ROOM)
+    rec = Reconstruction(frame=frame, labels=labels, planes=ROOM)
     paper = {"iterations": 0, "merge": False, "absorb": False}
     out = DenseCrfRefiner(DenseCrfRefiner.Config(**paper)).refine(rec, PARAMS)
     assert out.num_planes == 8         # 3 planes split in two, plus the two side walls
@@ -123,7 +123,7 @@ def test_small_regions_and_splits_without_crf():
     # labelled "back wall" lies on the left wall it touches and joins it. The room comes back.
     merged = DenseCrfRefiner(DenseCrfRefiner.Config(iterations=0)).refine(rec, PARAMS)
     np.testing.assert_array_equal(merged.labels, np.where(labels == 0, 0, gt))
-    np.testing.assert_allclose(merged.params[:, :3], ROOM[:, :3], atol=1e-4)
+    np.testing.assert_allclose(merged.planes[:, :3], ROOM[:, :3], atol=1e-4)
 
 
 @pytest.mark.parametrize("changes", [
@@ -151,7 +151,7 @@ def test_dense_crf_on_a_synthetic_view(synthetic_view):
     num = int(gt.max())
     noisy = np.where(rng.random(gt.shape) < 0.15, rng.integers(0, num + 1, gt.shape), gt)
     rec = Reconstruction(frame=view.frame, labels=noisy.astype(np.int32),
-                         params=np.tile([0.0, 0.0, -1.0, 1.0], (num, 1)))
+                         planes=np.tile([0.0, 0.0, -1.0, 1.0], (num, 1)))
     # The speckle includes label 0 as an observed label, so 0 keeps the paper's unary here.
     cfg = DenseCrfRefiner.Config(min_area=0, uniform_nonplanar=False)
     out = DenseCrfRefiner(cfg).refine(rec, PARAMS)
@@ -177,14 +177,14 @@ def test_nonplanar_pixels_are_filled_but_do_not_bend_the_planes():
     obj = band & (np.arange(gt.shape[0])[:, None] < 48)
     depth = frame.depth.copy()
     depth[obj] *= 0.5                   # a non-planar object in front of the upper wall
-    rec = Reconstruction(frame=frame.with_(depth=depth), labels=labels, params=ROOM)
+    rec = Reconstruction(frame=frame.with_(depth=depth), labels=labels, planes=ROOM)
     ungated = DenseCrfRefiner(DenseCrfRefiner.Config(fill_distance=float("inf"))).refine(
         rec, PARAMS)
     assert ungated.num_planes == 5
     assert np.all(ungated.labels[band] == 3)
-    np.testing.assert_allclose(ungated.params[2], ROOM[2], atol=1e-4)
+    np.testing.assert_allclose(ungated.planes[2], ROOM[2], atol=1e-4)
     gated = DenseCrfRefiner().refine(rec, PARAMS)
     assert not np.any(gated.labels[obj])
     assert np.all(gated.labels[band & ~obj] == 3)
     np.testing.assert_array_equal(gated.labels[~band], ungated.labels[~band])
-    np.testing.assert_allclose(gated.params[2], ROOM[2], atol=1e-4)
+    np.testing.assert_allclose(gated.planes[2], ROOM[2], atol=1e-4)

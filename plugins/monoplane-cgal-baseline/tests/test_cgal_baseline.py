@@ -28,7 +28,7 @@ def test_finds_the_three_planes_of_an_exact_box() -> None:
     assert 3 <= rec.num_planes <= 4
     assert segmentation_scores(rec.labels, gt).sc > 0.9
     for plane in BOX_PLANES:
-        assert np.abs(rec.params - plane).max(axis=1).min() < 5e-3
+        assert np.abs(rec.planes - plane).max(axis=1).min() < 5e-3
 
 
 def test_baseline_contract() -> None:
@@ -39,7 +39,7 @@ def test_minimum_support_option_drops_small_planes() -> None:
     frame, _ = box_frame(64, 48)
     rec = cgal_efficient_ransac(frame, min_support=0.4)
     assert rec.num_planes == 1 and rec.config["min_support"] == 0.4
-    np.testing.assert_allclose(rec.params[0], BOX_PLANES[0], atol=1e-3)
+    np.testing.assert_allclose(rec.planes[0], BOX_PLANES[0], atol=1e-3)
 
 
 def _box_with_a_small_plate() -> tuple[object, np.ndarray]:
