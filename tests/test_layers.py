@@ -413,7 +413,7 @@ UNREVIEWED = {
     "monoplane/evaluation/bench_frames.py", "monoplane/evaluation/posed_sequences.py",
     "monoplane/evaluation/runner.py",
     "monoplane/evaluation/sequences.py", "monoplane/evaluation/twoview.py",
-    "monoplane/export/gltf.py", "monoplane/export/rerun_log.py", "monoplane/io/frames.py",
+    "monoplane/io/frames.py",
     "monoplane/multiview/fusion.py",
     "monoplane/multiview/writers.py", "monoplane/stages/fusers.py",
 }
