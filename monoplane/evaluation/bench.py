@@ -14,10 +14,11 @@ Scene complexity
     times, and per-frame medians in :attr:`BenchResult.per_frame`: time against plane count.
 
 Your own frames
-    With ``data`` (:class:`monoplane.evaluation.bench_frames.DataSource`, ``monoplane bench --data DIR``) the
-    frames are read from a folder instead (the layouts ``monoplane batch`` reads, or a
-    Redwood-style ``depth/`` + ``image/`` sequence; see :mod:`monoplane.evaluation.bench_frames`), and the
-    sizes and objects ranges do not apply: one result, whose size is that of the first frame.
+    With ``data`` (:class:`monoplane.evaluation.bench_frames.DataSource`, ``monoplane bench
+    --data DIR``) the frames are read from a folder instead (the layouts ``monoplane batch``
+    reads, or a Redwood-style ``depth/`` + ``image/`` sequence; see
+    :mod:`monoplane.evaluation.bench_frames`), and the sizes and objects ranges do not apply:
+    one result, whose size is that of the first frame.
     Frames without normals (depth-only) have them estimated by the preset's cue stage, inside
     the timed call; a baseline needs normals, so it gets the ones the preset estimated and its
     time does not include them.
