@@ -34,12 +34,12 @@ __all__ = [
 
 if TYPE_CHECKING:
     from monoplane.datamodel import Camera, Frame, Reconstruction, Scene
-    from monoplane.host.detect import detect_planes
     from monoplane.errors import ConfigError, InvalidInput, MonoplaneError, StageError
     from monoplane.export.rerun_log import log_rerun
-    from monoplane.io.frames import load_frame, save_reconstruction
     from monoplane.hookspecs import hookimpl
+    from monoplane.host.detect import detect_planes
     from monoplane.host.pipeline import Pipeline
+    from monoplane.io.frames import load_frame, save_reconstruction
     from monoplane.version import __version__
 
 

@@ -1,7 +1,7 @@
 import pytest
 
-from monoplane.host import config
 from monoplane.errors import ConfigError
+from monoplane.host import config
 
 
 def test_presets_include_the_paper_ablation_rows():

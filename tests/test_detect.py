@@ -8,8 +8,8 @@ import pytest
 
 from monoplane.datamodel import CloudResult
 from monoplane.errors import ConfigError, InvalidInput, StageError
-from monoplane.geometry.open3d_objects import cloud_plane_meshes, cloud_to_open3d
 from monoplane.geometry.cloud_mesh import cloud_mesh
+from monoplane.geometry.open3d_objects import cloud_plane_meshes, cloud_to_open3d
 from monoplane.hookspecs import hookimpl
 from monoplane.host.detect import CloudPlaneResult, detect_planes
 from monoplane.host.pipeline import Pipeline

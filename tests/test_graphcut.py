@@ -5,7 +5,6 @@ import itertools
 import numpy as np
 import pytest
 
-from monoplane.errors import InvalidInput
 from monoplane.algorithm.graphcut import (
     BinaryEnergy,
     check_submodular,
@@ -21,6 +20,7 @@ from monoplane.algorithm.graphcut import (
     pool_payback,
     proximity_weights,
 )
+from monoplane.errors import InvalidInput
 
 
 def brute_force(e: BinaryEnergy) -> tuple[np.ndarray, float]:

@@ -298,8 +298,8 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
 #: modules it imports from a higher layer). Empty it as they go: the test fails on a stale
 #: entry too.
 PENDING: dict[str, set[str]] = {
-    # save_scene(report=True) writes the report itself; the exporter registry (issue 36) makes
-    # reports the caller's choice, as save_reconstruction's `also` does
+    # the deprecated save_scene(report=True) of 0.1 writes the report itself (save's `also`
+    # makes reports the caller's choice now); it stays working until it goes in 0.3.0
     "monoplane.multiview.writers": {"monoplane.report"},
 }
 
@@ -392,7 +392,7 @@ def test_no_import_runs_back_up() -> None:
 #: heavy library (numba, SciPy, OpenCV, Open3D, pycolmap, onnxruntime, Ray, Rerun) or the
 #: plugin system, and says so in a comment; an import that only broke a cycle or ran up the
 #: layers goes to the top. Lower the cap as they go.
-MAX_DEFERRED_IMPORTS = 89
+MAX_DEFERRED_IMPORTS = 81
 
 #: Files (or folders) that defer every import of ours, and why (instead of a comment at each).
 DEFERS_EVERYTHING = {
@@ -405,18 +405,6 @@ DEFERS_EVERYTHING = {
 
 def _defers_everything(file: str) -> bool:
     return any(file == k or (k.endswith("/") and file.startswith(k)) for k in DEFERS_EVERYTHING)
-
-#: Files whose imports inside functions other work in flight rewrites (issue 36): their
-#: comments are not checked yet. Empty it as they are reviewed.
-UNREVIEWED = {
-    "monoplane/batch/frame.py", "monoplane/evaluation/bench.py",
-    "monoplane/evaluation/bench_frames.py", "monoplane/evaluation/posed_sequences.py",
-    "monoplane/evaluation/runner.py",
-    "monoplane/evaluation/sequences.py", "monoplane/evaluation/twoview.py",
-    "monoplane/export/gltf.py", "monoplane/export/rerun_log.py", "monoplane/io/frames.py",
-    "monoplane/multiview/fusion.py",
-    "monoplane/multiview/writers.py", "monoplane/stages/fusers.py",
-}
 
 
 def _deferred_imports() -> list[tuple[str, int, bool]]:
@@ -452,14 +440,14 @@ def test_few_imports_happen_inside_functions() -> None:
         f"{len(found)} imports of monoplane modules inside functions, at most "
         f"{MAX_DEFERRED_IMPORTS}: move the new ones to the top")
     files = {f for f, _, _ in found}
-    stale = sorted(f for f in (*DEFERS_EVERYTHING, *UNREVIEWED)
+    stale = sorted(f for f in DEFERS_EVERYTHING
                    if not any(g == f or (f.endswith("/") and g.startswith(f)) for g in files))
     assert stale == [], "no import inside a function left in these: remove them from the lists"
 
 
 def test_an_import_inside_a_function_says_what_it_defers() -> None:
     silent = [f"{f}:{line}" for f, line, said in _deferred_imports()
-              if not said and not _defers_everything(f) and f not in UNREVIEWED]
+              if not said and not _defers_everything(f)]
     assert silent == [], "say in a comment what each of these defers, or move it to the top"
 
 

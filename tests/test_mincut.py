@@ -8,8 +8,8 @@ import maxflow
 import numpy as np
 import pytest
 
-from monoplane.errors import InvalidInput
 from monoplane.algorithm.mincut import min_cut, min_cut_flows
+from monoplane.errors import InvalidInput
 
 
 def cut_capacity(sink_side, tails, heads, caps, rev_caps, terminal):

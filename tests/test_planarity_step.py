@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 import monoplane
-from monoplane.datamodel import Reconstruction
 from monoplane.algorithm.planarity import PlanarityConfig, check_cloud, check_image, curved_planes
+from monoplane.datamodel import Reconstruction
 from monoplane.synth import generate
 
 

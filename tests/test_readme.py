@@ -13,8 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from monoplane.host import config
 from monoplane.cli import SUBCOMMANDS, build_parser
+from monoplane.host import config
 from monoplane.stages.base import STAGE_KINDS
 
 README = Path(__file__).resolve().parents[1] / "README.md"

@@ -1,1 +1,2 @@
-"""The algorithm of the paper: sequential RANSAC, graph cut, max-flow, dense CRF, regions, planarity."""
+"""The algorithm of the paper: sequential RANSAC, graph cut, max-flow, dense CRF, regions,
+planarity."""

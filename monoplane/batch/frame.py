@@ -155,7 +155,7 @@ def has_pipeline() -> bool:
 
 def pipeline_for(config: dict[str, Any]):  # -> monoplane.Pipeline
     """This process's pipeline for ``config``, built (with every stage) on first use."""
-    from monoplane.host.pipeline import Pipeline
+    from monoplane.host.pipeline import Pipeline  # loads OpenCV, which only workers need
 
     key = json.dumps(config, sort_keys=True, default=str)
     if _CACHE.key != key:
@@ -182,6 +182,7 @@ def process_frame(job: BatchJob, spec: FrameSpec) -> FrameResult:
         ``"ok"`` with the plane count, or ``"failed"`` with a one-line reason; never raises
         for a bad frame or a stage error.
     """
+    # these load OpenCV, which only the worker processes running frames need
     from monoplane.export.saving import save
     from monoplane.io.frames import load_frame
 
@@ -194,6 +195,7 @@ def process_frame(job: BatchJob, spec: FrameSpec) -> FrameResult:
         rec = pipe.run(frame.with_(name=spec.name))
         report = None
         if job.report:  # one copy of the 3D viewer (1 MB) for all frame reports
+            # the report loads OpenCV
             from monoplane.report.frame import write_frame_report
             from monoplane.report.viewer import install_viewer
 
@@ -218,7 +220,7 @@ def is_complete(folder: Path, report: bool = False) -> bool:
 def frame_output_files() -> tuple[str, ...]:
     """The files ``monoplane run`` writes for a frame: those the output formats on by default
     state (:func:`monoplane.export.output_files`), looked up once per process."""
-    from monoplane.export.saving import output_files
+    from monoplane.export.saving import output_files  # loads OpenCV
 
     return output_files("frame")
 

@@ -25,10 +25,10 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, TypeVar
 
-from monoplane.stages.config_fields import build_dataclass
+from monoplane.algorithm.ransac import RansacConfig
 from monoplane.datamodel import Reconstruction
 from monoplane.errors import ConfigError
-from monoplane.algorithm.ransac import RansacConfig
+from monoplane.stages.config_fields import build_dataclass
 
 #: Type of a baseline: a frame with cues in, planes out.
 Baseline = Callable[..., Reconstruction]
@@ -76,8 +76,8 @@ def baseline_config(cls: type[_Config], options: Mapping[str, Any], name: str) -
 class RansacBaselineSettings:
     """Settings every RANSAC-type baseline shares with the pipeline, in unit-sphere units.
 
-    The defaults are read from :class:`~monoplane.algorithm.ransac.RansacConfig`, so a baseline and the
-    presets are compared at the same thresholds unless a user overrides them
+    The defaults are read from :class:`~monoplane.algorithm.ransac.RansacConfig`, so a
+    baseline and the presets are compared at the same thresholds unless a user overrides them
     (``--baseline-set NAME.FIELD=VALUE``). Baselines subclass it with their own fields.
 
     Attributes

@@ -14,10 +14,11 @@ Scene complexity
     times, and per-frame medians in :attr:`BenchResult.per_frame`: time against plane count.
 
 Your own frames
-    With ``data`` (:class:`monoplane.evaluation.bench_frames.DataSource`, ``monoplane bench --data DIR``) the
-    frames are read from a folder instead (the layouts ``monoplane batch`` reads, or a
-    Redwood-style ``depth/`` + ``image/`` sequence; see :mod:`monoplane.evaluation.bench_frames`), and the
-    sizes and objects ranges do not apply: one result, whose size is that of the first frame.
+    With ``data`` (:class:`monoplane.evaluation.bench_frames.DataSource`, ``monoplane bench
+    --data DIR``) the frames are read from a folder instead (the layouts ``monoplane batch``
+    reads, or a Redwood-style ``depth/`` + ``image/`` sequence; see
+    :mod:`monoplane.evaluation.bench_frames`), and the sizes and objects ranges do not apply:
+    one result, whose size is that of the first frame.
     Frames without normals (depth-only) have them estimated by the preset's cue stage, inside
     the timed call; a baseline needs normals, so it gets the ones the preset estimated and its
     time does not include them.
@@ -65,9 +66,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from monoplane.evaluation.bench_frames import DataSource, load_data_frames
 from monoplane.errors import InvalidInput
+from monoplane.evaluation.baselines import CALL_TIMING, baseline_names, get_baseline
+from monoplane.evaluation.bench_frames import DataSource, load_data_frames
+from monoplane.evaluation.runner import parse_size
 from monoplane.hookspecs import hookimpl
+from monoplane.host.registry import get_plugin_manager
 
 if TYPE_CHECKING:
     from monoplane.datamodel import Frame
@@ -334,8 +338,7 @@ def bench(preset: str = "monoplane", sizes: Sequence[tuple[int, int]] = DEFAULT_
         if bad is not None:
             raise InvalidInput(f"objects range {bad[0]}-{bad[1]}: need 0 <= min <= max")
     # Resolve names now, in this process, so that bad input fails before any child starts.
-    from monoplane.evaluation.baselines import baseline_names
-    from monoplane.host.pipeline import Pipeline
+    from monoplane.host.pipeline import Pipeline  # loads OpenCV
 
     Pipeline.from_preset(preset, overrides=list(overrides or []))
     names = baseline_names(_plugin_manager(plugins))
@@ -358,8 +361,6 @@ def bench(preset: str = "monoplane", sizes: Sequence[tuple[int, int]] = DEFAULT_
 
 
 def _plugin_manager(plugins: Sequence[str], *extra: object) -> Any:
-    from monoplane.host.registry import get_plugin_manager
-
     try:
         modules = tuple(importlib.import_module(name) for name in plugins)
     except ImportError as exc:
@@ -373,7 +374,7 @@ def _bench_size(preset: str, overrides: list[str], size: tuple[int, int], seed: 
                 data: DataSource | None = None) -> BenchResult:
     """One size (and objects range), or the data frames, of :func:`bench` (in a child process
     when isolated)."""
-    from monoplane.evaluation.baselines import CALL_TIMING, get_baseline
+    # the pipeline and the generator load OpenCV
     from monoplane.host.pipeline import Pipeline
     from monoplane.synth import generate
 
@@ -452,8 +453,6 @@ def _bench_size(preset: str, overrides: list[str], size: tuple[int, int], seed: 
 
 def parse_sizes(text: str) -> list[tuple[int, int]]:
     """Parse ``"256x192,640x480"`` into ``[(256, 192), (640, 480)]``."""
-    from monoplane.evaluation.runner import parse_size
-
     sizes = [parse_size(part.strip()) for part in text.split(",") if part.strip()]
     if not sizes:
         raise InvalidInput(f"no size in '{text}'; use e.g. 256x192,640x480")

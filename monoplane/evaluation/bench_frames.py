@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from monoplane.batch.specs import read_frames
 from monoplane.datamodel import Frame
 from monoplane.errors import InvalidInput
 
@@ -107,8 +108,7 @@ def load_data_frames(source: DataSource) -> list[Frame]:
         One line naming the folder, file or argument: a missing folder, an empty listing, a
         depth PNG without a scale, unreadable files.
     """
-    from monoplane.batch.specs import read_frames
-    from monoplane.io.frames import load_frame
+    from monoplane.io.frames import load_frame  # loads OpenCV
 
     if source.frames is not None and source.frames < 1:
         raise InvalidInput(f"--frames must be at least 1, got {source.frames}")

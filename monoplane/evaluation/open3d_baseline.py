@@ -8,9 +8,9 @@ until the best plane has fewer inliers than the pipeline's minimum plane size (0
 valid pixels, the paper's 300 px at 256×192) or 20 planes were found (the pipeline's limit).
 Each round runs at most 1000 iterations (the pipeline's limit too) with Open3D's own early
 termination at its default confidence; every valid pixel is used (no subsampling). These
-shared values are read from :class:`~monoplane.algorithm.ransac.RansacConfig`'s defaults. Normals are not
-used (``segment_plane`` has no normal test) and there is no spatial coherence: that is what the
-baseline stands for, plain sequential RANSAC from a widely used library.
+shared values are read from :class:`~monoplane.algorithm.ransac.RansacConfig`'s defaults.
+Normals are not used (``segment_plane`` has no normal test) and there is no spatial coherence:
+that is what the baseline stands for, plain sequential RANSAC from a widely used library.
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from monoplane.algorithm.ransac import RansacConfig
 from monoplane.datamodel import Frame, Reconstruction
 from monoplane.evaluation.baseline_base import (
     CALL_TIMING,
@@ -31,7 +32,6 @@ from monoplane.evaluation.baseline_base import (
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.planes import fit_plane
 from monoplane.hookspecs import hookimpl
-from monoplane.algorithm.ransac import RansacConfig
 
 _RANSAC = RansacConfig()
 

@@ -87,6 +87,10 @@ from monoplane.evaluation.view_sets import (
     split_positions,
     view_overlap,
 )
+from monoplane.host.config import given_cues_overrides
+from monoplane.host.pipeline import Pipeline
+from monoplane.multiview import hold_intrinsics_fixed, reconstruct_multiview
+from monoplane.stages.base import CueProvider
 
 if TYPE_CHECKING:
     from monoplane.host.pipeline import Pipeline
@@ -196,8 +200,6 @@ def run_view_set(seq: PosedSequence, members: Sequence[int], mode: str, pipe: Pi
         The result, or None and the one-line error when the run raised a
         :class:`~monoplane.errors.MonoplaneError`; and the run's wall seconds.
     """
-    from monoplane.multiview import reconstruct_multiview
-
     frames = [sequence_frame(seq, k, mode, seed, level) for k in members]
     start = time.perf_counter()
     try:
@@ -305,10 +307,6 @@ def evaluate_posed_sequence(data_dir: str | Path,
         :func:`summarise`'s totals plus ``rows`` (per set: :func:`score_view_set`'s row with
         ``time_s``).
     """
-    from monoplane.host.config import given_cues_overrides
-    from monoplane.host.pipeline import Pipeline
-    from monoplane.multiview import hold_intrinsics_fixed
-
     modes = _checked_modes(mode, level, n, rotation_threshold, translation_threshold)
     seq = load_posed_sequence(data_dir, intrinsics, depth_scale)
     # Build the pipeline before the costly selection so a bad --set fails at once.
@@ -385,8 +383,6 @@ def probe_network_cues(seq: PosedSequence, k: int, pipe: Pipeline) -> None:
     InvalidInput
         Naming ``--mode network``, the provider and its error.
     """
-    from monoplane.stages.base import CueProvider
-
     frame = sequence_frame(seq, k, "network")
     try:
         pipe.prepare(frame)

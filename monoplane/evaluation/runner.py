@@ -76,7 +76,7 @@ def preset_method(name: str, overrides: list[str] | None = None) -> Method:
     The synthetic frames carry their (corrupted) cues already, so the pipeline skips the cue
     provider for them (:meth:`~monoplane.stages.base.CueProvider.needs_cues`).
     """
-    from monoplane.host.pipeline import Pipeline
+    from monoplane.host.pipeline import Pipeline  # loads OpenCV
 
     pipe = Pipeline.from_preset(name, overrides=overrides)
     return Method(name=name, kind="preset", run=lambda frame, seed: pipe.run(frame))
@@ -328,7 +328,7 @@ def evaluate(methods: Sequence[Method], n: int = 50, level: str = "mild", seed: 
     """
     from tqdm import tqdm
 
-    from monoplane.synth import generate
+    from monoplane.synth import generate  # loads OpenCV
 
     if n < 1:
         raise InvalidInput(f"--n must be at least 1, got {n}")

@@ -211,6 +211,7 @@ def evaluate_sequences(n: int = 10, views: int = 5, path: str = "walk", level: s
     """
     from tqdm import tqdm
 
+    # the pipeline, multiview and the generator load OpenCV
     from monoplane.host.pipeline import Pipeline
     from monoplane.multiview import hold_intrinsics_fixed, reconstruct_multiview
     from monoplane.synth.sequence import generate_sequence

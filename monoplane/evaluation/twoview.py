@@ -27,7 +27,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from monoplane.datamodel import Camera, Scene, orient_towards_camera, plane_to_camera
+from monoplane.datamodel import (
+    Camera,
+    Scene,
+    SfmResult,
+    orient_towards_camera,
+    pixel_rays,
+    plane_to_camera,
+)
 from monoplane.errors import InvalidInput, MonoplaneError
 from monoplane.evaluation.recall import median_scale
 
@@ -245,8 +252,6 @@ def ground_truth_sfm(synth: SynthScene, num_points: int = 400, seed: int = 0) ->
     seed : int
         Sampling seed.
     """
-    from monoplane.datamodel import SfmResult, pixel_rays
-
     rng = np.random.default_rng(seed)
     v0 = synth.views[0]
     h, w = v0.gt_depth.shape
@@ -357,6 +362,7 @@ def evaluate_pairs(n: int = 20, level: str = "mild", seed: int = 0, progress: bo
     """
     from tqdm import tqdm
 
+    # the pipeline, multiview and the generator load OpenCV
     from monoplane.host.pipeline import Pipeline
     from monoplane.multiview import hold_intrinsics_fixed, reconstruct_multiview
     from monoplane.synth import generate

@@ -12,14 +12,13 @@ from typing import Any
 from monoplane.export.exporter import Exporter
 from monoplane.export.shared import SharedWork
 from monoplane.hookspecs import hookimpl
+from monoplane.host.config import dumps_toml
 
 #: First line of a frame's ``config.toml``.
 RERUN_COMMENT = "# Resolved monoplane config; rerun with: monoplane run ... --config config.toml\n"
 
 
 def _write(result: Any, folder: Path, shared: SharedWork) -> None:
-    from monoplane.host.config import dumps_toml  # config imports the plugin registry
-
     head = RERUN_COMMENT if result.result_kind == "frame" else ""
     (folder / "config.toml").write_text(head + dumps_toml(result.config))
 

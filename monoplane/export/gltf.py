@@ -52,6 +52,7 @@ from monoplane.export.exporter import Exporter
 from monoplane.export.shared import SharedWork
 from monoplane.geometry.camera import frustum
 from monoplane.geometry.cloud_mesh import cloud_mesh
+from monoplane.geometry.mesh import scene_mesh
 from monoplane.geometry.polygons import PlaneMesh, reconstruction_mesh
 from monoplane.hookspecs import hookimpl
 from monoplane.palette import plane_palette
@@ -280,8 +281,6 @@ def scene_glb(scene: Scene, mesh: PlaneMesh | None = None) -> bytes:
     bytes
         The ``.glb`` file; plane ids are the 0-based global ids of ``scene.json``.
     """
-    from monoplane.geometry.mesh import scene_mesh
-
     if mesh is None:
         mesh = scene_mesh(scene)
     return planes_glb(mesh, scene.planes, plane_palette(scene.planes.shape[0]), first_id=0,

@@ -93,7 +93,7 @@ def _cloud_document(result: CloudResult) -> dict[str, Any]:
 def _multiview_document(result: Any) -> dict[str, Any]:
     """``scene.json`` of a multi-view result (a :class:`monoplane.multiview.MultiviewResult`:
     the scene with its SfM, alignments and plane matches)."""
-    from monoplane.multiview.global_planes import scene_plane_colors
+    from monoplane.multiview.global_planes import scene_plane_colors  # loads OpenCV
 
     scene = result.scene
     cams = cameras_document(scene.cameras, result.registration)["cameras"]
@@ -223,7 +223,7 @@ def _write(result: Any, folder: Path, shared: SharedWork) -> None:
         np.save(folder / "labels.npy", result.labels)
         write_json(folder / "planes.json", planes_document(result))
     else:
-        from monoplane.multiview.global_planes import global_label_map
+        from monoplane.multiview.global_planes import global_label_map  # loads OpenCV
 
         scene = result.scene
         for v, (rec, links) in enumerate(zip(scene.views, scene.links, strict=True)):

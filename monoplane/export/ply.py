@@ -19,7 +19,9 @@ from monoplane.errors import InvalidInput
 from monoplane.export.exporter import Exporter
 from monoplane.export.files import write_plane_mesh_ply, write_points_ply
 from monoplane.export.shared import SharedWork
+from monoplane.geometry.open3d_objects import cloud_plane_colors, cloud_to_open3d
 from monoplane.hookspecs import hookimpl
+from monoplane.multiview.global_planes import scene_plane_colors
 
 
 def _write(result: Any, folder: Path, shared: SharedWork) -> None:
@@ -30,15 +32,11 @@ def _write(result: Any, folder: Path, shared: SharedWork) -> None:
     elif kind == "cloud":
         import open3d as o3d
 
-        from monoplane.geometry.open3d_objects import cloud_plane_colors, cloud_to_open3d
-
         if not o3d.io.write_point_cloud(str(folder / "labelled.ply"), cloud_to_open3d(result)):
             raise InvalidInput(f"cannot write {folder / 'labelled.ply'}")
         colors = np.round(cloud_plane_colors(result)[1:] * 255).astype(np.uint8)
         write_plane_mesh_ply(folder / "planes.ply", mesh, colors)
     else:
-        from monoplane.multiview.global_planes import scene_plane_colors
-
         write_plane_mesh_ply(folder / "scene.ply", mesh, scene_plane_colors(result.scene),
                              first_id=0)
         write_points_ply(folder / "points.ply", result.sfm.points, result.sfm.colors)

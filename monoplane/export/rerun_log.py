@@ -48,12 +48,14 @@ from typing import Any
 import numpy as np
 
 from monoplane.datamodel import CloudResult, Reconstruction, Scene
-from monoplane.errors import MonoplaneError
+from monoplane.errors import InvalidInput, MonoplaneError
 from monoplane.export.exporter import Exporter
 from monoplane.export.shared import SharedWork
 from monoplane.geometry.cloud_mesh import cloud_mesh
+from monoplane.geometry.mesh import scene_mesh
 from monoplane.geometry.polygons import PlaneMesh, reconstruction_mesh
 from monoplane.hookspecs import hookimpl
+from monoplane.multiview.global_planes import global_label_map
 from monoplane.palette import NON_PLANAR, plane_palette
 
 #: Most points logged per view (depth pixels are taken on a regular grid to stay below it).
@@ -85,8 +87,6 @@ def check_recording_path(path: str | Path) -> Path:
     MissingExtra
         The Rerun SDK is not installed.
     """
-    from monoplane.errors import InvalidInput
-
     p = Path(path)
     if p.suffix != ".rrd":
         raise InvalidInput(f"--rerun {p}: a Rerun recording needs the suffix .rrd")
@@ -175,8 +175,6 @@ def log_rerun(result: Any, path: str | Path | None = None, *, recording: Any = N
 
 def _log_any(rr: ModuleType, stream: Any, result: Any, entity: str) -> None:
     """Log ``result`` by what its ``result_kind`` says it is."""
-    from monoplane.errors import InvalidInput
-
     kind = getattr(result, "result_kind", "")
     if kind == "frame":
         log_reconstruction(rr, stream, result, entity)
@@ -275,9 +273,6 @@ def log_scene(rr: ModuleType, stream: Any, scene: Scene, sfm_colors: np.ndarray 
               entity: str = "world") -> None:
     """Log a multi-view scene (see the module notes); ``sfm_colors`` are the (M, 3) uint8
     colours of ``scene.points``, if known."""
-    from monoplane.geometry.mesh import scene_mesh
-    from monoplane.multiview.global_planes import global_label_map
-
     G = scene.planes.shape[0]
     stream.log(entity, rr.ViewCoordinates.RDF, static=True)
     stream.log(entity, annotation_context(rr, G, first_id=0))

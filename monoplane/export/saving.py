@@ -23,6 +23,7 @@ from monoplane.errors import ConfigError, InvalidInput, PluginError
 from monoplane.export.exporter import Exporter
 from monoplane.export.files import atomic_output_dir
 from monoplane.export.shared import SharedWork
+from monoplane.host.registry import Registry, get_plugin_manager
 from monoplane.version import __version__
 
 
@@ -61,8 +62,6 @@ class ExporterInfo:
 
 def _plugin_manager(pm: pluggy.PluginManager | None) -> pluggy.PluginManager:
     """``pm`` (a fresh default one when None) with the built-in exporters registered."""
-    from monoplane.host.registry import get_plugin_manager
-
     pm = pm if pm is not None else get_plugin_manager()
     for name in builtin_exporters():
         if pm.get_plugin(name) is None:
@@ -85,8 +84,6 @@ def get_exporters(pm: pluggy.PluginManager | None = None) -> list[ExporterInfo]:
         A plugin registered something that is not a well-formed :class:`Exporter`, or two
         plugins registered the same name.
     """
-    from monoplane.host.registry import Registry
-
     pm = _plugin_manager(pm)
     dists = {id(plugin): dist for plugin, dist in pm.list_plugin_distinfo()}
     found: dict[str, ExporterInfo] = {}

@@ -28,15 +28,15 @@ class SharedWork:
         if key not in self._meshes:
             kind = result.result_kind
             if kind == "frame":
-                from monoplane.geometry.polygons import reconstruction_mesh
+                from monoplane.geometry.polygons import reconstruction_mesh  # loads OpenCV
 
                 self._meshes[key] = reconstruction_mesh(result)
             elif kind == "cloud":
-                from monoplane.geometry.cloud_mesh import cloud_mesh
+                from monoplane.geometry.cloud_mesh import cloud_mesh  # loads OpenCV
 
                 self._meshes[key] = cloud_mesh(result)
             else:
-                from monoplane.geometry.mesh import scene_mesh
+                from monoplane.geometry.mesh import scene_mesh  # loads OpenCV
 
                 scene = result.scene if kind == "multiview" else result
                 self._meshes[key] = scene_mesh(scene)

@@ -94,8 +94,10 @@ def replace_plane(rec: Reconstruction, cam: object, local: int,
     return replace(rec, planes=params, rmse=rmse)
 
 
-def drop_planes(rec: Reconstruction, drop: np.ndarray) -> Reconstruction:
-    """``rec`` with the pixels of the planes flagged in ``drop`` ((P,) bool) set to 0."""
+def unlabel_planes(rec: Reconstruction, drop: np.ndarray) -> Reconstruction:
+    """``rec`` with the pixels of the planes flagged in ``drop`` ((P,) bool) set to 0
+    (non-planar); the planes keep their ids and parameters (unlike
+    :func:`monoplane.algorithm.planarity.drop_planes`, which removes and renumbers them)."""
     if not drop.any():
         return rec
     labels = np.where(drop[np.maximum(rec.labels, 1) - 1], 0, rec.labels)

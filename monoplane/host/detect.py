@@ -16,10 +16,8 @@ from __future__ import annotations
 
 from typing import Any
 
-
 from monoplane.host.cloud_result import CloudPlaneResult
 from monoplane.host.pipeline import Pipeline
-from monoplane.palette import NON_PLANAR, plane_palette
 
 
 def detect_planes(cloud: Any, preset: str = "cloud",

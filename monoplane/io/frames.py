@@ -31,6 +31,7 @@ import numpy as np
 from monoplane.cues.intrinsics import assume_intrinsics
 from monoplane.datamodel import Frame, Reconstruction, intrinsics_matrix
 from monoplane.errors import InvalidInput
+from monoplane.export.saving import save, select_exporters, write_outputs
 from monoplane.io.checks import MAX_MAGNITUDE, load_npy, read_png
 
 #: Accepted pinhole intrinsics, in pixels. A focal length below 0.1 px is a field of view of
@@ -338,8 +339,6 @@ def load_frame(image: str | Path | None = None, depth: str | Path | None = None,
 
 def write_reconstruction_files(rec: Reconstruction, folder: Path) -> None:
     """Deprecated: :func:`monoplane.export.saving.write_outputs` (the default formats)."""
-    from monoplane.export.saving import select_exporters, write_outputs
-
     _deprecated("write_reconstruction_files", "monoplane.export.saving.write_outputs")
     write_outputs(rec, Path(folder), select_exporters("frame"))
 
@@ -347,8 +346,6 @@ def write_reconstruction_files(rec: Reconstruction, folder: Path) -> None:
 def save_reconstruction(rec: Reconstruction, out_dir: str | Path, overwrite: bool = False,
                         also: Callable[[Path], object] | None = None) -> Path:
     """Deprecated: :func:`monoplane.export.save`, which writes the same folder."""
-    from monoplane.export.saving import save
-
     _deprecated("save_reconstruction", "monoplane.export.save")
     return save(rec, out_dir, overwrite, also=also)
 

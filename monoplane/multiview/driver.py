@@ -14,11 +14,11 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from monoplane.host.pool import default_workers
-from monoplane.host.view_pool import VIEW_STAGES, ViewPool, process_view
 from monoplane.datamodel import Frame, Reconstruction, Scene, SfmResult
 from monoplane.errors import InvalidInput, StageError
 from monoplane.geometry.alignment import ScaleAlignment
+from monoplane.host.pool import default_workers
+from monoplane.host.view_pool import VIEW_STAGES, ViewPool, process_view
 from monoplane.multiview.global_planes import fuse_and_adjust
 from monoplane.multiview.registration import (
     align_to_sfm,

@@ -84,6 +84,7 @@ def __getattr__(name: str) -> Any:
     """``scene_mesh`` moved to :mod:`monoplane.geometry.mesh` in 0.2.0; the old path (this
     module was ``monoplane.multiview.fusion``) works until 0.3.0."""
     if name == "scene_mesh":
+        # loads OpenCV, and a top-level import would make the old path skip the warning
         from monoplane.geometry.mesh import scene_mesh
 
         warnings.warn("monoplane.multiview.fusion.scene_mesh moved to "

@@ -41,11 +41,11 @@ from monoplane.geometry.plane_matching import (
 )
 from monoplane.geometry.plane_merging import CoplanarMerger
 from monoplane.geometry.plane_transfer import (
-    drop_planes,
     plane_footprint,
     project_to_view,
     recovered_region,
     replace_plane,
+    unlabel_planes,
 )
 from monoplane.hookspecs import hookimpl
 from monoplane.stages.base import Fuser, Stage, param
@@ -193,7 +193,7 @@ class AverageFuser(Fuser):
         cfg = self.config
         flat = self.flat_planes(views)
         # Rejected planes are non-planar for every later step: matching, fusion, recovery.
-        screened = [drop_planes(rec, ~ok) for rec, ok in zip(views, flat, strict=True)]
+        screened = [unlabel_planes(rec, ~ok) for rec, ok in zip(views, flat, strict=True)]
         matches = self.match_planes(screened, sfm)
         nodes = [(v, local) for v, rec in enumerate(views)
                  for local in range(1, rec.num_planes + 1) if flat[v][local - 1]]

@@ -20,8 +20,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from monoplane.geometry.cloud import PlaneCloud
-from monoplane.geometry.graph import NeighbourGraph
 from monoplane.algorithm.graphcut import (
     data_costs,
     degree_normalisation,
@@ -29,6 +27,8 @@ from monoplane.algorithm.graphcut import (
     pool_payback,
     proximity_weights,
 )
+from monoplane.geometry.cloud import PlaneCloud
+from monoplane.geometry.graph import NeighbourGraph
 from monoplane.hookspecs import hookimpl
 from monoplane.stages.base import (
     Labeler,

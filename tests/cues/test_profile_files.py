@@ -12,7 +12,6 @@ import pytest
 
 pytest.importorskip("onnx")
 
-from monoplane.host import config  # noqa: E402
 from monoplane.cues import BUILTIN_PROFILES, CueNetwork  # noqa: E402
 from monoplane.cues.profile_files import (  # noqa: E402
     load_profile_file,
@@ -26,6 +25,7 @@ from monoplane.cues.tiny_models import (  # noqa: E402
 )
 from monoplane.datamodel import Frame, default_intrinsics  # noqa: E402
 from monoplane.errors import ConfigError, InvalidInput  # noqa: E402
+from monoplane.host import config  # noqa: E402
 from monoplane.stages.cue_providers import OnnxCues, OnnxCuesConfig  # noqa: E402
 
 H, W = 48, 64

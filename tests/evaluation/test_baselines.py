@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from monoplane import hookimpl, hookspecs
+from monoplane.algorithm.ransac import RansacConfig
 from monoplane.errors import ConfigError, PluginError
 from monoplane.evaluation.baselines import (
     CALL_TIMING,
@@ -22,7 +23,6 @@ from monoplane.evaluation.baselines import (
 )
 from monoplane.evaluation.segmentation import segmentation_scores
 from monoplane.host.registry import get_plugin_manager
-from monoplane.algorithm.ransac import RansacConfig
 from monoplane.testing import BOX_PLANES, box_frame
 
 

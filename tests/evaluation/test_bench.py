@@ -9,6 +9,7 @@ import cv2
 import numpy as np
 import pytest
 
+from monoplane.errors import InvalidInput
 from monoplane.evaluation.bench import (
     BaselineBench,
     BenchResult,
@@ -19,7 +20,6 @@ from monoplane.evaluation.bench import (
     parse_sizes,
 )
 from monoplane.evaluation.bench_frames import DataSource, load_data_frames
-from monoplane.errors import InvalidInput
 
 
 def test_tracker_attributes_each_allocation_to_its_stage() -> None:

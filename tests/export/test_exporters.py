@@ -12,6 +12,7 @@ from monoplane.cli import main
 from monoplane.datamodel import Camera, Reconstruction, Scene
 from monoplane.errors import ConfigError, InvalidInput, PluginError
 from monoplane.export import Exporter, get_exporters, output_files, save
+from monoplane.export.gltf import cloud_glb
 from monoplane.hookspecs import hookimpl
 from monoplane.host.detect import detect_planes
 from monoplane.host.registry import AUTOLOAD_ENV, get_plugin_manager
@@ -65,6 +66,8 @@ def test_save_writes_exactly_the_files_the_formats_state(tmp_path: Path) -> None
     assert files_in(out) == sorted(output_files("cloud"))
     assert json.loads((out / "planes.json").read_text())["num_planes"] == cloud.num_planes
     assert np.array_equal(np.load(out / "labels.npy"), cloud.labels)
+    # called alone, the glTF builder meshes the cloud itself, as save's shared mesh does
+    assert (out / "planes.glb").read_bytes() == cloud_glb(cloud)
 
 
 def test_formats_are_chosen_by_name_and_checked(tmp_path: Path) -> None:

@@ -138,9 +138,9 @@ def test_the_catalogue_entry_is_the_shared_file(tmp_path: Path,
     import shutil
 
     from monoplane.datamodel import Frame, intrinsics_matrix
+    from monoplane.host.pipeline import Pipeline
     from monoplane.models import get_model, model_path, require_model
     from monoplane.models.cache import check_file
-    from monoplane.host.pipeline import Pipeline
     from monoplane.stages.base import FeatureMatcher
 
     monkeypatch.setenv("MONOPLANE_CACHE", str(tmp_path))

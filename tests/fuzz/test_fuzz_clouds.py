@@ -19,10 +19,10 @@ from hypothesis import given
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from monoplane.io.clouds import SUFFIXES, _lzf_decompress, read_point_cloud
-from monoplane.host.detect import detect_planes
 from monoplane.errors import InvalidInput
+from monoplane.host.detect import detect_planes
 from monoplane.io.checks import MAX_MAGNITUDE
+from monoplane.io.clouds import SUFFIXES, _lzf_decompress, read_point_cloud
 
 #: (suffix, keyword arguments of open3d.io.write_point_cloud) of every variant written.
 _VARIANTS = [(".ply", {}), (".ply", {"write_ascii": True}), (".pcd", {}),

@@ -10,8 +10,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from monoplane.host import config
 from monoplane.errors import ConfigError
+from monoplane.host import config
 from monoplane.host.registry import get_registry
 from monoplane.stages.base import STAGE_KINDS
 

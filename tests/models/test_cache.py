@@ -15,6 +15,7 @@ import pytest
 
 from monoplane.cli import main
 from monoplane.errors import ConfigError, InvalidInput
+from monoplane.host.pipeline import Pipeline
 from monoplane.models import (
     CATALOGUE,
     ModelRecord,
@@ -26,7 +27,6 @@ from monoplane.models import (
     require_model,
 )
 from monoplane.models import cache as cache_mod
-from monoplane.host.pipeline import Pipeline
 
 PAYLOAD = b"not really an onnx file, but bytes with a known hash" * 100
 

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from monoplane.evaluation.twoview import relative_pose_error
+from monoplane.host.pipeline import Pipeline
 from monoplane.io.frames import load_frame
 from monoplane.multiview import hold_intrinsics_fixed, reconstruct_multiview
-from monoplane.host.pipeline import Pipeline
 
 DATA = Path(__file__).resolve().parents[3] / "shared" / "data" / "rgbd-livingroom"
 

@@ -9,16 +9,16 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from monoplane.host.view_pool import ViewPool
 from monoplane.evaluation.twoview import ground_truth_sfm
 from monoplane.hookspecs import hookimpl
+from monoplane.host.pipeline import Pipeline
+from monoplane.host.registry import get_plugin_manager
+from monoplane.host.view_pool import ViewPool
 from monoplane.multiview import (
     matcher_keeps_intrinsics,
     reconstruct_multiview,
     rescale_reconstruction,
 )
-from monoplane.host.pipeline import Pipeline
-from monoplane.host.registry import get_plugin_manager
 from monoplane.stages.base import Matcher
 from monoplane.synth.sequence import generate_sequence
 

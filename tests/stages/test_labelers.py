@@ -3,8 +3,6 @@
 import numpy as np
 import pytest
 
-from monoplane.geometry.cloud import PlaneCloud
-from monoplane.geometry.graph import NeighbourGraph
 from monoplane.algorithm.graphcut import (
     gc_ransac_energy,
     msac_costs,
@@ -12,6 +10,8 @@ from monoplane.algorithm.graphcut import (
     normal_costs,
     proximity_weights,
 )
+from monoplane.geometry.cloud import PlaneCloud
+from monoplane.geometry.graph import NeighbourGraph
 from monoplane.stages.base import RansacParams
 from monoplane.stages.labelers import (
     GraphCutLabeler,
