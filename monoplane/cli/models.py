@@ -13,7 +13,6 @@ from monoplane.cues.profile_files import (
     profile_to_toml,
 )
 from monoplane.errors import InvalidInput
-from monoplane.host.pipeline import Pipeline
 from monoplane.models import (
     CATALOGUE,
     cache_dir,
@@ -24,7 +23,6 @@ from monoplane.models import (
     require_model,
 )
 from monoplane.models.catalogue import ModelRecord
-from monoplane.stages.base import CueProvider
 
 DESCRIPTION = """Monocular depth/normal networks monoplane can download on request (ONNX exports
 published on Hugging Face, pinned to a revision where one is known, checked by size and SHA-256).
@@ -132,22 +130,3 @@ def run_profile(args: argparse.Namespace) -> int:
     print(profile_to_toml(profile), end="")
     return 0
 
-
-def prepare_cue_model(pipe: Pipeline, *, fetch_missing: bool, has_depth: bool,
-                      has_normals: bool, quiet: bool = False) -> None:
-    """Make sure the pipeline's catalogue model (``cues.model``) is in the cache.
-
-    The cue provider says which catalogue model the input needs
-    (:meth:`~monoplane.stages.base.CueProvider.catalogue_model`). With ``fetch_missing`` a
-    missing model is downloaded (the only download a run ever does); otherwise a missing model
-    is a one-line error naming the fetch command, raised before any image is read.
-    """
-    name = pipe.stage("cues", CueProvider).catalogue_model(not has_depth, not has_normals)
-    if not name or cached_model(name) is not None:
-        return
-    if fetch_missing:
-        result = fetch(name)
-        if not quiet:
-            print(f"fetched {name} -> {result.path} (sha256 {result.sha256})")
-        return
-    require_model(name)

@@ -14,13 +14,9 @@ from monoplane.cli.common import (
     pipeline_from_args,
     write_rerun_arg,
 )
-from monoplane.cli.models import prepare_cue_model
-from monoplane.cues import CueNetwork
-from monoplane.errors import InvalidInput
 from monoplane.host.config import cue_model_overrides
-from monoplane.host.pipeline import Pipeline
+from monoplane.host.cue_models import prepare_cue_model, require_depth_source
 from monoplane.io.frames import load_frame, save_reconstruction
-from monoplane.stages.base import CueProvider
 
 DESCRIPTION = """Recover the planes of one image and write labels.png (uint16, 0 = non-planar),
 planes.json (normal . X + offset = 0 in the camera frame and the depth's units), planes.ply,
@@ -78,20 +74,3 @@ def run(args: argparse.Namespace) -> int:
         print(f"{rec.num_planes} planes in {rec.timings.get('total', 0.0):.2f} s -> {out}")
     return 0
 
-
-def require_depth_source(pipe: Pipeline, image: str) -> None:
-    """Fail with the next step when an image has no depth and the cue provider, one that takes
-    catalogue models (``--cues``), has no depth network to predict it.
-
-    Other providers (``given``, plugins with their own model files) give their own error when
-    they run.
-    """
-    provider = pipe.stage("cues", CueProvider)
-    network = getattr(provider, "network", None)
-    takes_catalogue = type(provider).catalogue_model is not CueProvider.catalogue_model
-    if (takes_catalogue and isinstance(network, CueNetwork) and network.depth_path is None
-            and provider.catalogue_model(True, True) is None):
-        raise InvalidInput(
-            f"{image} has no depth and no depth model is set: pass --cues NAME --fetch to "
-            f"download a monocular model once (e.g. --cues depth-anything-v2-small; "
-            f"'monoplane models list' shows them all), or give --depth FILE")
