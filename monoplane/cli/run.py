@@ -54,8 +54,12 @@ def run(args: argparse.Namespace) -> int:
     overrides = (cue_model_overrides(args.cues, args.preset, args.config, args.overrides)
                  if args.cues else args.overrides)
     pipe = pipeline_from_args(args, overrides)
-    prepare_cue_model(pipe, fetch_missing=args.fetch, has_depth=args.depth is not None,
-                      has_normals=args.normals is not None, quiet=args.quiet)
+    fetched = prepare_cue_model(pipe, fetch_missing=args.fetch,
+                                has_depth=args.depth is not None,
+                                has_normals=args.normals is not None)
+    if fetched is not None and not args.quiet:
+        name, result = fetched
+        print(f"fetched {name} -> {result.path} (sha256 {result.sha256})")
     frame = load_frame(args.image, depth=args.depth, normals=args.normals,
                        intrinsics=args.intrinsics, **depth_reading(args))
     if frame.depth is None:
