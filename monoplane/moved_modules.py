@@ -17,6 +17,8 @@ from types import ModuleType
 
 #: Old module path -> new module path.
 MOVED: dict[str, str] = {
+    "monoplane.batch.pool": "monoplane.host.pool",
+    "monoplane.batch.views": "monoplane.host.view_pool",
     "monoplane.bench": "monoplane.evaluation.bench",
     "monoplane.bench_data": "monoplane.evaluation.bench_frames",
     "monoplane.cloud_config": "monoplane.host.cloud_config",

@@ -27,6 +27,10 @@ What it holds, by use:
   :func:`run_baseline`.
 * Registry: :func:`get_plugin_manager`, :func:`get_registry` (e.g. to check in a test that a
   stage registers).
+* Output formats: :class:`Exporter`, returned by the ``monoplane_register_exporters`` hook
+  (a frame's, a cloud's or a multi-view result's files; see docs/plugins.md); results are a
+  :class:`Reconstruction`, a :class:`CloudResult` or a multi-view result, told apart by their
+  ``result_kind``.
 * Errors: :class:`ConfigError`, :class:`InvalidInput`, :class:`MonoplaneError`,
   :class:`PluginError`, :class:`StageError`.
 """
@@ -41,7 +45,15 @@ from monoplane.cues import (
     OnnxProfile,
     plan_letterbox,
 )
-from monoplane.datamodel import Camera, Frame, Reconstruction, Scene, SfmResult, default_intrinsics
+from monoplane.datamodel import (
+    Camera,
+    CloudResult,
+    Frame,
+    Reconstruction,
+    Scene,
+    SfmResult,
+    default_intrinsics,
+)
 from monoplane.errors import ConfigError, InvalidInput, MonoplaneError, PluginError, StageError
 from monoplane.evaluation.baselines import (
     CALL_TIMING,
@@ -52,6 +64,7 @@ from monoplane.evaluation.baselines import (
     get_baseline,
     run_baseline,
 )
+from monoplane.export.exporter import Exporter
 from monoplane.features import Correspondences, Keypoints, PairMatches
 from monoplane.geometry.alignment import ScaleAlignment
 from monoplane.geometry.cloud import PlaneCloud
@@ -96,4 +109,5 @@ __all__ = [
     "Stage", "StageError", "StageKind", "TripletDraws", "baseline_config", "baseline_names",
     "default_intrinsics", "fit_plane", "get_baseline", "get_plugin_manager", "get_registry",
     "hookimpl", "param", "plan_letterbox", "run_baseline",
+    "CloudResult", "Exporter",
 ]

@@ -245,7 +245,7 @@ class TwoViewRoom:
         """Each view's exact planes and labels, as a refiner would hand them to a fuser."""
         from monoplane.datamodel import Reconstruction
 
-        return [Reconstruction(frame=v.frame, labels=v.gt_labels, params=v.planes)
+        return [Reconstruction(frame=v.frame, labels=v.gt_labels, planes=v.planes)
                 for v in self.views]
 
     def sfm(self, num_points: int = 300) -> SfmResult:
@@ -393,7 +393,7 @@ def check_stage_contract(cls: type[Stage], frame: Frame | None = None, seed: int
         pts = frame.points()[labels == 1]
         from monoplane.geometry.planes import fit_plane
 
-        rec = Reconstruction(frame=frame, labels=labels, params=fit_plane(pts)[0][None])
+        rec = Reconstruction(frame=frame, labels=labels, planes=fit_plane(pts)[0][None])
         out = stage.refine(rec, params)
         assert isinstance(out, Reconstruction) and out.labels.shape == frame.shape
         return
@@ -453,7 +453,7 @@ def _check_multiview_stage(stage: Stage, room: TwoViewRoom) -> None:
     np.testing.assert_allclose(np.linalg.norm(scene.planes[:, :3], axis=1), 1.0, atol=1e-6)
     linked = 0
     for v, table in enumerate(scene.links):
-        world = plane_to_world(views[v].params, room.views[v].R, room.views[v].t)
+        world = plane_to_world(views[v].planes, room.views[v].R, room.views[v].t)
         for local, glob in table.items():
             cos = abs(float(world[local - 1, :3] @ scene.planes[glob, :3]))
             assert cos > np.cos(np.deg2rad(10.0)), \
@@ -482,9 +482,9 @@ def check_baseline_contract(baseline: Callable[..., Reconstruction], seed: int =
     assert isinstance(rec, Reconstruction), f"{name} must return a Reconstruction"
     assert rec.labels.shape == frame.shape and rec.frame.shape == frame.shape
     assert rec.labels.min() >= 0 and rec.labels.max() <= rec.num_planes
-    assert np.isfinite(rec.params).all()
-    np.testing.assert_allclose(np.linalg.norm(rec.params[:, :3], axis=1), 1.0, atol=1e-6)
-    assert rec.num_planes and np.abs(rec.params - BOX_PLANES[0]).max(axis=1).min() < 0.02, \
+    assert np.isfinite(rec.planes).all()
+    np.testing.assert_allclose(np.linalg.norm(rec.planes[:, :3], axis=1), 1.0, atol=1e-6)
+    assert rec.num_planes and np.abs(rec.planes - BOX_PLANES[0]).max(axis=1).min() < 0.02, \
         f"{name} misses the back wall of an exact box"
     try:
         baseline(frame, seed=seed, no_such_option=1)

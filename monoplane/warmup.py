@@ -1,9 +1,9 @@
 """Compile every numba kernel once, so that the first real run loads them from the disk cache.
 
-monoplane's kernels (:mod:`monoplane.jit`, :mod:`monoplane.algorithm.lattice_kernels`) compile on their
-first call and cache the machine code on disk. Without a warm-up, the first ``monoplane run``
-on a machine spends 20-30 s compiling; ``setup.sh`` runs this module instead, so the user's
-first run costs what every later run does::
+monoplane's kernels (:mod:`monoplane.jit`, :mod:`monoplane.algorithm.lattice_kernels`) compile
+on their first call and cache the machine code on disk. Without a warm-up, the first
+``monoplane run`` on a machine spends 20-30 s compiling; ``setup.sh`` runs this module instead,
+so the user's first run costs what every later run does::
 
     python3 -m monoplane.warmup
 
@@ -31,6 +31,18 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from importlib import resources
 from typing import Any
+
+import numpy as np
+
+from monoplane import jit
+from monoplane.export.saving import save as save_outputs
+from monoplane.geometry.planes import planes_from_triplets
+from monoplane.host import config
+from monoplane.host.detect import detect_planes
+from monoplane.host.pipeline import Pipeline
+from monoplane.report.frame import write_frame_report
+from monoplane.report.render3d import Lines, Mesh, Shot, render_image
+from monoplane.synth import generate
 
 
 @dataclass
@@ -76,7 +88,6 @@ def package_kernels() -> dict[str, Callable[[], bool]]:
     """
     from numba.core.registry import CPUDispatcher
 
-    from monoplane import jit
 
     found: dict[str, Callable[[], bool]] = {}
     for name in kernel_modules():
@@ -98,16 +109,11 @@ def package_kernels() -> dict[str, Callable[[], bool]]:
 
 
 def _run_preset(preset: str, frame: Any) -> Any:
-    from monoplane.host.pipeline import Pipeline
-
     return Pipeline.from_preset(preset).run(frame)
 
 
 def _render_triangle_and_line() -> None:
     """Render one triangle and one line segment (the dtypes of the reports' 3D views)."""
-    import numpy as np
-
-    from monoplane.report.render3d import Lines, Mesh, Shot, render_image
 
     corners = np.array([[-1.0, -1.0, 4.0], [1.0, -1.0, 4.0], [0.0, 1.0, 4.0]])
     K = np.array([[16.0, 0.0, 7.5], [0.0, 16.0, 7.5], [0.0, 0.0, 1.0]])
@@ -123,15 +129,6 @@ def _workloads(report: bool = True) -> Iterator[tuple[str, Callable[[], Any]]]:
     ``max_points`` (the labels are then propagated to the pixels left out, by kernels of their
     own).
     """
-    import numpy as np
-
-    from monoplane.host import config
-    from monoplane.host.detect import detect_planes
-    from monoplane.io.frames import save_reconstruction
-    from monoplane.geometry.planes import planes_from_triplets
-    from monoplane.host.pipeline import Pipeline
-    from monoplane.report.frame import write_frame_report
-    from monoplane.synth import generate
 
     frame = generate(0, "mild", width=256, height=192, n_views=1).views[0].frame
     for preset in config.list_presets():
@@ -143,8 +140,8 @@ def _workloads(report: bool = True) -> Iterator[tuple[str, Callable[[], Any]]]:
     def save() -> None:
         rec = Pipeline.from_preset("monoplane").run(frame)
         with tempfile.TemporaryDirectory() as tmp:
-            save_reconstruction(rec, f"{tmp}/out",
-                                also=functools.partial(write_frame_report, rec) if report else None)
+            save_outputs(rec, f"{tmp}/out",
+                         also=functools.partial(write_frame_report, rec) if report else None)
 
     yield "outputs" + (" and report" if report else ""), save
     # The frame report draws no lines, and --no-report skips it: the rasterizer's kernels get

@@ -1,10 +1,16 @@
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from monoplane.datamodel import (
+    RESULT_KINDS,
     Camera,
+    CloudResult,
     Frame,
+    PlaneSet,
     Reconstruction,
+    Scene,
     default_intrinsics,
     intrinsics_matrix,
     orient_towards_camera,
@@ -74,7 +80,7 @@ def test_orientation_makes_offset_positive():
 def test_planar_depth_reproduces_exact_depth():
     corner, labels = box_frame(64, 48, CORNER_PLANES, focal=50.0)
     depth = corner.depth
-    rec = Reconstruction(frame=frame(), labels=labels, params=CORNER_PLANES)
+    rec = Reconstruction(frame=frame(), labels=labels, planes=CORNER_PLANES)
     assert np.allclose(rec.planar_depth(), depth, rtol=1e-5)
     assert rec.area_px.sum() == depth.size
     assert rec.support.tolist() == rec.area_px.tolist()
@@ -82,7 +88,7 @@ def test_planar_depth_reproduces_exact_depth():
 
 def test_reconstruction_rejects_labels_beyond_planes():
     with pytest.raises(InvalidInput, match="labels must lie"):
-        Reconstruction(frame=frame(), labels=np.full((48, 64), 2), params=np.zeros((1, 4)) + 1)
+        Reconstruction(frame=frame(), labels=np.full((48, 64), 2), planes=np.zeros((1, 4)) + 1)
 
 
 def test_plane_world_round_trip():
@@ -105,7 +111,8 @@ def test_data_model_imports_nothing_of_the_project_but_errors_jit_and_the_aliase
     import sys
 
     code = ("import sys, monoplane.datamodel; "
-            "print(sorted(m for m in sys.modules if m.startswith('monoplane'))); "
+            "print(sorted(m for m in sys.modules if m.startswith('monoplane') "
+            "and not m.startswith('monoplane.datamodel.'))); "
             "print('cv2' in sys.modules, 'pluggy' in sys.modules, 'numba' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     loaded = ("['monoplane', 'monoplane.datamodel', 'monoplane.errors', 'monoplane.jit', "
@@ -144,7 +151,7 @@ def test_package_names_load_on_first_use() -> None:
 
 
 def test_validation_kernels_count_as_the_numpy_checks() -> None:
-    from monoplane.datamodel import _depth_counts, _normal_counts
+    from monoplane.datamodel.frame import _depth_counts, _normal_counts
 
     rng = np.random.default_rng(5)
     depth = rng.normal(1.0, 1.0, size=(20, 30)).astype(np.float32)
@@ -162,3 +169,45 @@ def test_validation_kernels_count_as_the_numpy_checks() -> None:
     bad = finite & (norm > 0) & (np.abs(norm - 1.0) > 1e-2)
     assert _normal_counts(normals) == (int((~finite).sum()), int(bad.sum()))
     assert 0 < bad.sum() < 30
+
+
+def test_every_result_is_a_plane_set_with_planes_ids_and_support() -> None:
+    _, labels = box_frame(64, 48, CORNER_PLANES, focal=50.0)
+    rec = Reconstruction(frame=frame(), labels=labels, planes=CORNER_PLANES)
+    P = len(CORNER_PLANES)
+    assert isinstance(rec, PlaneSet) and rec.result_kind == "frame"
+    assert rec.planes.shape == (P, 4) and rec.ids.tolist() == list(range(1, P + 1))
+    cam = Camera(K=frame().K, R=np.eye(3), t=np.zeros(3), width=64, height=48)
+    # both views' plane 1 is global plane 0; the second view's plane 2 is global plane 1
+    scene = Scene(cameras=[cam, cam], views=[rec, rec], planes=rec.planes[:2],
+                  links=[{1: 0}, {1: 0, 2: 1}])
+    assert isinstance(scene, PlaneSet) and scene.result_kind == "scene"
+    assert scene.ids.tolist() == [0, 1]
+    assert scene.support.tolist() == [2 * rec.area_px[0], rec.area_px[1]]
+    cloud = CloudResult(points=np.eye(3), labels=[1, 1, 0], planes=[0, 0, 1, 0.0],
+                        rmse=[0.0])
+    assert cloud.result_kind == "cloud" and cloud.planes.shape == (1, 4)
+    assert cloud.support.tolist() == [2] and cloud.ids.tolist() == [1]
+    assert sorted({rec.result_kind, scene.result_kind, cloud.result_kind}) == \
+        sorted(RESULT_KINDS[:3])
+
+
+def test_the_former_attribute_names_still_work_with_a_warning() -> None:
+    _, labels = box_frame(64, 48, CORNER_PLANES, focal=50.0)
+    with pytest.warns(DeprecationWarning, match=r"Reconstruction\.planes"):
+        rec = Reconstruction(frame=frame(), labels=labels, params=CORNER_PLANES)
+    with pytest.warns(DeprecationWarning, match=r"Reconstruction\.planes"):
+        assert rec.params is rec.planes
+    with pytest.warns(DeprecationWarning):
+        moved = replace(rec, params=rec.planes * 2)  # the old keyword wins over the field
+    np.testing.assert_allclose(moved.planes, rec.planes)  # re-normalised on the way in
+    with pytest.warns(DeprecationWarning, match=r"CloudResult\.support"):
+        cloud = CloudResult(np.eye(3), [1, 1, 0], [0, 0, 1, 0.0], [0.0], num_points=[2])
+    assert cloud.support.tolist() == [2]
+
+
+def test_results_reject_malformed_planes_in_one_line() -> None:
+    with pytest.raises(InvalidInput, match="4 values per plane"):
+        CloudResult(np.eye(3), [1, 1, 0], [0, 0, 1], [0.0])
+    with pytest.raises(InvalidInput, match="must have 1 rows"):
+        CloudResult(np.eye(3), [1, 1, 0], [0, 0, 1, 0.0], [0.0, 1.0])

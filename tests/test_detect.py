@@ -6,9 +6,12 @@ import numpy as np
 import open3d as o3d
 import pytest
 
-from monoplane.host.detect import detect_planes
+from monoplane.datamodel import CloudResult
 from monoplane.errors import ConfigError, InvalidInput, StageError
+from monoplane.geometry.open3d_objects import cloud_plane_meshes, cloud_to_open3d
+from monoplane.geometry.cloud_mesh import cloud_mesh
 from monoplane.hookspecs import hookimpl
+from monoplane.host.detect import CloudPlaneResult, detect_planes
 from monoplane.host.pipeline import Pipeline
 from monoplane.host.registry import get_plugin_manager
 from monoplane.stages.base import Refiner, Sampler
@@ -62,7 +65,7 @@ def test_coplanar_separate_tops_stay_two_planes_in_input_order():
         np.testing.assert_allclose(n, [0, 0, 1], atol=1e-6)
         assert d == pytest.approx(-z, abs=1e-6)
         assert res.rmse[pid - 1] < 1e-6
-        assert res.num_points[pid - 1] == np.sum(res.labels == pid)
+        assert res.support[pid - 1] == np.sum(res.labels == pid)
 
 
 def test_legacy_and_tensor_open3d_clouds_agree_with_arrays():
@@ -152,9 +155,9 @@ def test_large_cloud_is_subsampled_but_every_point_labelled():
 def test_conversions_to_open3d():
     points, _ = two_coplanar_tops()
     res = detect_planes(points, overrides=VIEW)
-    pcd = res.to_open3d()
+    pcd = cloud_to_open3d(res)
     assert len(pcd.points) == len(points) and pcd.has_colors()
-    meshes = res.plane_meshes()
+    meshes = cloud_plane_meshes(res)
     assert len(meshes) == res.num_planes
     for pid, mesh in enumerate(meshes, start=1):
         v = np.asarray(mesh.vertices)
@@ -165,6 +168,25 @@ def test_conversions_to_open3d():
         pts = points[res.labels == pid]
         box = np.ptp(pts[:, 0]) * np.ptp(pts[:, 1])
         assert mesh.get_surface_area() == pytest.approx(box, rel=0.25)
+
+
+def test_the_result_speaks_the_plane_set_vocabulary_and_the_old_names_warn():
+    points, _ = two_coplanar_tops()
+    res = detect_planes(points, overrides=VIEW)
+    assert isinstance(res, CloudResult) and res.result_kind == "cloud"
+    assert res.planes.shape == (3, 4) and res.planes.dtype == np.float64
+    assert res.ids.tolist() == [1, 2, 3]
+    assert res.support.tolist() == np.bincount(res.labels, minlength=4)[1:].tolist()
+    with pytest.warns(DeprecationWarning, match="CloudResult.support"):
+        assert res.num_points is res.support
+    with pytest.warns(DeprecationWarning, match="cloud_to_open3d"):
+        assert len(res.to_open3d().points) == len(points)
+    with pytest.warns(DeprecationWarning, match="cloud_mesh"):
+        assert len(res.plane_mesh().triangles) == len(cloud_mesh(res).triangles)
+    with pytest.warns(DeprecationWarning, match="CloudResult.support"):
+        again = CloudPlaneResult(res.points, res.labels, res.planes, res.rmse,
+                                 num_points=res.support, centroids=res.centroids)
+    assert again.support.tolist() == res.support.tolist()
 
 
 class _StageLog:

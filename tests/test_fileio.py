@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from monoplane.errors import InvalidInput
+from monoplane.export.files import atomic_output_dir
 from monoplane.io.frames import (
-    atomic_output_dir,
     load_frame,
     read_depth,
     read_intrinsics,

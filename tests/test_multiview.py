@@ -11,10 +11,10 @@ import pytest
 
 from monoplane.datamodel import Reconstruction
 from monoplane.evaluation.twoview import ground_truth_sfm, relative_pose_error
+from monoplane.export import save
 from monoplane.geometry.alignment import ScaleAlignment
 from monoplane.multiview import (
     MultiviewResult,
-    save_scene,
     scale_sfm,
     scene_mesh,
 )
@@ -41,7 +41,7 @@ def _oracle_result(synth) -> MultiviewResult:
 
 def test_save_scene_layout_and_contents(synth_pair, tmp_path: Path) -> None:
     result = _oracle_result(synth_pair)
-    out = save_scene(result, tmp_path / "scene")
+    out = save(result, tmp_path / "scene")
     for v in range(2):
         for name in ("labels.png", "planes.json", "planes.ply", "depth_planar.npy"):
             assert (out / f"view_{v:03d}" / name).is_file()
@@ -72,16 +72,16 @@ def test_scene_mesh_lies_on_its_fused_planes(synth_pair) -> None:
 
 
 def test_failed_save_leaves_nothing(synth_pair, tmp_path: Path, monkeypatch) -> None:
-    import monoplane.io.frames
+    import monoplane.export.ply
 
     result = _oracle_result(synth_pair)
 
     def boom(*args, **kwargs):
         raise RuntimeError("disk full")
 
-    monkeypatch.setattr(monoplane.io.frames, "write_plane_mesh_ply", boom)
+    monkeypatch.setattr(monoplane.export.ply, "write_plane_mesh_ply", boom)
     with pytest.raises(RuntimeError):
-        save_scene(result, tmp_path / "scene")
+        save(result, tmp_path / "scene")
     assert list(tmp_path.iterdir()) == []
 
 

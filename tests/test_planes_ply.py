@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from monoplane.datamodel import Frame, Reconstruction, intrinsics_matrix
-from monoplane.io.frames import save_reconstruction
+from monoplane.export import save
 
 _SCALARS = {"char": int, "uchar": int, "short": int, "ushort": int, "int": int, "uint": int,
             "int8": int, "uint8": int, "int16": int, "uint16": int, "int32": int, "uint32": int,
@@ -74,8 +74,8 @@ def wall_and_box(tmp_path: Path) -> tuple[Path, np.ndarray, np.ndarray]:
     rgb[~box] = (200, 50, 50)
     rgb[box] = (20, 20, 220)
     planes = np.array([[0.0, 0.0, -1.0, 4.0], [0.0, 0.0, -1.0, 2.0]])
-    rec = Reconstruction(frame=Frame(rgb=rgb, K=K), labels=labels, params=planes)
-    out = save_reconstruction(rec, tmp_path / "out")
+    rec = Reconstruction(frame=Frame(rgb=rgb, K=K), labels=labels, planes=planes)
+    out = save(rec, tmp_path / "out")
     return out, K, box
 
 

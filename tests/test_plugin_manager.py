@@ -1,4 +1,6 @@
 import dataclasses
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -16,6 +18,23 @@ def test_every_kind_has_builtins_from_monoplane():
     for kind in STAGE_KINDS:
         assert reg.names(kind), f"no built-in {kind}"
     assert all(i.provider == "monoplane" for i in reg.all())
+
+
+def test_the_core_registry_loads_no_evaluation_module():
+    """Baselines are evaluation's: the core plugin manager registers stages only, and the
+    evaluation code adds its built-in baseline when it looks baselines up."""
+    code = ("import sys; from monoplane.host.registry import get_plugin_manager, get_registry; "
+            "get_registry(get_plugin_manager(autoload=False)); "
+            "print(sorted(m for m in sys.modules if m.startswith('monoplane.evaluation')))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True)
+    assert out.stdout.strip() == "[]"
+    from monoplane.evaluation.baselines import BUILTIN_BASELINES, baseline_names
+
+    pm = get_plugin_manager(autoload=False)
+    assert "open3d-ransac" in baseline_names(pm)
+    assert [pm.get_plugin(name) is not None for name in BUILTIN_BASELINES] == [True]
+    assert "open3d-ransac" in baseline_names(pm)  # registering twice is harmless
 
 
 @pytest.mark.parametrize("info", get_registry(get_plugin_manager(autoload=False)).all(),
@@ -62,13 +81,33 @@ def test_plugin_guide_documents_every_hook():
     assert not missing, f"docs/plugins.md does not document: {missing}"
 
 
+@pytest.mark.parametrize("kind", KINDS.values(), ids=lambda k: k.name)
+def test_each_kind_has_its_written_out_hookspec(kind):
+    """Each registration hook is a function of its own in hookspecs.py (greppable, documented
+    as pytest's are), named as the kind says, stating its summary, table and contract."""
+    import inspect
+
+    import monoplane.hookspecs as hs
+
+    spec = getattr(hs, kind.hook)
+    assert getattr(spec, "monoplane_spec", None) is not None, f"{kind.hook} is no hookspec"
+    assert spec.__name__ == kind.hook and spec.__module__ == hs.__name__
+    assert f"def {kind.hook}()" in inspect.getsource(hs)  # written out, not generated
+    doc = " ".join(inspect.getdoc(spec).split())
+    assert doc.startswith(kind.summary)
+    assert f"Config table ``[{kind.name}]``" in doc
+    assert f":class:`monoplane.stages.base.{kind.base.__name__}`" in doc
+    assert inspect.signature(spec).return_annotation == f"list[type[{kind.base.__name__}]]"
+
+
 def test_the_kinds_list_is_the_one_source():
     """Hookspecs, registry, config tables and the plugin guide's two tables all follow
     ``KINDS``: one registration hook per kind, one row per kind in each table, in order."""
     import monoplane.hookspecs as hs
 
     specs = {n for n in dir(hs) if n.startswith("monoplane_register_")}
-    assert specs == {k.hook for k in KINDS.values()} | {"monoplane_register_baselines"}
+    assert specs == {k.hook for k in KINDS.values()} | {"monoplane_register_baselines",
+                                                         "monoplane_register_exporters"}
     assert STAGE_KINDS == tuple(k.base.kind for k in KINDS.values())
     lines = DOCS.read_text().splitlines()
     contract_rows = [ln for ln in lines if ln.startswith("| `") and "` | `" in ln
@@ -77,7 +116,7 @@ def test_the_kinds_list_is_the_one_source():
     for row, kind in zip(contract_rows, KINDS.values(), strict=True):
         assert row.split("|")[2].strip() == f"`{kind.base.__name__}`", row
     hook_rows = [ln for ln in lines if ln.startswith("| `monoplane_register_")
-                 and "baselines" not in ln]
+                 and "baselines" not in ln and "exporters" not in ln]
     assert [r.split("`")[1].removesuffix("()") for r in hook_rows] == \
         [k.hook for k in KINDS.values()]
     for row, kind in zip(hook_rows, KINDS.values(), strict=True):

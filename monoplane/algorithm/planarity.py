@@ -151,7 +151,7 @@ def drop_planes(rec: Reconstruction, drop: np.ndarray) -> Reconstruction:
     remap = np.zeros(rec.num_planes + 1, dtype=np.int32)
     remap[1:][keep] = np.arange(1, int(keep.sum()) + 1, dtype=np.int32)
     assert rec.rmse is not None and rec.support is not None
-    return Reconstruction(frame=rec.frame, labels=remap[rec.labels], params=rec.params[keep],
+    return Reconstruction(frame=rec.frame, labels=remap[rec.labels], planes=rec.planes[keep],
                           rmse=rec.rmse[keep], support=rec.support[keep], config=rec.config,
                           timings=rec.timings)
 
@@ -190,7 +190,7 @@ def check_image(rec: Reconstruction, cfg: PlanarityConfig,
                else frame.normals[::step, ::step].reshape(-1, 3))
     shape_points = inner
     if cfg.inlier_band > 0 and epsilon is not None:
-        shape_points = _near_their_plane(points, inner, rec.params,
+        shape_points = _near_their_plane(points, inner, rec.planes,
                                          cfg.inlier_band * epsilon * scene_radius(
                                              frame.points(), frame.depth > 0))
     curved = curved_planes(points, normals, inner, rec.num_planes, cfg,

@@ -459,16 +459,16 @@ class SequentialRansac:
         already; a total-least-squares fit commutes with the similarity that maps them back
         to the camera frame, where planes and RMSE are then expressed.
         """
-        renumber, params, rmse, support = refit_planes(
+        renumber, params, rmse, support = refit_and_renumber(
             cloud.all_points, labels.ravel()[cloud.pixel_grid()[2]], int(labels.max(initial=0)))
         params = cloud.plane_to_camera(params)
         return Reconstruction(frame=frame, labels=renumber[labels],
-                              params=orient_towards_camera(params) if len(params)
+                              planes=orient_towards_camera(params) if len(params)
                               else np.zeros((0, 4)),
                               rmse=rmse * cloud.scale, support=support)
 
 
-def refit_planes(points: np.ndarray, labels: np.ndarray, count: int
+def refit_and_renumber(points: np.ndarray, labels: np.ndarray, count: int
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Least-squares plane of each label on all its points; labels too small to fit a plane
     become non-planar and the others are renumbered 1..P in their order.

@@ -396,7 +396,7 @@ def clean_regions(rec: Reconstruction, labels: np.ndarray, min_area: int,
     if split and (merge or absorb):
         tolerance = max_distance * scene_radius(points, valid)
         if merge:
-            fitted, _, _ = moments.planes(rec.params[origin - 1])
+            fitted, _, _ = moments.planes(rec.planes[origin - 1])
             extra = region_adjacency(pieces, connectivity) if merge_adjacent else None
             remap, origin = _merge_groups(moments, area, origin, fitted, max_angle_deg,
                                           tolerance, extra)
@@ -404,7 +404,7 @@ def clean_regions(rec: Reconstruction, labels: np.ndarray, min_area: int,
             moments = moments.combine(remap[1:], origin.size)
             area = np.bincount(remap[1:], area, origin.size + 1)[1:].astype(np.int64)
         if absorb:
-            fitted, _, _ = moments.planes(rec.params[origin - 1])
+            fitted, _, _ = moments.planes(rec.planes[origin - 1])
             remap = _absorb_remap(moments, area, region_adjacency(pieces, connectivity),
                                   fitted, min_area, tolerance)
             pieces = remap[pieces]
@@ -421,9 +421,9 @@ def clean_regions(rec: Reconstruction, labels: np.ndarray, min_area: int,
         source, merged = np.unique(source, return_inverse=True)
         final = np.concatenate([[0], merged + 1]).astype(np.int32)[final]
         moments = moments.combine(merged + 1, source.size)
-    inherited = rec.params[source - 1] if source.size else np.zeros((0, 4))
+    inherited = rec.planes[source - 1] if source.size else np.zeros((0, 4))
     params, rmse, support = moments.planes(inherited)
-    return Reconstruction(frame=frame, labels=final, params=params, rmse=rmse, support=support,
+    return Reconstruction(frame=frame, labels=final, planes=params, rmse=rmse, support=support,
                           config=rec.config, timings=dict(rec.timings))
 
 

@@ -7,13 +7,16 @@
 * :func:`run_batch` reads a folder of frame folders or a manifest (:mod:`.specs`), skips frames
   already done, runs the rest with :func:`process_frame` on an engine (:mod:`.engines`: a local
   process pool or Ray) and writes ``summary.json`` (and ``index.html``).
-* :func:`map_ordered` and :class:`WorkerPool` (:mod:`.pool`) are the local worker pool on its
-  own: a picklable function over items with a per-worker initializer, for any parallel work.
+* :func:`map_ordered` and :class:`WorkerPool` (:mod:`monoplane.host.pool`, re-exported here)
+  are the local worker pool on its own: a picklable function over items with a per-worker
+  initializer, for any parallel work.
 """
 
 from monoplane.batch.engines import ENGINES, EngineError
 from monoplane.batch.frame import BatchJob, FrameResult, process_frame
-from monoplane.batch.pool import (
+from monoplane.batch.runner import BatchOptions, BatchSummary, run_batch
+from monoplane.batch.specs import MANIFEST_COLUMNS, FrameSpec, read_frames
+from monoplane.host.pool import (
     TaskOutcome,
     WorkerDied,
     WorkerInitError,
@@ -21,11 +24,9 @@ from monoplane.batch.pool import (
     default_workers,
     map_ordered,
 )
-from monoplane.batch.runner import BatchSummary, run_batch
-from monoplane.batch.specs import MANIFEST_COLUMNS, FrameSpec, read_frames
 
 __all__ = [
-    "ENGINES", "MANIFEST_COLUMNS", "BatchJob", "BatchSummary", "EngineError", "FrameResult",
-    "FrameSpec", "TaskOutcome", "WorkerDied", "WorkerInitError", "WorkerPool",
+    "ENGINES", "MANIFEST_COLUMNS", "BatchJob", "BatchOptions", "BatchSummary", "EngineError",
+    "FrameResult", "FrameSpec", "TaskOutcome", "WorkerDied", "WorkerInitError", "WorkerPool",
     "default_workers", "map_ordered", "process_frame", "read_frames", "run_batch",
 ]

@@ -22,6 +22,8 @@ import socket
 import time
 from collections import deque
 from collections.abc import Iterator, Sequence
+from types import ModuleType
+from typing import Any
 
 from monoplane.batch.frame import (
     BatchJob,
@@ -31,9 +33,9 @@ from monoplane.batch.frame import (
     pipeline_for,
     process_frame,
 )
-from monoplane.batch.pool import WorkerPool
 from monoplane.batch.specs import FrameSpec
 from monoplane.errors import InvalidInput, MonoplaneError
+from monoplane.host.pool import WorkerInitError, WorkerPool, default_workers, fork_if_available
 
 ENGINES = ("local", "ray")
 
@@ -63,11 +65,9 @@ def run_local(job: BatchJob, specs: Sequence[FrameSpec], workers: int
     """Run frames on ``workers`` local processes (never more than there are frames)."""
     if not specs:
         return
-    from monoplane.batch.pool import WorkerInitError, fork_if_available
-
     try:
         # The batch driver only reads files and resolves the config, so its workers may fork
-        # from it and skip re-importing everything (see monoplane.batch.pool). Not when this
+        # from it and skip re-importing everything (see monoplane.host.pool). Not when this
         # process has built a pipeline itself (Python API use): its ONNX sessions' threads
         # would not exist in the children.
         method = "spawn" if has_pipeline() else fork_if_available()
@@ -161,6 +161,54 @@ def _lost_worker_errors() -> tuple[type[BaseException], ...]:
             rx.ObjectLostError, rx.OutOfMemoryError)
 
 
+def _join_ray(ray: ModuleType, address: str | None, workers: int | None) -> bool:
+    """Start or join Ray unless this process has already; True when it started it here.
+
+    Raises
+    ------
+    EngineError
+        When Ray cannot be started or joined (one line naming where).
+    """
+    from ray.exceptions import RayError
+
+    if ray.is_initialized():
+        return False
+    if address:
+        _probe(address)
+    try:
+        if address:
+            ray.init(address=address, log_to_driver=False, logging_level=logging.WARNING)
+        else:
+            ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False,
+                     logging_level=logging.WARNING)
+    except (ConnectionError, RayError, ValueError, RuntimeError) as exc:
+        where = f"at {address}" if address else "locally"
+        raise EngineError(f"cannot start or join Ray {where}: {_text(exc)}") from None
+    return True
+
+
+def _ray_result(ray: ModuleType, ref: Any, name: str, attempt: int,
+                notes: list[str] | None) -> FrameResult | None:
+    """The result of a finished frame task, or None when its worker was lost and the frame
+    should run again (attempt ``attempt`` of :data:`RAY_ATTEMPTS`; a note says so)."""
+    from ray.exceptions import RayError
+
+    try:
+        return ray.get(ref)
+    except _lost_worker_errors() as exc:
+        if attempt < RAY_ATTEMPTS:
+            if notes is not None:
+                notes.append(f"{name}: ran again after its Ray worker was "
+                             f"lost ({type(exc).__name__}, attempt {attempt} of "
+                             f"{RAY_ATTEMPTS})")
+            return None
+        return FrameResult(name, "failed",
+                           error=f"its Ray worker was lost on all {attempt} "
+                                 f"attempts; the last time: {_text(exc)}")
+    except RayError as exc:  # process_frame returns failures; this is Ray's or a bug
+        return FrameResult(name, "failed", error=one_line(exc))
+
+
 def run_ray(job: BatchJob, specs: Sequence[FrameSpec], workers: int | None,
             address: str | None = None, notes: list[str] | None = None
             ) -> Iterator[FrameResult]:
@@ -193,23 +241,7 @@ def run_ray(job: BatchJob, specs: Sequence[FrameSpec], workers: int | None,
     if not specs:
         return
     ray = _import_ray()
-    from ray.exceptions import RayError
-
-    started = False
-    if not ray.is_initialized():
-        if address:
-            _probe(address)
-        try:
-            if address:
-                ray.init(address=address, log_to_driver=False, logging_level=logging.WARNING)
-            else:
-                ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False,
-                         logging_level=logging.WARNING)
-        except (ConnectionError, RayError, ValueError, RuntimeError) as exc:
-            where = f"at {address}" if address else "locally"
-            raise EngineError(f"cannot start or join Ray {where}: {_text(exc)}") from None
-        started = True
-    lost = _lost_worker_errors()
+    started = _join_ray(ray, address, workers)
     pending: dict = {}
     try:
         n = workers or max(1, int(ray.cluster_resources().get("CPU", 1)))
@@ -246,21 +278,10 @@ def run_ray(job: BatchJob, specs: Sequence[FrameSpec], workers: int | None,
                 queue.clear()
                 break
             i = pending.pop(done[0])
-            try:
-                result = ray.get(done[0])
-            except lost as exc:
-                if attempts[i] < RAY_ATTEMPTS:
-                    queue.appendleft(i)
-                    if notes is not None:
-                        notes.append(f"{specs[i].name}: ran again after its Ray worker was "
-                                     f"lost ({type(exc).__name__}, attempt {attempts[i]} of "
-                                     f"{RAY_ATTEMPTS})")
-                    continue
-                result = FrameResult(specs[i].name, "failed",
-                                     error=f"its Ray worker was lost on all {attempts[i]} "
-                                           f"attempts; the last time: {_text(exc)}")
-            except RayError as exc:  # process_frame returns failures; this is Ray's or a bug
-                result = FrameResult(specs[i].name, "failed", error=one_line(exc))
+            result = _ray_result(ray, done[0], specs[i].name, attempts[i], notes)
+            if result is None:
+                queue.appendleft(i)
+                continue
             yield result
     finally:
         for ref in pending:  # Ctrl-C or an error: stop what still runs
@@ -288,8 +309,6 @@ def run_engine(engine: str, job: BatchJob, specs: Sequence[FrameSpec], workers: 
                ray_address: str | None = None, notes: list[str] | None = None
                ) -> Iterator[FrameResult]:
     """Dispatch to :func:`run_local` or :func:`run_ray` (``notes``: see :func:`run_ray`)."""
-    from monoplane.batch.pool import default_workers
-
     check_engine(engine, ray_address)
     if engine == "local":
         return run_local(job, specs, workers or default_workers())

@@ -2,14 +2,15 @@
 
 :func:`process_frame` is ``(job, frame spec) -> FrameResult``: it loads the frame's files, runs
 the pipeline the job's config describes and writes ``<out>/<name>/`` with
-:func:`monoplane.io.frames.save_reconstruction`, exactly as ``monoplane run`` does. It never raises for
+:func:`monoplane.export.save`, exactly as ``monoplane run`` does. It never raises for
 a bad frame: the failure comes back as a one-line reason. The pipeline (and any ONNX session
 its stages open) is built once per process and reused for every later frame of the same config.
 
-Completeness: ``save_reconstruction`` writes into a hidden temporary sibling folder and renames
-it into place, so ``<out>/<name>/`` appears whole or not at all, whenever the process is killed.
-A frame counts as done when its folder holds every file of :data:`OUTPUT_FILES` (and
-``report.html`` when reports are asked for). Temporary folders left by a killed run are deleted
+Completeness: ``save`` writes into a hidden temporary sibling folder and renames it into place,
+so ``<out>/<name>/`` appears whole or not at all, whenever the process is killed. A frame counts
+as done when its folder holds every file the output formats on by default state they write for
+a frame (:func:`monoplane.export.output_files`, third-party formats included), and
+``report.html`` when reports are asked for. Temporary folders left by a killed run are deleted
 by :func:`clean_stale` at the start of the next run.
 """
 
@@ -27,9 +28,6 @@ from monoplane.batch.specs import FrameSpec
 from monoplane.errors import MonoplaneError
 from monoplane.version import __version__
 
-#: Files ``monoplane run`` writes for every frame.
-OUTPUT_FILES = ("labels.png", "planes.json", "planes.ply", "planes.glb", "depth_planar.npy",
-                "config.toml")
 REPORT_FILE = "report.html"
 #: Folder of ``index.html``'s thumbnails and of the one 3D viewer script every frame report of
 #: the batch shares.
@@ -184,7 +182,8 @@ def process_frame(job: BatchJob, spec: FrameSpec) -> FrameResult:
         ``"ok"`` with the plane count, or ``"failed"`` with a one-line reason; never raises
         for a bad frame or a stage error.
     """
-    from monoplane.io.frames import load_frame, save_reconstruction
+    from monoplane.export.saving import save
+    from monoplane.io.frames import load_frame
 
     start = time.perf_counter()
     try:
@@ -201,7 +200,7 @@ def process_frame(job: BatchJob, spec: FrameSpec) -> FrameResult:
             viewer = f"../{ASSETS}/{install_viewer(Path(job.out) / ASSETS)}"
             report = functools.partial(write_frame_report, rec, viewer=viewer)
         # overwrite=True: the caller already decided this frame must be (re)computed.
-        save_reconstruction(rec, Path(job.out) / spec.name, overwrite=True, also=report)
+        save(rec, Path(job.out) / spec.name, overwrite=True, also=report, pm=pipe.pm)
     except Exception as exc:
         return FrameResult(spec.name, "failed", seconds=time.perf_counter() - start,
                            error=one_line(exc))
@@ -211,8 +210,28 @@ def process_frame(job: BatchJob, spec: FrameSpec) -> FrameResult:
 
 def is_complete(folder: Path, report: bool = False) -> bool:
     """Whether ``folder`` holds a whole frame output (and ``report.html`` if ``report``)."""
-    names = OUTPUT_FILES + ((REPORT_FILE,) if report else ())
+    names = frame_output_files() + ((REPORT_FILE,) if report else ())
     return folder.is_dir() and all((folder / n).is_file() for n in names)
+
+
+@functools.cache
+def frame_output_files() -> tuple[str, ...]:
+    """The files ``monoplane run`` writes for a frame: those the output formats on by default
+    state (:func:`monoplane.export.output_files`), looked up once per process."""
+    from monoplane.export.saving import output_files
+
+    return output_files("frame")
+
+
+def __getattr__(name: str) -> Any:
+    if name == "OUTPUT_FILES":  # a constant until 0.2.0: the formats are plugins now
+        import warnings
+
+        warnings.warn("monoplane.batch.frame.OUTPUT_FILES is deprecated; use "
+                      "monoplane.export.output_files('frame') (the old name goes in 0.3.0)",
+                      DeprecationWarning, stacklevel=2)
+        return frame_output_files()
+    raise AttributeError(f"module 'monoplane.batch.frame' has no attribute {name!r}")
 
 
 def stored_result(folder: Path) -> tuple[int | None, dict[str, Any] | None]:
@@ -228,8 +247,8 @@ def clean_stale(out: Path) -> list[Path]:
     """Delete temporary folders that a killed run left in ``out``; returns what was removed.
 
     These are the hidden ``.<name>.<random>.partial`` / ``.old`` siblings of
-    :func:`monoplane.io.frames.atomic_output_dir`. Call it only while holding the batch lock, so that
-    no live run is writing them.
+    :func:`monoplane.export.files.atomic_output_dir`. Call it only while holding the batch lock,
+    so that no live run is writing them.
     """
     removed = []
     for p in out.iterdir():

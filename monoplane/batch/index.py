@@ -18,6 +18,7 @@ import numpy as np
 
 from monoplane.batch.frame import ASSETS, REPORT_FILE, BatchSummary
 from monoplane.batch.specs import FrameSpec
+from monoplane.io.frames import read_image
 from monoplane.report import figures as fig
 from monoplane.report import html
 from monoplane.report.viewer import SECTION_ID
@@ -27,8 +28,6 @@ THUMB_WIDTH = 240
 
 def thumbnail(spec: FrameSpec, frame_dir: Path, dest: Path) -> bool:
     """Write a small label overlay of one finished frame; False if its files are unreadable."""
-    from monoplane.io.frames import read_image
-
     labels = cv2.imread(str(frame_dir / "labels.png"), cv2.IMREAD_UNCHANGED)
     if labels is None or labels.ndim != 2:
         return False

@@ -26,6 +26,8 @@ from monoplane.batch.frame import FrameResult, one_line
 from monoplane.batch.specs import FrameSpec, read_frames
 from monoplane.datamodel import Reconstruction
 from monoplane.errors import InvalidInput
+from monoplane.export.rerun_log import log_reconstruction, recording_file, require_rerun
+from monoplane.io.frames import load_frame
 
 #: Timeline of a batch recording; its steps are frame indices in input order.
 TIMELINE = "frame"
@@ -52,8 +54,6 @@ def load_frame_output(folder: Path, spec: FrameSpec) -> Reconstruction:
     InvalidInput
         A file is missing or unreadable.
     """
-    from monoplane.io.frames import load_frame
-
     try:
         doc = json.loads((folder / "planes.json").read_text())
         k = doc["intrinsics"]
@@ -69,7 +69,7 @@ def load_frame_output(folder: Path, spec: FrameSpec) -> Reconstruction:
                        depth_scale=spec.depth_scale, nan_as_invalid=spec.nan_as_invalid,
                        depth_kind=spec.depth_kind)
     return Reconstruction(frame=frame.with_(name=spec.name), labels=labels.astype(np.int32),
-                          params=params)
+                          planes=params)
 
 
 def write_batch_recording(path: str | Path, out: str | Path, specs: Sequence[FrameSpec],
@@ -93,8 +93,6 @@ def write_batch_recording(path: str | Path, out: str | Path, specs: Sequence[Fra
         ``"name: reason"`` of each finished frame that could not be reloaded (and is therefore
         missing from the recording).
     """
-    from monoplane.export.rerun_log import log_reconstruction, recording_file, require_rerun
-
     rr = require_rerun()
     done = {f.name for f in frames if f.status in ("ok", "skipped")}
     missing = []

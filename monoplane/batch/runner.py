@@ -9,6 +9,7 @@ progress bar, then write ``summary.json`` (and ``index.html`` with ``report``) a
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import fcntl
 import json
 import os
@@ -16,6 +17,7 @@ import sys
 import tempfile
 import time
 from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -105,22 +107,12 @@ def plan(specs: Sequence[FrameSpec], out: Path, config: dict[str, Any], overwrit
     return todo, decided
 
 
-def run_batch(source: str | Path | Sequence[FrameSpec], out: str | Path,
-              config: str | Path | dict[str, Any] | None = None, preset: str | None = None,
-              overrides: dict[str, Any] | list[str] | None = None, *, workers: int | None = None,
-              engine: str = "local", ray_address: str | None = None, overwrite: bool = False,
-              report: bool = False, depth_scale: float | None = None,
-              depth_kind: str = "metric", nan_as_invalid: bool = False,
-              progress: bool = True) -> BatchSummary:
-    """Reconstruct every frame of a folder or manifest into ``out/<name>/``.
+@dataclass(frozen=True)
+class BatchOptions:
+    """How :func:`run_batch` runs a batch: the pipeline, the engine and how frames are read.
 
-    Parameters
+    Attributes
     ----------
-    source : path or sequence of FrameSpec
-        A folder of frame folders, a ``.jsonl``/``.csv`` manifest (see
-        :mod:`monoplane.batch.specs`), or specs built in Python.
-    out : path
-        Batch output folder (created if missing).
     config, preset, overrides
         Pipeline configuration, as :meth:`monoplane.Pipeline.from_config`.
     workers : int, optional
@@ -138,6 +130,99 @@ def run_batch(source: str | Path | Sequence[FrameSpec], out: str | Path,
         Defaults for every frame (a manifest's ``depth_scale`` column wins).
     progress : bool
         Show a progress bar on stderr.
+    """
+
+    config: str | Path | dict[str, Any] | None = None
+    preset: str | None = None
+    overrides: dict[str, Any] | list[str] | None = None
+    workers: int | None = None
+    engine: str = "local"
+    ray_address: str | None = None
+    overwrite: bool = False
+    report: bool = False
+    depth_scale: float | None = None
+    depth_kind: str = "metric"
+    nan_as_invalid: bool = False
+    progress: bool = True
+
+    @classmethod
+    def of(cls, options: BatchOptions | None = None, **fields: Any) -> BatchOptions:
+        """``options`` (default: the defaults) with ``fields`` replaced.
+
+        Raises
+        ------
+        TypeError
+            When a keyword is not a field (the message lists them).
+        """
+        valid = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(fields) - valid)
+        if unknown:
+            raise TypeError(f"run_batch() got an unexpected keyword argument '{unknown[0]}'; "
+                            f"options: {', '.join(sorted(valid))}")
+        return dataclasses.replace(options or cls(), **fields)
+
+
+def _read_specs(source: str | Path | Sequence[FrameSpec], opts: BatchOptions,
+                notes: list[str]) -> tuple[list[FrameSpec], str]:
+    """The frame specs of ``source`` and how to name it in messages; checks their names."""
+    if isinstance(source, (str, Path)):
+        specs = read_frames(source, opts.depth_scale, opts.depth_kind, opts.nan_as_invalid,
+                            notes)
+        source_text = str(source)
+    else:
+        # Workers may run elsewhere (Ray) with another working directory: absolute paths.
+        specs = [absolute_paths(s) for s in source]
+        source_text = f"{len(specs)} frame specs"
+        for spec in specs:
+            check_name(spec.name, "FrameSpec")
+    names = [s.name for s in specs]
+    if len(set(names)) != len(names):
+        dup = next(n for n in names if names.count(n) > 1)
+        raise InvalidInput(f"frame name {dup!r} appears twice in {source_text}")
+    return specs, source_text
+
+
+def _run_frames(job: BatchJob, todo: list[FrameSpec], decided: dict[str, FrameResult],
+                total: int, opts: BatchOptions, notes: list[str]
+                ) -> Iterator[FrameResult]:
+    """Run ``todo`` on the engine, showing progress over all ``total`` frames; yields each
+    result as it comes."""
+    counts = {"ok": 0, "failed": sum(r.status == "failed" for r in decided.values()),
+              "skipped": sum(r.status == "skipped" for r in decided.values())}
+    bar = _Bar(total=total, initial=len(decided), unit="frame", desc="batch",
+               disable=not opts.progress, file=sys.stderr, dynamic_ncols=True)
+    run_start = time.perf_counter()
+    ran = 0
+    try:
+        for res in run_engine(opts.engine, job, todo, opts.workers, opts.ray_address, notes):
+            counts[res.status] += 1
+            ran += 1
+            fps = ran / max(time.perf_counter() - run_start, 1e-9)
+            bar.set_postfix_str(f"done={counts['ok']} failed={counts['failed']} "
+                                f"skipped={counts['skipped']} {fps:.2f} fps")
+            bar.update()
+            yield res
+    finally:
+        bar.close()
+
+
+def run_batch(source: str | Path | Sequence[FrameSpec], out: str | Path,
+              options: BatchOptions | str | Path | dict[str, Any] | None = None,
+              **fields: Any) -> BatchSummary:
+    """Reconstruct every frame of a folder or manifest into ``out/<name>/``.
+
+    Parameters
+    ----------
+    source : path or sequence of FrameSpec
+        A folder of frame folders, a ``.jsonl``/``.csv`` manifest (see
+        :mod:`monoplane.batch.specs`), or specs built in Python.
+    out : path
+        Batch output folder (created if missing).
+    options : BatchOptions, optional
+        How to run it (a config path or dict here is taken as ``config``, as before 0.2.0).
+    **fields
+        Fields of :class:`BatchOptions` given as keywords, e.g.
+        ``run_batch(src, out, preset="range", workers=2)``; they override ``options``.
 
     Returns
     -------
@@ -151,65 +236,46 @@ def run_batch(source: str | Path | Sequence[FrameSpec], out: str | Path,
     KeyboardInterrupt
         After stopping the workers and writing ``summary.json`` (``interrupted: true``).
     """
+    # numba, SciPy and OpenCV load with the pipeline, when a batch runs: importing
+    # monoplane.batch for its specs or pool stays light
     from monoplane.host.pipeline import Pipeline
 
+    if options is not None and not isinstance(options, BatchOptions):
+        options, fields = None, {"config": options, **fields}
+    opts = BatchOptions.of(options, **fields)
     start = time.perf_counter()
     notes: list[str] = []
-    if isinstance(source, (str, Path)):
-        specs = read_frames(source, depth_scale, depth_kind, nan_as_invalid, notes)
-        source_text = str(source)
-    else:
-        # Workers may run elsewhere (Ray) with another working directory: absolute paths.
-        specs = [absolute_paths(s) for s in source]
-        source_text = f"{len(specs)} frame specs"
-        for spec in specs:
-            check_name(spec.name, "FrameSpec")
-    names = [s.name for s in specs]
-    if len(set(names)) != len(names):
-        dup = next(n for n in names if names.count(n) > 1)
-        raise InvalidInput(f"frame name {dup!r} appears twice in {source_text}")
-    if workers is not None and workers < 1:
-        raise InvalidInput(f"--workers must be at least 1, got {workers}")
-    check_engine(engine, ray_address)
-    cfg = Pipeline.from_config(config, preset=preset, overrides=overrides).config.to_dict()
+    specs, source_text = _read_specs(source, opts, notes)
+    if opts.workers is not None and opts.workers < 1:
+        raise InvalidInput(f"--workers must be at least 1, got {opts.workers}")
+    check_engine(opts.engine, opts.ray_address)
+    cfg = Pipeline.from_config(opts.config, preset=opts.preset,
+                               overrides=opts.overrides).config.to_dict()
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise InvalidInput(f"output path {out} is an existing file, not a folder")
     out.mkdir(parents=True, exist_ok=True)
-    summary = BatchSummary([], cfg, engine=engine, workers=workers,
+    summary = BatchSummary([], cfg, engine=opts.engine, workers=opts.workers,
                            notes=notes, info={"input": source_text,
                                  "started": datetime.now(UTC).isoformat(
                                      timespec="seconds")})
     with batch_lock(out):
         clean_stale(out)
-        todo, decided = plan(specs, out, cfg, overwrite, report)
-        job = BatchJob(config=cfg, out=str(out.resolve()), report=report)
+        todo, decided = plan(specs, out, cfg, opts.overwrite, opts.report)
+        job = BatchJob(config=cfg, out=str(out.resolve()), report=opts.report)
         results = dict(decided)
-        counts = {"ok": 0, "failed": sum(r.status == "failed" for r in decided.values()),
-                  "skipped": sum(r.status == "skipped" for r in decided.values())}
-        bar = _Bar(total=len(specs), initial=len(decided), unit="frame", desc="batch",
-                   disable=not progress, file=sys.stderr, dynamic_ncols=True)
-        run_start = time.perf_counter()
-        ran = 0
         try:
-            for res in run_engine(engine, job, todo, workers, ray_address, notes):
+            for res in _run_frames(job, todo, decided, len(specs), opts, notes):
                 results[res.name] = res
-                counts[res.status] += 1
-                ran += 1
-                fps = ran / max(time.perf_counter() - run_start, 1e-9)
-                bar.set_postfix_str(f"done={counts['ok']} failed={counts['failed']} "
-                                    f"skipped={counts['skipped']} {fps:.2f} fps")
-                bar.update()
         except KeyboardInterrupt:
             summary.interrupted = True
             raise
         finally:
-            bar.close()
-            summary.frames = [results[n] for n in names if n in results]
+            summary.frames = [results[s.name] for s in specs if s.name in results]
             summary.seconds = time.perf_counter() - start
             write_json_atomic(out / "summary.json", summary.to_dict())
-        if report:
-            from monoplane.batch.index import write_index
+        if opts.report:
+            from monoplane.batch.index import write_index  # loads OpenCV and the report
 
             write_index(summary, specs, out)
     return summary

@@ -58,7 +58,9 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from monoplane.batch.engines import check_engine
 from monoplane.errors import InvalidInput
+from monoplane.synth.batchset import write_frame_folder
 
 
 @dataclass
@@ -255,8 +257,6 @@ def _write_input(root: Path, frames: int, distinct: int, size: tuple[int, int], 
                  seed: int) -> Path:
     """The batch input: a folder of ``frames`` frames, or a manifest cycling over
     ``distinct`` of them when there are more."""
-    from monoplane.synth.batchset import write_frame_folder
-
     folders = write_frame_folder(root / "frames", min(frames, distinct), size[0], size[1],
                                  level, seed)
     if frames <= distinct:
@@ -313,8 +313,6 @@ def bench_batch(preset: str = "monoplane", size: tuple[int, int] = (640, 480),
     -------
     BatchBenchResult
     """
-    from monoplane.batch.engines import check_engine
-
     if not Path("/proc/self/smaps_rollup").exists():
         raise InvalidInput("the batch bench reads process memory from /proc/<pid>/smaps_rollup, "
                            "which this system does not have (Linux 4.14 or later)")

@@ -3,13 +3,12 @@
 from __future__ import annotations
 
 import argparse
-import json
+from pathlib import Path
 
 import numpy as np
 
 from monoplane.cli.common import add_rerun_arg, add_set_arg, check_output_args, write_rerun_arg
 from monoplane.errors import InvalidInput
-from monoplane.io.frames import atomic_output_dir, write_plane_mesh_ply
 
 DESCRIPTION = """Detect the planes of a point cloud (PLY, PCD, XYZ or PTS) with MonoPlane's
 graph-cut RANSAC and the graph-crf refiner, and write into --out:
@@ -71,12 +70,9 @@ def _up_hint(text: str) -> tuple[float, float, float] | None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import open3d as o3d
-
-    from monoplane.io.clouds import read_point_cloud
-    from monoplane.host.config import dumps_toml
+    from monoplane.export.saving import save
     from monoplane.host.detect import detect_planes
-    from monoplane.report.cloud import cloud_glb, write_cloud_report
+    from monoplane.io.clouds import read_point_cloud
 
     check_output_args(args)  # fail before any work
     cloud = read_point_cloud(args.cloud)
@@ -85,20 +81,15 @@ def run(args: argparse.Namespace) -> int:
                                overrides=args.overrides or None)
     except InvalidInput as exc:  # what is wrong with the points: name the file
         raise InvalidInput(f"point cloud {args.cloud}: {exc}") from None
-    with atomic_output_dir(args.out, args.overwrite) as tmp:
-        np.save(tmp / "labels.npy", result.labels)
-        doc = {"source": str(args.cloud), **result.planes_document()}
-        (tmp / "planes.json").write_text(json.dumps(doc, indent=2) + "\n")
-        (tmp / "config.toml").write_text(dumps_toml(result.config))
-        if not o3d.io.write_point_cloud(str(tmp / "labelled.ply"), result.to_open3d()):
-            raise InvalidInput(f"cannot write {args.out}/labelled.ply")
-        colors = np.round(result.plane_colors()[1:] * 255).astype(np.uint8)
-        mesh = result.plane_mesh()
-        write_plane_mesh_ply(tmp / "planes.ply", mesh, colors)
-        (tmp / "planes.glb").write_bytes(cloud_glb(result, mesh))
-        if args.report:
-            write_cloud_report(result, tmp, source=str(args.cloud), progress=not args.quiet,
+    result.source = str(args.cloud)
+    report = None
+    if args.report:
+        from monoplane.report.cloud import write_cloud_report
+
+        def report(folder: Path) -> None:
+            write_cloud_report(result, folder, source=str(args.cloud), progress=not args.quiet,
                                up_hint=args.up)
+    save(result, args.out, args.overwrite, also=report)
     write_rerun_arg(args, result)
     if not args.quiet:
         for note in result.notes:

@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from monoplane.export.files import check_output_dir
 from monoplane.host.pipeline import Pipeline
-from monoplane.io.frames import check_output_dir
 
 
 def add_pipeline_args(parser: argparse.ArgumentParser) -> None:

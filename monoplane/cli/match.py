@@ -6,7 +6,8 @@ import argparse
 import sys
 
 from monoplane.cli.common import add_pipeline_args, pipeline_from_args
-from monoplane.io.frames import check_output_dir, load_frame
+from monoplane.export.files import check_output_dir
+from monoplane.io.frames import load_frame
 
 DESCRIPTION = """Run the configured matcher (default: pycolmap SIFT + exhaustive matching +
 incremental mapping, on the CPU) on two or more images and write into --out:
@@ -36,9 +37,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from monoplane.errors import InvalidInput
-    from monoplane.multiview import save_sfm
-    from monoplane.multiview.registration import hold_given_intrinsics, structure_from_motion
-    from monoplane.multiview.summaries import sfm_summary, unregistered_names
+    from monoplane.multiview import (
+        hold_given_intrinsics,
+        save_sfm,
+        sfm_summary,
+        structure_from_motion,
+        unregistered_names,
+    )
 
     check_output_dir(args.out, args.overwrite)  # fail before any work
     if len(args.images) < 2:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import Any
 
 from monoplane.cli.common import (
     add_input_args,
@@ -66,9 +67,8 @@ def _per_image(files: list[str] | None, n: int, what: str) -> list[str | None]:
 
 def run(args: argparse.Namespace) -> int:
     from monoplane.errors import InvalidInput
-    from monoplane.multiview import reconstruct_multiview, save_scene
-    from monoplane.multiview.registration import hold_given_intrinsics
-    from monoplane.multiview.summaries import scene_summary
+    from monoplane.export.saving import save
+    from monoplane.multiview import hold_given_intrinsics, reconstruct_multiview, scene_summary
 
     check_output_args(args)  # fail before any work
     n = len(args.images)
@@ -91,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
               "from a 60 degree field-of-view start", file=sys.stderr)
     result = reconstruct_multiview(frames, pipe, progress=not args.quiet, strict=args.strict,
                                    workers=args.workers)
-    out = save_scene(result, args.out, overwrite=args.overwrite, report=args.report)
+    out = save(result, args.out, overwrite=args.overwrite, also=_scene_report(args, result))
     write_rerun_arg(args, result)
     if not args.quiet:
         print(f"{scene_summary(result)} -> {out}")
@@ -99,3 +99,12 @@ def run(args: argparse.Namespace) -> int:
         if refined:
             print(refined)
     return 0
+
+
+def _scene_report(args: argparse.Namespace, result: Any):  # -> Callable[[Path], None] | None
+    """With ``--report``, what writes ``report.html`` into the output folder."""
+    if not args.report:
+        return None
+    from monoplane.report import write_scene_report
+
+    return lambda folder: write_scene_report(result.scene, folder)

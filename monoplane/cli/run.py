@@ -14,9 +14,10 @@ from monoplane.cli.common import (
     pipeline_from_args,
     write_rerun_arg,
 )
+from monoplane.export.saving import save
 from monoplane.host.config import cue_model_overrides
 from monoplane.host.cue_models import prepare_cue_model, require_depth_source
-from monoplane.io.frames import load_frame, save_reconstruction
+from monoplane.io.frames import load_frame
 
 DESCRIPTION = """Recover the planes of one image and write labels.png (uint16, 0 = non-planar),
 planes.json (normal . X + offset = 0 in the camera frame and the depth's units), planes.ply,
@@ -70,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
         from monoplane.report import write_frame_report  # loads the plotting libraries
 
         report = functools.partial(write_frame_report, rec, progress=not args.quiet)
-    out = save_reconstruction(rec, args.out, overwrite=args.overwrite, also=report)
+    out = save(rec, args.out, overwrite=args.overwrite, also=report)
     write_rerun_arg(args, rec)
     if not args.quiet:
         for note in rec.frame.notes:

@@ -16,6 +16,9 @@ A profile can also be declared in TOML, with no Python at all (:mod:`monoplane.c
 networks to ONNX.
 """
 
+import warnings
+from typing import Any
+
 from monoplane.cues.intrinsics import (
     ASSUMED_INTRINSICS_NOTE,
     DEFAULT_HFOV_DEG,
@@ -45,7 +48,7 @@ from monoplane.cues.transforms import (
     Letterbox,
     decode_normals,
     depth_from_disparity,
-    orient_normals,
+    face_camera,
     plan_letterbox,
     prepare_image,
     relative_depth_from_depth,
@@ -58,7 +61,16 @@ __all__ = [
     "DeclaredProfile", "load_profile_file", "profile_from_table", "profile_to_toml",
     "IMAGENET_MEAN", "IMAGENET_STD", "Letterbox", "ModelSpec", "OUTPUT_KINDS", "OnnxModel",
     "OnnxProfile", "assume_intrinsics", "decode_normals", "depth_from_disparity",
-    "get_profile", "intrinsics_assumed", "orient_normals", "parse_axes", "plan_letterbox",
+    "face_camera", "get_profile", "intrinsics_assumed", "parse_axes", "plan_letterbox",
     "prepare_image", "reassume_intrinsics", "relative_depth_from_depth", "restore_map",
     "scaled_intrinsics",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    # the old name of face_camera (monoplane.geometry.orientation.orient_normals is another)
+    if name == "orient_normals":
+        warnings.warn("monoplane.cues.orient_normals is now face_camera; the old name goes in "
+                      "0.3.0", DeprecationWarning, stacklevel=2)
+        return face_camera
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

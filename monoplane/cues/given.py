@@ -43,7 +43,7 @@ def use_given_cues(frame: Frame) -> Frame:
 @kernel
 def _orient_and_blank(normals: np.ndarray, depth: np.ndarray, k_inv: np.ndarray
                       ) -> tuple[np.ndarray, int]:
-    """:func:`~monoplane.cues.transforms.orient_normals` of (H, W, 3) float32 ``normals``
+    """:func:`~monoplane.cues.transforms.face_camera` of (H, W, 3) float32 ``normals``
     with the (3, 3) float32 ``k_inv``, then zero where the (H, W) float32 ``depth`` is not
     positive, in one pass (the same float32 operations in the same order, so the same bits).
     Also returns how many normals the orientation flipped."""

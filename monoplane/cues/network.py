@@ -20,7 +20,7 @@ from monoplane.cues.session import OnnxModel
 from monoplane.cues.transforms import (
     decode_normals,
     depth_from_disparity,
-    orient_normals,
+    face_camera,
     relative_depth_from_depth,
 )
 from monoplane.datamodel import Frame
@@ -247,5 +247,5 @@ class CueNetwork:
                     changes["normals_from_depth"] = True
             changes["normals"] = np.where((depth > 0)[..., None], normals, 0).astype(np.float32)
         else:
-            changes["normals"] = orient_normals(frame.normals, frame.K)
+            changes["normals"] = face_camera(frame.normals, frame.K)
         return frame.with_(notes=notes, **changes)

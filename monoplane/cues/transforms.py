@@ -6,7 +6,9 @@ Every function is pure numpy/OpenCV so plugins can reuse them with their own ses
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
+from typing import Any
 
 import cv2
 import numpy as np
@@ -227,11 +229,14 @@ def decode_normals(raw: np.ndarray, spec: ModelSpec, K: np.ndarray) -> np.ndarra
     n = np.stack([sign * v[..., ch] for ch, sign in axes], axis=-1)
     norm = np.linalg.norm(n, axis=-1, keepdims=True)
     n = np.where(norm > 1e-6, n / np.maximum(norm, 1e-6), 0.0).astype(np.float32)
-    return orient_normals(n, K)
+    return face_camera(n, K)
 
 
-def orient_normals(normals: np.ndarray, K: np.ndarray) -> np.ndarray:
-    """Flip normals that point away from the camera.
+def face_camera(normals: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """Flip normals that point away from the camera, pixel by pixel.
+
+    (Formerly ``orient_normals``, a name :func:`monoplane.geometry.orientation.orient_normals`
+    keeps for orienting a cloud's normals consistently.)
 
     Parameters
     ----------
@@ -255,3 +260,12 @@ def orient_normals(normals: np.ndarray, K: np.ndarray) -> np.ndarray:
     dot += normals[..., 1] * (k_inv[1, 0] * u + k_inv[1, 1] * v + k_inv[1, 2])
     dot += normals[..., 2] * (k_inv[2, 0] * u + k_inv[2, 1] * v + k_inv[2, 2])
     return np.where((dot > 0)[..., None], -normals, normals)
+
+
+def __getattr__(name: str) -> Any:
+    # the old name of face_camera, which also named the cloud orientation of geometry
+    if name == "orient_normals":
+        warnings.warn("monoplane.cues.transforms.orient_normals is now face_camera; the old "
+                      "name goes in 0.3.0", DeprecationWarning, stacklevel=2)
+        return face_camera
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -5,8 +5,10 @@ Baselines register through the pluggy hook ``monoplane_register_baselines`` (see
 :mod:`monoplane.hookspecs`), like every other extension point: a plugin returns a dict from
 method name (what users pass to ``--baseline``) to callable. What a baseline is and the
 settings it shares with the pipeline are in :mod:`monoplane.evaluation.baseline_base`; the
-built-in ``open3d-ransac`` is the plugin :mod:`monoplane.evaluation.open3d_baseline`. Both
-modules' public names can be imported from here too. Use :func:`run_baseline` to run one by
+built-in ``open3d-ransac`` is the plugin :mod:`monoplane.evaluation.open3d_baseline`, which
+this module registers on the plugin manager it reads (:data:`BUILTIN_BASELINES`), so that the
+core registry (:mod:`monoplane.host.registry`) loads no evaluation module. Both modules'
+public names can be imported from here too. Use :func:`run_baseline` to run one by
 name::
 
     from monoplane.evaluation.baselines import run_baseline
@@ -16,13 +18,13 @@ name::
 from __future__ import annotations
 
 import functools
+import importlib
 import time
 from collections.abc import Mapping, Sequence
 from typing import Any
 
 import pluggy
 
-from monoplane.host.config import parse_override
 from monoplane.datamodel import Frame, Reconstruction
 from monoplane.errors import ConfigError, PluginError
 from monoplane.evaluation.baseline_base import (
@@ -32,22 +34,41 @@ from monoplane.evaluation.baseline_base import (
     baseline_config,
 )
 from monoplane.evaluation.open3d_baseline import Open3DRansacConfig, open3d_ransac
+from monoplane.host.config import parse_override
+from monoplane.host.registry import get_plugin_manager
 
 __all__ = [
-    "CALL_TIMING", "Baseline", "Open3DRansacConfig", "RansacBaselineSettings", "baseline_config",
-    "baseline_names", "bind_baseline", "get_baseline", "open3d_ransac", "parse_baseline_options",
-    "registered_baselines", "run_baseline",
+    "BUILTIN_BASELINES", "CALL_TIMING", "Baseline", "Open3DRansacConfig",
+    "RansacBaselineSettings", "baseline_config", "baseline_names", "bind_baseline",
+    "get_baseline", "open3d_ransac", "parse_baseline_options", "registered_baselines",
+    "run_baseline", "with_builtin_baselines",
 ]
 
 
+#: The built-in baseline plugins: evaluation registers them on the plugin manager it reads.
+BUILTIN_BASELINES: tuple[str, ...] = ("monoplane.evaluation.open3d_baseline",)
+
+
+def with_builtin_baselines(pm: pluggy.PluginManager) -> pluggy.PluginManager:
+    """``pm`` with the modules of :data:`BUILTIN_BASELINES` registered (once), under their
+    module names, as :func:`~monoplane.host.registry.get_plugin_manager` registers the
+    built-in stages."""
+    for modname in BUILTIN_BASELINES:
+        module = importlib.import_module(modname)
+        if not pm.is_registered(module):
+            pm.register(module, name=modname)
+    return pm
+
+
 def registered_baselines(pm: pluggy.PluginManager | None = None) -> dict[str, Baseline]:
-    """Every baseline the plugin manager knows, by name.
+    """Every baseline the plugin manager knows, by name, the built-in ones included.
 
     Parameters
     ----------
     pm : pluggy.PluginManager, optional
         Defaults to :func:`monoplane.host.registry.get_plugin_manager` (built-ins, plus
-        installed plugins unless autoloading is disabled).
+        installed plugins unless autoloading is disabled). The built-in baselines are
+        registered on it (:func:`with_builtin_baselines`).
 
     Raises
     ------
@@ -55,9 +76,7 @@ def registered_baselines(pm: pluggy.PluginManager | None = None) -> dict[str, Ba
         When a plugin returns something else than a name -> callable dict, or two plugins
         register the same name.
     """
-    from monoplane.host.registry import get_plugin_manager
-
-    pm = pm or get_plugin_manager()
+    pm = with_builtin_baselines(pm or get_plugin_manager())
     found: dict[str, Baseline] = {}
     for impl in pm.hook.monoplane_register_baselines.get_hookimpls():
         table = impl.function() or {}

@@ -6,15 +6,15 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from monoplane.batch.throughput import BatchBenchResult, format_batch_bench
 from monoplane.errors import InvalidInput
-from monoplane.evaluation.bench import COMPLEXITY_LEVELS
+from monoplane.evaluation.bench import COMPLEXITY_LEVELS, BenchResult, format_bench
+from monoplane.host.pool import default_workers
 
 
 def parse_worker_counts(text: str | None) -> list[int]:
     """``"1,2"`` as worker counts to compare, the first being the reference; None gives 1 and
-    the number of cores (:func:`monoplane.batch.default_workers`)."""
-    from monoplane.batch import default_workers
-
+    the number of cores (:func:`monoplane.host.pool.default_workers`)."""
     if text is None:
         return list(dict.fromkeys([1, default_workers()]))
     try:
@@ -58,9 +58,6 @@ def saved_bench_table(path: str | Path, markdown: bool = False) -> str:
     monoplane.errors.InvalidInput
         Naming ``path`` when it cannot be read or is no such file.
     """
-    from monoplane.batch.throughput import BatchBenchResult, format_batch_bench
-    from monoplane.evaluation.bench import BenchResult, format_bench
-
     try:
         data = json.loads(Path(path).read_text())
         if data.get("kind") == "batch":

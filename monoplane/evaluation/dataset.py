@@ -31,8 +31,12 @@ import numpy as np
 
 from monoplane.datamodel import Frame, Reconstruction
 from monoplane.errors import ConfigError, InvalidInput, MonoplaneError
+from monoplane.evaluation.baselines import bind_baseline
 from monoplane.evaluation.segcomp import DEFAULT_TOLERANCE, SegCompScores, segcomp
 from monoplane.evaluation.segmentation import SegmentationScores, segmentation_scores
+from monoplane.host.detect import detect_planes
+from monoplane.host.pipeline import Pipeline
+from monoplane.io.frames import load_frame
 
 _RGB_NAMES = ("rgb.png", "rgb.jpg", "color.png", "color.jpg")
 
@@ -64,8 +68,6 @@ def load_dataset(folder: str | Path) -> list[LabelledFrame]:
         When the folder does not exist, holds no frame with ``gt_labels.png``, or a frame's
         files do not agree in size.
     """
-    from monoplane.io.frames import load_frame
-
     root = Path(folder)
     if not root.is_dir():
         raise InvalidInput(f"--data {root}: not a folder")
@@ -168,24 +170,19 @@ class DatasetResults:
 def cloud_reconstruction(frame: Frame, preset: str, overrides: list[str] | None,
                          seed: int) -> Reconstruction:
     """Run :func:`monoplane.detect_planes` on a frame's shuffled 3D points; labels per pixel."""
-    from monoplane.host.detect import detect_planes
-
     valid = np.flatnonzero(frame.valid.ravel())
     order = np.random.default_rng(seed).permutation(valid.size)
     points = frame.points().reshape(-1, 3)[valid[order]]
     res = detect_planes(points, preset=preset, overrides=overrides)
     flat = np.zeros(frame.height * frame.width, dtype=np.int32)
     flat[valid[order]] = res.labels
-    return Reconstruction(frame=frame, labels=flat.reshape(frame.shape), params=res.planes,
-                          rmse=res.rmse, support=res.num_points)
+    return Reconstruction(frame=frame, labels=flat.reshape(frame.shape), planes=res.planes,
+                          rmse=res.rmse, support=res.support)
 
 
 def _methods(presets: Sequence[str], baselines: Sequence[str], overrides: list[str] | None,
              as_cloud: bool, baseline_options: dict[str, dict[str, Any]]
              ) -> list[tuple[str, str, Any]]:
-    from monoplane.evaluation.baselines import bind_baseline
-    from monoplane.host.pipeline import Pipeline
-
     out: list[tuple[str, str, Any]] = []
     for name in presets:
         if as_cloud:
@@ -238,8 +235,6 @@ def evaluate_dataset(folder: str | Path, presets: Sequence[str] = (),
     DatasetResults
     """
     from tqdm import tqdm
-
-    from monoplane.host.pipeline import Pipeline
 
     if not 0.5 < tolerance <= 1.0:
         raise InvalidInput(f"--tolerance must lie in (0.5, 1], got {tolerance}")

@@ -120,7 +120,7 @@ def open3d_ransac(frame: Frame, *, seed: int = 0, **options: Any) -> Reconstruct
         flat[cloud.pixel_grid()[2][chosen]] = len(planes)
         remaining = np.setdiff1d(remaining, chosen, assume_unique=True)
     return Reconstruction(frame=frame, labels=flat.reshape(frame.shape),
-                          params=np.asarray(planes, dtype=np.float64).reshape(-1, 4),
+                          planes=np.asarray(planes, dtype=np.float64).reshape(-1, 4),
                           rmse=np.asarray(rmses, dtype=np.float64),
                           support=np.asarray(supports, dtype=np.int64),
                           config={"baseline": "open3d-ransac", **asdict(cfg)},

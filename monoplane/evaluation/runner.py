@@ -130,7 +130,7 @@ def resolve_methods(presets: Sequence[str] = (), baselines: Sequence[str] = (),
 
 
 @dataclass
-class FrameResult:
+class FrameScores:
     """Scores of one method on one frame."""
 
     scene_seed: int
@@ -181,14 +181,14 @@ class MethodResult:
         As in :class:`Method`.
     thresholds : list of float
         Depth thresholds of ``recall`` (metres).
-    frames : list of FrameResult
+    frames : list of FrameScores
         Per-frame scores, in scene order.
     """
 
     name: str
     kind: str
     thresholds: list[float]
-    frames: list[FrameResult] = field(default_factory=list)
+    frames: list[FrameScores] = field(default_factory=list)
 
     voi = FrameMean("voi", "Mean VOI (nats).")
     ri = FrameMean("ri", "Mean Rand index.")
@@ -283,7 +283,7 @@ def score_reconstruction(rec: Reconstruction, gt_labels: np.ndarray, gt_depth: n
 
 def _empty_reconstruction(frame: Frame) -> Reconstruction:
     return Reconstruction(frame=frame, labels=np.zeros(frame.shape, dtype=np.int32),
-                          params=np.zeros((0, 4)))
+                          planes=np.zeros((0, 4)))
 
 
 def parse_size(text: str) -> tuple[int, int]:
@@ -370,7 +370,7 @@ def evaluate(methods: Sequence[Method], n: int = 50, level: str = "mild", seed: 
                 seconds = time.perf_counter() - start
                 core = rec.timings.get(CALL_TIMING, seconds) if not failed else seconds
                 voi, ri, sc, recalled, n_gt = score_reconstruction(rec, gt_labels, gt_depth, thr)
-                result.frames.append(FrameResult(
+                result.frames.append(FrameScores(
                     scene_seed=scene_seed, voi=voi, ri=ri, sc=sc, recalled=recalled, n_gt=n_gt,
                     n_planes=rec.num_planes, seconds=seconds, core_seconds=core, failed=failed,
                     error=error,
@@ -413,3 +413,12 @@ def format_table(results: EvalResults) -> str:
              f"seeds {s['seed']}..{s['seed'] + s['n'] - 1}")
     rule = "-" * len(line(header))
     return "\n".join([title, line(header), rule, *[line(r) for r in rows]])
+
+
+def __getattr__(name: str) -> Any:
+    # FrameResult was also monoplane.batch's per-frame outcome; the old name goes in 0.3.0
+    if name == "FrameResult":
+        warnings.warn("monoplane.evaluation.runner.FrameResult is now FrameScores; the old "
+                      "name goes in 0.3.0", DeprecationWarning, stacklevel=2)
+        return FrameScores
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -1,4 +1,5 @@
-"""Plane meshes as glTF 2.0 binary scenes (``.glb``): one mesh node per plane.
+"""The ``gltf`` output format: plane meshes as glTF 2.0 binary scenes (``.glb``), one mesh node
+per plane: ``planes.glb`` of a frame or a point cloud, ``scene.glb`` of a multi-view result.
 
 What a monoplane ``.glb`` holds
 -------------------------------
@@ -41,13 +42,18 @@ import json
 import math
 import struct
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from monoplane.datamodel import Camera, Reconstruction, Scene
+from monoplane.datamodel import Camera, CloudResult, Reconstruction, Scene
+from monoplane.export.exporter import Exporter
+from monoplane.export.shared import SharedWork
 from monoplane.geometry.camera import frustum
 from monoplane.geometry.polygons import PlaneMesh, reconstruction_mesh
+from monoplane.hookspecs import hookimpl
+from monoplane.palette import plane_palette
 from monoplane.version import __version__
 
 #: Name of the root node that carries the frame conversion.
@@ -252,11 +258,9 @@ def reconstruction_glb(rec: Reconstruction, mesh: PlaneMesh | None = None) -> by
     bytes
         The ``.glb`` file; plane ids are the label values 1..P.
     """
-    from monoplane.report.colors import plane_palette  # imports OpenCV: load it on use
-
     if mesh is None:
         mesh = reconstruction_mesh(rec)
-    return planes_glb(mesh, rec.params, plane_palette(rec.num_planes))
+    return planes_glb(mesh, rec.planes, plane_palette(rec.num_planes))
 
 
 def scene_glb(scene: Scene, mesh: PlaneMesh | None = None) -> bytes:
@@ -276,9 +280,43 @@ def scene_glb(scene: Scene, mesh: PlaneMesh | None = None) -> bytes:
         The ``.glb`` file; plane ids are the 0-based global ids of ``scene.json``.
     """
     from monoplane.geometry.mesh import scene_mesh
-    from monoplane.report.colors import plane_palette
 
     if mesh is None:
         mesh = scene_mesh(scene)
     return planes_glb(mesh, scene.planes, plane_palette(scene.planes.shape[0]), first_id=0,
                       cameras=scene.cameras)
+
+
+def cloud_glb(result: CloudResult, mesh: PlaneMesh | None = None) -> bytes:
+    """``planes.glb`` of a point cloud: two-sided planes in the cloud's frame, palette colours.
+
+    ``mesh`` is :func:`~monoplane.geometry.cloud_mesh.cloud_mesh` of the result when the caller
+    already has it.
+    """
+    if mesh is None:
+        mesh = cloud_mesh(result)
+    return planes_glb(mesh, result.planes, plane_palette(result.num_planes), double_sided=True)
+
+
+def _write(result: Any, folder: Path, shared: SharedWork) -> None:
+    kind = result.result_kind
+    mesh = shared.mesh(result)
+    if kind == "frame":
+        (folder / "planes.glb").write_bytes(reconstruction_glb(result, mesh))
+    elif kind == "cloud":
+        (folder / "planes.glb").write_bytes(cloud_glb(result, mesh))
+    else:
+        (folder / "scene.glb").write_bytes(scene_glb(result.scene, mesh))
+
+
+EXPORTER = Exporter(
+    name="gltf",
+    files={"frame": ("planes.glb",), "cloud": ("planes.glb",), "multiview": ("scene.glb",)},
+    write=_write,
+    summary="plane meshes as glTF binary (one node per plane; a scene's cameras too)",
+)
+
+
+@hookimpl
+def monoplane_register_exporters() -> list[Exporter]:
+    return [EXPORTER]

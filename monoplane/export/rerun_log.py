@@ -1,7 +1,8 @@
 """Rerun recordings of monoplane results: :func:`log_rerun` and the commands' ``--rerun FILE.rrd``.
 
 Rerun (``rerun-sdk``) is an optional extra: ``pip install 'monoplane[rerun]'``. Open a recording
-with ``rerun FILE.rrd``.
+with ``rerun FILE.rrd``. As the ``rerun`` output format (off by default: ``save(...,
+formats=[..., "rerun"])``) it writes ``recording.rrd`` into the output folder.
 
 Entities
 --------
@@ -46,9 +47,14 @@ from typing import Any
 
 import numpy as np
 
-from monoplane.datamodel import Reconstruction, Scene
+from monoplane.datamodel import CloudResult, Reconstruction, Scene
 from monoplane.errors import MonoplaneError
+from monoplane.export.exporter import Exporter
+from monoplane.export.shared import SharedWork
+from monoplane.geometry.cloud_mesh import cloud_mesh
 from monoplane.geometry.polygons import PlaneMesh, reconstruction_mesh
+from monoplane.hookspecs import hookimpl
+from monoplane.palette import NON_PLANAR, plane_palette
 
 #: Most points logged per view (depth pixels are taken on a regular grid to stay below it).
 MAX_POINTS = 200_000
@@ -130,7 +136,7 @@ def log_rerun(result: Any, path: str | Path | None = None, *, recording: Any = N
 
     Parameters
     ----------
-    result : Reconstruction, MultiviewResult, Scene or CloudPlaneResult
+    result : Reconstruction, MultiviewResult, Scene or CloudResult
         What ``monoplane run``/``batch``, ``multiview`` or ``cloud`` computed (see the module
         notes for the entities of each).
     path : str or Path, optional
@@ -168,20 +174,21 @@ def log_rerun(result: Any, path: str | Path | None = None, *, recording: Any = N
 
 
 def _log_any(rr: ModuleType, stream: Any, result: Any, entity: str) -> None:
-    from monoplane.host.detect import CloudPlaneResult
+    """Log ``result`` by what its ``result_kind`` says it is."""
     from monoplane.errors import InvalidInput
 
-    if isinstance(result, Reconstruction):
+    kind = getattr(result, "result_kind", "")
+    if kind == "frame":
         log_reconstruction(rr, stream, result, entity)
-    elif isinstance(result, Scene):
+    elif kind == "scene":
         log_scene(rr, stream, result, None, entity)
-    elif isinstance(result, CloudPlaneResult):
-        log_cloud(rr, stream, result, entity)
-    elif isinstance(getattr(result, "scene", None), Scene):  # a MultiviewResult
+    elif kind == "multiview":
         log_scene(rr, stream, result.scene, result.sfm.colors, entity)
+    elif kind == "cloud":
+        log_cloud(rr, stream, result, entity)
     else:
         raise InvalidInput(f"log_rerun: cannot log a {type(result).__name__}; give a "
-                           "Reconstruction, MultiviewResult, Scene or CloudPlaneResult")
+                           "Reconstruction, MultiviewResult, Scene or CloudResult")
 
 
 def annotation_context(rr: ModuleType, num_planes: int, first_id: int = 1) -> Any:
@@ -191,8 +198,6 @@ def annotation_context(rr: ModuleType, num_planes: int, first_id: int = 1) -> An
     ``plane_<i + first_id>`` (``first_id`` 1 for label values, 0 for a scene's global planes,
     whose label maps hold global id + 1).
     """
-    from monoplane.report.colors import NON_PLANAR, plane_palette
-
     classes = [rr.AnnotationInfo(id=0, label="non-planar", color=NON_PLANAR.tolist())]
     classes += [rr.AnnotationInfo(id=i + 1, label=f"plane_{i + first_id}", color=rgb.tolist())
                 for i, rgb in enumerate(plane_palette(num_planes))]
@@ -209,8 +214,6 @@ def log_plane_meshes(rr: ModuleType, stream: Any, mesh: PlaneMesh, planes: np.nd
     """Log ``entity/planes/plane_<id>``, one mesh per plane in its palette colour, after
     clearing ``entity/planes`` (so that a frame logged after another keeps none of its
     planes)."""
-    from monoplane.report.colors import plane_palette
-
     palette = plane_palette(len(planes))
     stream.log(f"{entity}/planes", rr.Clear(recursive=True))
     for row, plane in enumerate(planes):
@@ -265,7 +268,7 @@ def log_reconstruction(rr: ModuleType, stream: Any, rec: Reconstruction,
     points, colors, classes = _view_points(rec, rec.labels)
     stream.log(f"{entity}/points", rr.Points3D(points, colors=colors, class_ids=classes))
     log_plane_meshes(rr, stream, reconstruction_mesh(rec) if mesh is None else mesh,
-                     rec.params, 1, entity)
+                     rec.planes, 1, entity)
 
 
 def log_scene(rr: ModuleType, stream: Any, scene: Scene, sfm_colors: np.ndarray | None,
@@ -292,8 +295,8 @@ def log_scene(rr: ModuleType, stream: Any, scene: Scene, sfm_colors: np.ndarray 
     log_plane_meshes(rr, stream, scene_mesh(scene), scene.planes, 0, entity)
 
 
-def log_cloud(rr: ModuleType, stream: Any, result: Any, entity: str = "world") -> None:
-    """Log a point cloud's planes (see the module notes); ``result`` is a CloudPlaneResult."""
+def log_cloud(rr: ModuleType, stream: Any, result: CloudResult, entity: str = "world") -> None:
+    """Log a point cloud's planes (see the module notes); ``result`` is a CloudResult."""
     stream.log(entity, annotation_context(rr, result.num_planes))
     finite = np.isfinite(result.points).all(axis=1)
     colors = None
@@ -302,4 +305,23 @@ def log_cloud(rr: ModuleType, stream: Any, result: Any, entity: str = "world") -
     stream.log(f"{entity}/points", rr.Points3D(result.points[finite].astype(np.float32),
                                                colors=colors,
                                                class_ids=result.labels[finite].astype(np.uint16)))
-    log_plane_meshes(rr, stream, result.plane_mesh(), result.planes, 1, entity)
+    log_plane_meshes(rr, stream, cloud_mesh(result), result.planes, 1, entity)
+
+
+def _write(result: Any, folder: Path, shared: SharedWork) -> None:
+    log_rerun(result, folder / "recording.rrd")
+
+
+EXPORTER = Exporter(
+    name="rerun",
+    files={"frame": ("recording.rrd",), "cloud": ("recording.rrd",),
+           "multiview": ("recording.rrd",)},
+    write=_write,
+    default=False,  # an optional extra, and a viewer's file rather than a result
+    summary="a Rerun recording, recording.rrd (needs the 'rerun' extra)",
+)
+
+
+@hookimpl
+def monoplane_register_exporters() -> list[Exporter]:
+    return [EXPORTER]

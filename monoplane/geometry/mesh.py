@@ -67,7 +67,7 @@ def planar_mesh(
     z = np.zeros(labels.shape)
     planar = labels > 0
     if np.any(planar):
-        z[planar] = ray_plane_depth(rays[planar], rec.params[labels[planar] - 1])
+        z[planar] = ray_plane_depth(rays[planar], rec.planes[labels[planar] - 1])
     if max_depth is None and frame.depth is not None:
         max_depth = 2.0 * float(frame.depth.max())
     if max_depth is not None:
@@ -165,7 +165,7 @@ def scene_mesh(scene: Scene, step: int = 2, max_cells: int = 512) -> PlaneMesh:
             mask = rec.labels[::step, ::step] == local
             rays = rays_cache[v][mask]
             z = ray_plane_depth(rays, plane_to_camera(plane, cam.R, cam.t)[0])
-            z_own = ray_plane_depth(rays, rec.params[local - 1])
+            z_own = ray_plane_depth(rays, rec.planes[local - 1])
             ok = (z > 0) & (z_own > 0) & (z < 2 * z_own) & (z_own < 2 * z)
             if not np.any(ok):
                 continue

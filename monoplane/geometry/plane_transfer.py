@@ -87,11 +87,11 @@ def replace_plane(rec: Reconstruction, cam: object, local: int,
     mask = rec.labels == local
     rays = pixel_rays(cam.K, cam.height, cam.width)[mask]
     points = rays * rec.frame.depth[mask, None]
-    params, rmse = rec.params.copy(), rec.rmse.copy()
+    params, rmse = rec.planes.copy(), rec.rmse.copy()
     params[local - 1] = plane
     rmse[local - 1] = float(np.sqrt(np.mean((points @ plane[:3] + plane[3]) ** 2))) if len(
         points) else 0.0
-    return replace(rec, params=params, rmse=rmse)
+    return replace(rec, planes=params, rmse=rmse)
 
 
 def drop_planes(rec: Reconstruction, drop: np.ndarray) -> Reconstruction:
@@ -138,7 +138,7 @@ def recovered_region(views: list[Reconstruction], cameras: list, members: list[t
         off = np.abs(depth - z)
         own = np.full(z.shape, np.inf)
         if rec.num_planes:
-            z_own = ray_plane_depth(rays, rec.params[np.maximum(labels, 1) - 1])
+            z_own = ray_plane_depth(rays, rec.planes[np.maximum(labels, 1) - 1])
             own = np.where(labels > 0, np.abs(depth - z_own), np.inf)
         return covered & (depth > 0) & (off <= cfg.recover_max_distance * depth) & (off < own)
 

@@ -271,7 +271,7 @@ def reconstruction_mesh(rec: Reconstruction, tolerance_px: float = 1.5) -> Plane
     """
     parts = []
     for pid in range(1, rec.num_planes + 1):
-        verts, tris = mask_plane_mesh(rec.labels == pid, rec.params[pid - 1], rec.frame.K,
+        verts, tris = mask_plane_mesh(rec.labels == pid, rec.planes[pid - 1], rec.frame.K,
                                       tolerance_px)
         parts.append((pid, verts, tris))
     return PlaneMesh.concatenate(parts)

@@ -21,7 +21,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from monoplane.algorithm.ransac import refit_planes
+from monoplane.algorithm.ransac import refit_and_renumber
 from monoplane.errors import InvalidInput
 from monoplane.geometry.cloud import PlaneCloud, normalised_cloud
 from monoplane.geometry.orientation import orient_normals
@@ -82,7 +82,7 @@ def estimate_normals(points: np.ndarray, cfg: CloudConfig) -> np.ndarray:
 class CloudFit(NamedTuple):
     """The planes of a point cloud in its own frame and units (:meth:`Pipeline.run_cloud
     <monoplane.host.pipeline.Pipeline.run_cloud>`): what
-    :class:`~monoplane.host.detect.CloudPlaneResult` holds, but for the configuration."""
+    :class:`~monoplane.datamodel.CloudResult` holds, but for the configuration."""
 
     points: np.ndarray
     """(N, 3) float64 input points, input order (non-finite ones included)."""
@@ -155,8 +155,8 @@ class CloudInput:
         timings : dict
             Seconds per step, returned with the fit.
         """
-        renumber, params, rmse, support = refit_planes(self.unique, labels,
-                                                       int(labels.max(initial=0)))
+        renumber, params, rmse, support = refit_and_renumber(self.unique, labels,
+                                                             int(labels.max(initial=0)))
         labels = renumber[labels]
         centroids = np.zeros((params.shape[0], 3))
         if params.shape[0]:

@@ -4,9 +4,10 @@
 Python API first::
 
     import monoplane
+    from monoplane.export import save
     pipe = monoplane.Pipeline.from_preset("monoplane", overrides={"labeler.lambda": 0.9})
     rec = pipe.run(monoplane.load_frame("rgb.png", depth="depth.npy", intrinsics="K.json"))
-    monoplane.save_reconstruction(rec, "out/")
+    save(rec, "out/")
 
 A point cloud goes through the same stages without the pixel grid (:meth:`Pipeline.run_cloud`,
 which :func:`monoplane.detect_planes` calls); frames and clouds share the RANSAC driver's

@@ -24,7 +24,9 @@ from monoplane.errors import ConfigError, PluginError
 from monoplane.stages.base import KINDS, STAGE_KINDS, Stage
 from monoplane.version import __version__
 
-#: The built-in stage modules, registered in this order. The one place that names them.
+#: The built-in stage modules, registered in this order. The one place that names them. The
+#: built-in baseline is evaluation's, which registers it when evaluation runs
+#: (:data:`monoplane.evaluation.baselines.BUILTIN_BASELINES`): the core loads no evaluation code.
 DEFAULT_PLUGINS: tuple[str, ...] = (
     "monoplane.stages.cue_providers",
     "monoplane.stages.samplers",
@@ -37,7 +39,6 @@ DEFAULT_PLUGINS: tuple[str, ...] = (
     "monoplane.stages.registrars",
     "monoplane.stages.fusers",
     "monoplane.stages.adjusters",
-    "monoplane.evaluation.open3d_baseline",
 )
 
 #: Set this environment variable to disable entry-point autoloading of third-party plugins.

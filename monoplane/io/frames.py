@@ -1,4 +1,4 @@
-"""Reading inputs and writing outputs (the on-disk contract of the command line and API).
+"""Reading inputs (the on-disk contract of the command line and API).
 
 Inputs
 ------
@@ -9,23 +9,21 @@ Inputs
   R, G, B = x, y, z.
 * Intrinsics: ``"fx,fy,cx,cy"`` or a JSON file ``{"fx":…, "fy":…, "cx":…, "cy":…}``.
 
-Outputs (one folder, written atomically: a temporary sibling folder renamed into place)
--------------------------------------------------------------------------------------------
-``labels.png`` (uint16, 0 = non-planar), ``planes.json``, ``planes.ply`` (every plane region
-triangulated on its plane with its holes left open, each face carrying its ``plane_id``; see
-:func:`write_plane_mesh_ply`), ``planes.glb`` (the same triangles, one glTF mesh node per plane;
-see :mod:`monoplane.export.gltf`), ``depth_planar.npy`` and ``config.toml``.
+Outputs are written by :func:`monoplane.export.save` (one module per format in
+:mod:`monoplane.export`). The writers that lived here (:func:`save_reconstruction`,
+:func:`write_reconstruction_files`, ``planes_document``, ``atomic_output_dir``,
+``check_output_dir``, ``write_*_ply``) still work until 0.3.0, with a ``DeprecationWarning``
+naming their replacement.
 """
 
 from __future__ import annotations
 
-import contextlib
+import importlib
 import json
-import os
-import shutil
-import tempfile
-from collections.abc import Callable, Iterator
+import warnings
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -33,10 +31,7 @@ import numpy as np
 from monoplane.cues.intrinsics import assume_intrinsics
 from monoplane.datamodel import Frame, Reconstruction, intrinsics_matrix
 from monoplane.errors import InvalidInput
-from monoplane.export.gltf import reconstruction_glb
-from monoplane.geometry.polygons import PlaneMesh, reconstruction_mesh
 from monoplane.io.checks import MAX_MAGNITUDE, load_npy, read_png
-from monoplane.version import __version__
 
 #: Accepted pinhole intrinsics, in pixels. A focal length below 0.1 px is a field of view of
 #: nearly 180 degrees on any image; no sensor is near 1e8 px wide. Beyond these bounds a value
@@ -341,222 +336,42 @@ def load_frame(image: str | Path | None = None, depth: str | Path | None = None,
                  depth_units=depth_units, name=name, notes=notes)
 
 
-def check_output_dir(out_dir: str | Path, overwrite: bool = False) -> Path:
-    """Fail early if ``out_dir`` cannot become an output folder; returns it as a Path.
-
-    Raises
-    ------
-    InvalidInput
-        If ``out_dir`` is an existing file, an existing non-empty folder without ``overwrite``,
-        or a file stands where one of its parent folders should be.
-    """
-    out = Path(out_dir)
-    if out.exists() and not out.is_dir():
-        raise InvalidInput(f"output path {out} is an existing file, not a folder")
-    if out.is_dir() and any(out.iterdir()) and not overwrite:
-        raise InvalidInput(f"output folder {out} exists and is not empty; pass --overwrite")
-    parent = next((p for p in out.parents if p.exists()), Path("."))
-    if not parent.is_dir():
-        raise InvalidInput(f"cannot write to {out}: {parent} is a file, not a folder")
-    return out
-
-
-@contextlib.contextmanager
-def atomic_output_dir(out_dir: str | Path, overwrite: bool = False) -> Iterator[Path]:
-    """Yield a temporary folder that becomes ``out_dir`` only if the block succeeds.
-
-    Missing parent folders are created. The temporary folder is a sibling of ``out_dir``
-    (same file system, so the final rename is atomic). On any exception it is removed and
-    ``out_dir`` is left untouched.
-
-    Raises
-    ------
-    InvalidInput
-        As :func:`check_output_dir`.
-    """
-    out = check_output_dir(out_dir, overwrite)
-    parent = out.parent
-    parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".partial", dir=parent))
-    # mkdtemp creates the folder 0700; the result is an ordinary output folder, so give it the
-    # permissions the user's umask gives any new folder.
-    umask = os.umask(0)
-    os.umask(umask)
-    tmp.chmod(0o777 & ~umask)
-    try:
-        yield tmp
-        if out.exists():
-            trash = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=parent))
-            os.replace(out, trash / out.name)
-            os.replace(tmp, out)
-            shutil.rmtree(trash, ignore_errors=True)
-        else:
-            os.replace(tmp, out)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-
-
-def write_ascii_ply(path: Path, vertices: np.ndarray, vertex_rgb: np.ndarray,
-                    faces: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
-                    comment: str | None = None) -> None:
-    """Write coloured points, or a triangle mesh whose faces carry a colour and a plane id, as
-    an ASCII PLY (the one PLY writer of the package's outputs).
-
-    Parameters
-    ----------
-    path : Path
-        Output file.
-    vertices : numpy.ndarray
-        (N, 3) coordinates, written as ``float`` with 7 significant digits.
-    vertex_rgb : numpy.ndarray
-        (N, 3) uint8 RGB.
-    faces : tuple of numpy.ndarray, optional
-        ``(triangles, face_rgb, plane_ids)``: (F, 3) vertex indices, (F, 3) uint8 RGB and (F,)
-        int plane id of each triangle; without them the file holds points only.
-    comment : str, optional
-        One header comment line.
-    """
-    header = ["ply", "format ascii 1.0", *([f"comment {comment}"] if comment else []),
-              f"element vertex {len(vertices)}",
-              "property float x", "property float y", "property float z",
-              "property uchar red", "property uchar green", "property uchar blue"]
-    lines = [f"{x:.7g} {y:.7g} {z:.7g} {r} {g} {b}"
-             for (x, y, z), (r, g, b) in zip(np.asarray(vertices).tolist(),
-                                             np.asarray(vertex_rgb).tolist(), strict=True)]
-    if faces is not None:
-        triangles, face_rgb, plane_ids = faces
-        header += [f"element face {len(triangles)}", "property list uchar int vertex_indices",
-                   "property uchar red", "property uchar green", "property uchar blue",
-                   "property int plane_id"]
-        lines += [f"3 {a} {b} {c} {r} {g} {bl} {pid}"
-                  for (a, b, c), (r, g, bl), pid in zip(
-                      np.asarray(triangles).tolist(), np.asarray(face_rgb).tolist(),
-                      np.asarray(plane_ids).tolist(), strict=True)]
-    path.write_text("\n".join([*header, "end_header", *lines]) + "\n")
-
-
-def write_points_ply(path: Path, points: np.ndarray, colors: np.ndarray | None = None) -> None:
-    """Write a coloured point cloud as an ASCII PLY.
-
-    Parameters
-    ----------
-    path : Path
-        Output file.
-    points : numpy.ndarray
-        (M, 3) points.
-    colors : numpy.ndarray, optional
-        (M, 3) uint8 RGB; grey when omitted.
-    """
-    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    col = (np.full((len(pts), 3), 200, np.uint8) if colors is None
-           else np.asarray(colors, dtype=np.uint8).reshape(-1, 3))
-    write_ascii_ply(path, pts, col)
-
-
-def write_plane_mesh_ply(path: Path, mesh: PlaneMesh, colors: np.ndarray,
-                         first_id: int = 1) -> None:
-    """Write plane regions as an ASCII PLY triangle mesh, each face tagged with its plane id.
-
-    Parameters
-    ----------
-    path : Path
-        Output file.
-    mesh : PlaneMesh
-        Triangles with their ``plane_ids``.
-    colors : numpy.ndarray
-        (P, 3) uint8 RGB of plane id ``p`` at row ``p - first_id``.
-    first_id : int
-        Id of the first plane: 1 for label values, 0 for a scene's global planes.
-
-    Notes
-    -----
-    Elements: ``vertex`` (float x, y, z; uchar red, green, blue) and ``face`` (uchar-counted
-    int list ``vertex_indices`` of 3 entries; uchar red, green, blue; int ``plane_id``). No
-    vertex is shared between planes, so the vertex colour is the plane colour too (Open3D reads
-    vertex colours, not face colours).
-    """
-    colors = np.asarray(colors, dtype=np.uint8).reshape(-1, 3)
-    face_rgb = colors[mesh.plane_ids - first_id].reshape(-1, 3)
-    vertex_rgb = np.zeros((len(mesh.vertices), 3), np.uint8)
-    vertex_rgb[mesh.triangles.reshape(-1)] = np.repeat(face_rgb, 3, axis=0)
-    write_ascii_ply(path, mesh.vertices, vertex_rgb, (mesh.triangles, face_rgb, mesh.plane_ids),
-                    comment="monoplane plane regions; face plane_id = plane id in the "
-                            "accompanying JSON")
-
-
-def planes_document(rec: Reconstruction) -> dict:
-    """The ``planes.json`` content for a reconstruction."""
-    K = rec.frame.K
-    colors = rec.colors
-    area = rec.area_px
-    planes = [{
-        "id": i + 1,
-        "normal": [float(v) for v in rec.params[i, :3]],
-        "offset": float(rec.params[i, 3]),
-        "area_px": int(area[i]),
-        "rmse": float(rec.rmse[i]),  # type: ignore[index]
-        "support": int(rec.support[i]),  # type: ignore[index]
-        "color": [int(c) for c in colors[i]],
-    } for i in range(rec.num_planes)]
-    return {
-        "planes": planes,
-        "convention": "normal . X + offset = 0, X in the camera frame (x right, y down, "
-                      "z forward) in depth_units; normal faces the camera",
-        "intrinsics": {"fx": float(K[0, 0]), "fy": float(K[1, 1]), "cx": float(K[0, 2]),
-                       "cy": float(K[1, 2]), "width": rec.frame.width,
-                       "height": rec.frame.height},
-        "depth_units": rec.frame.depth_units,
-        "depth_kind": rec.frame.depth_kind,
-        "notes": list(rec.frame.notes),
-        "timings_s": {k: round(float(v), 4) for k, v in rec.timings.items()},
-        "config": rec.config,
-    }
-
-
 def write_reconstruction_files(rec: Reconstruction, folder: Path) -> None:
-    """Write the single-view outputs into an existing folder (not atomic by itself)."""
-    from monoplane.host.config import dumps_toml  # config imports the plugin registry
+    """Deprecated: :func:`monoplane.export.saving.write_outputs` (the default formats)."""
+    from monoplane.export.saving import select_exporters, write_outputs
 
-    if rec.num_planes > np.iinfo(np.uint16).max:
-        raise InvalidInput(f"{rec.num_planes} planes do not fit in a uint16 labels.png")
-    cv2.imwrite(str(folder / "labels.png"), rec.labels.astype(np.uint16))
-    doc = planes_document(rec)
-    doc["monoplane_version"] = __version__
-    (folder / "planes.json").write_text(json.dumps(doc, indent=2) + "\n")
-    mesh = reconstruction_mesh(rec)
-    write_plane_mesh_ply(folder / "planes.ply", mesh, rec.colors)
-    (folder / "planes.glb").write_bytes(reconstruction_glb(rec, mesh))
-    np.save(folder / "depth_planar.npy", rec.planar_depth())
-    (folder / "config.toml").write_text(
-        "# Resolved monoplane config; rerun with: monoplane run ... --config config.toml\n"
-        + dumps_toml(rec.config))
+    _deprecated("write_reconstruction_files", "monoplane.export.saving.write_outputs")
+    write_outputs(rec, Path(folder), select_exporters("frame"))
 
 
 def save_reconstruction(rec: Reconstruction, out_dir: str | Path, overwrite: bool = False,
                         also: Callable[[Path], object] | None = None) -> Path:
-    """Write a reconstruction's outputs atomically into ``out_dir``.
+    """Deprecated: :func:`monoplane.export.save`, which writes the same folder."""
+    from monoplane.export.saving import save
 
-    Parameters
-    ----------
-    rec : Reconstruction
-        What to write.
-    out_dir : str or Path
-        Target folder; must not exist (or be empty) unless ``overwrite``.
-    overwrite : bool
-        Replace an existing folder.
-    also : callable, optional
-        Writes more files into the folder, given its temporary path, before the folder is put
-        in place, so that they appear with the outputs or not at all (the CLI and the batch
-        pass :func:`monoplane.report.write_frame_report` this way).
+    _deprecated("save_reconstruction", "monoplane.export.save")
+    return save(rec, out_dir, overwrite, also=also)
 
-    Returns
-    -------
-    Path
-        The output folder.
-    """
-    with atomic_output_dir(out_dir, overwrite) as tmp:
-        write_reconstruction_files(rec, tmp)
-        if also is not None:
-            also(tmp)
-    return Path(out_dir)
+
+def _deprecated(old: str, new: str) -> None:
+    warnings.warn(f"monoplane.io.frames.{old} is deprecated; use {new} (the old name goes in "
+                  "0.3.0)", DeprecationWarning, stacklevel=3)
+
+
+#: Writers that moved to :mod:`monoplane.export`: old name -> (module, name).
+_MOVED = {
+    "atomic_output_dir": ("monoplane.export.files", "atomic_output_dir"),
+    "check_output_dir": ("monoplane.export.files", "check_output_dir"),
+    "write_ascii_ply": ("monoplane.export.files", "write_ascii_ply"),
+    "write_plane_mesh_ply": ("monoplane.export.files", "write_plane_mesh_ply"),
+    "write_points_ply": ("monoplane.export.files", "write_points_ply"),
+    "planes_document": ("monoplane.export.labels", "planes_document"),
+}
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _MOVED:
+        raise AttributeError(f"module 'monoplane.io.frames' has no attribute {name!r}")
+    module, new = _MOVED[name]
+    _deprecated(name, f"{module}.{new}")
+    return getattr(importlib.import_module(module), new)

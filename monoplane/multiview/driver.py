@@ -10,12 +10,12 @@ import contextlib
 import sys
 import time
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from monoplane.batch.pool import default_workers
-from monoplane.batch.views import VIEW_STAGES, ViewPool, process_view
+from monoplane.host.pool import default_workers
+from monoplane.host.view_pool import VIEW_STAGES, ViewPool, process_view
 from monoplane.datamodel import Frame, Reconstruction, Scene, SfmResult
 from monoplane.errors import InvalidInput, StageError
 from monoplane.geometry.alignment import ScaleAlignment
@@ -78,6 +78,8 @@ class MultiviewResult:
     fused : Scene or None
         The scene as fused, before the adjuster (for evaluation).
     """
+
+    result_kind: ClassVar[str] = "multiview"  # see monoplane.datamodel.PlaneSet
 
     scene: Scene
     sfm: SfmResult

@@ -196,9 +196,9 @@ def rescale_reconstruction(rec: Reconstruction, frame: Frame, scale: float) -> R
         Same labels and normals; offsets ``d`` and ``rmse`` multiplied by ``scale``; ``frame``
         as given.
     """
-    params = rec.params.copy()
+    params = rec.planes.copy()
     params[:, 3] *= scale
-    return replace(rec, frame=frame, params=params, rmse=rec.rmse * scale)
+    return replace(rec, frame=frame, planes=params, rmse=rec.rmse * scale)
 
 
 #: The alignment of the view that defines the world frame when SfM built no model.

@@ -8,7 +8,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from monoplane.export.gltf import planes_glb
+from monoplane.export.gltf import cloud_glb
+from monoplane.geometry.cloud_mesh import cloud_mesh
 from monoplane.report import figures as fig
 from monoplane.report import html
 from monoplane.report.colors import plane_palette, shade
@@ -32,8 +33,7 @@ from monoplane.report.viewpoints import (
 )
 
 if TYPE_CHECKING:
-    from monoplane.host.detect import CloudPlaneResult
-    from monoplane.geometry.polygons import PlaneMesh
+    from monoplane.datamodel import CloudResult
 
 #: Size of the 3D renders in pixels.
 RENDER_SIZE = (960, 720)
@@ -45,17 +45,7 @@ CAMERA_UP = (0.0, -1.0, 0.0)
 CUT_SHARE = 0.8
 
 
-def cloud_glb(result: CloudPlaneResult, mesh: PlaneMesh | None = None) -> bytes:
-    """``planes.glb`` of a point cloud: two-sided planes in the cloud's frame, palette colours.
-
-    ``mesh`` is ``result.plane_mesh()`` when the caller already has it.
-    """
-    if mesh is None:
-        mesh = result.plane_mesh()
-    return planes_glb(mesh, result.planes, plane_palette(result.num_planes), double_sided=True)
-
-
-def room_frame(result: CloudPlaneResult, up_hint: tuple[float, float, float] | None = CAMERA_UP
+def room_frame(result: CloudResult, up_hint: tuple[float, float, float] | None = CAMERA_UP
                ) -> RoomFrame:
     """Up, floor and ceiling of a cloud (see :func:`~monoplane.report.room.estimate_room_frame`).
 
@@ -63,7 +53,7 @@ def room_frame(result: CloudPlaneResult, up_hint: tuple[float, float, float] | N
     (y down), ``None`` lets the planes alone decide.
     """
     hint = None if up_hint is None else np.asarray(up_hint, dtype=np.float64)
-    return estimate_room_frame(result.points, result.planes, result.num_points, hint)
+    return estimate_room_frame(result.points, result.planes, result.support, hint)
 
 
 def _horizontal_forward(up: np.ndarray) -> np.ndarray:
@@ -76,7 +66,7 @@ def _horizontal_forward(up: np.ndarray) -> np.ndarray:
     return np.cross(up, [0.0, 1.0, 0.0])
 
 
-def cloud_views(result: CloudPlaneResult, out_dir: Path, frame: RoomFrame | None = None
+def cloud_views(result: CloudResult, out_dir: Path, frame: RoomFrame | None = None
                 ) -> tuple[list[html.Figure], RenderResult]:
     """Render the plane meshes from above, from outside at an angle, and from inside.
 
@@ -87,7 +77,7 @@ def cloud_views(result: CloudPlaneResult, out_dir: Path, frame: RoomFrame | None
     from behind (a cloud's planes face the side their points' normals face, the scanner's).
     The inside views are drawn only when a plane was found to be the floor.
     """
-    mesh = result.plane_mesh()
+    mesh = cloud_mesh(result)
     if len(mesh.triangles) == 0:
         return [], RenderResult({}, "no plane to render", 0.0)
     frame = frame or room_frame(result)
@@ -129,7 +119,7 @@ def cloud_views(result: CloudPlaneResult, out_dir: Path, frame: RoomFrame | None
     return [f for f in figures if f.src[:-4] in result_3d.paths], result_3d
 
 
-def write_cloud_report(result: CloudPlaneResult, out_dir: Path, source: str = "",
+def write_cloud_report(result: CloudResult, out_dir: Path, source: str = "",
                        render_3d: bool = True, progress: bool = False,
                        up_hint: tuple[float, float, float] | None = CAMERA_UP) -> Path:
     """Write ``report.html``, its renders and ``summary.png`` for the planes of a point cloud.
@@ -140,7 +130,7 @@ def write_cloud_report(result: CloudPlaneResult, out_dir: Path, source: str = ""
 
     Parameters
     ----------
-    result : CloudPlaneResult
+    result : CloudResult
         Planes of the cloud, in its own frame and units.
     out_dir : pathlib.Path
         Folder for ``report.html`` and its pictures (created if missing).
@@ -185,7 +175,7 @@ def write_cloud_report(result: CloudPlaneResult, out_dir: Path, source: str = ""
     rows = [[f"{html.swatch(palette[i])}{i + 1}",
              "(" + ", ".join(f"{x:+.3f}" for x in result.planes[i, :3]) + ")",
              f"{result.planes[i, 3]:.4g}",
-             f"{int(result.num_points[i])} ({100.0 * result.num_points[i] / total:.1f} %)",
+             f"{int(result.support[i])} ({100.0 * result.support[i] / total:.1f} %)",
              f"{result.rmse[i]:.4g}",
              "(" + ", ".join(f"{x:.3g}" for x in result.centroids[i]) + ")"]
             for i in range(result.num_planes)]

@@ -1,6 +1,8 @@
-"""Colours for figures: a plane palette whose neighbours differ, and colourised depth and normals.
+"""Colours for figures: colourised depth and normals, shading, and the plane palette.
 
-All images here are RGB uint8 (H, W, 3); convert to BGR only when writing with OpenCV.
+All images here are RGB uint8 (H, W, 3); convert to BGR only when writing with OpenCV. The plane
+palette lives in :mod:`monoplane.palette` (it needs no OpenCV, so every layer can use it) and is
+re-exported here for the report modules.
 """
 
 from __future__ import annotations
@@ -8,57 +10,12 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-#: Colour of label 0 (non-planar pixels) in label maps.
-NON_PLANAR = np.array([40, 40, 40], dtype=np.uint8)
+from monoplane.palette import NON_PLANAR, label_colors, plane_palette
 
-_GOLDEN = 0.618033988749895
-
-
-def plane_palette(n: int) -> np.ndarray:
-    """Distinct, saturated colours for plane ids 1..n.
-
-    Hues advance by the golden ratio, so any run of consecutive ids spreads over the colour
-    wheel; brightness and saturation cycle through three levels so that ids whose hues happen to
-    be close still differ in lightness.
-
-    Parameters
-    ----------
-    n : int
-        Number of planes.
-
-    Returns
-    -------
-    numpy.ndarray
-        (n, 3) uint8 RGB; row ``i`` is the colour of plane id ``i + 1``.
-    """
-    if n <= 0:
-        return np.zeros((0, 3), dtype=np.uint8)
-    i = np.arange(n)
-    hue = (0.05 + i * _GOLDEN) % 1.0
-    sat = np.array([0.85, 0.65, 0.95])[i % 3]
-    val = np.array([0.95, 0.80, 0.65])[(i // 3) % 3]
-    hsv = np.stack([hue * 180.0, sat * 255.0, val * 255.0], axis=-1).astype(np.uint8)
-    return cv2.cvtColor(hsv[None], cv2.COLOR_HSV2RGB)[0]
-
-
-def label_colors(labels: np.ndarray, n_planes: int | None = None) -> np.ndarray:
-    """Paint a label map with :func:`plane_palette`.
-
-    Parameters
-    ----------
-    labels : numpy.ndarray
-        (H, W) integer labels, 0 = non-planar.
-    n_planes : int, optional
-        Palette size; defaults to ``labels.max()``.
-
-    Returns
-    -------
-    numpy.ndarray
-        (H, W, 3) uint8 RGB; non-planar pixels are :data:`NON_PLANAR`.
-    """
-    n = int(labels.max()) if n_planes is None else int(n_planes)
-    lut = np.vstack([NON_PLANAR[None], plane_palette(max(n, int(labels.max())))])
-    return lut[labels]
+__all__ = [
+    "LIGHT_DIRECTION", "NON_PLANAR", "colorize_depth", "colorize_normals", "colormap",
+    "depth_range", "label_colors", "plane_palette", "shade",
+]
 
 
 def depth_range(*depths: np.ndarray) -> tuple[float, float]:

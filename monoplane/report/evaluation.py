@@ -20,20 +20,21 @@ from tqdm import tqdm
 from monoplane.errors import MonoplaneError
 from monoplane.report import figures as fig
 from monoplane.report import html
+from monoplane.synth import generate
 
 if TYPE_CHECKING:
-    from monoplane.evaluation.runner import EvalResults, FrameResult, Method, MethodResult
+    from monoplane.evaluation.runner import EvalResults, FrameScores, Method, MethodResult
 
 #: Metrics a case can be ranked by, and whether higher is better.
 RANKING = {"sc": True, "ri": True, "voi": False}
 
 
-def pick_cases(method: MethodResult, metric: str = "sc") -> list[tuple[str, FrameResult]]:
+def pick_cases(method: MethodResult, metric: str = "sc") -> list[tuple[str, FrameScores]]:
     """The best and the worst frame of a method by one metric.
 
     Returns
     -------
-    list of (str, FrameResult)
+    list of (str, FrameScores)
         ``[("best", frame), ("worst", frame)]``; one entry when the method saw one frame, none
         when it saw none. Frames with a NaN score are skipped.
     """
@@ -85,8 +86,6 @@ def write_eval_report(results: EvalResults, out_dir: Path,
     pathlib.Path
         Path of ``report.html``.
     """
-    from monoplane.synth import generate
-
     if metric not in RANKING:
         raise ValueError(f"metric must be one of {', '.join(RANKING)}, got {metric!r}")
     start = time.perf_counter()

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from monoplane.datamodel import Reconstruction
+from monoplane.datamodel import Frame, Reconstruction
 from monoplane.export.gltf import reconstruction_glb
 from monoplane.geometry.mesh import planar_mesh
 from monoplane.report import figures as fig
@@ -53,13 +53,13 @@ def estimate_up(rec: Reconstruction, max_tilt_deg: float = 35.0) -> np.ndarray:
     camera_up = np.array([0.0, -1.0, 0.0])
     if rec.num_planes == 0:
         return camera_up
-    cos_up = rec.params[:, :3] @ camera_up
+    cos_up = rec.planes[:, :3] @ camera_up
     horizontal = np.abs(cos_up) > np.cos(np.deg2rad(max_tilt_deg))
     if not np.any(horizontal):
         return camera_up
     area = np.where(horizontal, rec.area_px, -1)
     i = int(np.argmax(area))
-    return rec.params[i, :3] * np.sign(cos_up[i])
+    return rec.planes[i, :3] * np.sign(cos_up[i])
 
 
 def frame_views(rec: Reconstruction, out_dir: Path) -> tuple[list[html.Figure], RenderResult]:
@@ -78,7 +78,7 @@ def frame_views(rec: Reconstruction, out_dir: Path) -> tuple[list[html.Figure], 
     if len(triangles) == 0:
         return [], RenderResult({}, "no planar surface to render in 3D", 0.0)
     palette = plane_palette(rec.num_planes) / 255.0
-    by_plane = shade(palette[plane_ids - 1], rec.params[plane_ids - 1, :3])
+    by_plane = shade(palette[plane_ids - 1], rec.planes[plane_ids - 1, :3])
     meshes = [Mesh(vertices, triangles, by_plane), Mesh(vertices, triangles, colors)]
     width, height = render_size(*frame.shape)
     K = frame.K.copy()
@@ -91,7 +91,7 @@ def frame_views(rec: Reconstruction, out_dir: Path) -> tuple[list[html.Figure], 
         ("frontal", "frontal view (the input camera)", K, np.eye(4), None)]
     for vp in orbit_viewpoints(vertices, estimate_up(rec), np.array([0.0, 0.0, 1.0]), width,
                                height)[:2]:
-        facing = facing_triangles(tri_planes, rec.params, vp.eye)
+        facing = facing_triangles(tri_planes, rec.planes, vp.eye)
         vp = zoom_to_fit(vp, vertices[np.unique(triangles[facing])], width, height)
         views.append((vp.name, vp.title, vp.K, vp.world_to_cam, facing))
     shots: list[Shot] = []
@@ -114,7 +114,7 @@ def plane_rows(rec: Reconstruction) -> list[list[str]]:
     rmse, support = np.asarray(rec.rmse), np.asarray(rec.support)  # filled on construction
     rows = []
     for i in range(rec.num_planes):
-        n, d = rec.params[i, :3], rec.params[i, 3]
+        n, d = rec.planes[i, :3], rec.planes[i, 3]
         rows.append([
             f"{html.swatch(palette[i])}{i + 1}",
             "(" + ", ".join(f"{x:+.3f}" for x in n) + ")",
@@ -239,35 +239,11 @@ def write_frame_report(rec: Reconstruction, out_dir: Path, render_3d: bool = Tru
     frame = rec.frame
 
     bar.set_postfix_str("inputs")
-    inputs = [html.Figure("input.png", "input image")]
-    fig.save_png(out / "input.png", fig.input_image(frame.rgb, frame.shape))
-    if frame.depth is not None:
-        fig.save_png(out / "depth.png", fig.colorized_depth_figure(frame.depth,
-                                                                   frame.depth_units))
-        inputs.append(html.Figure("depth.png", f"depth cue ({frame.depth_kind}, "
-                                               f"{frame.depth_units}; near blue, far red)"))
-    if frame.normals is not None:
-        fig.save_png(out / "normals.png", fig.enlarge(colorize_normals(frame.normals),
-                                                      fig.display_scale(frame.width), True))
-        inputs.append(html.Figure("normals.png", "normal cue (blue: facing the camera, "
-                                                 "green: facing up, red/cyan: facing sideways)"))
+    inputs = _input_figures(frame, out)
     bar.update()
 
     bar.set_postfix_str("planes")
-    fig.save_png(out / "labels_overlay.png", fig.overlay_labels(frame.rgb, rec.labels,
-                                                                n_planes=rec.num_planes))
-    fig.save_png(out / "label_map.png", fig.label_map(rec.labels, rec.num_planes))
-    planes_figs = [
-        html.Figure("labels_overlay.png", "planes over the image, with plane ids"),
-        html.Figure("label_map.png", "label map (dark: non-planar)"),
-    ]
-    depth_figs = []
-    if frame.depth is not None:
-        fig.save_png(out / "depth_compare.png",
-                     fig.depth_comparison(frame.depth, rec.planar_depth(), frame.depth_units))
-        depth_figs.append(html.Figure(
-            "depth_compare.png", "input depth (left) and the depth the planes imply (right), "
-                                 "on one colour scale; black: invalid or non-planar"))
+    planes_figs, depth_figs = _plane_figures(rec, out)
     bar.update()
 
     bar.set_postfix_str("3D views")
@@ -278,15 +254,7 @@ def write_frame_report(rec: Reconstruction, out_dir: Path, render_3d: bool = Tru
     bar.update()
 
     bar.set_postfix_str("html")
-    panels = [(fig.load_png(out / "input.png"), "input image"),
-              (fig.load_png(out / "labels_overlay.png"), f"{rec.num_planes} planes")]
-    if frame.depth is not None:
-        panels.append((fig.load_png(out / "depth.png"), "depth cue"))
-    panels += [(fig.load_png(out / f.src), f.caption.split(",")[0]) for f in views
-               if f.src.endswith("_planes.png")]
-    fig.save_png(out / "summary.png", fig.contact_sheet(panels, columns=3))
-    total_px = frame.height * frame.width
-    coverage = 100.0 * float((rec.labels > 0).sum()) / total_px
+    _write_summary_sheet(rec, out, views)
     sections = [
         summary_section("input, planes, depth and the rendered 3D views"),
         html.section("Inputs", html.figure_grid(inputs, 3)),
@@ -309,9 +277,66 @@ def write_frame_report(rec: Reconstruction, out_dir: Path, render_3d: bool = Tru
     sections.append(html.section("Notes", html.bullet_list(notes) or html.paragraph("none")))
     sections.append(timing_section(rec.timings, rec.config,
                                    rendered.seconds if render_3d else None, start))
+    return finish_report(out, bar, f"monoplane report: {frame.name}", _subtitle(rec),
+                         sections)
+
+
+def _input_figures(frame: Frame, out: Path) -> list[html.Figure]:
+    """Write the frame's image and cues as figures (``input.png``, ``depth.png``,
+    ``normals.png``, those it has)."""
+    inputs = [html.Figure("input.png", "input image")]
+    fig.save_png(out / "input.png", fig.input_image(frame.rgb, frame.shape))
+    if frame.depth is not None:
+        fig.save_png(out / "depth.png", fig.colorized_depth_figure(frame.depth,
+                                                                   frame.depth_units))
+        inputs.append(html.Figure("depth.png", f"depth cue ({frame.depth_kind}, "
+                                               f"{frame.depth_units}; near blue, far red)"))
+    if frame.normals is not None:
+        fig.save_png(out / "normals.png", fig.enlarge(colorize_normals(frame.normals),
+                                                      fig.display_scale(frame.width), True))
+        inputs.append(html.Figure("normals.png", "normal cue (blue: facing the camera, "
+                                                 "green: facing up, red/cyan: facing sideways)"))
+    return inputs
+
+
+def _plane_figures(rec: Reconstruction, out: Path
+                   ) -> tuple[list[html.Figure], list[html.Figure]]:
+    """Write the label figures and, with depth, the depth comparison; returns both lists."""
+    frame = rec.frame
+    fig.save_png(out / "labels_overlay.png", fig.overlay_labels(frame.rgb, rec.labels,
+                                                                n_planes=rec.num_planes))
+    fig.save_png(out / "label_map.png", fig.label_map(rec.labels, rec.num_planes))
+    planes_figs = [
+        html.Figure("labels_overlay.png", "planes over the image, with plane ids"),
+        html.Figure("label_map.png", "label map (dark: non-planar)"),
+    ]
+    depth_figs = []
+    if frame.depth is not None:
+        fig.save_png(out / "depth_compare.png",
+                     fig.depth_comparison(frame.depth, rec.planar_depth(), frame.depth_units))
+        depth_figs.append(html.Figure(
+            "depth_compare.png", "input depth (left) and the depth the planes imply (right), "
+                                 "on one colour scale; black: invalid or non-planar"))
+    return planes_figs, depth_figs
+
+
+def _write_summary_sheet(rec: Reconstruction, out: Path, views: list[html.Figure]) -> None:
+    """``summary.png``: the input, the planes, the depth cue and the rendered plane views."""
+    panels = [(fig.load_png(out / "input.png"), "input image"),
+              (fig.load_png(out / "labels_overlay.png"), f"{rec.num_planes} planes")]
+    if rec.frame.depth is not None:
+        panels.append((fig.load_png(out / "depth.png"), "depth cue"))
+    panels += [(fig.load_png(out / f.src), f.caption.split(",")[0]) for f in views
+               if f.src.endswith("_planes.png")]
+    fig.save_png(out / "summary.png", fig.contact_sheet(panels, columns=3))
+
+
+def _subtitle(rec: Reconstruction) -> str:
+    """The report's subtitle: size, planes, coverage, depth and intrinsics, and the time."""
+    frame = rec.frame
+    coverage = 100.0 * float((rec.labels > 0).sum()) / (frame.height * frame.width)
     K = frame.K
-    subtitle = (f"{frame.width}×{frame.height} px · {rec.num_planes} planes covering "
-                f"{coverage:.1f} % of the image · depth {frame.depth_kind} in "
-                f"{frame.depth_units} · fx={K[0, 0]:.1f} fy={K[1, 1]:.1f} "
-                f"cx={K[0, 2]:.1f} cy={K[1, 2]:.1f} · {datetime.now():%Y-%m-%d %H:%M}")
-    return finish_report(out, bar, f"monoplane report: {frame.name}", subtitle, sections)
+    return (f"{frame.width}×{frame.height} px · {rec.num_planes} planes covering "
+            f"{coverage:.1f} % of the image · depth {frame.depth_kind} in "
+            f"{frame.depth_units} · fx={K[0, 0]:.1f} fy={K[1, 1]:.1f} "
+            f"cx={K[0, 2]:.1f} cy={K[1, 2]:.1f} · {datetime.now():%Y-%m-%d %H:%M}")

@@ -7,6 +7,7 @@ from datetime import datetime
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
 from monoplane.datamodel import Reconstruction, Scene, plane_to_camera, plane_to_world
 from monoplane.export.gltf import SOURCE_TO_GLTF, scene_glb
@@ -81,12 +82,12 @@ def fused_view_mesh(rec: Reconstruction, links: dict[int, int], planes_world: np
         (P, 4) the view's planes in world coordinates (after snapping), positive on the side the
         camera saw; row ``local - 1`` is local plane ``local``.
     """
-    params = rec.params.copy()
+    params = rec.planes.copy()
     for local, g in links.items():
         params[local - 1] = plane_to_camera(planes_world[g], R, t)[0]
-    snapped = Reconstruction(frame=rec.frame, labels=rec.labels, params=params)
+    snapped = Reconstruction(frame=rec.frame, labels=rec.labels, planes=params)
     v, tris, colors, local_ids = planar_mesh(snapped, mesh_step(*rec.frame.shape))
-    return (v - t) @ R, tris, colors, local_ids, plane_to_world(snapped.params, R, t)
+    return (v - t) @ R, tris, colors, local_ids, plane_to_world(snapped.planes, R, t)
 
 
 def scene_views(scene: Scene, out_dir: Path) -> tuple[list[html.Figure], RenderResult]:
@@ -202,48 +203,11 @@ def write_scene_report(scene: Scene, out_dir: Path, render_3d: bool = True,
     views3d, rendered = rendered_views(render_3d, lambda: scene_views(scene, out))
     bar.update()
 
-    per_view: list[html.Figure] = []
-    maps = global_label_maps(scene)
-    n_colours = G + max((r.num_planes for r in scene.views), default=0)
-    for v, (rec, links, lab) in enumerate(zip(scene.views, scene.links, maps, strict=True)):
-        bar.set_postfix_str(f"view {v + 1}/{n_views}")
-        names = {g + 1: f"G{g}" for g in range(G)}
-        names.update({G + k: f"L{local}" for k, local in enumerate(
-            [lo for lo in range(1, rec.num_planes + 1) if lo not in links], start=1)})
-        fig.save_png(out / f"view{v + 1}_input.png", fig.input_image(rec.frame.rgb,
-                                                                     rec.frame.shape))
-        fig.save_png(out / f"view{v + 1}_labels.png",
-                     fig.overlay_labels(rec.frame.rgb, lab, n_planes=n_colours, id_names=names))
-        title = rec.frame.name or scene.cameras[v].name
-        per_view += [
-            html.Figure(f"view{v + 1}_input.png", f"view {v + 1}: {title}"),
-            html.Figure(f"view{v + 1}_labels.png",
-                        f"view {v + 1}: planes by global id (G…); L…: planes only this view "
-                        "has (grey in 3D)"),
-        ]
-        bar.update()
+    per_view = _view_figures(scene, out, bar)
 
     bar.set_postfix_str("html")
-    palette = plane_palette(max(G, 1))
-    owners: dict[int, list[str]] = {g: [] for g in range(G)}
-    area = np.zeros(G, dtype=np.int64)
-    for v, (rec, links) in enumerate(zip(scene.views, scene.links, strict=True)):
-        for local, g in sorted(links.items()):
-            owners[g].append(f"{v + 1}:{local}")
-            area[g] += rec.area_px[local - 1]
-    plane_rows = [
-        [f"{html.swatch(palette[g])}G{g}",
-         "(" + ", ".join(f"{x:+.3f}" for x in scene.planes[g, :3]) + ")",
-         f"{scene.planes[g, 3]:.3f}", html.esc(", ".join(owners[g]) or "none"), f"{area[g]}"]
-        for g in range(G)
-    ]
-    cam_rows = []
-    for v, (cam, rec, links) in enumerate(zip(scene.cameras, scene.views, scene.links,
-                                                 strict=True)):
-        scale = f"{scene.scales[v]:.4g}" if v < len(scene.scales) else "n/a"
-        cam_rows.append([f"{v + 1}", cam.name or rec.frame.name,
-                         "(" + ", ".join(f"{x:+.3f}" for x in cam.center) + ")", scale,
-                         f"{rec.num_planes}", f"{len(links)}"])
+    plane_rows = _global_plane_rows(scene)
+    cam_rows = _camera_rows(scene)
     panels = [(fig.load_png(out / f.src), f.caption.split(":")[0]) for f in per_view[1::2][:3]]
     panels += [(fig.load_png(out / f.src), f.caption.split(",")[0]) for f in views3d
                if f.src.endswith("_planes.png")]
@@ -277,3 +241,61 @@ def write_scene_report(scene: Scene, out_dir: Path, render_3d: bool = True,
     subtitle = (f"{n_views} views · {G} global planes · {len(scene.points)} sparse points · "
                 f"{datetime.now():%Y-%m-%d %H:%M}")
     return finish_report(out, bar, "monoplane multi-view report", subtitle, sections)
+
+
+def _view_figures(scene: Scene, out: Path, bar: tqdm) -> list[html.Figure]:
+    """Write each view's image and its planes by global id (G…, and L… for the planes only
+    that view has); one progress step per view."""
+    G, n_views = scene.planes.shape[0], len(scene.views)
+    per_view: list[html.Figure] = []
+    maps = global_label_maps(scene)
+    n_colours = G + max((r.num_planes for r in scene.views), default=0)
+    for v, (rec, links, lab) in enumerate(zip(scene.views, scene.links, maps, strict=True)):
+        bar.set_postfix_str(f"view {v + 1}/{n_views}")
+        names = {g + 1: f"G{g}" for g in range(G)}
+        names.update({G + k: f"L{local}" for k, local in enumerate(
+            [lo for lo in range(1, rec.num_planes + 1) if lo not in links], start=1)})
+        fig.save_png(out / f"view{v + 1}_input.png", fig.input_image(rec.frame.rgb,
+                                                                     rec.frame.shape))
+        fig.save_png(out / f"view{v + 1}_labels.png",
+                     fig.overlay_labels(rec.frame.rgb, lab, n_planes=n_colours, id_names=names))
+        title = rec.frame.name or scene.cameras[v].name
+        per_view += [
+            html.Figure(f"view{v + 1}_input.png", f"view {v + 1}: {title}"),
+            html.Figure(f"view{v + 1}_labels.png",
+                        f"view {v + 1}: planes by global id (G…); L…: planes only this view "
+                        "has (grey in 3D)"),
+        ]
+        bar.update()
+    return per_view
+
+
+def _global_plane_rows(scene: Scene) -> list[list[str]]:
+    """Rows of the global plane table: swatch and id, normal, offset, the view:local planes
+    it fuses and their area in pixels."""
+    G = scene.planes.shape[0]
+    palette = plane_palette(max(G, 1))
+    owners: dict[int, list[str]] = {g: [] for g in range(G)}
+    area = np.zeros(G, dtype=np.int64)
+    for v, (rec, links) in enumerate(zip(scene.views, scene.links, strict=True)):
+        for local, g in sorted(links.items()):
+            owners[g].append(f"{v + 1}:{local}")
+            area[g] += rec.area_px[local - 1]
+    return [
+        [f"{html.swatch(palette[g])}G{g}",
+         "(" + ", ".join(f"{x:+.3f}" for x in scene.planes[g, :3]) + ")",
+         f"{scene.planes[g, 3]:.3f}", html.esc(", ".join(owners[g]) or "none"), f"{area[g]}"]
+        for g in range(G)
+    ]
+
+
+def _camera_rows(scene: Scene) -> list[list[str]]:
+    """Rows of the camera table: view, image, centre, depth scale, planes, linked planes."""
+    cam_rows = []
+    for v, (cam, rec, links) in enumerate(zip(scene.cameras, scene.views, scene.links,
+                                                 strict=True)):
+        scale = f"{scene.scales[v]:.4g}" if v < len(scene.scales) else "n/a"
+        cam_rows.append([f"{v + 1}", cam.name or rec.frame.name,
+                         "(" + ", ".join(f"{x:+.3f}" for x in cam.center) + ")", scale,
+                         f"{rec.num_planes}", f"{len(links)}"])
+    return cam_rows

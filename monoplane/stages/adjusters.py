@@ -149,7 +149,7 @@ class PlaneBundleAdjuster(Adjuster):
                     continue
                 out["norm_view"].append(v)
                 out["norm_plane"].append(row[glob])
-                m = rec.params[local - 1, :3]
+                m = rec.planes[local - 1, :3]
                 # Same side as the global plane (both normally face the cameras).
                 out["norm_m"].append(m if (cam.R.T @ m) @ scene.planes[glob, :3] >= 0 else -m)
                 idx = np.flatnonzero((rec.labels.ravel() == local) & (depth.ravel() > 0))
@@ -213,16 +213,16 @@ class PlaneBundleAdjuster(Adjuster):
         for v, rec in enumerate(scene.views):
             s = float(res.scales[v])
             frame = rec.frame.with_(depth=(rec.frame.depth * s).astype(np.float32))
-            params = rec.params.copy()
+            params = rec.planes.copy()
             params[:, 3] *= s
-            views.append(replace(rec, frame=frame, params=params))
+            views.append(replace(rec, frame=frame, planes=params))
         planes = scene.planes.copy()
         planes[refined] = res.planes
         for g, mem in members.items():
             if g in row:
                 continue
             # Planes left out of the solve follow their views' new poses and scales.
-            world = np.array([plane_to_world(views[v].params[local - 1], cameras[v].R,
+            world = np.array([plane_to_world(views[v].planes[local - 1], cameras[v].R,
                                              cameras[v].t).reshape(4) for v, local in mem])
             planes[g] = fuse_planes(world)
         for g in range(planes.shape[0]):

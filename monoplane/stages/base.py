@@ -72,7 +72,7 @@ class StageKind:
         The contract every stage of the kind subclasses; its ``kind`` attribute is the kind's
         name and config table.
     hook : str
-        Name of the registration hook (a generated spec in :mod:`monoplane.hookspecs`).
+        Name of the registration hook (its spec is written out in :mod:`monoplane.hookspecs`).
     summary : str
         What the hook registers, one sentence (the hook's docstring and the plugin guide).
     """

@@ -200,7 +200,7 @@ class AverageFuser(Fuser):
         index = {node: k for k, node in enumerate(nodes)}
         edges = np.array([(index[(m.view_i, m.plane_i)], index[(m.view_j, m.plane_j)])
                           for m in matches], dtype=np.int64).reshape(-1, 2)
-        world = [plane_to_world(rec.params, cam.R, cam.t) if rec.num_planes else
+        world = [plane_to_world(rec.planes, cam.R, cam.t) if rec.num_planes else
                  np.zeros((0, 4)) for rec, cam in zip(views, sfm.cameras, strict=True)]
         node_planes = np.array([world[v][local - 1] for v, local in nodes]).reshape(-1, 4)
         merger = CoplanarMerger(nodes, node_planes, screened, sfm.cameras,
@@ -496,7 +496,7 @@ class AverageFuser(Fuser):
                 labels[region] = rec.num_planes + 1
                 points = rays[i][region] * rec.frame.depth[region, None]
                 rmse = float(np.sqrt(np.mean((points @ plane[:3] + plane[3]) ** 2)))
-                views[i] = replace(rec, labels=labels, params=np.vstack([rec.params, plane]),
+                views[i] = replace(rec, labels=labels, planes=np.vstack([rec.planes, plane]),
                                    rmse=np.append(rec.rmse, rmse),
                                    support=np.append(rec.support, int(region.sum())))
                 links[i][rec.num_planes + 1] = g
@@ -514,7 +514,7 @@ class AverageFuser(Fuser):
         out: list[PlaneMatch] = []
         centroids = [world_centroids(rec, cam) for rec, cam in zip(views, sfm.cameras,
                                                                      strict=True)]
-        world = [plane_to_world(rec.params, cam.R, cam.t).reshape(-1, 4)
+        world = [plane_to_world(rec.planes, cam.R, cam.t).reshape(-1, 4)
                  for rec, cam in zip(views, sfm.cameras, strict=True)]
         for i in range(len(views)):
             for j in range(i + 1, len(views)):
@@ -522,7 +522,7 @@ class AverageFuser(Fuser):
                 if a.num_planes == 0 or b.num_planes == 0:
                     continue
                 ci, cj = sfm.cameras[i], sfm.cameras[j]
-                angles = normal_angles_deg(a.params[:, :3] @ ci.R, b.params[:, :3] @ cj.R)
+                angles = normal_angles_deg(a.planes[:, :3] @ ci.R, b.planes[:, :3] @ cj.R)
                 found: dict[tuple[int, int], tuple[str, float]] = {}
                 pairs = sfm.matches.get((i, j))
                 if cfg.use_keypoints and pairs is not None and len(pairs):
@@ -537,9 +537,9 @@ class AverageFuser(Fuser):
                         found[(int(p), int(q))] = ("keypoints", 1.0 + float(share))
                 if cfg.use_reprojection:
                     R_ji, t_ji = relative_pose(ci.R, ci.t, cj.R, cj.t)
-                    iou_ij = reprojection_iou(a.labels, a.params, ci.K, b.labels, cj.K, R_ji,
+                    iou_ij = reprojection_iou(a.labels, a.planes, ci.K, b.labels, cj.K, R_ji,
                                               t_ji, self._step(b), b.num_planes)
-                    iou_ji = reprojection_iou(b.labels, b.params, cj.K, a.labels, ci.K,
+                    iou_ji = reprojection_iou(b.labels, b.planes, cj.K, a.labels, ci.K,
                                               R_ji.T, -R_ji.T @ t_ji, self._step(a), a.num_planes)
                     score = np.maximum(iou_ij, iou_ji.T)
                     for p, q in reprojection_plane_matches(iou_ij, iou_ji,

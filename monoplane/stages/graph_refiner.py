@@ -420,14 +420,14 @@ class GraphCrfRefiner(Refiner):
         graph = pixel_graph(cloud, self.config.max_jump)
         pixels = cloud.pixel_grid()[0]
         start = rec.labels.ravel()[pixels]
-        planes = cloud.plane_to_normalised(rec.params) if rec.num_planes else np.zeros((0, 4))
+        planes = cloud.plane_to_normalised(rec.planes) if rec.num_planes else np.zeros((0, 4))
         labels, _ = self.refine_cloud(cloud, graph, start, planes, params)
         image = np.zeros(frame.height * frame.width, dtype=np.int32)
         image[pixels] = labels
         params, rmse, support = fit_planes_per_label(frame.points().reshape(-1, 3), image,
                                                      int(labels.max(initial=0)))
         return Reconstruction(frame=frame, labels=image.reshape(frame.shape),
-                              params=orient_towards_camera(params) if len(params)
+                              planes=orient_towards_camera(params) if len(params)
                               else np.zeros((0, 4)),
                               rmse=rmse, support=support, timings=dict(rec.timings))
 

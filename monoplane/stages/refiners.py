@@ -226,7 +226,7 @@ class DenseCrfRefiner(Refiner):
         min_area = scaled_min_area(frame.shape, c.min_area)
         if np.isfinite(work.fill_tolerance) or c.fill_angle_deg < 180:
             labels = gate_filled_pixels(
-                work.points, frame.depth > 0, rec.labels, labels, rec.params,
+                work.points, frame.depth > 0, rec.labels, labels, rec.planes,
                 work.fill_tolerance, frame.normals, c.fill_angle_deg,
                 patch_px=int(round(c.fill_patch_px * frame.width / 256)))
         crf = time.perf_counter() - start

@@ -266,7 +266,7 @@ class PlaneAwareRegistrar(Registrar):
 
     def _geometry(self, rec: Reconstruction, scale: float) -> ViewGeometry:
         f = rec.frame
-        return view_geometry(f.K, f.depth * scale, f.normals, f.rgb, rec.params,
+        return view_geometry(f.K, f.depth * scale, f.normals, f.rgb, rec.planes,
                              rec.area_px, f.depth_kind == "metric", self.config.grid)
 
     def _why(self, tried: list[_Candidate]) -> str:

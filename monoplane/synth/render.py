@@ -14,12 +14,15 @@ Lambertian, so a surface point looks the same from every view.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
-import open3d as o3d
 
 from monoplane.datamodel import pixel_rays, plane_to_camera
 from monoplane.synth.scene import Layout
+
+if TYPE_CHECKING:
+    import open3d as o3d
 
 _AMBIENT = 0.35
 _DIFFUSE = 0.8
@@ -62,6 +65,8 @@ class RenderedView:
 
 def make_raycaster(layout: Layout) -> o3d.t.geometry.RaycastingScene:
     """Build the ray-casting acceleration structure of a layout (shared by its views)."""
+    import open3d as o3d  # seconds to import: only when a scene is rendered
+
     scene = o3d.t.geometry.RaycastingScene()
     scene.add_triangles(o3d.core.Tensor(layout.vertices), o3d.core.Tensor(layout.triangles))
     return scene
@@ -99,6 +104,8 @@ def render_view(raycaster: o3d.t.geometry.RaycastingScene, layout: Layout, K: np
     -------
     RenderedView
     """
+    import open3d as o3d  # loaded already by make_raycaster
+
     rays_cam = pixel_rays(K, height, width).reshape(-1, 3)
     center = -R.T @ t
     # World direction R^T d of every ray; its camera-z component stays 1, so t_hit is z-depth.

@@ -280,34 +280,16 @@ def _free(xy: np.ndarray, r: float, discs: list[np.ndarray], size: np.ndarray,
     return all(np.hypot(*(xy - d[:2])) > r + d[2] for d in discs)
 
 
-def build_layout(rng: np.random.Generator, objects: int | None = None) -> Layout:
-    """Draw a random furnished room and the first camera.
-
-    Parameters
-    ----------
-    rng : numpy.random.Generator
-        Source of all randomness (the layout is a pure function of its state).
-    objects : int, optional
-        ``None``: the usual furnishing, 2-4 cabinets and shelves, 0-2 free-standing boxes,
-        1-2 tables with 1-2 things on each, 2-4 curved objects and 2-4 wall panels or doors
-        (about 7-16 objects, most of them in view). A number: exactly that many objects, each
-        of a kind drawn uniformly from those five, placed in view 0's horizontal field of view
-        (a table counts as one object with what stands on it); a scene-complexity knob for
-        benchmarks. The room and the camera are the same either way, the objects are not.
+def _room(b: _MeshBuilder, rng: np.random.Generator, size: np.ndarray
+          ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, float]]:
+    """Add the floor, ceiling and walls of a room of ``size`` (m) to ``b``.
 
     Returns
     -------
-    Layout
-
-    Raises
-    ------
-    RuntimeError
-        When ``objects`` pieces cannot all be placed (the room is full; not reached below about
-        a dozen).
+    list
+        Per wall: (point on the wall, inward normal, in-wall horizontal axis, wall length).
     """
-    size = np.array([rng.uniform(4.0, 6.5), rng.uniform(4.5, 7.0), rng.uniform(2.5, 3.1)])
     lx, ly, lz = size
-    b = _MeshBuilder()
     ex, ey, ez = np.eye(3)
     half = size / 2
     # Room: floor, ceiling, walls; normals point into the room. Each face overhangs its
@@ -327,89 +309,99 @@ def build_layout(rng: np.random.Generator, objects: int | None = None) -> Layout
     ]
     for k, (p, n, a, length) in enumerate(walls):
         b.quad(p, (length / 2 + 0.01) * a, over[2] * ez, n, "wall", wall_mats[k // 2])
+    return walls
 
-    cam, target = _look_from_target(rng, size)
-    discs: list[np.ndarray] = [np.array([cam[0], cam[1], CAMERA_CLEARANCE])]
-    footprints: list[np.ndarray] = []
-    wall_used: list[list[tuple[float, float]]] = [[] for _ in walls]
-    gaze = (target - cam)[:2] / np.linalg.norm((target - cam)[:2])
 
-    def in_view(xy: np.ndarray) -> bool:
+class _Furnisher:
+    """Places the objects of one room: each placer tries to add one object of its kind and
+    says whether it did, keeping every object's footprint disc free of the others and of the
+    first camera."""
+
+    def __init__(self, rng: np.random.Generator, b: _MeshBuilder, size: np.ndarray,
+                 walls: list[tuple[np.ndarray, np.ndarray, np.ndarray, float]],
+                 cam: np.ndarray, target: np.ndarray, objects: int | None) -> None:
+        self.rng, self.b, self.size, self.walls = rng, b, size, walls
+        self.cam, self.objects = cam, objects
+        self.discs: list[np.ndarray] = [np.array([cam[0], cam[1], CAMERA_CLEARANCE])]
+        self.footprints: list[np.ndarray] = []
+        self.wall_used: list[list[tuple[float, float]]] = [[] for _ in walls]
+        self.gaze = (target - cam)[:2] / np.linalg.norm((target - cam)[:2])
+
+    def in_view(self, xy: np.ndarray) -> bool:
         """Whether a placement counts: always for the usual furnishing; with a set number of
         objects, only within 25 degrees of view 0's gaze (every field of view is >= 55)."""
-        if objects is None:
+        if self.objects is None:
             return True
-        ray = xy - cam[:2]
-        return bool(ray @ gaze > np.cos(np.radians(25.0)) * np.linalg.norm(ray))
+        ray = xy - self.cam[:2]
+        return bool(ray @ self.gaze > np.cos(np.radians(25.0)) * np.linalg.norm(ray))
 
-    def floor_spot(r: float) -> np.ndarray | None:
+    def floor_spot(self, r: float) -> np.ndarray | None:
         """A uniformly drawn floor point (x, y) whose disc of radius r is free, else None."""
-        xy = rng.uniform([r, r], [lx - r, ly - r])
-        return xy if _free(xy, r, discs, size) and in_view(xy) else None
+        lx, ly = self.size[:2]
+        xy = self.rng.uniform([r, r], [lx - r, ly - r])
+        return xy if _free(xy, r, self.discs, self.size) and self.in_view(xy) else None
 
-    def occupy(xy: np.ndarray, r: float) -> None:
+    def occupy(self, xy: np.ndarray, r: float) -> None:
         """Reserve the disc for later placements and record it as a footprint."""
         disc = np.array([xy[0], xy[1], r])
-        discs.append(disc)
-        footprints.append(disc)
+        self.discs.append(disc)
+        self.footprints.append(disc)
 
-    # Each placer tries to add one object of its kind and says whether it did.
-
-    def cabinet() -> bool:
+    def cabinet(self) -> bool:
         """A cabinet or shelf against a wall."""
+        rng = self.rng
         for _try in range(30):
             k = int(rng.integers(4))
-            p, n, a, length = walls[k]
+            p, n, a, length = self.walls[k]
             w, dpt, h = rng.uniform(0.5, 1.3), rng.uniform(0.3, 0.6), rng.uniform(0.45, 1.9)
             s = rng.uniform(w / 2 + 0.05, length - w / 2 - 0.05)
             center = p.copy()
             center[2] = h / 2
             center += (s - length / 2) * a + (dpt / 2 + 0.01) * n
             r = float(np.hypot(w, dpt) / 2)
-            if not _free(center[:2], r, discs, size, margin=None) or not in_view(center[:2]):
+            if (not _free(center[:2], r, self.discs, self.size, margin=None)
+                    or not self.in_view(center[:2])):
                 continue
             yaw = float(np.arctan2(a[1], a[0]))
-            b.box(center, np.array([w / 2, dpt / 2, h / 2]), yaw, "box",
-                  random_material(rng, "object"))
-            occupy(center, r)
-            wall_used[k].append((s - w / 2, s + w / 2))
+            self.b.box(center, np.array([w / 2, dpt / 2, h / 2]), yaw, "box",
+                       random_material(rng, "object"))
+            self.occupy(center, r)
+            self.wall_used[k].append((s - w / 2, s + w / 2))
             return True
         return False
 
-    def floor_placer(width: tuple[float, float], depth: tuple[float, float],
-                     height: tuple[float, float]
-                     ) -> Callable[[Callable[[float, float, float, np.ndarray], None]],
-                                   Callable[[], bool]]:
-        """Decorator making a placer of a box-shaped floor object from its builder.
+    def _on_floor(self, width: tuple[float, float], depth: tuple[float, float],
+                  height: tuple[float, float],
+                  build: Callable[[float, float, float, np.ndarray], None]) -> bool:
+        """Place a box-shaped floor object: draw its size (uniform in each range) and a free
+        floor spot for its footprint disc, up to 30 times; on success call ``build`` with
+        ``(w, depth, h, xy)`` and reserve the disc (:meth:`occupy`)."""
+        rng = self.rng
+        for _try in range(30):
+            w, dpt, h = rng.uniform(*width), rng.uniform(*depth), rng.uniform(*height)
+            r = float(np.hypot(w, dpt) / 2)
+            xy = self.floor_spot(r)
+            if xy is not None:
+                build(w, dpt, h, xy)
+                self.occupy(xy, r)
+                return True
+        return False
 
-        The placer draws the object's size (uniform in each range) and a free floor spot for
-        its footprint disc, up to 30 times; on success it calls the builder with
-        ``(w, depth, h, xy)`` and reserves the disc (:func:`occupy`).
-        """
-        def placer(build: Callable[[float, float, float, np.ndarray], None]
-                   ) -> Callable[[], bool]:
-            def place() -> bool:
-                for _try in range(30):
-                    w, dpt, h = rng.uniform(*width), rng.uniform(*depth), rng.uniform(*height)
-                    r = float(np.hypot(w, dpt) / 2)
-                    xy = floor_spot(r)
-                    if xy is not None:
-                        build(w, dpt, h, xy)
-                        occupy(xy, r)
-                        return True
-                return False
-            return place
-        return placer
-
-    @floor_placer((0.3, 0.8), (0.3, 0.8), (0.3, 1.0))
-    def free_box(w: float, dpt: float, h: float, xy: np.ndarray) -> None:
+    def free_box(self) -> bool:
         """A free-standing box with random yaw."""
-        b.box(np.array([xy[0], xy[1], h / 2]), np.array([w / 2, dpt / 2, h / 2]),
-              float(rng.uniform(0, np.pi)), "box", random_material(rng, "object"))
+        return self._on_floor((0.3, 0.8), (0.3, 0.8), (0.3, 1.0), self._build_free_box)
 
-    @floor_placer((0.8, 1.6), (0.6, 1.0), (0.68, 0.8))
-    def table(w: float, dpt: float, h: float, xy: np.ndarray) -> None:
+    def _build_free_box(self, w: float, dpt: float, h: float, xy: np.ndarray) -> None:
+        rng = self.rng
+        self.b.box(np.array([xy[0], xy[1], h / 2]), np.array([w / 2, dpt / 2, h / 2]),
+                   float(rng.uniform(0, np.pi)), "box", random_material(rng, "object"))
+
+    def table(self) -> bool:
         """A table: slab top, tube legs, and one or two things on top."""
+        return self._on_floor((0.8, 1.6), (0.6, 1.0), (0.68, 0.8), self._build_table)
+
+    def _build_table(self, w: float, dpt: float, h: float, xy: np.ndarray) -> None:
+        rng, b = self.rng, self.b
         yaw = float(rng.uniform(0, np.pi))
         th = 0.04
         b.box(np.array([xy[0], xy[1], h - th / 2]), np.array([w / 2, dpt / 2, th / 2]), yaw,
@@ -439,20 +431,21 @@ def build_layout(rng: np.random.Generator, objects: int | None = None) -> Layout
                 _torus(b, np.array([oxy[0], oxy[1], h + rr]), rng.uniform(0.1, 0.18), rr,
                        mat)
 
-    def curved() -> bool:
+    def curved(self) -> bool:
         """A sphere, domed cylinder or torus on the floor."""
+        rng, b = self.rng, self.b
         for _try in range(30):
             kind = int(rng.integers(3))
             mat = random_material(rng, "object")
             if kind == 0:
                 rad = rng.uniform(0.15, 0.35)
-                xy = floor_spot(rad)
+                xy = self.floor_spot(rad)
                 if xy is None:
                     continue
                 _sphere(b, np.array([xy[0], xy[1], rad]), rad, mat)
             elif kind == 1:
                 rad = rng.uniform(0.1, 0.25)
-                xy = floor_spot(rad)
+                xy = self.floor_spot(rad)
                 if xy is None:
                     continue
                 _domed_cylinder(b, np.array([xy[0], xy[1], 0.0]), rad, rng.uniform(0.3, 1.0),
@@ -460,19 +453,22 @@ def build_layout(rng: np.random.Generator, objects: int | None = None) -> Layout
             else:
                 big, small = rng.uniform(0.2, 0.35), rng.uniform(0.05, 0.1)
                 rad = big + small
-                xy = floor_spot(rad)
+                xy = self.floor_spot(rad)
                 if xy is None:
                     continue
                 _torus(b, np.array([xy[0], xy[1], small]), big, small, mat)
-            occupy(xy, rad)
+            self.occupy(xy, rad)
             return True
         return False
 
-    def panel() -> bool:
+    def panel(self) -> bool:
         """A wall panel (picture, board) or door: a thin box whose back face lies on the wall."""
+        rng = self.rng
+        lz = self.size[2]
+        ez = np.eye(3)[2]
         for _try in range(30):
             k = int(rng.integers(4))
-            p, n, a, length = walls[k]
+            p, n, a, length = self.walls[k]
             door = rng.uniform() < 0.25
             if door:
                 w, h, z0 = rng.uniform(0.8, 1.0), rng.uniform(1.95, 2.1), 0.0
@@ -482,43 +478,86 @@ def build_layout(rng: np.random.Generator, objects: int | None = None) -> Layout
             th = rng.uniform(0.02, 0.06)
             s = rng.uniform(w / 2 + 0.1, length - w / 2 - 0.1)
             lo, hi = s - w / 2, s + w / 2
-            if any(lo < u1 + 0.05 and hi > u0 - 0.05 for u0, u1 in wall_used[k]):
+            if any(lo < u1 + 0.05 and hi > u0 - 0.05 for u0, u1 in self.wall_used[k]):
                 continue
             center = p.copy()
             center[2] = z0 + h / 2
             center += (s - length / 2) * a + (th / 2) * n
-            if not in_view(center[:2]):
+            if not self.in_view(center[:2]):
                 continue
             yaw = float(np.arctan2(a[1], a[0]))
             # Local +y of the box is the wall normal for yaw along a; skip the face on the wall.
             back = 3 if np.allclose(np.cross(a, ez), -n) else 2
             # A door starts at the floor, so its bottom face is hidden; a picture's is not.
-            b.box(center, np.array([w / 2, th / 2, h / 2]), yaw, "panel",
-                  random_material(rng, "panel"), skip_bottom=door, skip=(back,))
-            wall_used[k].append((lo, hi))
+            self.b.box(center, np.array([w / 2, th / 2, h / 2]), yaw, "panel",
+                       random_material(rng, "panel"), skip_bottom=door, skip=(back,))
+            self.wall_used[k].append((lo, hi))
             return True
         return False
 
-    if objects is None:
-        # The counts are drawn kind by kind, each right before its placements.
-        for place, (low, high) in ((cabinet, (2, 5)), (free_box, (0, 3)), (table, (1, 3)),
-                                   (curved, (2, 5)), (panel, (2, 5))):
-            for _ in range(int(rng.integers(low, high))):
-                place()
-    else:
-        placers = (cabinet, free_box, table, curved, panel)
+    def furnish(self) -> None:
+        """The usual furnishing, or exactly :attr:`objects` objects of uniformly drawn kinds.
+
+        Raises
+        ------
+        RuntimeError
+            When that many objects cannot all be placed.
+        """
+        rng = self.rng
+        if self.objects is None:
+            # The counts are drawn kind by kind, each right before its placements.
+            for place, (low, high) in ((self.cabinet, (2, 5)), (self.free_box, (0, 3)),
+                                       (self.table, (1, 3)), (self.curved, (2, 5)),
+                                       (self.panel, (2, 5))):
+                for _ in range(int(rng.integers(low, high))):
+                    place()
+            return
+        placers = (self.cabinet, self.free_box, self.table, self.curved, self.panel)
         placed = 0
-        for _try in range(50 * max(objects, 1)):
-            if placed == objects:
+        for _try in range(50 * max(self.objects, 1)):
+            if placed == self.objects:
                 break
             placed += placers[int(rng.integers(len(placers)))]()
-        if placed < objects:
-            raise RuntimeError(f"could place only {placed} of {objects} objects in view")
+        if placed < self.objects:
+            raise RuntimeError(f"could place only {placed} of {self.objects} objects in view")
 
+
+def build_layout(rng: np.random.Generator, objects: int | None = None) -> Layout:
+    """Draw a random furnished room and the first camera.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+        Source of all randomness (the layout is a pure function of its state).
+    objects : int, optional
+        ``None``: the usual furnishing, 2-4 cabinets and shelves, 0-2 free-standing boxes,
+        1-2 tables with 1-2 things on each, 2-4 curved objects and 2-4 wall panels or doors
+        (about 7-16 objects, most of them in view). A number: exactly that many objects, each
+        of a kind drawn uniformly from those five, placed in view 0's horizontal field of view
+        (a table counts as one object with what stands on it); a scene-complexity knob for
+        benchmarks. The room and the camera are the same either way, the objects are not.
+
+    Returns
+    -------
+    Layout
+
+    Raises
+    ------
+    RuntimeError
+        When ``objects`` pieces cannot all be placed (the room is full; not reached below about
+        a dozen).
+    """
+    size = np.array([rng.uniform(4.0, 6.5), rng.uniform(4.5, 7.0), rng.uniform(2.5, 3.1)])
+    lx, ly, lz = size
+    b = _MeshBuilder()
+    walls = _room(b, rng, size)
+    cam, target = _look_from_target(rng, size)
+    furnisher = _Furnisher(rng, b, size, walls, cam, target, objects)
+    furnisher.furnish()
     light = np.array([rng.uniform(0.3, 0.7) * lx, rng.uniform(0.3, 0.7) * ly, lz - 0.25])
     hfov = float(rng.uniform(55.0, 68.0))
     return b.build(size=size, light=light, camera_center=cam, camera_target=target,
-                   hfov_deg=hfov, footprints=np.array(footprints).reshape(-1, 3))
+                   hfov_deg=hfov, footprints=np.array(furnisher.footprints).reshape(-1, 3))
 
 
 def extra_camera(layout: Layout, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:

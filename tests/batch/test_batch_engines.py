@@ -11,10 +11,10 @@ import pytest
 from batch_helpers import BROKEN, GOOD, read_labels
 
 from monoplane.batch import run_batch
-from monoplane.batch.frame import OUTPUT_FILES
 from monoplane.batch.index import write_index
 from monoplane.batch.specs import read_frames
 from monoplane.cli import main
+from monoplane.export import output_files
 
 
 def check_batch_output(out: Path, summary, reference: dict[str, np.ndarray]) -> None:
@@ -22,7 +22,7 @@ def check_batch_output(out: Path, summary, reference: dict[str, np.ndarray]) -> 
     assert [f.name for f in summary.frames] == sorted([*GOOD, BROKEN])  # input order
     for name in GOOD:
         assert by_name[name].status == "ok", by_name[name]
-        assert sorted(p.name for p in (out / name).iterdir()) == sorted(OUTPUT_FILES)
+        assert sorted(p.name for p in (out / name).iterdir()) == sorted(output_files("frame"))
         np.testing.assert_array_equal(read_labels(out / name), reference[name])
         assert by_name[name].planes == int(reference[name].max())
     bad = by_name[BROKEN]

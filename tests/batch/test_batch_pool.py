@@ -7,7 +7,7 @@ import os
 import pytest
 
 from monoplane.batch import WorkerDied, WorkerInitError, WorkerPool, map_ordered
-from monoplane.batch.pool import fork_if_available
+from monoplane.host.pool import fork_if_available
 
 _STATE: dict[str, object] = {}
 

@@ -11,7 +11,7 @@ from monoplane.cues import (
     ModelSpec,
     decode_normals,
     depth_from_disparity,
-    orient_normals,
+    face_camera,
     parse_axes,
     plan_letterbox,
     prepare_image,
@@ -129,11 +129,11 @@ def test_decode_flips_normals_that_face_away() -> None:
     out = decode_normals(raw, ModelSpec(output="normals"), K)
     assert np.all(out[..., 2] == -1.0)
     rays = pixel_rays(K, 6, 8)
-    tilted = orient_normals(np.broadcast_to([0.0, 1.0, 0.0], (6, 8, 3)), K)
+    tilted = face_camera(np.broadcast_to([0.0, 1.0, 0.0], (6, 8, 3)), K)
     assert np.all(np.sum(tilted * rays, axis=-1) <= 0)
 
 
-def test_orient_normals_matches_the_ray_image_reference() -> None:
+def test_face_camera_matches_the_ray_image_reference() -> None:
     # Reference: dot products with the full (H, W, 3) float32 ray image; random normals and
     # intrinsics with skew.
     rng = np.random.default_rng(0)
@@ -142,7 +142,7 @@ def test_orient_normals_matches_the_ray_image_reference() -> None:
     normals = rng.normal(size=(30, 40, 3)).astype(np.float32)
     rays = pixel_rays(K, 30, 40).astype(np.float32)
     away = np.sum(normals * rays, axis=-1, keepdims=True) > 0
-    out = orient_normals(normals, K)
+    out = face_camera(normals, K)
     assert out.dtype == np.float32
     np.testing.assert_array_equal(out, np.where(away, -normals, normals))
 
@@ -156,3 +156,13 @@ def test_bad_axes_are_config_errors(axes: str) -> None:
 def test_axes_parse() -> None:
     assert parse_axes("x,-y,-z") == ((0, 1.0), (1, -1.0), (2, -1.0))
     assert parse_axes(" -z , x, y") == ((2, -1.0), (0, 1.0), (1, 1.0))
+
+
+def test_the_old_name_of_face_camera_still_works_with_a_warning() -> None:
+    import monoplane.cues
+    import monoplane.cues.transforms
+
+    for module in (monoplane.cues, monoplane.cues.transforms):
+        with pytest.warns(DeprecationWarning, match="face_camera"):
+            assert module.orient_normals is face_camera
+

@@ -87,9 +87,9 @@ def test_given_provider_still_recomputes_normals_when_asked() -> None:
     assert any("estimated from depth" in n for n in pipe.prepare(frame).notes)
 
 
-def test_given_cues_kernel_matches_orient_normals_and_masking() -> None:
+def test_given_cues_kernel_matches_face_camera_and_masking() -> None:
     # Reference: the numpy composition the kernel fuses, compared bit for bit.
-    from monoplane.cues.transforms import orient_normals
+    from monoplane.cues.transforms import face_camera
 
     rng = np.random.default_rng(3)
     frame = complete_frame()
@@ -99,7 +99,7 @@ def test_given_cues_kernel_matches_orient_normals_and_masking() -> None:
     depth = frame.depth.copy()
     depth[::3, ::5] = 0
     out = use_given_cues(frame.with_(depth=depth, normals=normals))
-    oriented = orient_normals(normals, frame.K)
+    oriented = face_camera(normals, frame.K)
     expected = np.where((depth > 0)[..., None], oriented, 0).astype(np.float32)
     np.testing.assert_array_equal(out.normals, expected)
     flipped = int(np.sum(np.any(oriented != normals, axis=-1)))

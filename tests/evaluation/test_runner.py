@@ -129,3 +129,10 @@ def test_each_method_warms_up_once_untimed_before_the_timed_runs() -> None:
                    size=SIZE, progress=False)
     assert calls == [7, 7, 8]  # the warm-up on the first scene, then one timed run per scene
     assert len(res.methods[0].frames) == 2
+
+
+def test_the_old_name_of_frame_scores_still_works_with_a_warning() -> None:
+    import monoplane.evaluation.runner as runner
+
+    with pytest.warns(DeprecationWarning, match="FrameScores"):
+        assert runner.FrameResult is runner.FrameScores

@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from monoplane.batch.views import ViewPool
+from monoplane.host.view_pool import ViewPool
 from monoplane.evaluation.twoview import ground_truth_sfm
 from monoplane.hookspecs import hookimpl
 from monoplane.multiview import (

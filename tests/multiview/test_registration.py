@@ -11,8 +11,9 @@ import pytest
 
 from monoplane.errors import InvalidInput
 from monoplane.evaluation.twoview import ground_truth_sfm, relative_pose_error
-from monoplane.multiview import reconstruct_multiview, save_scene
+from monoplane.export import save
 from monoplane.host.pipeline import Pipeline
+from monoplane.multiview import reconstruct_multiview
 from monoplane.synth.sequence import generate_sequence
 
 OVERRIDES = ["cues.plugin=given", "refiner.plugin=none"]
@@ -63,7 +64,7 @@ def test_unregistered_view_is_placed_by_the_registrar(star, tmp_path: Path) -> N
     c_pred = -out.scene.cameras[2].R.T @ out.scene.cameras[2].t
     c_true = -v2.R.T @ v2.t
     assert np.linalg.norm(c_pred - c_true) < 0.05 * np.linalg.norm(c_true - (-v0.R.T @ v0.t))
-    saved = save_scene(out, tmp_path / "scene")
+    saved = save(out, tmp_path / "scene")
     cams = json.loads((saved / "cameras.json").read_text())["cameras"]
     assert cams[2]["registration"]["method"] == reg["method"]
     assert cams[2]["registration"]["agreeing_points"] == reg["agreeing_points"]
@@ -109,7 +110,7 @@ def test_view_that_cannot_be_placed_is_left_out_and_named(star, tmp_path: Path,
     out = reconstruct_multiview(frames, pipe, sfm=sfm, workers=1)
     assert out.frame_indices == [0, 1]
     assert out.unregistered == [frames[2].name]
-    saved = save_scene(out, tmp_path / "scene")
+    saved = save(out, tmp_path / "scene")
     doc = json.loads((saved / "scene.json").read_text())
     assert doc["unregistered"] == [frames[2].name]
     assert len(doc["cameras"]) == 2

@@ -1,34 +1,10 @@
-"""Palette distinctness and colourisation of depth and normals."""
+"""Colourisation of depth and normals, and shading."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from monoplane.report.colors import (
-    NON_PLANAR,
-    colorize_depth,
-    colorize_normals,
-    depth_range,
-    label_colors,
-    plane_palette,
-    shade,
-)
-
-
-def test_palette_colours_are_distinct() -> None:
-    pal = plane_palette(24).astype(float)
-    dist = np.linalg.norm(pal[:, None] - pal[None], axis=-1)
-    np.fill_diagonal(dist, np.inf)
-    assert dist.min() > 25.0
-    # Neighbouring ids (often adjacent planes) differ strongly.
-    assert np.linalg.norm(np.diff(pal, axis=0), axis=1).min() > 80.0
-
-
-def test_label_colors_maps_zero_to_non_planar() -> None:
-    labels = np.array([[0, 1], [2, 3]])
-    rgb = label_colors(labels)
-    np.testing.assert_array_equal(rgb[0, 0], NON_PLANAR)
-    np.testing.assert_array_equal(rgb[1, 1], plane_palette(3)[2])
+from monoplane.report.colors import colorize_depth, colorize_normals, depth_range, shade
 
 
 def test_depth_colours_near_blue_far_red_invalid_black() -> None:

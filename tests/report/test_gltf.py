@@ -14,8 +14,8 @@ import trimesh
 from report_fixtures import make_scene
 
 from monoplane.datamodel import Reconstruction
+from monoplane.export import save
 from monoplane.export.gltf import SOURCE_TO_GLTF, reconstruction_glb, scene_glb
-from monoplane.io.frames import save_reconstruction
 from monoplane.geometry.polygons import reconstruction_mesh
 from monoplane.report.colors import plane_palette
 
@@ -43,7 +43,7 @@ def _load(path: Path) -> tuple[trimesh.Scene, pygltflib.GLTF2]:
 
 def test_planes_glb_has_one_mesh_per_plane_in_the_documented_frame(room, tmp_path: Path
                                                                     ) -> None:
-    out = save_reconstruction(room, tmp_path / "out")
+    out = save(room, tmp_path / "out")
     path = out / "planes.glb"
     doc = json.loads((out / "planes.json").read_text())
     ids = [p["id"] for p in doc["planes"]]

@@ -15,7 +15,8 @@ import cv2
 import numpy as np
 import pytest
 
-from monoplane.host.detect import CloudPlaneResult
+from monoplane.datamodel import CloudResult
+from monoplane.geometry.cloud_mesh import cloud_mesh
 from monoplane.report.cloud import CAMERA_UP, CUT_SHARE, cloud_views, room_frame
 from monoplane.report.colors import plane_palette, shade
 from monoplane.report.render3d import Mesh
@@ -57,7 +58,7 @@ def room_points() -> dict[str, np.ndarray]:
     return out
 
 
-def room_result(rotation: np.ndarray | None = None) -> CloudPlaneResult:
+def room_result(rotation: np.ndarray | None = None) -> CloudResult:
     """The room as a detection result, optionally turned by ``rotation`` (3, 3)."""
     R = np.eye(3) if rotation is None else rotation
     parts = room_points()
@@ -68,14 +69,14 @@ def room_result(rotation: np.ndarray | None = None) -> CloudPlaneResult:
     planes = np.array([[*(R @ PLANES[n][0]), PLANES[n][1]] for n in names])
     counts = np.array([len(parts[n]) for n in names], np.int64)
     centroids = np.array([parts[n].mean(0) @ R.T for n in names])
-    return CloudPlaneResult(points=points, labels=labels, planes=planes,
-                            rmse=np.zeros(len(names)), num_points=counts, centroids=centroids)
+    return CloudResult(points=points, labels=labels, planes=planes,
+                            rmse=np.zeros(len(names)), support=counts, centroids=centroids)
 
 
 def test_the_largest_plane_is_a_wall_but_up_comes_from_the_floor() -> None:
     result = room_result()
     names = list(PLANES)
-    assert names[int(np.argmax(result.num_points))] == "back"   # the old rule's choice
+    assert names[int(np.argmax(result.support))] == "back"   # the old rule's choice
     frame = room_frame(result)                                   # camera-frame hint (0, -1, 0)
     np.testing.assert_allclose(frame.up, [0.0, -1.0, 0.0], atol=1e-9)
     assert names[frame.floor] == "floor" and names[frame.ceiling] == "ceiling"
@@ -105,11 +106,11 @@ def test_without_a_hint_things_standing_on_the_floor_decide() -> None:
     result = room_result()
     tops = np.array([[x, FLOOR_Y - 0.45, z] for x in np.arange(-3.5, 3.5, 0.1)
                      for z in np.arange(1.2, 1.8, 0.1)])
-    result = CloudPlaneResult(
+    result = CloudResult(
         points=np.concatenate([result.points, tops]),
         labels=np.concatenate([result.labels, np.full(len(tops), 7, np.int32)]),
         planes=np.vstack([result.planes, [0.0, -1.0, 0.0, FLOOR_Y - 0.45]]),
-        rmse=np.zeros(7), num_points=np.append(result.num_points, len(tops)),
+        rmse=np.zeros(7), support=np.append(result.support, len(tops)),
         centroids=np.vstack([result.centroids, tops.mean(0)]))
     frame = room_frame(result, up_hint=None)
     assert list(PLANES)[frame.floor] == "floor"
@@ -119,7 +120,7 @@ def test_a_plane_inside_the_cloud_is_no_floor() -> None:
     # The table top has points on both sides (floor below, walls and ceiling above).
     result = room_result()
     keep = result.labels != 1
-    frame = estimate_room_frame(result.points[keep], result.planes[1:], result.num_points[1:],
+    frame = estimate_room_frame(result.points[keep], result.planes[1:], result.support[1:],
                                 np.array(CAMERA_UP))
     assert list(PLANES)[1:][frame.floor] != "table"
 
@@ -127,7 +128,7 @@ def test_a_plane_inside_the_cloud_is_no_floor() -> None:
 def test_section_below_cuts_walls_at_the_height() -> None:
     result = room_result()
     frame = room_frame(result)
-    mesh = result.plane_mesh()
+    mesh = cloud_mesh(result)
     colors = np.zeros((len(mesh.vertices), 3))
     cut, planes = section_below(Mesh(mesh.vertices, mesh.triangles, colors),
                                 mesh.plane_ids - 1, frame, 2.0)
@@ -164,7 +165,7 @@ def test_birdseye_view_has_no_ceiling_and_inside_views_exist(tmp_path: Path) -> 
     from monoplane.report.viewpoints import orbit_viewpoints
 
     frame = room_frame(result)
-    mesh = result.plane_mesh()
+    mesh = cloud_mesh(result)
     vp = orbit_viewpoints(mesh.vertices, frame.up, np.array([0.0, 0, 1]), 320, 240)[0]
     vertex_plane = np.zeros(len(mesh.vertices), np.int64)
     vertex_plane[mesh.triangles.reshape(-1)] = np.repeat(mesh.plane_ids - 1, 3)

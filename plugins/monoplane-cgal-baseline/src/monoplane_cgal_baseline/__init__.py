@@ -101,7 +101,7 @@ def cgal_efficient_ransac(frame: Frame, *, seed: int = 0, **options: Any) -> Rec
 
     Raises
     ------
-    monoplane.errors.ConfigError
+    monoplane.plugin.ConfigError
         On an unknown option or an ill-typed value (the message lists the valid options).
     """
     from CGAL import CGAL_Shape_detection
@@ -137,7 +137,7 @@ def cgal_efficient_ransac(frame: Frame, *, seed: int = 0, **options: Any) -> Rec
         supports.append(members.size)
         flat[cloud.all_pixels[members]] = len(planes)
     return Reconstruction(frame=frame, labels=flat.reshape(frame.shape),
-                          params=np.asarray(planes, dtype=np.float64).reshape(-1, 4),
+                          planes=np.asarray(planes, dtype=np.float64).reshape(-1, 4),
                           rmse=np.asarray(rmses, dtype=np.float64),
                           support=np.asarray(supports, dtype=np.int64),
                           config={"baseline": "cgal", **asdict(cfg)},

@@ -9,7 +9,7 @@ the whole process group) reaches the parent only, which then stops the workers i
 
 Typical use (results in input order)::
 
-    from monoplane.batch import map_ordered
+    from monoplane.host.pool import map_ordered
 
     def setup(config):             # runs once per worker process
         global PIPE

@@ -1,13 +1,13 @@
 """Per-view work of a multi-view run (cues, RANSAC, refiner) in a pool of processes.
 
-The view pool sits beside the batch pool (:mod:`monoplane.batch.pool`) and is built on it. It
-differs from a batch in one way: it is opened *before* structure from motion, so its workers
-start while the matcher runs, and the host process takes over every view no worker has started
-once it waits for the results.
+The view pool is built on the worker pool of :mod:`monoplane.host.pool`, which batches use
+too. It differs from a batch in one way: it is opened *before* structure from motion, so its
+workers start while the matcher runs, and the host process takes over every view no worker has
+started once it waits for the results.
 
 Python API::
 
-    from monoplane.batch.views import ViewPool, process_view
+    from monoplane.host.view_pool import ViewPool, process_view
     with ViewPool(pipe, workers=2, n_views=len(frames)) as pool:
         tasks = pool.submit(process_view, frames)   # runs in the background
         ...                                          # e.g. SfM in this process
@@ -20,11 +20,11 @@ import contextlib
 from collections.abc import Callable, Iterator
 from typing import TYPE_CHECKING, Any
 
-from monoplane.batch.pool import WorkerInitError, WorkerPool, default_workers
+from monoplane.host.pipeline import Pipeline
+from monoplane.host.pool import WorkerInitError, WorkerPool, default_workers
 
 if TYPE_CHECKING:
     from monoplane.datamodel import Frame, Reconstruction
-    from monoplane.host.pipeline import Pipeline
 
 # Each worker builds the pipeline once from the config (initializer), then takes one view per task.
 _PIPE: Pipeline | None = None
@@ -35,8 +35,6 @@ VIEW_STAGES = ("cues", "ransac", "refiner")
 
 def _init_view_worker(config: dict[str, Any]) -> None:
     """Worker initializer: build this worker's pipeline from the resolved config."""
-    from monoplane.host.pipeline import Pipeline
-
     global _PIPE
     _PIPE = Pipeline.from_config(config)
 
