@@ -7,8 +7,8 @@ import json
 import pytest
 import tomli_w
 
-from monoplane.host import config
 from monoplane.cli import main
+from monoplane.host import config
 
 
 def _toml_literal(value: object) -> str:
