@@ -51,6 +51,7 @@ from monoplane.datamodel import Camera, CloudResult, Reconstruction, Scene
 from monoplane.export.exporter import Exporter
 from monoplane.export.shared import SharedWork
 from monoplane.geometry.camera import frustum
+from monoplane.geometry.cloud_mesh import cloud_mesh
 from monoplane.geometry.polygons import PlaneMesh, reconstruction_mesh
 from monoplane.hookspecs import hookimpl
 from monoplane.palette import plane_palette
