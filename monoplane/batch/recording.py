@@ -17,12 +17,13 @@ from __future__ import annotations
 import json
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
 
 from monoplane.batch.frame import FrameResult, one_line
-from monoplane.batch.specs import FrameSpec
+from monoplane.batch.specs import FrameSpec, read_frames
 from monoplane.datamodel import Reconstruction
 from monoplane.errors import InvalidInput
 from monoplane.export.rerun_log import log_reconstruction, recording_file, require_rerun
@@ -107,3 +108,12 @@ def write_batch_recording(path: str | Path, out: str | Path, specs: Sequence[Fra
             stream.set_time(TIMELINE, sequence=i)
             log_reconstruction(rr, stream, rec)
     return missing
+
+
+def record_batch(path: str | Path, source: str | Path, out: str | Path,
+                 frames: Sequence[FrameResult], **reading: Any) -> list[str]:
+    """:func:`write_batch_recording` of the batch that read ``source`` (a folder of frame
+    folders or a manifest, read again with :func:`~monoplane.batch.specs.read_frames` and the
+    same ``reading`` keywords: ``depth_scale``, ``depth_kind``, ``nan_as_invalid``) into
+    ``out``; returns the frames missing from it, as ``"name: reason"``."""
+    return write_batch_recording(path, out, read_frames(source, **reading), frames)

@@ -81,11 +81,10 @@ def run_cmd(args: argparse.Namespace) -> int:
         for f in summary.failed:
             print(f"failed: {f.name}: {f.error}")
     if args.rerun:
-        from monoplane.batch import read_frames
-        from monoplane.batch.recording import write_batch_recording
+        from monoplane.batch.recording import record_batch
 
-        specs = read_frames(args.input, **depth_reading(args))
-        missing = write_batch_recording(args.rerun, args.out, specs, summary.frames)
+        missing = record_batch(args.rerun, args.input, args.out, summary.frames,
+                               **depth_reading(args))
         if not args.quiet:
             for reason in missing:
                 print(f"note: not in {args.rerun}: {reason}")

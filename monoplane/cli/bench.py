@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
-from pathlib import Path
+from typing import TYPE_CHECKING
 
 from monoplane.cli.common import add_set_arg
 from monoplane.errors import InvalidInput
 from monoplane.evaluation.score_files import write_scores
+
+if TYPE_CHECKING:
+    from monoplane.evaluation.bench_frames import DataSource
 
 DESCRIPTION = """Run a preset on seeded synthetic frames at one or more image sizes and print one
 table: the median time of every pipeline stage and sub-step (from the reconstruction's
@@ -116,109 +118,72 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _worker_counts(text: str | None) -> list[int]:
-    from monoplane.batch import default_workers
-
-    if text is None:
-        return list(dict.fromkeys([1, default_workers()]))
-    try:
-        counts = [int(v) for v in text.split(",")]
-    except ValueError:
-        counts = []
-    if not counts or min(counts) < 1:
-        raise InvalidInput(f"--workers must be comma-separated counts of at least 1, e.g. 1,2; "
-                           f"got {text!r}")
-    return counts
-
-
-def _object_ranges(text: str | None, complexity: bool) -> list[tuple[int, int]] | None:
-    """``--objects``/``--complexity`` as (min, max) ranges; ``None`` for the usual scenes."""
-    from monoplane.evaluation.bench import COMPLEXITY_LEVELS
-
-    if text is None:
-        return list(COMPLEXITY_LEVELS) if complexity else None
-    if complexity:
-        raise InvalidInput("give either --complexity or --objects, not both")
-    ranges = []
-    for part in text.split(","):
-        lo, _, hi = part.strip().partition("-")
-        try:
-            span = (int(lo), int(hi or lo))
-        except ValueError:
-            span = (-1, -1)
-        if not 0 <= span[0] <= span[1]:
-            raise InvalidInput(f"--objects takes ranges like 1-2,4-6,8-12 (min <= max, both "
-                               f">= 0); got {part.strip()!r}")
-        ranges.append(span)
-    return ranges
-
-
 def _write_json(path: str, doc: dict) -> None:
     # --from-json reads the numbers back as floats, NaN included.
     print(f"numbers written to {write_scores(path, doc, nan_as_null=False)}", file=sys.stderr)
 
 
-def _from_json(path: str, markdown: bool) -> str:
-    from monoplane.batch.throughput import BatchBenchResult, format_batch_bench
-    from monoplane.evaluation.bench import BenchResult, format_bench
+def _run_batch(args: argparse.Namespace, settings: dict) -> int:
+    from monoplane.batch.throughput import bench_batch, format_batch_bench
+    from monoplane.evaluation.bench import parse_sizes
+    from monoplane.evaluation.bench_options import parse_worker_counts
 
-    try:
-        data = json.loads(Path(path).read_text())
-        if data.get("kind") == "batch":
-            return format_batch_bench(BatchBenchResult.from_dict(data["result"]), markdown)
-        return format_bench([BenchResult.from_dict(r) for r in data["results"]], markdown)
-    except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
-        raise InvalidInput(f"{path}: not a 'monoplane bench --json' file ({exc})") from exc
+    if args.data is not None:
+        raise InvalidInput("--data applies to the frame bench; 'monoplane batch' itself "
+                           "reads a folder: time it with --batch on synthetic frames")
+    if settings["objects"] is not None:
+        raise InvalidInput("--objects and --complexity apply to the frame bench, not --batch")
+    sizes = parse_sizes(args.sizes or "640x480")
+    if len(sizes) != 1:
+        raise InvalidInput(f"--batch takes one size in --sizes, got {args.sizes!r}")
+    result = bench_batch(args.preset, sizes[0], frames=20 if args.frames is None else args.frames,
+                         workers=parse_worker_counts(args.workers),
+                         engines=args.engines or ["local"], repeat=args.repeat, seed=args.seed,
+                         level=args.level, overrides=args.overrides,
+                         progress=not args.no_progress)
+    print(format_batch_bench(result, markdown=args.markdown))
+    if args.json:
+        _write_json(args.json, {"kind": "batch", "settings": settings,
+                                "result": result.to_dict()})
+    return 0
+
+
+def _data_source(args: argparse.Namespace, settings: dict) -> DataSource | None:
+    """``--data`` and its options as the frames to time (None: synthetic frames); recorded in
+    ``settings``."""
+    from monoplane.evaluation.bench_frames import DataSource
+
+    if args.data is None:
+        if (args.depth_scale, args.intrinsics, args.depth_only) != (None, None, False):
+            raise InvalidInput("--depth-scale, --intrinsics and --depth-only apply to --data "
+                               "only")
+        return None
+    if args.sizes is not None:
+        raise InvalidInput("--sizes applies to synthetic frames; --data times the frames "
+                           "at their own size")
+    settings.update(data=args.data, depth_scale=args.depth_scale, intrinsics=args.intrinsics,
+                    depth_only=args.depth_only)
+    return DataSource(args.data, args.depth_scale, args.intrinsics, args.depth_only,
+                      args.frames)
 
 
 def run(args: argparse.Namespace) -> int:
     from monoplane.evaluation.bench import bench, format_bench, parse_sizes
-    from monoplane.evaluation.bench_frames import DataSource
+    from monoplane.evaluation.bench_options import parse_object_ranges, saved_bench_table
 
     if args.from_json:
-        print(_from_json(args.from_json, args.markdown))
+        print(saved_bench_table(args.from_json, args.markdown))
         return 0
-    objects = _object_ranges(args.objects, args.complexity)
+    objects = parse_object_ranges(args.objects, args.complexity)
     settings = {"preset": args.preset, "sizes": args.sizes, "frames": args.frames,
                 "repeat": args.repeat, "seed": args.seed, "level": args.level,
                 "overrides": args.overrides,
                 "objects": None if objects is None else [list(r) for r in objects]}
     if args.batch:
-        if args.data is not None:
-            raise InvalidInput("--data applies to the frame bench; 'monoplane batch' itself "
-                               "reads a folder: time it with --batch on synthetic frames")
-        if objects is not None:
-            raise InvalidInput("--objects and --complexity apply to the frame bench, not "
-                               "--batch")
-        from monoplane.batch.throughput import bench_batch, format_batch_bench
-
-        sizes = parse_sizes(args.sizes or "640x480")
-        if len(sizes) != 1:
-            raise InvalidInput(f"--batch takes one size in --sizes, got {args.sizes!r}")
-        frames = 20 if args.frames is None else args.frames
-        result = bench_batch(args.preset, sizes[0], frames=frames,
-                             workers=_worker_counts(args.workers),
-                             engines=args.engines or ["local"], repeat=args.repeat,
-                             seed=args.seed, level=args.level, overrides=args.overrides,
-                             progress=not args.no_progress)
-        print(format_batch_bench(result, markdown=args.markdown))
-        if args.json:
-            _write_json(args.json, {"kind": "batch", "settings": settings,
-                                    "result": result.to_dict()})
-        return 0
+        return _run_batch(args, settings)
     if args.workers is not None or args.engines is not None:
         raise InvalidInput("--workers and --engine apply to --batch only")
-    data = None
-    if args.data is not None:
-        if args.sizes is not None:
-            raise InvalidInput("--sizes applies to synthetic frames; --data times the frames "
-                               "at their own size")
-        data = DataSource(args.data, args.depth_scale, args.intrinsics, args.depth_only,
-                          args.frames)
-        settings.update(data=args.data, depth_scale=args.depth_scale,
-                        intrinsics=args.intrinsics, depth_only=args.depth_only)
-    elif (args.depth_scale, args.intrinsics, args.depth_only) != (None, None, False):
-        raise InvalidInput("--depth-scale, --intrinsics and --depth-only apply to --data only")
+    data = _data_source(args, settings)
     results = bench(args.preset, parse_sizes(args.sizes or "256x192,640x480"),
                     repeat=args.repeat, seed=args.seed, level=args.level,
                     overrides=args.overrides, progress=not args.no_progress,

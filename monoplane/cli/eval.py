@@ -224,16 +224,8 @@ def _write_report(results: Any, methods: list[Any], out_dir: str, progress: bool
     print(f"report written to {path}", file=sys.stderr)
 
 
-def _baseline_options(args: argparse.Namespace, names: list[str], all_methods: bool = False
-                      ) -> dict[str, dict[str, Any]]:
-    """``--baseline-set`` options per baseline; each must name a baseline of the run."""
-    from monoplane.evaluation.baselines import baseline_names, parse_baseline_options
-
-    run = [*names, *baseline_names()] if all_methods else names
-    return parse_baseline_options(args.baseline_sets, list(dict.fromkeys(run)))
-
-
 def _run_dataset(args: argparse.Namespace) -> int:
+    from monoplane.evaluation.baselines import parse_baseline_options
     from monoplane.evaluation.dataset import evaluate_dataset, format_dataset_table
 
     if args.multiview or args.all_methods or args.report:
@@ -242,7 +234,8 @@ def _run_dataset(args: argparse.Namespace) -> int:
     results = evaluate_dataset(args.data, args.presets, args.baselines, args.overrides or None,
                                as_cloud=args.as_cloud, tolerance=args.tolerance,
                                seed=args.seed, progress=not args.no_progress,
-                               baseline_options=_baseline_options(args, args.baselines))
+                               baseline_options=parse_baseline_options(args.baseline_sets,
+                                                                        args.baselines))
     print(format_dataset_table(results))
     if args.json:
         _write_json(args.json, results.to_dict())
@@ -250,6 +243,7 @@ def _run_dataset(args: argparse.Namespace) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
+    from monoplane.evaluation.baselines import parse_baseline_options
     from monoplane.evaluation.runner import evaluate, format_table, parse_size, resolve_methods
 
     if args.data and args.multiview:
@@ -270,7 +264,8 @@ def run(args: argparse.Namespace) -> int:
     if args.multiview:
         return _run_multiview(args, size)
     methods = resolve_methods(args.presets, args.baselines, args.all_methods, args.overrides,
-                              _baseline_options(args, args.baselines, args.all_methods))
+                              parse_baseline_options(args.baseline_sets, args.baselines,
+                                                     args.all_methods))
     results = evaluate(methods, n=args.n, level=args.level, seed=args.seed, size=size,
                        progress=not args.no_progress)
     print(format_table(results))

@@ -37,28 +37,29 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from monoplane.errors import InvalidInput
-    from monoplane.multiview import hold_intrinsics_fixed, save_sfm
-    from monoplane.multiview.registration import feature_correspondences, match_views
+    from monoplane.multiview import (
+        hold_given_intrinsics,
+        save_sfm,
+        sfm_summary,
+        structure_from_motion,
+        unregistered_names,
+    )
 
     check_output_dir(args.out, args.overwrite)  # fail before any work
     if len(args.images) < 2:
         raise InvalidInput(f"match needs at least 2 images, got {len(args.images)}")
     pipe = pipeline_from_args(args)
-    if args.intrinsics and not hold_intrinsics_fixed(pipe) and not args.quiet:
-        print(f"monoplane: note: matcher '{pipe.config.stages['matcher'][0]}' cannot hold "
-              "intrinsics fixed; --intrinsics is its starting guess", file=sys.stderr)
+    note = hold_given_intrinsics(pipe) if args.intrinsics else None
+    if note and not args.quiet:
+        print(f"monoplane: note: {note}", file=sys.stderr)
     frames = [load_frame(img, intrinsics=args.intrinsics) for img in args.images]
     timings: dict[str, float] = {}
-    sfm = match_views(pipe, frames, feature_correspondences(pipe, frames), "match", timings)
+    sfm = structure_from_motion(pipe, frames, "match", timings)
     out = save_sfm(sfm, args.out, overwrite=args.overwrite)
     if not args.quiet:
-        pairs = ", ".join(f"{sfm.cameras[i].name}-{sfm.cameras[j].name}: {len(m)}"
-                          for (i, j), m in sorted(sfm.matches.items()))
-        missing = [c.name for c, ok in zip(sfm.cameras, sfm.registered, strict=True) if not ok]
+        missing = unregistered_names(sfm)
         if missing:
             print(f"monoplane: warning: could not register {', '.join(missing)}",
                   file=sys.stderr)
-        print(f"{sfm.num_views - len(missing)} cameras, {len(sfm.points)} points, "
-              f"verified matches {pairs} "
-              f"in {timings['matcher']:.2f} s -> {out}", file=sys.stdout)
+        print(f"{sfm_summary(sfm, timings['matcher'])} -> {out}", file=sys.stdout)
     return 0

@@ -5,26 +5,15 @@ from __future__ import annotations
 import argparse
 import json
 
-from monoplane.cues.profile_files import (
-    BUILTIN_PROFILES,
-    get_profile,
-    is_profile_file,
-    load_profile_file,
-    profile_to_toml,
+from monoplane.cues.profile_files import BUILTIN_PROFILES, profile_to_toml
+from monoplane.models import fetch, get_model, require_model
+from monoplane.models.listing import (
+    catalogue_rows,
+    catalogue_table,
+    fetch_summary,
+    profile_named,
+    unpinned_note,
 )
-from monoplane.errors import InvalidInput
-from monoplane.host.pipeline import Pipeline
-from monoplane.models import (
-    CATALOGUE,
-    cache_dir,
-    cached_model,
-    fetch,
-    get_model,
-    model_path,
-    require_model,
-)
-from monoplane.models.catalogue import ModelRecord
-from monoplane.stages.base import CueProvider
 
 DESCRIPTION = """Monocular depth/normal networks monoplane can download on request (ONNX exports
 published on Hugging Face, pinned to a revision where one is known, checked by size and SHA-256).
@@ -63,51 +52,21 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     pr.set_defaults(func=run_profile)
 
 
-def _status(record: ModelRecord) -> str:
-    try:
-        return "cached" if cached_model(record.name) is not None else "-"
-    except InvalidInput:  # a wrong-size copy: say so in the listing, do not fail it
-        return "broken"
-
-
-def _size(record: ModelRecord) -> str:
-    return "?" if record.size is None else f"{record.size / 1e6:.0f} MB"
-
-
 def run_list(args: argparse.Namespace) -> int:
-    records = [CATALOGUE[n] for n in sorted(CATALOGUE)]
     if args.json:
-        rows = [{**r.to_dict(), "cached": _status(r) == "cached", "path": str(model_path(r))}
-                for r in records]
-        print(json.dumps(rows, indent=2))
+        print(json.dumps(catalogue_rows(), indent=2))
         return 0
-    table = [("name", "task", "licence", "size", "profile", "cached", "source")]
-    for r in records:
-        rev = r.revision[:10] if r.pinned else f"{r.revision} (unpinned)"
-        table.append((r.name, r.task, r.licence.split(" ")[0], _size(r), r.profile, _status(r),
-                     f"{r.repo}@{rev}:{r.filename}"))
-    widths = [max(len(row[i]) for row in table) for i in range(len(table[0]) - 1)]
-    for row in table:
-        print("  ".join(c.ljust(w) for c, w in zip(row[:-1], widths, strict=False)) + "  "
-              + row[-1])
-    print(f"\ncache: {cache_dir()}")
-    for r in records:
-        print(f"  {r.name}: {r.summary}; licence {r.licence}")
+    print(catalogue_table())
     print("\n" + BRING_YOUR_OWN.format(names=", ".join(sorted(BUILTIN_PROFILES))))
     return 0
 
 
 def run_fetch(args: argparse.Namespace) -> int:
     record = get_model(args.name)
-    if not record.pinned:
-        print(f"note: {record.name} follows the branch {record.revision!r} (no commit hash "
-              f"pinned); the size and hash checks guard against a changed file")
-    result = fetch(args.name)
-    verb = "downloaded" if result.downloaded else "already cached"
-    print(f"{record.name}: {verb}, verified -> {result.path}")
-    pinned = "matches the catalogue" if record.sha256 and len(record.sha256) == 64 else (
-        "not fully pinned in the catalogue: pin it")
-    print(f"sha256 {result.sha256} ({pinned})")
+    note = unpinned_note(record)
+    if note:
+        print(f"note: {note}")
+    print(fetch_summary(record, fetch(args.name)))
     return 0
 
 
@@ -118,36 +77,5 @@ def run_path(args: argparse.Namespace) -> int:
 
 def run_profile(args: argparse.Namespace) -> int:
     """Print a built-in, catalogue or file profile as profile-file TOML (files are checked)."""
-    name = args.name
-    if is_profile_file(name):
-        profile = load_profile_file(name).profile
-    elif name in CATALOGUE:
-        record = CATALOGUE[name]
-        if record.task == "features":
-            raise InvalidInput(f"{name} is a features model (the '{record.profile}' features "
-                               "stage runs it); only depth and normals models have a profile")
-        profile = get_profile(record.profile)
-    else:
-        profile = get_profile(name)
-    print(profile_to_toml(profile), end="")
+    print(profile_to_toml(profile_named(args.name)), end="")
     return 0
-
-
-def prepare_cue_model(pipe: Pipeline, *, fetch_missing: bool, has_depth: bool,
-                      has_normals: bool, quiet: bool = False) -> None:
-    """Make sure the pipeline's catalogue model (``cues.model``) is in the cache.
-
-    The cue provider says which catalogue model the input needs
-    (:meth:`~monoplane.stages.base.CueProvider.catalogue_model`). With ``fetch_missing`` a
-    missing model is downloaded (the only download a run ever does); otherwise a missing model
-    is a one-line error naming the fetch command, raised before any image is read.
-    """
-    name = pipe.stage("cues", CueProvider).catalogue_model(not has_depth, not has_normals)
-    if not name or cached_model(name) is not None:
-        return
-    if fetch_missing:
-        result = fetch(name)
-        if not quiet:
-            print(f"fetched {name} -> {result.path} (sha256 {result.sha256})")
-        return
-    require_model(name)

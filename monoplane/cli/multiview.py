@@ -68,7 +68,7 @@ def _per_image(files: list[str] | None, n: int, what: str) -> list[str | None]:
 def run(args: argparse.Namespace) -> int:
     from monoplane.errors import InvalidInput
     from monoplane.export.saving import save
-    from monoplane.multiview import hold_intrinsics_fixed, reconstruct_multiview
+    from monoplane.multiview import hold_given_intrinsics, reconstruct_multiview, scene_summary
 
     check_output_args(args)  # fail before any work
     n = len(args.images)
@@ -79,9 +79,9 @@ def run(args: argparse.Namespace) -> int:
     if args.workers is not None and args.workers < 1:
         raise InvalidInput(f"--workers must be at least 1, got {args.workers}")
     pipe = pipeline_from_args(args)
-    if args.intrinsics and not hold_intrinsics_fixed(pipe) and not args.quiet:
-        print(f"monoplane: note: matcher '{pipe.config.stages['matcher'][0]}' cannot hold "
-              "intrinsics fixed; --intrinsics is its starting guess", file=sys.stderr)
+    note = hold_given_intrinsics(pipe) if args.intrinsics else None
+    if note and not args.quiet:
+        print(f"monoplane: note: {note}", file=sys.stderr)
     frames = [
         load_frame(img, depth=d, normals=nm, intrinsics=args.intrinsics, **depth_reading(args))
         for img, d, nm in zip(args.images, depths, normals, strict=True)
@@ -94,10 +94,7 @@ def run(args: argparse.Namespace) -> int:
     out = save(result, args.out, overwrite=args.overwrite, also=_scene_report(args, result))
     write_rerun_arg(args, result)
     if not args.quiet:
-        scene = result.scene
-        per_view = ", ".join(str(v.num_planes) for v in scene.views)
-        print(f"{scene.planes.shape[0]} global planes from {per_view} view planes, "
-              f"{len(result.sfm.points)} SfM points, {result.timings['total']:.2f} s -> {out}")
+        print(f"{scene_summary(result)} -> {out}")
         refined = refinement_summary(result.adjustment)
         if refined:
             print(refined)

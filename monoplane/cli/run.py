@@ -14,14 +14,10 @@ from monoplane.cli.common import (
     pipeline_from_args,
     write_rerun_arg,
 )
-from monoplane.cli.models import prepare_cue_model
-from monoplane.cues import CueNetwork
-from monoplane.errors import InvalidInput
 from monoplane.export.saving import save
 from monoplane.host.config import cue_model_overrides
-from monoplane.host.pipeline import Pipeline
+from monoplane.host.cue_models import prepare_cue_model, require_depth_source
 from monoplane.io.frames import load_frame
-from monoplane.stages.base import CueProvider
 
 DESCRIPTION = """Recover the planes of one image and write labels.png (uint16, 0 = non-planar),
 planes.json (normal . X + offset = 0 in the camera frame and the depth's units), planes.ply,
@@ -59,8 +55,12 @@ def run(args: argparse.Namespace) -> int:
     overrides = (cue_model_overrides(args.cues, args.preset, args.config, args.overrides)
                  if args.cues else args.overrides)
     pipe = pipeline_from_args(args, overrides)
-    prepare_cue_model(pipe, fetch_missing=args.fetch, has_depth=args.depth is not None,
-                      has_normals=args.normals is not None, quiet=args.quiet)
+    fetched = prepare_cue_model(pipe, fetch_missing=args.fetch,
+                                has_depth=args.depth is not None,
+                                has_normals=args.normals is not None)
+    if fetched is not None and not args.quiet:
+        name, result = fetched
+        print(f"fetched {name} -> {result.path} (sha256 {result.sha256})")
     frame = load_frame(args.image, depth=args.depth, normals=args.normals,
                        intrinsics=args.intrinsics, **depth_reading(args))
     if frame.depth is None:
@@ -79,20 +79,3 @@ def run(args: argparse.Namespace) -> int:
         print(f"{rec.num_planes} planes in {rec.timings.get('total', 0.0):.2f} s -> {out}")
     return 0
 
-
-def require_depth_source(pipe: Pipeline, image: str) -> None:
-    """Fail with the next step when an image has no depth and the cue provider, one that takes
-    catalogue models (``--cues``), has no depth network to predict it.
-
-    Other providers (``given``, plugins with their own model files) give their own error when
-    they run.
-    """
-    provider = pipe.stage("cues", CueProvider)
-    network = getattr(provider, "network", None)
-    takes_catalogue = type(provider).catalogue_model is not CueProvider.catalogue_model
-    if (takes_catalogue and isinstance(network, CueNetwork) and network.depth_path is None
-            and provider.catalogue_model(True, True) is None):
-        raise InvalidInput(
-            f"{image} has no depth and no depth model is set: pass --cues NAME --fetch to "
-            f"download a monocular model once (e.g. --cues depth-anything-v2-small; "
-            f"'monoplane models list' shows them all), or give --depth FILE")

@@ -114,8 +114,8 @@ def get_baseline(name: str, pm: pluggy.PluginManager | None = None) -> Baseline:
     return table[name]
 
 
-def parse_baseline_options(exprs: Sequence[str], names: Sequence[str]
-                           ) -> dict[str, dict[str, Any]]:
+def parse_baseline_options(exprs: Sequence[str], names: Sequence[str],
+                           all_baselines: bool = False) -> dict[str, dict[str, Any]]:
     """Parse ``--baseline-set NAME.FIELD=VALUE`` expressions into options per baseline.
 
     Parameters
@@ -124,6 +124,8 @@ def parse_baseline_options(exprs: Sequence[str], names: Sequence[str]
         Expressions; the value is read as a TOML value (``0.001``, ``true``, ``"text"``).
     names : sequence of str
         The baselines being run: every expression must name one of them.
+    all_baselines : bool
+        Every registered baseline runs too (``--all``), after ``names``.
 
     Returns
     -------
@@ -135,6 +137,7 @@ def parse_baseline_options(exprs: Sequence[str], names: Sequence[str]
     ConfigError
         On a malformed expression or one naming a baseline that is not being run.
     """
+    names = list(dict.fromkeys([*names, *(baseline_names() if all_baselines else [])]))
     out: dict[str, dict[str, Any]] = {}
     for expr in exprs:
         try:

@@ -32,13 +32,16 @@ from monoplane.geometry.mesh import scene_mesh
 from monoplane.multiview.driver import MultiviewResult, reconstruct_multiview
 from monoplane.multiview.global_planes import global_label_map, scene_plane_colors
 from monoplane.multiview.registration import (
+    hold_given_intrinsics,
     hold_intrinsics_fixed,
     matcher_keeps_intrinsics,
     origin_sfm,
     rescale_reconstruction,
     scale_sfm,
+    structure_from_motion,
     subset_sfm,
 )
+from monoplane.multiview.summaries import scene_summary, sfm_summary, unregistered_names
 from monoplane.multiview.writers import (
     cameras_document,
     save_scene,
@@ -48,8 +51,9 @@ from monoplane.multiview.writers import (
 )
 
 __all__ = [
-    "MultiviewResult", "cameras_document", "global_label_map", "hold_intrinsics_fixed",
-    "matcher_keeps_intrinsics", "origin_sfm", "reconstruct_multiview", "rescale_reconstruction",
-    "save_scene", "save_sfm", "scale_sfm", "scene_document", "scene_mesh", "scene_plane_colors",
-    "subset_sfm", "write_points_ply",
+    "MultiviewResult", "cameras_document", "global_label_map", "hold_given_intrinsics",
+    "hold_intrinsics_fixed", "matcher_keeps_intrinsics", "origin_sfm", "reconstruct_multiview",
+    "rescale_reconstruction", "save_scene", "save_sfm", "scale_sfm", "scene_document",
+    "scene_mesh", "scene_plane_colors", "scene_summary", "sfm_summary", "structure_from_motion",
+    "subset_sfm", "unregistered_names", "write_points_ply",
 ]

@@ -67,6 +67,37 @@ def match_views(pipe: Pipeline, frames: list[Frame], found: Correspondences, lab
     return replace(sfm, correspondences=found)
 
 
+def structure_from_motion(pipe: Pipeline, frames: list[Frame], label: str = "match",
+                          timings: dict[str, float] | None = None) -> SfmResult:
+    """The ``[features]`` stage's correspondences of ``frames`` and the ``[matcher]``'s model
+    of them, in one call (:func:`feature_correspondences`, then :func:`match_views`).
+
+    Parameters
+    ----------
+    pipe : Pipeline
+        Configured pipeline (see :func:`hold_intrinsics_fixed` to keep the frames' ``K``).
+    frames : list of Frame
+        The views, with ``rgb``; two or more.
+    label : str
+        Name for the stage timings hook.
+    timings : dict, optional
+        Wall seconds per stage kind (``features`` when matched first, ``matcher``), added to.
+
+    Returns
+    -------
+    SfmResult
+        World-to-camera cameras (OpenCV axes), sparse points, verified matches and the
+        correspondences; ``registered`` says which views the matcher placed.
+
+    Raises
+    ------
+    monoplane.errors.StageError
+        From the features stage or the matcher (``kind`` says which).
+    """
+    timings = {} if timings is None else timings
+    return match_views(pipe, frames, feature_correspondences(pipe, frames), label, timings)
+
+
 def scale_sfm(sfm: SfmResult, factor: float) -> SfmResult:
     """The same SfM model with world coordinates multiplied by ``factor`` (> 0).
 
@@ -119,6 +150,15 @@ def hold_intrinsics_fixed(pipe: Pipeline) -> bool:
     pipe.config.stages["matcher"] = (name, fixed)
     pipe._stages.pop("matcher", None)  # rebuilt from the new config on next use
     return True
+
+
+def hold_given_intrinsics(pipe: Pipeline) -> str | None:
+    """:func:`hold_intrinsics_fixed` for intrinsics the user gave (``--intrinsics``): None when
+    the matcher keeps them, otherwise the note saying they are only its starting guess."""
+    if hold_intrinsics_fixed(pipe):
+        return None
+    return (f"matcher '{pipe.config.stages['matcher'][0]}' cannot hold intrinsics fixed; "
+            "--intrinsics is its starting guess")
 
 
 def matcher_keeps_intrinsics(pipe: Pipeline) -> bool:

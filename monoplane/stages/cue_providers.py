@@ -245,6 +245,11 @@ class OnnxCues(NetworkCues):
             return self.config.model
         return None
 
+    def lacks_depth_model(self) -> bool:
+        """True when no depth network is configured: no ``cues.model``, no ``depth_model``
+        and none in the profile file."""
+        return self.network.depth_path is None and self.catalogue_model(True, True) is None
+
     def provide(self, frame: Frame) -> Frame:
         """Predict the frame's missing depth and normals (see :meth:`CueNetwork.provide`).
 

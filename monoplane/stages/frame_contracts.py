@@ -109,6 +109,17 @@ class CueProvider(Stage):
         the cache, or fetch on request, before any image is read."""
         return None
 
+    def lacks_depth_model(self) -> bool:
+        """True when a frame without depth would find no network here to predict it, and a
+        catalogue model (``cues.model``, ``monoplane run --cues NAME``) is what would give
+        one. The host then asks for a model or a depth file before reading any image
+        (:func:`monoplane.host.cue_models.require_depth_source`).
+
+        Default False: a provider that takes no catalogue model, or needs none, reports what
+        it lacks itself when it runs.
+        """
+        return False
+
     @classmethod
     def catalogue_config(cls, model: str) -> dict[str, Any] | None:
         """The keys of this provider's ``[cues]`` table that make it use the model-catalogue

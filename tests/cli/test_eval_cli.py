@@ -106,9 +106,9 @@ def test_bench_complexity_is_the_default_objects_ranges() -> None:
     from monoplane.cli.bench import _object_ranges
     from monoplane.evaluation.bench import COMPLEXITY_LEVELS
 
-    assert _object_ranges(None, True) == list(COMPLEXITY_LEVELS) == [(1, 2), (4, 6), (8, 12)]
-    assert _object_ranges(None, False) is None
-    assert _object_ranges("0, 3-5", False) == [(0, 0), (3, 5)]
+    assert parse_object_ranges(None, True) == list(COMPLEXITY_LEVELS) == [(1, 2), (4, 6), (8, 12)]
+    assert parse_object_ranges(None, False) is None
+    assert parse_object_ranges("0, 3-5", False) == [(0, 0), (3, 5)]
 
 
 def test_eval_report_writes_html(tmp_path: Path) -> None:

@@ -124,6 +124,11 @@ def test_baseline_set_is_parsed_bound_and_checked_before_any_frame() -> None:
         parse_baseline_options(["cgal.min_support=0.001"], ["open3d-ransac"])
     with pytest.raises(ConfigError, match="must look like NAME.FIELD=VALUE"):
         parse_baseline_options(["min_support=0.001"], ["open3d-ransac"])
+    # With --all every registered baseline runs, so each may be set.
+    assert parse_baseline_options(["open3d-ransac.max_planes=3"], [], all_baselines=True) == {
+        "open3d-ransac": {"max_planes": 3}}
+    with pytest.raises(ConfigError, match="baselines run: open3d-ransac$"):
+        parse_baseline_options(["x.y=1"], ["open3d-ransac", "open3d-ransac"])
     # Bad options fail when bound, not on the first frame.
     with pytest.raises(ConfigError, match="valid options: epsilon"):
         bind_baseline("open3d-ransac", {"bogus": 1})
