@@ -103,8 +103,8 @@ def test_bench_complexity_levels_in_table_and_json(tmp_path: Path,
 
 
 def test_bench_complexity_is_the_default_objects_ranges() -> None:
-    from monoplane.cli.bench import _object_ranges
     from monoplane.evaluation.bench import COMPLEXITY_LEVELS
+    from monoplane.evaluation.bench_options import parse_object_ranges
 
     assert parse_object_ranges(None, True) == list(COMPLEXITY_LEVELS) == [(1, 2), (4, 6), (8, 12)]
     assert parse_object_ranges(None, False) is None
