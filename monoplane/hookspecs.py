@@ -9,7 +9,7 @@ match the specs below. Built-in stages register through exactly these hooks (see
     my_stages = "my_package.stages"
 
 Registration hooks return a list of stage classes; there is one per stage kind of
-:data:`monoplane.stages.base.KINDS`, named by its ``hook`` (``tests/test_plugin_manager.py``
+:data:`monoplane.contracts.KINDS`, named by its ``hook`` (``tests/test_plugin_manager.py``
 checks that each kind has its spec here). Each class subclasses the kind's contract, has a
 unique ``name`` (what a config's ``plugin = "..."`` selects) and a ``Config`` dataclass (the
 kind's config table). Observation hooks are called while a pipeline runs and must not change
@@ -24,9 +24,7 @@ from typing import TYPE_CHECKING
 import pluggy
 
 if TYPE_CHECKING:
-    from monoplane.datamodel import Reconstruction
-    from monoplane.export.exporter import Exporter
-    from monoplane.stages.base import (
+    from monoplane.contracts import (
         Adjuster,
         CueProvider,
         FeatureMatcher,
@@ -38,6 +36,8 @@ if TYPE_CHECKING:
         Sampler,
         Scorer,
     )
+    from monoplane.contracts.exporter import Exporter
+    from monoplane.datamodel import Reconstruction
 
 PROJECT_NAME = "monoplane"
 
@@ -52,8 +52,8 @@ hookimpl = pluggy.HookimplMarker(PROJECT_NAME)
 def monoplane_register_cue_providers() -> list[type[CueProvider]]:
     """Cue providers: fill a frame's depth, normals and intrinsics.
 
-    Config table ``[cues]``. Contract: :class:`monoplane.stages.base.CueProvider` (or
-    :class:`~monoplane.stages.base.NetworkCues` for one that runs a cue network).
+    Config table ``[cues]``. Contract: :class:`monoplane.contracts.CueProvider` (or
+    :class:`~monoplane.contracts.NetworkCues` for one that runs a cue network).
     """
 
 
@@ -61,7 +61,7 @@ def monoplane_register_cue_providers() -> list[type[CueProvider]]:
 def monoplane_register_samplers() -> list[type[Sampler]]:
     """Minimal-sample generators for plane RANSAC (3 point indices per sample).
 
-    Config table ``[sampler]``. Contract: :class:`monoplane.stages.base.Sampler`.
+    Config table ``[sampler]``. Contract: :class:`monoplane.contracts.Sampler`.
     """
 
 
@@ -69,7 +69,7 @@ def monoplane_register_samplers() -> list[type[Sampler]]:
 def monoplane_register_scorers() -> list[type[Scorer]]:
     """Hypothesis scorers (lower cost is better), vectorised over many planes.
 
-    Config table ``[scorer]``. Contract: :class:`monoplane.stages.base.Scorer`.
+    Config table ``[scorer]``. Contract: :class:`monoplane.contracts.Scorer`.
     """
 
 
@@ -77,7 +77,7 @@ def monoplane_register_scorers() -> list[type[Scorer]]:
 def monoplane_register_labelers() -> list[type[Labeler]]:
     """Binary inlier labelers for one plane hypothesis (threshold, graph cuts).
 
-    Config table ``[labeler]``. Contract: :class:`monoplane.stages.base.Labeler`.
+    Config table ``[labeler]``. Contract: :class:`monoplane.contracts.Labeler`.
     """
 
 
@@ -85,7 +85,7 @@ def monoplane_register_labelers() -> list[type[Labeler]]:
 def monoplane_register_refiners() -> list[type[Refiner]]:
     """Refiners of the multi-plane labelling (dense CRF on images, graph CRF).
 
-    Config table ``[refiner]``. Contract: :class:`monoplane.stages.base.Refiner`.
+    Config table ``[refiner]``. Contract: :class:`monoplane.contracts.Refiner`.
     """
 
 
@@ -94,7 +94,7 @@ def monoplane_register_feature_matchers() -> list[type[FeatureMatcher]]:
     """Feature matchers: keypoints and correspondences between images (local features or
     pairwise networks).
 
-    Config table ``[features]``. Contract: :class:`monoplane.stages.base.FeatureMatcher`.
+    Config table ``[features]``. Contract: :class:`monoplane.contracts.FeatureMatcher`.
     """
 
 
@@ -102,7 +102,7 @@ def monoplane_register_feature_matchers() -> list[type[FeatureMatcher]]:
 def monoplane_register_matchers() -> list[type[Matcher]]:
     """Multi-view matchers giving cameras, sparse points and keypoint matches (SfM).
 
-    Config table ``[matcher]``. Contract: :class:`monoplane.stages.base.Matcher`.
+    Config table ``[matcher]``. Contract: :class:`monoplane.contracts.Matcher`.
     """
 
 
@@ -111,7 +111,7 @@ def monoplane_register_registrars() -> list[type[Registrar]]:
     """Registrars placing the views the matcher left out (from planes, normals, depth,
     matches).
 
-    Config table ``[registrar]``. Contract: :class:`monoplane.stages.base.Registrar`.
+    Config table ``[registrar]``. Contract: :class:`monoplane.contracts.Registrar`.
     """
 
 
@@ -119,7 +119,7 @@ def monoplane_register_registrars() -> list[type[Registrar]]:
 def monoplane_register_fusers() -> list[type[Fuser]]:
     """Fusers of per-view planes into a global planar scene.
 
-    Config table ``[fuser]``. Contract: :class:`monoplane.stages.base.Fuser`.
+    Config table ``[fuser]``. Contract: :class:`monoplane.contracts.Fuser`.
     """
 
 
@@ -127,7 +127,7 @@ def monoplane_register_fusers() -> list[type[Fuser]]:
 def monoplane_register_adjusters() -> list[type[Adjuster]]:
     """Joint refiners of a fused scene's cameras, per-view depth scales and global planes.
 
-    Config table ``[adjuster]``. Contract: :class:`monoplane.stages.base.Adjuster`.
+    Config table ``[adjuster]``. Contract: :class:`monoplane.contracts.Adjuster`.
     """
 
 

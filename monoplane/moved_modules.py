@@ -24,7 +24,7 @@ MOVED: dict[str, str] = {
     "monoplane.cloud_config": "monoplane.host.cloud_config",
     "monoplane.cloud_files": "monoplane.io.clouds",
     "monoplane.config": "monoplane.host.config",
-    "monoplane.config_fields": "monoplane.stages.config_fields",
+    "monoplane.config_fields": "monoplane.contracts.config_fields",
     "monoplane.densecrf": "monoplane.algorithm.densecrf",
     "monoplane.detect": "monoplane.host.detect",
     "monoplane.fileio": "monoplane.io.frames",
@@ -39,6 +39,7 @@ MOVED: dict[str, str] = {
     "monoplane.plugin_manager": "monoplane.host.registry",
     "monoplane.ransac": "monoplane.algorithm.ransac",
     "monoplane.regions": "monoplane.algorithm.regions",
+    "monoplane.stages.base": "monoplane.contracts",
     "monoplane.stages.cues": "monoplane.stages.cue_providers",
 }
 

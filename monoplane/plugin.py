@@ -37,6 +37,32 @@ What it holds, by use:
 
 from __future__ import annotations
 
+from monoplane.contracts import (
+    KINDS,
+    STAGE_KINDS,
+    Adjuster,
+    BinnedPoints,
+    CueProvider,
+    FeatureMatcher,
+    Fuser,
+    Labeler,
+    Labeling,
+    LabelingContext,
+    Matcher,
+    NetworkCues,
+    NoConfig,
+    ProximityAffinities,
+    RansacParams,
+    Refiner,
+    Registrar,
+    Sampler,
+    Scorer,
+    Stage,
+    StageKind,
+    TripletDraws,
+    param,
+)
+from monoplane.contracts.exporter import Exporter
 from monoplane.cues import (
     IMAGENET_MEAN,
     IMAGENET_STD,
@@ -64,7 +90,6 @@ from monoplane.evaluation.baselines import (
     get_baseline,
     run_baseline,
 )
-from monoplane.export.exporter import Exporter
 from monoplane.features import Correspondences, Keypoints, PairMatches
 from monoplane.geometry.alignment import ScaleAlignment
 from monoplane.geometry.cloud import PlaneCloud
@@ -72,31 +97,6 @@ from monoplane.geometry.graph import NeighbourGraph
 from monoplane.geometry.planes import fit_plane
 from monoplane.hookspecs import hookimpl
 from monoplane.host.registry import get_plugin_manager, get_registry
-from monoplane.stages.base import (
-    KINDS,
-    STAGE_KINDS,
-    Adjuster,
-    BinnedPoints,
-    CueProvider,
-    FeatureMatcher,
-    Fuser,
-    Labeler,
-    Labeling,
-    LabelingContext,
-    Matcher,
-    NetworkCues,
-    NoConfig,
-    ProximityAffinities,
-    RansacParams,
-    Refiner,
-    Registrar,
-    Sampler,
-    Scorer,
-    Stage,
-    StageKind,
-    TripletDraws,
-    param,
-)
 
 __all__ = [
     "CALL_TIMING", "IMAGENET_MEAN", "IMAGENET_STD", "KINDS", "STAGE_KINDS", "Adjuster",

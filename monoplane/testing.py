@@ -33,9 +33,9 @@ import pytest
 if TYPE_CHECKING:
     import pluggy
 
+    from monoplane.contracts import Stage
     from monoplane.datamodel import Frame, Reconstruction, SfmResult
     from monoplane.geometry.cloud import PlaneCloud
-    from monoplane.stages.base import Stage
     from monoplane.synth import SynthView
 
 
@@ -339,7 +339,7 @@ def stage_plugin(**hooks: list[type]) -> object:
 
 
 def _check_config(cls: type[Stage]) -> Any:
-    from monoplane.stages.base import KINDS, Stage  # noqa: F811 (runtime import)
+    from monoplane.contracts import KINDS, Stage  # noqa: F811 (runtime import)
 
     assert isinstance(cls, type) and issubclass(cls, Stage), f"{cls} is not a Stage"
     assert cls.kind in KINDS, f"{cls.__name__}.kind {cls.kind!r} not in {tuple(KINDS)}"
@@ -359,17 +359,17 @@ def check_stage_contract(cls: type[Stage], frame: Frame | None = None, seed: int
     Static checks (all kinds): subclass of the right base, a name, a dataclass ``Config`` whose
     every field has a doc, and instantiation with defaults. With ``run`` (default: whether a
     ``frame`` is given) the stage is also run once and its output checked against the shapes,
-    dtypes and value ranges stated in :mod:`monoplane.stages.base`:
+    dtypes and value ranges stated in :mod:`monoplane.contracts`:
 
     * cues, sampler, scorer, labeler, refiner: on ``frame`` (a frame with depth and normals);
     * matcher: on the two textured views of :func:`two_view_room` (``frame`` is not used);
     * fuser: on the exact planes of those two views with their exact SfM result, and every
       link it makes must join planes that agree in the world frame.
     """
+    from monoplane.contracts import Labeling, RansacParams
     from monoplane.datamodel import Frame, Reconstruction
     from monoplane.geometry.cloud import PlaneCloud
     from monoplane.geometry.graph import NeighbourGraph
-    from monoplane.stages.base import Labeling, RansacParams
 
     stage = _check_config(cls)
     if not (frame is not None if run is None else run):

@@ -6,6 +6,7 @@ import numpy as np
 import open3d as o3d
 import pytest
 
+from monoplane.contracts import Refiner, Sampler
 from monoplane.datamodel import CloudResult
 from monoplane.errors import ConfigError, InvalidInput, StageError
 from monoplane.geometry.cloud_mesh import cloud_mesh
@@ -14,7 +15,6 @@ from monoplane.hookspecs import hookimpl
 from monoplane.host.detect import CloudPlaneResult, detect_planes
 from monoplane.host.pipeline import Pipeline
 from monoplane.host.registry import get_plugin_manager
-from monoplane.stages.base import Refiner, Sampler
 from monoplane.testing import box_frame
 
 

@@ -33,10 +33,8 @@ def _imports(path: Path) -> set[str]:
     return found
 
 
-#: The stage contracts: the modules of ``monoplane.stages`` that define no stage.
-CONTRACTS = ("monoplane.stages", "monoplane.stages.base", "monoplane.stages.config_fields",
-             "monoplane.stages.contract", "monoplane.stages.frame_contracts",
-             "monoplane.stages.scene_contracts")
+#: The package of the built-in stages (empty) and the package of the contracts they implement.
+STAGES, CONTRACTS = "monoplane.stages", "monoplane.contracts"
 
 MODULES = {_module_name(p): _imports(p) for p in sorted(PACKAGE.rglob("*.py"))}
 
@@ -50,7 +48,7 @@ def _within(name: str, prefixes: tuple[str, ...]) -> bool:
 
 
 def test_the_module_table_is_not_empty() -> None:
-    assert "monoplane.datamodel" in MODULES and "monoplane.stages.base" in MODULES
+    assert "monoplane.datamodel" in MODULES and "monoplane.contracts" in MODULES
 
 
 @pytest.mark.parametrize("module", sorted(m for m in MODULES
@@ -76,15 +74,14 @@ def test_stages_import_no_other_stage_and_no_host_driver(module: str) -> None:
                  "monoplane.evaluation", "monoplane.report", "monoplane.multiview")
     bad = {n for n in _ours(MODULES[module])
            if _within(n, forbidden)
-           or (_within(n, ("monoplane.stages",)) and n not in CONTRACTS)}
+           or (_within(n, (STAGES,)) and n != STAGES)}
     assert bad == set()
 
 
 def test_concrete_stages_are_named_only_in_the_default_plugin_list() -> None:
     from monoplane.host.registry import DEFAULT_PLUGINS
 
-    stage_modules = {m for m in MODULES if _within(m, ("monoplane.stages",))
-                     and m not in CONTRACTS}
+    stage_modules = {m for m in MODULES if _within(m, (STAGES,)) and m != STAGES}
     assert stage_modules <= set(DEFAULT_PLUGINS)
     importers = {m: MODULES[m] & stage_modules for m in MODULES
                  if not _within(m, ("monoplane.stages",)) and MODULES[m] & stage_modules}
@@ -136,10 +133,10 @@ def test_plugin_packages_import_only_the_public_plugin_api(part: str,
 
 def test_the_plugin_check_sees_every_form(tmp_path: Path) -> None:
     probe = tmp_path / "probe.py"
-    probe.write_text('def f():\n    from monoplane.stages.base import Stage\n'
+    probe.write_text('def f():\n    from monoplane.contracts import Stage\n'
                      'X = "monoplane.host.registry:get_registry"\n"""monoplane.errors is a '
                      'docstring"""\n')
-    assert _references(probe) == {"monoplane.stages.base", "monoplane.host.registry"}
+    assert _references(probe) == {"monoplane.contracts", "monoplane.host.registry"}
 
 
 def test_the_public_plugin_api_is_imported_by_nothing_inside() -> None:
@@ -276,17 +273,16 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     # detect_planes shares with the file readers
     ("kernels", ("monoplane.geometry", "monoplane.algorithm", "monoplane.io.checks")),
     ("cue and feature libraries", ("monoplane.cues", "monoplane.features")),
-    # with the exporter contract: what an output format states (the hookspecs name it)
-    ("stage contracts", (*(c for c in CONTRACTS if c != "monoplane.stages"),
-                         "monoplane.hookspecs", "monoplane.export.exporter")),
+    # what a stage or an output format states, and the hooks that register them
+    ("contracts", (CONTRACTS, "monoplane.hookspecs")),
     # model profiles are read into dataclasses with the contracts' config fields
     ("model catalogue", ("monoplane.cues.profile_files", "monoplane.models")),
     ("algorithm drivers", ("monoplane.algorithm.ransac", "monoplane.algorithm.planarity")),
     ("built-in stages", ("monoplane.stages",)),
     ("host", ("monoplane.host",)),
+    # the writers know every result by its vocabulary (result_kind), not its producer
+    ("io and export", ("monoplane.io", "monoplane.export")),
     ("multiview", ("monoplane.multiview",)),
-    # writers come after every producer of a result (frame, cloud, scene)
-    ("io and export", ("monoplane.io", "monoplane.export", "monoplane.multiview.writers")),
     ("applications", ("monoplane.batch", "monoplane.evaluation", "monoplane.report",
                       "monoplane.synth")),
     # what users and plugin authors import: free to name anything below
@@ -366,10 +362,10 @@ def test_every_layer_entry_names_a_module_or_package() -> None:
 def test_the_layer_check_sees_an_import_back_up() -> None:
     table = {m: set(d) for m, d in _DEPENDENCIES.items()}
     table["monoplane.host.detect"].add("monoplane.report.colors")
-    table["monoplane.geometry.cloud"].add("monoplane.stages.base")
+    table["monoplane.geometry.cloud"].add("monoplane.contracts")
     up = _upward(table)
     assert "monoplane.report.colors" in up["monoplane.host.detect"]
-    assert "monoplane.stages.base" in up["monoplane.geometry.cloud"]
+    assert "monoplane.contracts" in up["monoplane.geometry.cloud"]
     # a package that re-exports a higher submodule stands as high as it
     assert _layer("monoplane.cues") > _layer("monoplane.cues.network")
 

@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 
 from monoplane import Pipeline, load_frame, save_reconstruction
+from monoplane.contracts import Refiner
 from monoplane.errors import StageError
 from monoplane.evaluation.segmentation import segmentation_scores
 from monoplane.hookspecs import hookimpl
 from monoplane.host.registry import get_plugin_manager
-from monoplane.stages.base import Refiner
 from monoplane.synth import generate
 
 

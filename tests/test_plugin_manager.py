@@ -5,9 +5,9 @@ from pathlib import Path
 
 import pytest
 
+from monoplane.contracts import KINDS, STAGE_KINDS, Sampler, param
 from monoplane.errors import PluginError
 from monoplane.host.registry import get_plugin_manager, get_registry
-from monoplane.stages.base import KINDS, STAGE_KINDS, Sampler, param
 from monoplane.testing import check_stage_contract, stage_plugin
 
 DOCS = Path(__file__).resolve().parents[1] / "docs" / "plugins.md"
@@ -96,7 +96,7 @@ def test_each_kind_has_its_written_out_hookspec(kind):
     doc = " ".join(inspect.getdoc(spec).split())
     assert doc.startswith(kind.summary)
     assert f"Config table ``[{kind.name}]``" in doc
-    assert f":class:`monoplane.stages.base.{kind.base.__name__}`" in doc
+    assert f":class:`monoplane.contracts.{kind.base.__name__}`" in doc
     assert inspect.signature(spec).return_annotation == f"list[type[{kind.base.__name__}]]"
 
 

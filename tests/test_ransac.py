@@ -4,12 +4,12 @@ import numpy as np
 import pytest
 
 from monoplane.algorithm.ransac import RansacConfig, SequentialRansac
+from monoplane.contracts import Sampler
 from monoplane.datamodel import Frame, default_intrinsics, orient_towards_camera, pixel_rays
 from monoplane.errors import InvalidInput, PluginError, StageError
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.geometry.hypotheses import draw_triplets, needed_samples
-from monoplane.stages.base import Sampler
 from monoplane.stages.labelers import GraphCutLabeler, ProximityGraphCutLabeler, ThresholdLabeler
 from monoplane.stages.samplers import NormalConsistentSampler, UniformSampler
 from monoplane.stages.scorers import InlierCountScorer, MsacNormalScorer, MsacScorer

@@ -14,8 +14,8 @@ from pathlib import Path
 import pytest
 
 from monoplane.cli import SUBCOMMANDS, build_parser
+from monoplane.contracts import STAGE_KINDS
 from monoplane.host import config
-from monoplane.stages.base import STAGE_KINDS
 
 README = Path(__file__).resolve().parents[1] / "README.md"
 FLAG = re.compile(r"(?<![\w-])--[a-z][a-z0-9-]*")

@@ -105,7 +105,7 @@ def test_the_refiner_has_no_thresholds_of_its_own() -> None:
 
 def test_the_graph_refiner_follows_the_shared_epsilon() -> None:
     """A point 0.025 from a plane is non-planar at ε = 0.02 and on the plane at ε = 0.03."""
-    from monoplane.stages.base import RansacParams
+    from monoplane.contracts import RansacParams
     from monoplane.testing import cloud_from_arrays
 
     points = np.array([[0.0, 0.0, 0.025]])

@@ -7,9 +7,9 @@ import dataclasses
 import numpy as np
 import pytest
 
+from monoplane.contracts import Fuser, Matcher
 from monoplane.datamodel import Scene, SfmResult, intrinsics_matrix, plane_to_world
 from monoplane.host.registry import get_plugin_manager, get_registry
-from monoplane.stages.base import Fuser, Matcher
 from monoplane.testing import (
     ROOM,
     check_stage_contract,

@@ -43,6 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from monoplane.algorithm.region_moments import scene_radius
+from monoplane.contracts import param
 from monoplane.datamodel import Reconstruction
 from monoplane.errors import check_config
 from monoplane.geometry.flatness import (
@@ -52,7 +53,6 @@ from monoplane.geometry.flatness import (
     quadric_ratio,
     spread_of_groups,
 )
-from monoplane.stages.base import param
 
 
 @dataclass

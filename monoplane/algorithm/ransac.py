@@ -41,6 +41,19 @@ from typing import Any, NamedTuple, TypeVar
 
 import numpy as np
 
+from monoplane.contracts import (
+    SAMPLER_DRAWS,
+    Labeler,
+    Labeling,
+    LabelingContext,
+    RansacParams,
+    Sampler,
+    Scorer,
+    Stage,
+    TripletDraws,
+    param,
+    run_stage,
+)
 from monoplane.datamodel import Frame, Reconstruction, orient_towards_camera
 from monoplane.errors import InvalidInput, check_config
 from monoplane.geometry.cloud import PlaneCloud
@@ -57,19 +70,6 @@ from monoplane.geometry.normal_bins import bin_points
 from monoplane.geometry.planes import fit_planes_per_label
 from monoplane.geometry.sensor_noise import noise_limited_epsilon, plane_residual_sigma
 from monoplane.jit import in_background
-from monoplane.stages.base import (
-    SAMPLER_DRAWS,
-    Labeler,
-    Labeling,
-    LabelingContext,
-    RansacParams,
-    Sampler,
-    Scorer,
-    Stage,
-    TripletDraws,
-    param,
-    run_stage,
-)
 
 T = TypeVar("T")
 
@@ -164,7 +164,7 @@ class SequentialRansac:
     Parameters
     ----------
     sampler, scorer, labeler : Stage
-        The RANSAC stages (see :mod:`monoplane.stages.base`).
+        The RANSAC stages (see :mod:`monoplane.contracts`).
     config : RansacConfig, optional
         Driver parameters; defaults to the paper's.
     """
@@ -194,7 +194,7 @@ class SequentialRansac:
         meanwhile : callable, optional
             Called once the neighbour graph is being built in the background, e.g. to queue
             label-independent work of a later stage behind it (see
-            :meth:`monoplane.stages.base.Refiner.prepare`): the background thread is idle
+            :meth:`monoplane.contracts.Refiner.prepare`): the background thread is idle
             while the planes are searched and labelled one by one.
 
         Returns

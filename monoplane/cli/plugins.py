@@ -5,9 +5,9 @@ from __future__ import annotations
 import argparse
 import json
 
+from monoplane.contracts import STAGE_KINDS
 from monoplane.export.saving import get_exporters
 from monoplane.host.registry import AUTOLOAD_ENV, autoload_enabled, get_plugin_manager, get_registry
-from monoplane.stages.base import STAGE_KINDS
 
 #: The ``--kind`` of output formats (stage kinds are the others).
 EXPORTER_KIND = "exporter"

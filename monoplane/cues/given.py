@@ -1,7 +1,7 @@
 """Cues that come with the input: the check every frame with depth and normals goes through.
 
 A frame that already carries depth and normals needs no cue provider (see
-:meth:`monoplane.stages.base.CueProvider.needs_cues`); the pipeline still orients its normals
+:meth:`monoplane.contracts.CueProvider.needs_cues`); the pipeline still orients its normals
 towards the camera and blanks them where depth is invalid, which is all :func:`use_given_cues`
 does.
 """

@@ -36,10 +36,10 @@ from importlib import resources
 from pathlib import Path
 from typing import Any, Literal
 
+from monoplane.contracts import param
+from monoplane.contracts.config_fields import build_dataclass
 from monoplane.cues.profiles import ModelSpec, OnnxProfile
 from monoplane.errors import ConfigError
-from monoplane.stages.base import param
-from monoplane.stages.config_fields import build_dataclass
 
 #: ``cues.profile`` value that selects the inline ``[cues.custom]`` table.
 CUSTOM_PROFILE = "custom"

@@ -33,11 +33,11 @@ from monoplane.datamodel.pinhole import (
 )
 from monoplane.datamodel.planeset import RESULT_KINDS, PlaneSet
 from monoplane.datamodel.reconstruction import Reconstruction, orient_towards_camera
-from monoplane.datamodel.scene import Scene, SfmResult
+from monoplane.datamodel.scene import Scene, SfmResult, global_label_map, scene_plane_colors
 
 __all__ = [
     "DEPTH_KINDS", "RESULT_KINDS", "Camera", "CloudResult", "DepthKind", "Frame", "PlaneSet",
     "Reconstruction", "Scene", "SfmResult",
-    "default_intrinsics", "intrinsics_matrix", "orient_towards_camera", "pixel_rays",
-    "plane_to_camera", "plane_to_world", "ray_plane_depth",
+    "default_intrinsics", "global_label_map", "intrinsics_matrix", "orient_towards_camera",
+    "pixel_rays", "plane_to_camera", "plane_to_world", "ray_plane_depth", "scene_plane_colors",
 ]

@@ -201,3 +201,28 @@ class SfmResult:
         x_cam = self.points[self.point_ids[view][has]] @ cam.R.T + cam.t
         front = x_cam[:, 2] > 0
         return pix[front], x_cam[front, 2]
+
+
+def scene_plane_colors(scene: Scene) -> np.ndarray:
+    """(G, 3) uint8 area-weighted mean colour of each global plane over its views."""
+    g = scene.planes.shape[0]
+    sums = np.zeros((g, 3))
+    weights = np.zeros(g)
+    for v, table in enumerate(scene.links):
+        colors, area = scene.views[v].colors, scene.views[v].area_px
+        for local, glob in table.items():
+            sums[glob] += area[local - 1] * colors[local - 1]
+            weights[glob] += area[local - 1]
+    out = np.full((g, 3), 128, np.uint8)
+    ok = weights > 0
+    out[ok] = np.clip(sums[ok] / weights[ok, None], 0, 255).astype(np.uint8)
+    return out
+
+
+def global_label_map(labels: np.ndarray, links: dict[int, int]) -> np.ndarray:
+    """(H, W) uint16 map of global plane ids + 1 (0 = non-planar) from a view's local labels."""
+    lut = np.zeros(int(labels.max()) + 1, dtype=np.uint16)
+    for local, glob in links.items():
+        if local < len(lut):
+            lut[local] = glob + 1
+    return lut[labels]

@@ -26,9 +26,9 @@ from dataclasses import dataclass
 from typing import Any, TypeVar
 
 from monoplane.algorithm.ransac import RansacConfig
+from monoplane.contracts.config_fields import build_dataclass
 from monoplane.datamodel import Reconstruction
 from monoplane.errors import ConfigError
-from monoplane.stages.config_fields import build_dataclass
 
 #: Type of a baseline: a frame with cues in, planes out.
 Baseline = Callable[..., Reconstruction]

@@ -58,6 +58,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from monoplane.contracts import CueProvider
 from monoplane.errors import InvalidInput, MonoplaneError
 from monoplane.evaluation.posed_frames import (
     DEPTH_SUFFIXES,
@@ -90,7 +91,6 @@ from monoplane.evaluation.view_sets import (
 from monoplane.host.config import given_cues_overrides
 from monoplane.host.pipeline import Pipeline
 from monoplane.multiview import hold_intrinsics_fixed, reconstruct_multiview
-from monoplane.stages.base import CueProvider
 
 if TYPE_CHECKING:
     from monoplane.host.pipeline import Pipeline

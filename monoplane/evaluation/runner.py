@@ -74,7 +74,7 @@ def preset_method(name: str, overrides: list[str] | None = None) -> Method:
     """A pipeline preset as a method (the config is validated now, not on the first frame).
 
     The synthetic frames carry their (corrupted) cues already, so the pipeline skips the cue
-    provider for them (:meth:`~monoplane.stages.base.CueProvider.needs_cues`).
+    provider for them (:meth:`~monoplane.contracts.CueProvider.needs_cues`).
     """
     from monoplane.host.pipeline import Pipeline  # loads OpenCV
 

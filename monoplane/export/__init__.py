@@ -21,13 +21,13 @@ _LAZY = {
     "save": "monoplane.export.saving",
     "get_exporters": "monoplane.export.saving",
     "output_files": "monoplane.export.saving",
-    "Exporter": "monoplane.export.exporter",
+    "Exporter": "monoplane.contracts.exporter",
 }
 
 __all__ = ["Exporter", "get_exporters", "output_files", "save"]
 
 if TYPE_CHECKING:
-    from monoplane.export.exporter import Exporter
+    from monoplane.contracts.exporter import Exporter
     from monoplane.export.saving import get_exporters, output_files, save
 
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from monoplane.export.exporter import Exporter
+from monoplane.contracts.exporter import Exporter
 from monoplane.export.shared import SharedWork
 from monoplane.hookspecs import hookimpl
 from monoplane.host.config import dumps_toml

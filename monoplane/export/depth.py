@@ -11,8 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
+from monoplane.contracts.exporter import Exporter
 from monoplane.datamodel import Reconstruction
-from monoplane.export.exporter import Exporter
 from monoplane.export.shared import SharedWork
 from monoplane.hookspecs import hookimpl
 

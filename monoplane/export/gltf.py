@@ -47,8 +47,8 @@ from typing import Any
 
 import numpy as np
 
+from monoplane.contracts.exporter import Exporter
 from monoplane.datamodel import Camera, CloudResult, Reconstruction, Scene
-from monoplane.export.exporter import Exporter
 from monoplane.export.shared import SharedWork
 from monoplane.geometry.camera import frustum
 from monoplane.geometry.cloud_mesh import cloud_mesh

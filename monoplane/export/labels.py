@@ -22,9 +22,16 @@ from typing import Any
 
 import numpy as np
 
-from monoplane.datamodel import Camera, CloudResult, PlaneSet, Reconstruction
+from monoplane.contracts.exporter import Exporter
+from monoplane.datamodel import (
+    Camera,
+    CloudResult,
+    PlaneSet,
+    Reconstruction,
+    global_label_map,
+    scene_plane_colors,
+)
 from monoplane.errors import InvalidInput
-from monoplane.export.exporter import Exporter
 from monoplane.export.shared import SharedWork
 from monoplane.hookspecs import hookimpl
 from monoplane.version import __version__
@@ -93,8 +100,6 @@ def _cloud_document(result: CloudResult) -> dict[str, Any]:
 def _multiview_document(result: Any) -> dict[str, Any]:
     """``scene.json`` of a multi-view result (a :class:`monoplane.multiview.MultiviewResult`:
     the scene with its SfM, alignments and plane matches)."""
-    from monoplane.multiview.global_planes import scene_plane_colors  # loads OpenCV
-
     scene = result.scene
     cams = cameras_document(scene.cameras, result.registration)["cameras"]
     for v, cam in enumerate(cams):
@@ -223,7 +228,6 @@ def _write(result: Any, folder: Path, shared: SharedWork) -> None:
         np.save(folder / "labels.npy", result.labels)
         write_json(folder / "planes.json", planes_document(result))
     else:
-        from monoplane.multiview.global_planes import global_label_map  # loads OpenCV
 
         scene = result.scene
         for v, (rec, links) in enumerate(zip(scene.views, scene.links, strict=True)):

@@ -15,13 +15,13 @@ from typing import Any
 
 import numpy as np
 
+from monoplane.contracts.exporter import Exporter
+from monoplane.datamodel import scene_plane_colors
 from monoplane.errors import InvalidInput
-from monoplane.export.exporter import Exporter
 from monoplane.export.files import write_plane_mesh_ply, write_points_ply
 from monoplane.export.shared import SharedWork
 from monoplane.geometry.open3d_objects import cloud_plane_colors, cloud_to_open3d
 from monoplane.hookspecs import hookimpl
-from monoplane.multiview.global_planes import scene_plane_colors
 
 
 def _write(result: Any, folder: Path, shared: SharedWork) -> None:

@@ -47,15 +47,14 @@ from typing import Any
 
 import numpy as np
 
-from monoplane.datamodel import CloudResult, Reconstruction, Scene
+from monoplane.contracts.exporter import Exporter
+from monoplane.datamodel import CloudResult, Reconstruction, Scene, global_label_map
 from monoplane.errors import InvalidInput, MonoplaneError
-from monoplane.export.exporter import Exporter
 from monoplane.export.shared import SharedWork
 from monoplane.geometry.cloud_mesh import cloud_mesh
 from monoplane.geometry.mesh import scene_mesh
 from monoplane.geometry.polygons import PlaneMesh, reconstruction_mesh
 from monoplane.hookspecs import hookimpl
-from monoplane.multiview.global_planes import global_label_map
 from monoplane.palette import NON_PLANAR, plane_palette
 
 #: Most points logged per view (depth pixels are taken on a regular grid to stay below it).

@@ -19,8 +19,8 @@ from typing import Any
 
 import pluggy
 
+from monoplane.contracts.exporter import Exporter
 from monoplane.errors import ConfigError, InvalidInput, PluginError
-from monoplane.export.exporter import Exporter
 from monoplane.export.files import atomic_output_dir
 from monoplane.export.shared import SharedWork
 from monoplane.host.registry import Registry, get_plugin_manager

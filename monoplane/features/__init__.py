@@ -1,9 +1,9 @@
 """Keypoints and correspondences between images, from any feature stage.
 
-A ``[features]`` stage (:class:`monoplane.stages.base.FeatureMatcher`) either describes each
-image on its own (SIFT, XFeat: :meth:`~monoplane.stages.base.FeatureMatcher.detect` plus a
+A ``[features]`` stage (:class:`monoplane.contracts.FeatureMatcher`) either describes each
+image on its own (SIFT, XFeat: :meth:`~monoplane.contracts.FeatureMatcher.detect` plus a
 descriptor matcher) or matches two images at once (a pairwise network such as LoFTR or
-LightGlue: :meth:`~monoplane.stages.base.FeatureMatcher.match_pair`). :class:`Correspondences`
+LightGlue: :meth:`~monoplane.contracts.FeatureMatcher.match_pair`). :class:`Correspondences`
 hides the difference from everything downstream (COLMAP's database, the registrar, fusion):
 per view one keypoint list, per pair index matches into those lists, computed on demand and
 kept.

@@ -75,7 +75,7 @@ class PairMatches:
 
 class FeatureSource(Protocol):
     """What :class:`Correspondences` needs of a ``[features]`` stage
-    (:class:`monoplane.stages.base.FeatureMatcher` is the contract that provides it)."""
+    (:class:`monoplane.contracts.FeatureMatcher` is the contract that provides it)."""
 
     name: ClassVar[str]
     pairwise: ClassVar[bool]

@@ -9,7 +9,7 @@
 * :func:`search_batches`: a whole plane search, batch after batch with the adaptive stopping
   rule :func:`needed_samples`, in one call, its scalars in one :class:`SearchRule`. The RANSAC
   driver uses it when its sampler and scorer state that they draw and score as above
-  (:attr:`monoplane.stages.base.Sampler.draws`, :attr:`monoplane.stages.base.Scorer.scores`);
+  (:attr:`monoplane.contracts.Sampler.draws`, :attr:`monoplane.contracts.Scorer.scores`);
   it gives what calling them batch by batch gives, without the interpreter between batches.
 
 Why one module: numba inlines the helpers a kernel calls and caches the kernel by its own source

@@ -12,8 +12,8 @@ import math
 from dataclasses import dataclass
 from typing import Literal
 
+from monoplane.contracts import param
 from monoplane.errors import ConfigError
-from monoplane.stages.base import param
 
 
 @dataclass

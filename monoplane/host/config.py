@@ -1,6 +1,6 @@
 """Pipeline configuration: TOML files, shipped presets, ``--set`` overrides, strict validation.
 
-A config is TOML with one table per stage kind (:data:`~monoplane.stages.base.STAGE_KINDS`:
+A config is TOML with one table per stage kind (:data:`~monoplane.contracts.STAGE_KINDS`:
 ``[cues]``, ``[sampler]``, ...), each holding ``plugin = "name"`` and that plugin's parameters,
 plus the host's tables (:data:`HOST_TABLES`: ``[ransac]`` for the sequential driver,
 ``[cloud]`` for point clouds, ``[planarity]`` for the planarity test after the refiner). A config
@@ -27,10 +27,10 @@ from typing import Any, cast
 
 import tomli_w
 
+from monoplane.contracts import STAGE_KINDS, CueProvider, config_key
+from monoplane.contracts.config_fields import build_dataclass
 from monoplane.errors import ConfigError
 from monoplane.host.registry import Registry, get_registry
-from monoplane.stages.base import STAGE_KINDS, CueProvider, config_key
-from monoplane.stages.config_fields import build_dataclass
 
 DEFAULT_PRESET = "monoplane"
 #: The cue provider that serves the depth (and normals) given with each frame, estimating only
@@ -200,7 +200,7 @@ def cue_model_overrides(model: str, preset: str | None = None,
                         registry: Registry | None = None) -> dict[str, dict[str, Any]]:
     """The overrides of a run whose cue provider uses the catalogue model ``model``
     (``monoplane run --cues NAME``): the keys the configured provider names for it
-    (:meth:`~monoplane.stages.base.CueProvider.catalogue_config`) in ``[cues]``, then
+    (:meth:`~monoplane.contracts.CueProvider.catalogue_config`) in ``[cues]``, then
     ``overrides`` on top.
 
     Parameters

@@ -2,17 +2,17 @@
 catalogue model in the cache (fetched on request), and a depth network for a frame without
 depth.
 
-The cue provider decides (:meth:`~monoplane.stages.base.CueProvider.catalogue_model`,
-:meth:`~monoplane.stages.base.CueProvider.lacks_depth_model`); these helpers act on its answer
+The cue provider decides (:meth:`~monoplane.contracts.CueProvider.catalogue_model`,
+:meth:`~monoplane.contracts.CueProvider.lacks_depth_model`); these helpers act on its answer
 so that the command line only prints.
 """
 
 from __future__ import annotations
 
+from monoplane.contracts import CueProvider
 from monoplane.errors import InvalidInput
 from monoplane.host.pipeline import Pipeline
 from monoplane.models import FetchResult, cached_model, fetch, require_model
-from monoplane.stages.base import CueProvider
 
 
 def prepare_cue_model(pipe: Pipeline, *, fetch_missing: bool, has_depth: bool,
@@ -20,7 +20,7 @@ def prepare_cue_model(pipe: Pipeline, *, fetch_missing: bool, has_depth: bool,
     """Make sure the pipeline's catalogue model (``cues.model``) is in the cache.
 
     The cue provider says which catalogue model the input needs
-    (:meth:`~monoplane.stages.base.CueProvider.catalogue_model`). With ``fetch_missing`` a
+    (:meth:`~monoplane.contracts.CueProvider.catalogue_model`). With ``fetch_missing`` a
     missing model is downloaded (the only download a run ever does); otherwise a missing model
     is a one-line error naming the fetch command, raised before any image is read.
 
@@ -56,7 +56,7 @@ def prepare_cue_model(pipe: Pipeline, *, fetch_missing: bool, has_depth: bool,
 def require_depth_source(pipe: Pipeline, image: str) -> None:
     """Fail with the next step when ``image`` has no depth and the cue provider, one that takes
     catalogue models (``--cues``), has no depth network to predict it
-    (:meth:`~monoplane.stages.base.CueProvider.lacks_depth_model`).
+    (:meth:`~monoplane.contracts.CueProvider.lacks_depth_model`).
 
     Other providers (``given``, plugins with their own model files) give their own error when
     they run.

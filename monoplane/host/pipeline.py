@@ -30,15 +30,7 @@ import pluggy
 
 from monoplane.algorithm.planarity import check_cloud, check_image
 from monoplane.algorithm.ransac import SequentialRansac
-from monoplane.cues.given import use_given_cues
-from monoplane.datamodel import Frame, Reconstruction
-from monoplane.errors import ConfigError
-from monoplane.geometry.cloud import PlaneCloud
-from monoplane.geometry.graph import NeighbourGraph
-from monoplane.host import config as config_mod
-from monoplane.host.cloud_input import CloudFit, prepare_cloud
-from monoplane.host.registry import get_plugin_manager, get_registry
-from monoplane.stages.base import (
+from monoplane.contracts import (
     CueProvider,
     Labeler,
     RansacParams,
@@ -48,6 +40,14 @@ from monoplane.stages.base import (
     Stage,
     run_stage,
 )
+from monoplane.cues.given import use_given_cues
+from monoplane.datamodel import Frame, Reconstruction
+from monoplane.errors import ConfigError
+from monoplane.geometry.cloud import PlaneCloud
+from monoplane.geometry.graph import NeighbourGraph
+from monoplane.host import config as config_mod
+from monoplane.host.cloud_input import CloudFit, prepare_cloud
+from monoplane.host.registry import get_plugin_manager, get_registry
 
 T = TypeVar("T")
 S = TypeVar("S", bound=Stage)
@@ -97,7 +97,7 @@ class Pipeline:
         kind : str
             Stage kind, e.g. ``"labeler"``.
         base : type
-            The kind's base class (e.g. :class:`~monoplane.stages.base.Labeler`), which types
+            The kind's base class (e.g. :class:`~monoplane.contracts.Labeler`), which types
             the result.
         """
         if kind not in self._stages:
@@ -111,7 +111,7 @@ class Pipeline:
     def call(self, kind: str, label: str, fn: Callable[[], T], frame_name: str,
              timings: dict[str, float]) -> T:
         """Run one stage call, timing it and wrapping any failure in a :class:`StageError`
-        (:func:`~monoplane.stages.base.run_stage`)."""
+        (:func:`~monoplane.contracts.run_stage`)."""
         start = time.perf_counter()
         result = run_stage(kind, label, fn)
         seconds = time.perf_counter() - start
@@ -232,7 +232,7 @@ class Pipeline:
         The same driver (:meth:`_ransac`), hooks and :class:`StageError` wrapping as
         :meth:`segment`: the RANSAC's
         :meth:`~monoplane.algorithm.ransac.SequentialRansac.run_cloud` and the refiner's
-        :meth:`~monoplane.stages.base.Refiner.refine_cloud`.
+        :meth:`~monoplane.contracts.Refiner.refine_cloud`.
 
         Parameters
         ----------

@@ -20,8 +20,8 @@ from typing import Any
 import pluggy
 
 from monoplane import hookspecs
+from monoplane.contracts import KINDS, STAGE_KINDS, Stage
 from monoplane.errors import ConfigError, PluginError
-from monoplane.stages.base import KINDS, STAGE_KINDS, Stage
 from monoplane.version import __version__
 
 #: The built-in stage modules, registered in this order. The one place that names them. The

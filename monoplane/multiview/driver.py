@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
+from monoplane.contracts import Registrar
 from monoplane.datamodel import Frame, Reconstruction, Scene, SfmResult
 from monoplane.errors import InvalidInput, StageError
 from monoplane.geometry.alignment import ScaleAlignment
@@ -30,7 +31,6 @@ from monoplane.multiview.registration import (
     scale_sfm,
     subset_sfm,
 )
-from monoplane.stages.base import Registrar
 
 if TYPE_CHECKING:
     from monoplane.host.pipeline import Pipeline

@@ -1,6 +1,7 @@
-"""Global planes of a multi-view run: the fuser and adjuster calls, and what a fused scene
-yields per plane (its colour, each view's global label map; its surface mesh is
-:func:`monoplane.geometry.mesh.scene_mesh`).
+"""Global planes of a multi-view run: the fuser and adjuster calls. What a fused scene yields
+per plane is the data model's (:func:`monoplane.datamodel.scene_plane_colors`,
+:func:`monoplane.datamodel.global_label_map`) and geometry's
+(:func:`monoplane.geometry.mesh.scene_mesh`); they are re-exported here.
 
 Frames: world frame of the SfM model; cameras world-to-camera ``x_cam = R x_world + t``
 (OpenCV axes); global planes ``normal . x_world + offset = 0``.
@@ -11,10 +12,14 @@ from __future__ import annotations
 import warnings
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
-
-from monoplane.datamodel import Reconstruction, Scene, SfmResult
-from monoplane.stages.base import Adjuster, Fuser
+from monoplane.contracts import Adjuster, Fuser
+from monoplane.datamodel import (  # noqa: F401 - the last two: re-exported
+    Reconstruction,
+    Scene,
+    SfmResult,
+    global_label_map,
+    scene_plane_colors,
+)
 
 if TYPE_CHECKING:
     from monoplane.host.pipeline import Pipeline
@@ -53,31 +58,6 @@ def fuse_and_adjust(pipe: Pipeline, views: list[Reconstruction], sfm: SfmResult,
     scene, sfm, adjustment = pipe.call("adjuster", adjuster.name,
                                        lambda: adjuster.adjust(fused, sfm), "multiview", timings)
     return scene, fused, sfm, plane_matches, adjustment
-
-
-def scene_plane_colors(scene: Scene) -> np.ndarray:
-    """(G, 3) uint8 area-weighted mean colour of each global plane over its views."""
-    g = scene.planes.shape[0]
-    sums = np.zeros((g, 3))
-    weights = np.zeros(g)
-    for v, table in enumerate(scene.links):
-        colors, area = scene.views[v].colors, scene.views[v].area_px
-        for local, glob in table.items():
-            sums[glob] += area[local - 1] * colors[local - 1]
-            weights[glob] += area[local - 1]
-    out = np.full((g, 3), 128, np.uint8)
-    ok = weights > 0
-    out[ok] = np.clip(sums[ok] / weights[ok, None], 0, 255).astype(np.uint8)
-    return out
-
-
-def global_label_map(labels: np.ndarray, links: dict[int, int]) -> np.ndarray:
-    """(H, W) uint16 map of global plane ids + 1 (0 = non-planar) from a view's local labels."""
-    lut = np.zeros(int(labels.max()) + 1, dtype=np.uint16)
-    for local, glob in links.items():
-        if local < len(lut):
-            lut[local] = glob + 1
-    return lut[labels]
 
 
 def __getattr__(name: str) -> Any:

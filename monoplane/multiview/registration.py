@@ -12,11 +12,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from monoplane.contracts import FeatureMatcher, Matcher
 from monoplane.datamodel import Camera, Frame, Reconstruction, SfmResult
 from monoplane.errors import InvalidInput
 from monoplane.features import Correspondences
 from monoplane.geometry.alignment import ScaleAlignment, align_scale
-from monoplane.stages.base import FeatureMatcher, Matcher
 
 if TYPE_CHECKING:
     from monoplane.host.pipeline import Pipeline

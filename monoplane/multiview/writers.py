@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
-from monoplane.datamodel import SfmResult
+from monoplane.datamodel import SfmResult, global_label_map
 from monoplane.export.files import atomic_output_dir, write_points_ply
 from monoplane.export.labels import (  # noqa: F401 - scene_document: re-exported
     cameras_document,
@@ -24,7 +24,6 @@ from monoplane.export.labels import (  # noqa: F401 - scene_document: re-exporte
     write_json,
 )
 from monoplane.export.saving import save
-from monoplane.multiview.global_planes import global_label_map
 
 if TYPE_CHECKING:
     from monoplane.multiview.driver import MultiviewResult

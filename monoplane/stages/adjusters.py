@@ -15,12 +15,12 @@ from typing import Any
 
 import numpy as np
 
+from monoplane.contracts import Adjuster, Stage, param
 from monoplane.datamodel import Scene, SfmResult, pixel_rays, plane_to_camera, plane_to_world
 from monoplane.errors import InvalidInput
 from monoplane.geometry.plane_adjustment import AdjustmentProblem, AdjustmentResult, adjust
 from monoplane.geometry.plane_matching import fuse_planes
 from monoplane.hookspecs import hookimpl
-from monoplane.stages.base import Adjuster, Stage, param
 
 
 @dataclass
@@ -80,7 +80,7 @@ class PlaneBundleAdjuster(Adjuster):
     Config = PlaneBundleConfig
 
     def adjust(self, scene: Scene, sfm: SfmResult) -> tuple[Scene, SfmResult, dict[str, Any]]:
-        """Refine ``scene``; see :meth:`monoplane.stages.base.Adjuster.adjust`.
+        """Refine ``scene``; see :meth:`monoplane.contracts.Adjuster.adjust`.
 
         The report holds ``accepted``: when the solution's robust cost is above the initial
         one, or (with a finite ``figure_tolerance``) it raises one of the figures the report

@@ -37,6 +37,7 @@ from typing import Any
 
 import numpy as np
 
+from monoplane.contracts import CueProvider, NetworkCues, Stage, param
 from monoplane.cues.given import use_given_cues
 from monoplane.cues.network import CueNetwork
 from monoplane.cues.profile_files import (
@@ -54,7 +55,6 @@ from monoplane.errors import ConfigError, InvalidInput
 from monoplane.geometry.normals import normals_from_depth
 from monoplane.hookspecs import hookimpl
 from monoplane.models import get_model, require_model
-from monoplane.stages.base import CueProvider, NetworkCues, Stage, param
 
 
 @dataclass

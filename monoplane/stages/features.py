@@ -12,6 +12,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from monoplane.contracts import FeatureMatcher, Stage, param
 from monoplane.datamodel import Frame
 from monoplane.errors import ConfigError, InvalidInput
 from monoplane.features import Keypoints, PairMatches
@@ -19,7 +20,6 @@ from monoplane.features.matching import mutual_nearest, mutual_ratio
 from monoplane.features.xfeat import XFeatNetwork
 from monoplane.hookspecs import hookimpl
 from monoplane.models import cached_model, get_model, require_model
-from monoplane.stages.base import FeatureMatcher, Stage, param
 
 
 def _rgb(frame: Frame) -> np.ndarray:

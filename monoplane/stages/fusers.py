@@ -16,6 +16,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from monoplane.contracts import Fuser, Stage, param
 from monoplane.datamodel import (
     Reconstruction,
     Scene,
@@ -48,7 +49,6 @@ from monoplane.geometry.plane_transfer import (
     unlabel_planes,
 )
 from monoplane.hookspecs import hookimpl
-from monoplane.stages.base import Fuser, Stage, param
 
 
 @dataclass

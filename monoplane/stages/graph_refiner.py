@@ -35,6 +35,7 @@ import numpy as np
 
 from monoplane.algorithm.graphcut import proximity_weights
 from monoplane.algorithm.label_mean_field import candidate_labels, potts_mean_field
+from monoplane.contracts import ProximityAffinities, RansacParams, Refiner, Stage, param
 from monoplane.datamodel import Reconstruction, orient_towards_camera
 from monoplane.errors import check_config
 from monoplane.geometry.cloud import PlaneCloud
@@ -43,7 +44,6 @@ from monoplane.geometry.graph import NeighbourGraph
 from monoplane.geometry.planes import fit_planes_per_label
 from monoplane.hookspecs import hookimpl
 from monoplane.jit import chunks, kernel, run_threaded
-from monoplane.stages.base import ProximityAffinities, RansacParams, Refiner, Stage, param
 
 #: Points per thread below which the data costs are computed on one thread.
 _THREADED_NODES = 4096
@@ -375,7 +375,7 @@ class GraphCrfRefiner(Refiner):
 
     def refine_cloud(self, cloud: PlaneCloud, graph: NeighbourGraph, labels: np.ndarray,
                      planes: np.ndarray, params: RansacParams) -> tuple[np.ndarray, np.ndarray]:
-        """See :meth:`monoplane.stages.base.Refiner.refine_cloud`."""
+        """See :meth:`monoplane.contracts.Refiner.refine_cloud`."""
         c = self.config
         labels = np.asarray(labels, dtype=np.int32)
         planes = np.asarray(planes, dtype=np.float64).reshape(-1, 4)

@@ -27,10 +27,7 @@ from monoplane.algorithm.graphcut import (
     pool_payback,
     proximity_weights,
 )
-from monoplane.geometry.cloud import PlaneCloud
-from monoplane.geometry.graph import NeighbourGraph
-from monoplane.hookspecs import hookimpl
-from monoplane.stages.base import (
+from monoplane.contracts import (
     Labeler,
     Labeling,
     LabelingContext,
@@ -39,6 +36,9 @@ from monoplane.stages.base import (
     Stage,
     param,
 )
+from monoplane.geometry.cloud import PlaneCloud
+from monoplane.geometry.graph import NeighbourGraph
+from monoplane.hookspecs import hookimpl
 
 
 def _pool_distances(cloud: PlaneCloud, pool: np.ndarray, plane: np.ndarray) -> np.ndarray:
@@ -54,7 +54,7 @@ class ThresholdLabeler(Labeler):
     def label(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray,
               plane: np.ndarray, model_normal: np.ndarray, params: RansacParams,
               context: LabelingContext | None = None) -> Labeling:
-        """See :meth:`monoplane.stages.base.Labeler.label`; energy is −(inlier count)."""
+        """See :meth:`monoplane.contracts.Labeler.label`; energy is −(inlier count)."""
         inliers = _pool_distances(cloud, pool, plane) < params.epsilon
         return Labeling(inliers=inliers, energy=-float(inliers.sum()))
 
@@ -142,7 +142,7 @@ class _PoolGraphCut(Labeler):
 
     def prepare_pool(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray,
                      context: LabelingContext) -> None:
-        """The pool's terms (see :meth:`monoplane.stages.base.Labeler.prepare_pool`)."""
+        """The pool's terms (see :meth:`monoplane.contracts.Labeler.prepare_pool`)."""
         self._terms(cloud, graph, pool, _own(context))
 
     def _minimize(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray,
@@ -170,7 +170,7 @@ class GraphCutLabeler(_PoolGraphCut):
     def label(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray,
               plane: np.ndarray, model_normal: np.ndarray, params: RansacParams,
               context: LabelingContext | None = None) -> Labeling:
-        """See :meth:`monoplane.stages.base.Labeler.label`."""
+        """See :meth:`monoplane.contracts.Labeler.label`."""
         f0, f1 = data_costs(cloud.points, cloud.normals, pool, plane, None, params.epsilon)
         return self._minimize(cloud, graph, pool, f0, f1, context)
 
@@ -205,7 +205,7 @@ class ProximityGraphCutLabeler(_PoolGraphCut):
     def label(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray,
               plane: np.ndarray, model_normal: np.ndarray, params: RansacParams,
               context: LabelingContext | None = None) -> Labeling:
-        """See :meth:`monoplane.stages.base.Labeler.label`."""
+        """See :meth:`monoplane.contracts.Labeler.label`."""
         f0, data1 = data_costs(cloud.points, cloud.normals, pool, plane,
                                model_normal if self.config.normal_term else None,
                                params.epsilon, params.epsilon_n)

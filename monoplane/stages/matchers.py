@@ -20,11 +20,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from monoplane.contracts import Matcher, Stage, param
 from monoplane.datamodel import Camera, Frame, SfmResult, intrinsics_matrix
 from monoplane.errors import InvalidInput, MonoplaneError
 from monoplane.features import Correspondences
 from monoplane.hookspecs import hookimpl
-from monoplane.stages.base import Matcher, Stage, param
 
 #: COLMAP puts pixel centres at +0.5; monoplane puts them at integers.
 _COLMAP_PIXEL_OFFSET = 0.5

@@ -22,13 +22,13 @@ from monoplane.algorithm.regions import (
     gate_filled_pixels,
     scaled_min_area,
 )
+from monoplane.contracts import RansacParams, Refiner, Stage, param
 from monoplane.datamodel import Frame, Reconstruction
 from monoplane.errors import ConfigError, InvalidInput, check_config
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.hookspecs import hookimpl
 from monoplane.jit import in_background, thread_budget
-from monoplane.stages.base import RansacParams, Refiner, Stage, param
 
 
 @dataclass

@@ -17,6 +17,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from monoplane.contracts import Registrar, Stage, param
 from monoplane.datamodel import Camera, Reconstruction, SfmResult
 from monoplane.errors import ConfigError
 from monoplane.geometry.alignment import ScaleAlignment
@@ -45,7 +46,6 @@ from monoplane.geometry.view_agreement import (
     view_geometry,
 )
 from monoplane.hookspecs import hookimpl
-from monoplane.stages.base import Registrar, Stage, param
 
 #: Relative depth: how many of the densely best hypotheses are refined epipolarly.
 _RELATIVE_STARTS = 8

@@ -14,10 +14,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from monoplane.contracts import RansacParams, Sampler, Stage, TripletDraws, param
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.hypotheses import draw_triplets
 from monoplane.hookspecs import hookimpl
-from monoplane.stages.base import RansacParams, Sampler, Stage, TripletDraws, param
 
 
 class UniformSampler(Sampler):
@@ -28,7 +28,7 @@ class UniformSampler(Sampler):
 
     def sample(self, cloud: PlaneCloud, pool: np.ndarray, count: int,
                rng: np.random.Generator, params: RansacParams) -> np.ndarray:
-        """See :meth:`monoplane.stages.base.Sampler.sample`; returns (count, 3) int64."""
+        """See :meth:`monoplane.contracts.Sampler.sample`; returns (count, 3) int64."""
         if pool.size < 3 or count <= 0:
             return np.zeros((0, 3), dtype=np.int64)
         return draw_triplets(rng, pool, count, count, count)
@@ -51,7 +51,7 @@ class NormalConsistentSampler(Sampler):
 
     def sample(self, cloud: PlaneCloud, pool: np.ndarray, count: int,
                rng: np.random.Generator, params: RansacParams) -> np.ndarray:
-        """See :meth:`monoplane.stages.base.Sampler.sample`.
+        """See :meth:`monoplane.contracts.Sampler.sample`.
 
         ``2 * count`` candidates are drawn first and, if fewer than ``count`` pass the check,
         the rest of the ``max_draw_factor * count`` budget in one more batch; may return fewer
@@ -66,7 +66,7 @@ class NormalConsistentSampler(Sampler):
 
     def draw_budget(self, count: int) -> int:
         """``max_draw_factor * count`` candidates at most (see
-        :meth:`monoplane.stages.base.Sampler.draw_budget`)."""
+        :meth:`monoplane.contracts.Sampler.draw_budget`)."""
         return self.config.max_draw_factor * count
 
 
@@ -86,7 +86,7 @@ class NapsacSampler(Sampler):
 
     def sample(self, cloud: PlaneCloud, pool: np.ndarray, count: int,
                rng: np.random.Generator, params: RansacParams) -> np.ndarray:
-        """See :meth:`monoplane.stages.base.Sampler.sample`.
+        """See :meth:`monoplane.contracts.Sampler.sample`.
 
         Seeds whose neighbourhood holds fewer than two other pool points are dropped, so fewer
         than ``count`` samples may be returned.

@@ -17,7 +17,7 @@ direction of their normal (``bin_by_normal``, the cells of a cube map), and a ce
 cone of directions lies farther than ε_n from the model normal is counted, not visited
 (``binned_costs``). A hypothesis of one orientation in a scene of several thus reads a
 fraction of the points; the sum comes out equal up to the order of its additions. Because it
-states ``scores = "msac-normal"`` (:attr:`~monoplane.stages.base.Scorer.scores`), the RANSAC
+states ``scores = "msac-normal"`` (:attr:`~monoplane.contracts.Scorer.scores`), the RANSAC
 driver runs its whole search in one compiled call when the sampler states its draw too.
 """
 
@@ -27,6 +27,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from monoplane.contracts import RansacParams, Scorer, Stage
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.hypotheses import (
     INLIERS,
@@ -37,7 +38,6 @@ from monoplane.geometry.hypotheses import (
 )
 from monoplane.geometry.normal_bins import BinnedPoints, bin_points
 from monoplane.hookspecs import hookimpl
-from monoplane.stages.base import RansacParams, Scorer, Stage
 
 
 class _KernelScorer(Scorer):
@@ -48,7 +48,7 @@ class _KernelScorer(Scorer):
 
     def score(self, cloud: PlaneCloud, pool: np.ndarray, planes: np.ndarray,
               model_normals: np.ndarray, params: RansacParams) -> np.ndarray:
-        """See :meth:`monoplane.stages.base.Scorer.score`; (H,) float64 costs."""
+        """See :meth:`monoplane.contracts.Scorer.score`; (H,) float64 costs."""
         return hypothesis_costs(cloud.points, cloud.normals,
                                 np.ascontiguousarray(pool, dtype=np.int64),
                                 np.ascontiguousarray(planes, dtype=np.float64),
@@ -82,7 +82,7 @@ class MsacNormalScorer(_KernelScorer):
 
     def score(self, cloud: PlaneCloud, pool: np.ndarray, planes: np.ndarray,
               model_normals: np.ndarray, params: RansacParams) -> np.ndarray:
-        """See :meth:`monoplane.stages.base.Scorer.score`; (H,) float64 costs."""
+        """See :meth:`monoplane.contracts.Scorer.score`; (H,) float64 costs."""
         binned = self._binned(cloud, pool, params)
         return binned_costs(*binned, np.ascontiguousarray(planes, dtype=np.float64),
                             np.ascontiguousarray(model_normals, dtype=np.float64),

@@ -6,12 +6,12 @@ import dataclasses
 import pytest
 
 from monoplane.cli import main
+from monoplane.contracts import CueProvider, param
 from monoplane.errors import ConfigError
 from monoplane.hookspecs import hookimpl
 from monoplane.host import config
 from monoplane.host.config import cue_model_overrides
 from monoplane.host.registry import get_plugin_manager, get_registry
-from monoplane.stages.base import CueProvider, param
 
 
 class _StandIn(CueProvider):

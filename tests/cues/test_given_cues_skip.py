@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 
 from monoplane import Pipeline
+from monoplane.contracts import CueProvider, Stage
 from monoplane.cues.given import use_given_cues
 from monoplane.datamodel import pixel_rays
 from monoplane.errors import InvalidInput, StageError
 from monoplane.hookspecs import hookimpl
 from monoplane.host.registry import get_plugin_manager
-from monoplane.stages.base import CueProvider, Stage
 from monoplane.testing import box_frame
 
 

@@ -479,10 +479,10 @@ def test_network_mode_scores_the_cue_providers_prediction(walk: Path,
                                                           ) -> None:
     pytest.importorskip("pycolmap")
     import monoplane.host.pipeline
+    from monoplane.contracts import CueProvider
     from monoplane.evaluation.posed_sequences import evaluate_posed_sequence
     from monoplane.geometry.normals import normals_from_depth
     from monoplane.host.registry import get_plugin_manager
-    from monoplane.stages.base import CueProvider
     from monoplane.testing import stage_plugin
 
     seq = load_posed_sequence(walk)

@@ -7,11 +7,11 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
+from monoplane.contracts import FeatureMatcher, NoConfig
 from monoplane.datamodel import Frame, intrinsics_matrix
 from monoplane.errors import InvalidInput
 from monoplane.features import Correspondences, Keypoints, PairMatches
 from monoplane.features.matching import mutual_nearest, mutual_ratio
-from monoplane.stages.base import FeatureMatcher, NoConfig
 
 
 def _unit(a: np.ndarray) -> np.ndarray:

@@ -137,11 +137,11 @@ def test_the_catalogue_entry_is_the_shared_file(tmp_path: Path,
     finds it in the cache by its catalogue name (as after 'monoplane models fetch xfeat')."""
     import shutil
 
+    from monoplane.contracts import FeatureMatcher
     from monoplane.datamodel import Frame, intrinsics_matrix
     from monoplane.host.pipeline import Pipeline
     from monoplane.models import get_model, model_path, require_model
     from monoplane.models.cache import check_file
-    from monoplane.stages.base import FeatureMatcher
 
     monkeypatch.setenv("MONOPLANE_CACHE", str(tmp_path))
     record = get_model("xfeat")
@@ -161,9 +161,9 @@ def test_the_catalogue_entry_is_the_shared_file(tmp_path: Path,
 def test_sift_plus_xfeat_says_what_colmap_maps(tmp_path: Path,
                                                monkeypatch: pytest.MonkeyPatch,
                                                capsys: pytest.CaptureFixture) -> None:
+    from monoplane.contracts import FeatureMatcher
     from monoplane.errors import ConfigError
     from monoplane.host.pipeline import Pipeline
-    from monoplane.stages.base import FeatureMatcher
 
     monkeypatch.setenv("MONOPLANE_CACHE", str(tmp_path))  # an empty cache: no XFeat file
     pipe = Pipeline.from_preset("monoplane", ["features.plugin=sift+xfeat"])

@@ -10,10 +10,10 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from monoplane.contracts import STAGE_KINDS
 from monoplane.errors import ConfigError
 from monoplane.host import config
 from monoplane.host.registry import get_registry
-from monoplane.stages.base import STAGE_KINDS
 
 REGISTRY = get_registry()
 TABLES = list(STAGE_KINDS) + list(config.HOST_TABLES) + ["nope"]

@@ -7,12 +7,12 @@ from pathlib import Path
 
 import pytest
 
+from monoplane.contracts import CueProvider
 from monoplane.errors import InvalidInput
 from monoplane.host import cue_models
 from monoplane.host.cue_models import prepare_cue_model, require_depth_source
 from monoplane.host.pipeline import Pipeline
 from monoplane.models import FetchResult
-from monoplane.stages.base import CueProvider
 
 
 @pytest.fixture(autouse=True)

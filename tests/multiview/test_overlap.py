@@ -9,6 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from monoplane.contracts import Matcher
 from monoplane.evaluation.twoview import ground_truth_sfm
 from monoplane.hookspecs import hookimpl
 from monoplane.host.pipeline import Pipeline
@@ -19,7 +20,6 @@ from monoplane.multiview import (
     reconstruct_multiview,
     rescale_reconstruction,
 )
-from monoplane.stages.base import Matcher
 from monoplane.synth.sequence import generate_sequence
 
 #: The fuser may add planes recovered from other views to a view's labels; these tests compare

@@ -8,6 +8,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from monoplane.contracts import Matcher
 from monoplane.datamodel import Camera, SfmResult
 from monoplane.hookspecs import hookimpl
 from monoplane.host.pipeline import Pipeline
@@ -18,7 +19,6 @@ from monoplane.multiview.registration import (
     structure_from_motion,
 )
 from monoplane.multiview.summaries import scene_summary, sfm_summary, unregistered_names
-from monoplane.stages.base import Matcher
 from monoplane.testing import box_frame
 
 

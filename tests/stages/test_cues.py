@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from monoplane.contracts import param
 from monoplane.cues import assume_intrinsics, intrinsics_assumed
 from monoplane.datamodel import Frame, default_intrinsics, intrinsics_matrix, pixel_rays
 from monoplane.errors import ConfigError, InvalidInput
-from monoplane.stages.base import param
 from monoplane.stages.cue_providers import GivenCues, GivenCuesConfig, OnnxCues, OnnxCuesConfig
 from monoplane.testing import check_stage_contract
 

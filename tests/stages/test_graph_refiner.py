@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from monoplane import Pipeline
+from monoplane.contracts import RansacParams
 from monoplane.errors import ConfigError
 from monoplane.evaluation.segcomp import segcomp
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
-from monoplane.stages.base import RansacParams
 from monoplane.stages.graph_refiner import (
     GraphCrfConfig,
     GraphCrfRefiner,

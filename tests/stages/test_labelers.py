@@ -10,9 +10,9 @@ from monoplane.algorithm.graphcut import (
     normal_costs,
     proximity_weights,
 )
+from monoplane.contracts import RansacParams
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
-from monoplane.stages.base import RansacParams
 from monoplane.stages.labelers import (
     GraphCutLabeler,
     ProximityGraphCutLabeler,

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
+from monoplane.contracts import RansacParams
 from monoplane.datamodel import Frame, Reconstruction
 from monoplane.errors import ConfigError
-from monoplane.stages.base import RansacParams
 from monoplane.stages.refiners import DenseCrfRefiner, NoRefiner, monoplane_register_refiners
 from monoplane.testing import ROOM, check_stage_contract, room_cues
 

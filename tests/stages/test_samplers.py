@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
+from monoplane.contracts import RansacParams
 from monoplane.geometry.hypotheses import draw_triplets
-from monoplane.stages.base import RansacParams
 from monoplane.stages.samplers import NapsacSampler, NormalConsistentSampler, UniformSampler
 from monoplane.testing import cloud_from_arrays
 

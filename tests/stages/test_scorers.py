@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from monoplane.stages.base import RansacParams
+from monoplane.contracts import RansacParams
 from monoplane.stages.scorers import InlierCountScorer, MsacNormalScorer, MsacScorer
 from monoplane.testing import cloud_from_arrays
 

@@ -12,11 +12,11 @@ from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
 
 import numpy as np
 
+from monoplane.contracts.stage import Stage, param
 from monoplane.errors import PluginError
 
 # Re-exported: the public plugin API lists it.
 from monoplane.geometry.normal_bins import BinnedPoints  # noqa: F401
-from monoplane.stages.contract import Stage, param
 
 if TYPE_CHECKING:
     from monoplane.cues.network import CueNetwork

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any, ClassVar
 
-from monoplane.stages.contract import Stage
+from monoplane.contracts.stage import Stage
 
 if TYPE_CHECKING:
     from monoplane.datamodel import Frame, Reconstruction, Scene, SfmResult

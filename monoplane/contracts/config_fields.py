@@ -11,8 +11,8 @@ import types
 import typing
 from typing import Any
 
+from monoplane.contracts import config_key
 from monoplane.errors import ConfigError
-from monoplane.stages.base import config_key
 
 
 def _type_name(tp: Any) -> str:

@@ -18,9 +18,9 @@ in the paper.
 (:mod:`monoplane.hookspecs`), the registry, the config tables and the plugin guide's tables all
 derive from it, so a new kind is one base class and one entry there.
 
-The contracts live in :mod:`monoplane.stages.contract` (:class:`Stage`, :func:`param`),
-:mod:`monoplane.stages.frame_contracts` (cue provider, sampler, scorer, labeler, refiner) and
-:mod:`monoplane.stages.scene_contracts` (features, matcher, registrar, fuser, adjuster); every
+The contracts live in :mod:`monoplane.contracts.stage` (:class:`Stage`, :func:`param`),
+:mod:`monoplane.contracts.frame_stages` (cue provider, sampler, scorer, labeler, refiner) and
+:mod:`monoplane.contracts.scene_stages` (features, matcher, registrar, fuser, adjuster); every
 name is importable from here, which is where plugins import them from (or
 :mod:`monoplane.plugin`).
 """
@@ -29,15 +29,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-# Every contract, importable from here as before the contracts were split by kind.
-from monoplane.stages.contract import (  # noqa: F401
-    NoConfig,
-    Stage,
-    config_key,
-    param,
-    run_stage,
-)
-from monoplane.stages.frame_contracts import (  # noqa: F401
+from monoplane.contracts.frame_stages import (  # noqa: F401
     SAMPLER_DRAWS,
     SCORER_COSTS,
     BinnedPoints,
@@ -53,12 +45,21 @@ from monoplane.stages.frame_contracts import (  # noqa: F401
     Scorer,
     TripletDraws,
 )
-from monoplane.stages.scene_contracts import (  # noqa: F401
+from monoplane.contracts.scene_stages import (  # noqa: F401
     Adjuster,
     FeatureMatcher,
     Fuser,
     Matcher,
     Registrar,
+)
+
+# Every contract, importable from here as before the contracts were split by kind.
+from monoplane.contracts.stage import (  # noqa: F401
+    NoConfig,
+    Stage,
+    config_key,
+    param,
+    run_stage,
 )
 
 

@@ -1,7 +1,7 @@
 """The base of every stage: :class:`Stage`, and :func:`param` for the fields of its ``Config``.
 
-The contracts of the stage kinds subclass it (:mod:`monoplane.stages.frame_contracts`,
-:mod:`monoplane.stages.scene_contracts`); :mod:`monoplane.stages.base` gathers them all.
+The contracts of the stage kinds subclass it (:mod:`monoplane.contracts.frame_stages`,
+:mod:`monoplane.contracts.scene_stages`); :mod:`monoplane.contracts` gathers them all.
 """
 
 from __future__ import annotations
