@@ -115,6 +115,51 @@ class NeighbourGraph:
         spacing = float(np.median(dist[:, 1]))
         return cls(n, edges, None, None, tree, spacing)
 
+    @classmethod
+    def from_lattice(cls, points: np.ndarray, pixels: np.ndarray, shape: tuple[int, int],
+                     stride: int, shift: np.ndarray, max_jump: float) -> NeighbourGraph:
+        """The 8-neighbourhood of points sampled on a regular pixel lattice, cut at depth jumps.
+
+        On an organised frame sampled every ``stride`` pixels the lattice already says who
+        neighbours whom: one scan in raster order (:func:`pixel_grid_edges`) replaces the
+        kNN query, and builds the adjacency with the sorted edges.
+
+        Parameters
+        ----------
+        points : numpy.ndarray
+            (N, 3) float64 normalised points, in ascending pixel order.
+        pixels : numpy.ndarray
+            (N,) int64 flat pixel index ``v * W + u`` of each point, all on the lattice
+            ``v, u ≡ stride // 2 (mod stride)``.
+        shape : tuple of int
+            ``(H, W)`` of the frame.
+        stride : int
+            Lattice step in pixels, >= 1.
+        shift : numpy.ndarray
+            (3,) float64 camera centre's offset in the normalised frame (``center / scale``):
+            a jump is judged relative to the points' distance from the camera.
+        max_jump : float
+            Two lattice neighbours are linked unless their 3D distance exceeds ``max_jump``
+            times their distance from the camera.
+
+        Returns
+        -------
+        NeighbourGraph
+            Without a point index; ``spacing`` is the median length of the lattice pairs.
+        """
+        h, w = shape
+        offset = stride // 2
+        index = np.full(h * w, -1, dtype=np.int64)
+        index[pixels] = np.arange(pixels.shape[0])
+        lattice = np.ascontiguousarray(index.reshape(h, w)[offset::stride, offset::stride])
+        if np.count_nonzero(lattice >= 0) != pixels.shape[0]:
+            raise InvalidInput(f"the points do not all lie on the lattice of stride {stride}")
+        edges, gap, indptr, indices = pixel_grid_edges(
+            lattice, np.ascontiguousarray(points, dtype=np.float64),
+            np.asarray(shift, dtype=np.float64), float(max_jump))
+        spacing = float(np.median(gap)) if gap.size else 0.0
+        return cls(int(pixels.shape[0]), edges, indptr, indices, None, spacing)
+
     def weighted_adjacency(self, weights: np.ndarray
                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Symmetric CSR matrix of per-edge weights, every row's columns ascending.
