@@ -12,12 +12,14 @@ point from it, so every point lies in the closed unit ball.
 Subsampling
 -----------
 At high resolution RANSAC runs on a random subset of at most ``max_points`` valid pixels (drawn
-from the caller's generator, so it is deterministic for a seed). :meth:`PlaneCloud.propagate`
+from the caller's generator, so it is deterministic for a seed), or on the valid pixels of a
+regular lattice (``grid``; :func:`lattice_stride`), whose neighbours the lattice itself gives
+(:meth:`NeighbourGraph.from_lattice`). :meth:`PlaneCloud.propagate`
 then carries the labels of the subset to every valid pixel. A pixel first takes the label of
 its nearest sampled pixel in the image (a distance transform). Where that is doubtful (the
 pixel is not close to the sample's plane) it is decided in 3D instead: non-planar if its
 nearest 3D sample is non-planar, else the closest plane among its few nearest samples'
-planes. The 3D candidates are the sample and its neighbours in the kNN graph (the pixel is
+planes. The 3D candidates are the sample and its neighbours in the graph (the pixel is
 next to the sample, so its nearest samples are the sample's); only pixels farther in 3D from
 their image-nearest sample than a radius tied to the sampling density (across a depth jump)
 query the point index, and are non-planar when no sample lies within the radius.
@@ -199,8 +201,8 @@ class PlaneCloud:
             raise InvalidInput(
                 f"{frame.name}: plane fitting needs depth and normals; run a cue provider first"
             )
-        valid = frame.valid.ravel()
-        all_pixels = np.flatnonzero(valid).astype(np.int64)
+        valid_image = frame.valid
+        all_pixels = np.flatnonzero(valid_image.ravel()).astype(np.int64)
         if all_pixels.size < 3:
             raise InvalidInput(f"{frame.name}: fewer than 3 valid pixels")
         all_points, center, scale = _normalised_points(
@@ -215,7 +217,7 @@ class PlaneCloud:
         if grid:
             stride = 1
             if max_points is not None and all_pixels.size > max_points:
-                stride = lattice_stride(frame.valid, max_points)
+                stride = lattice_stride(valid_image, max_points)
                 offset = stride // 2
                 on_lattice = np.zeros(frame.shape, dtype=bool)
                 on_lattice[offset::stride, offset::stride] = True
