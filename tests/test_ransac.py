@@ -6,7 +6,7 @@ import pytest
 from monoplane.algorithm.ransac import RansacConfig, SequentialRansac
 from monoplane.contracts import Sampler
 from monoplane.datamodel import Frame, default_intrinsics, orient_towards_camera, pixel_rays
-from monoplane.errors import InvalidInput, PluginError, StageError
+from monoplane.errors import ConfigError, InvalidInput, PluginError, StageError
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.geometry.hypotheses import draw_triplets, needed_samples
@@ -164,6 +164,21 @@ def test_subsampled_run_labels_every_valid_pixel_of_the_planes():
     valid = frame.valid
     assert np.mean(ids[labels[valid] - 1] == rec.labels[valid]) > 0.97
     np.testing.assert_allclose(rec.planes[ids - 1], planes, atol=5e-3)
+
+
+def test_grid_sampling_recovers_the_room_with_the_lattice_graph():
+    frame, labels, planes = room(h=120, w=160)
+    driver = make("monoplane-nocrf", max_points=4000, sampling="grid")
+    rec = driver.run(frame)
+    ids = match(rec, labels, planes)
+    assert len(set(ids.tolist())) == len(planes)
+    assert np.mean(ids[labels - 1] == rec.labels) > 0.97
+    np.testing.assert_allclose(rec.params[ids - 1], planes, atol=1e-2)
+
+
+def test_sampling_must_be_named():
+    with pytest.raises(ConfigError, match="sampling must be one of random, grid"):
+        RansacConfig(sampling="lattice")
 
 
 def test_max_planes_and_min_support_stop_the_search():

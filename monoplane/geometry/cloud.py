@@ -12,12 +12,14 @@ point from it, so every point lies in the closed unit ball.
 Subsampling
 -----------
 At high resolution RANSAC runs on a random subset of at most ``max_points`` valid pixels (drawn
-from the caller's generator, so it is deterministic for a seed). :meth:`PlaneCloud.propagate`
+from the caller's generator, so it is deterministic for a seed), or on the valid pixels of a
+regular lattice (``grid``; :func:`lattice_stride`), whose neighbours the lattice itself gives
+(:meth:`NeighbourGraph.from_lattice`). :meth:`PlaneCloud.propagate`
 then carries the labels of the subset to every valid pixel. A pixel first takes the label of
 its nearest sampled pixel in the image (a distance transform). Where that is doubtful (the
 pixel is not close to the sample's plane) it is decided in 3D instead: non-planar if its
 nearest 3D sample is non-planar, else the closest plane among its few nearest samples'
-planes. The 3D candidates are the sample and its neighbours in the kNN graph (the pixel is
+planes. The 3D candidates are the sample and its neighbours in the graph (the pixel is
 next to the sample, so its nearest samples are the sample's); only pixels farther in 3D from
 their image-nearest sample than a radius tied to the sampling density (across a depth jump)
 query the point index, and are non-planar when no sample lies within the radius.
@@ -89,6 +91,10 @@ class PlaneCloud:
     sampled : numpy.ndarray or None
         (N,) int64 row of ``all_points`` of each point of a subsampled cloud without an image
         (a frame's cloud says it with ``pixels``); None otherwise.
+    stride : int or None
+        Step in pixels of the regular lattice a frame's points were sampled on
+        (:meth:`from_frame` with ``grid``; 1: every valid pixel); None for a random sample or
+        a cloud without an image.
     """
 
     points: np.ndarray
@@ -101,6 +107,7 @@ class PlaneCloud:
     all_points: np.ndarray
     all_pixels: np.ndarray | None
     sampled: np.ndarray | None = None
+    stride: int | None = None
 
     def __post_init__(self) -> None:
         n = self.points.shape[0]
@@ -162,7 +169,7 @@ class PlaneCloud:
 
     @classmethod
     def from_frame(cls, frame: Frame, max_points: int | None = None,
-                   rng: np.random.Generator | None = None) -> PlaneCloud:
+                   rng: np.random.Generator | None = None, grid: bool = False) -> PlaneCloud:
         """Unproject a frame's valid pixels into a normalised oriented cloud.
 
         Parameters
@@ -174,7 +181,11 @@ class PlaneCloud:
             Keep at most this many points, drawn uniformly without replacement; ``None`` or
             a value >= the number of valid pixels keeps all of them.
         rng : numpy.random.Generator, optional
-            Source of the subsampling; required when subsampling happens.
+            Source of the subsampling; required when random subsampling happens.
+        grid : bool
+            Subsample on a regular lattice instead: the valid pixels at ``v, u ≡ s // 2
+            (mod s)`` for the smallest stride ``s`` that keeps at most ``max_points`` of them
+            (:func:`lattice_stride`); ``stride`` records ``s``. Draws nothing from ``rng``.
 
         Returns
         -------
@@ -190,8 +201,8 @@ class PlaneCloud:
             raise InvalidInput(
                 f"{frame.name}: plane fitting needs depth and normals; run a cue provider first"
             )
-        valid = frame.valid.ravel()
-        all_pixels = np.flatnonzero(valid).astype(np.int64)
+        valid_image = frame.valid
+        all_pixels = np.flatnonzero(valid_image.ravel()).astype(np.int64)
         if all_pixels.size < 3:
             raise InvalidInput(f"{frame.name}: fewer than 3 valid pixels")
         all_points, center, scale = _normalised_points(
@@ -202,7 +213,18 @@ class PlaneCloud:
 
         keep = all_pixels
         points = all_points
-        if max_points is not None and all_pixels.size > max_points:
+        stride = None
+        if grid:
+            stride = 1
+            if max_points is not None and all_pixels.size > max_points:
+                stride = lattice_stride(valid_image, max_points)
+                offset = stride // 2
+                on_lattice = np.zeros(frame.shape, dtype=bool)
+                on_lattice[offset::stride, offset::stride] = True
+                chosen = np.flatnonzero(on_lattice.ravel()[all_pixels])
+                keep = all_pixels[chosen]
+                points = all_points[chosen]
+        elif max_points is not None and all_pixels.size > max_points:
             if max_points < 3:
                 raise InvalidInput(f"max_points must be at least 3, got {max_points}")
             if rng is None:
@@ -221,7 +243,7 @@ class PlaneCloud:
             colors = frame.rgb.reshape(-1, 3)[keep].astype(np.float64) / 255.0
         return cls(points=np.ascontiguousarray(points), normals=normals, colors=colors,
                    pixels=keep, center=center, scale=scale, shape=frame.shape,
-                   all_points=all_points, all_pixels=all_pixels)
+                   all_points=all_points, all_pixels=all_pixels, stride=stride)
 
     @classmethod
     def from_points(cls, points: np.ndarray, normals: np.ndarray, colors: np.ndarray | None,
@@ -417,6 +439,32 @@ class PlaneCloud:
             out[start:start + len(part)] = _closest_plane(
                 part, d_k.reshape(len(part), k), n_k.reshape(len(part), k), labels, planes)
         return out
+
+
+def lattice_stride(valid: np.ndarray, max_points: int) -> int:
+    """Smallest lattice step that keeps at most ``max_points`` valid pixels.
+
+    Parameters
+    ----------
+    valid : numpy.ndarray
+        (H, W) bool valid pixels.
+    max_points : int
+        Most lattice pixels to keep, >= 3.
+
+    Returns
+    -------
+    int
+        Stride ``s >= 1`` such that the valid pixels at ``v, u ≡ s // 2 (mod s)`` number at
+        most ``max_points``.
+    """
+    if max_points < 3:
+        raise InvalidInput(f"max_points must be at least 3, got {max_points}")
+    total = int(np.count_nonzero(valid))
+    # The valid fraction is about the same on every lattice: start from the stride it gives.
+    stride = max(1, int(np.ceil(np.sqrt(total / max_points))))
+    while int(np.count_nonzero(valid[stride // 2::stride, stride // 2::stride])) > max_points:
+        stride += 1
+    return stride
 
 
 def normalised_cloud(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:

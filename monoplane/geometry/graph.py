@@ -115,6 +115,51 @@ class NeighbourGraph:
         spacing = float(np.median(dist[:, 1]))
         return cls(n, edges, None, None, tree, spacing)
 
+    @classmethod
+    def from_lattice(cls, points: np.ndarray, pixels: np.ndarray, shape: tuple[int, int],
+                     stride: int, shift: np.ndarray, max_jump: float) -> NeighbourGraph:
+        """The 8-neighbourhood of points sampled on a regular pixel lattice, cut at depth jumps.
+
+        On an organised frame sampled every ``stride`` pixels the lattice already says who
+        neighbours whom: one scan in raster order (:func:`pixel_grid_edges`) replaces the
+        kNN query, and builds the adjacency with the sorted edges.
+
+        Parameters
+        ----------
+        points : numpy.ndarray
+            (N, 3) float64 normalised points, in ascending pixel order.
+        pixels : numpy.ndarray
+            (N,) int64 flat pixel index ``v * W + u`` of each point, all on the lattice
+            ``v, u ≡ stride // 2 (mod stride)``.
+        shape : tuple of int
+            ``(H, W)`` of the frame.
+        stride : int
+            Lattice step in pixels, >= 1.
+        shift : numpy.ndarray
+            (3,) float64 camera centre's offset in the normalised frame (``center / scale``):
+            a jump is judged relative to the points' distance from the camera.
+        max_jump : float
+            Two lattice neighbours are linked unless their 3D distance exceeds ``max_jump``
+            times their distance from the camera.
+
+        Returns
+        -------
+        NeighbourGraph
+            Without a point index; ``spacing`` is the median length of the lattice pairs.
+        """
+        h, w = shape
+        offset = stride // 2
+        index = np.full(h * w, -1, dtype=np.int64)
+        index[pixels] = np.arange(pixels.shape[0])
+        lattice = np.ascontiguousarray(index.reshape(h, w)[offset::stride, offset::stride])
+        if np.count_nonzero(lattice >= 0) != pixels.shape[0]:
+            raise InvalidInput(f"the points do not all lie on the lattice of stride {stride}")
+        edges, gap, indptr, indices = pixel_grid_edges(
+            lattice, np.ascontiguousarray(points, dtype=np.float64),
+            np.asarray(shift, dtype=np.float64), float(max_jump))
+        spacing = float(np.median(gap)) if gap.size else 0.0
+        return cls(int(pixels.shape[0]), edges, indptr, indices, None, spacing)
+
     def weighted_adjacency(self, weights: np.ndarray
                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Symmetric CSR matrix of per-edge weights, every row's columns ascending.
@@ -337,3 +382,77 @@ def _pool_edges(num_nodes: int, edges: np.ndarray, pool: np.ndarray
             ids[count] = e
             count += 1
     return out, ids
+
+
+@kernel
+def pixel_grid_edges(index: np.ndarray, points: np.ndarray, shift: np.ndarray, max_jump: float
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The 8-connected graph of :func:`monoplane.stages.graph_refiner.pixel_graph`, of the
+    (H, W) int64 node ``index`` of each pixel (-1: none).
+
+    Nodes number the valid pixels in raster order, so the four forward neighbours of a
+    pixel, taken in raster order (right, below left, below, below right), are larger nodes
+    in ascending order: scanning the pixels gives the edges sorted by ``(i, j)``.
+
+    Returns
+    -------
+    edges : numpy.ndarray
+        (E, 2) int64 kept edges, ``i < j``, sorted.
+    gap : numpy.ndarray
+        (M,) float64 3D distance of every candidate pair, kept or not.
+    indptr, indices : numpy.ndarray
+        Adjacency: the neighbours of node ``i`` are its larger ones, ascending, then its
+        smaller ones, ascending.
+    """
+    h, w = index.shape
+    n = points.shape[0]
+    edges = np.empty((4 * n, 2), dtype=np.int64)
+    gap = np.empty(4 * n, dtype=np.float64)
+    kept = pairs = 0
+    for v in range(h):
+        for u in range(w):
+            a = index[v, u]
+            if a < 0:
+                continue
+            # sqrt of the squares summed in order, as numpy's norm over an axis of 3.
+            x = points[a, 0] + shift[0]
+            y = points[a, 1] + shift[1]
+            z = points[a, 2] + shift[2]
+            reach = max_jump * max(np.sqrt(x * x + y * y + z * z), 1e-12)
+            for dv, du in ((0, 1), (1, -1), (1, 0), (1, 1)):
+                vv, uu = v + dv, u + du
+                if vv >= h or not 0 <= uu < w:
+                    continue
+                b = index[vv, uu]
+                if b < 0:
+                    continue
+                dx = points[a, 0] - points[b, 0]
+                dy = points[a, 1] - points[b, 1]
+                dz = points[a, 2] - points[b, 2]
+                g = np.sqrt(dx * dx + dy * dy + dz * dz)
+                gap[pairs] = g
+                pairs += 1
+                if g <= reach:
+                    edges[kept, 0] = a
+                    edges[kept, 1] = b
+                    kept += 1
+    edges = edges[:kept].copy()
+    larger = np.zeros(n, dtype=np.int64)
+    degree = np.zeros(n, dtype=np.int64)
+    for e in range(kept):
+        larger[edges[e, 0]] += 1
+        degree[edges[e, 0]] += 1
+        degree[edges[e, 1]] += 1
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    for i in range(n):
+        indptr[i + 1] = indptr[i] + degree[i]
+    first = indptr[:-1].copy()  # next free slot of each node's larger neighbours
+    second = indptr[:-1] + larger  # ... and of its smaller ones
+    indices = np.empty(2 * kept, dtype=np.int64)
+    for e in range(kept):
+        a, b = edges[e, 0], edges[e, 1]
+        indices[first[a]] = b
+        first[a] += 1
+        indices[second[b]] = a
+        second[b] += 1
+    return edges, gap[:pairs].copy(), indptr, indices

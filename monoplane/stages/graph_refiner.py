@@ -40,7 +40,7 @@ from monoplane.datamodel import Reconstruction, orient_towards_camera
 from monoplane.errors import check_config
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.components import graph_components, same_label_components
-from monoplane.geometry.graph import NeighbourGraph
+from monoplane.geometry.graph import NeighbourGraph, pixel_grid_edges
 from monoplane.geometry.planes import fit_planes_per_label
 from monoplane.hookspecs import hookimpl
 from monoplane.jit import chunks, kernel, run_threaded
@@ -111,7 +111,7 @@ def pixel_graph(cloud: PlaneCloud, max_jump: float) -> NeighbourGraph:
     index = np.full(h * w, -1, dtype=np.int64)
     index[pixels] = np.arange(cloud.size)
     # The cloud is centred on the scene; points are compared at their own depth scale.
-    edges, gap, indptr, indices = _pixel_graph(index.reshape(h, w), cloud.points,
+    edges, gap, indptr, indices = pixel_grid_edges(index.reshape(h, w), cloud.points,
                                                cloud.center / cloud.scale, float(max_jump))
     spacing = float(np.median(gap)) if gap.size else 0.0
     # No point index: the grid gave the neighbours, and building one over every pixel would
@@ -178,79 +178,6 @@ def _stable_order(labels: np.ndarray, counts: np.ndarray) -> np.ndarray:
         order[slot[labels[i]]] = i
         slot[labels[i]] += 1
     return order
-
-
-@kernel
-def _pixel_graph(index: np.ndarray, points: np.ndarray, shift: np.ndarray, max_jump: float
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`pixel_graph` of the (H, W) int64 node ``index`` of each pixel (-1: none).
-
-    Nodes number the valid pixels in raster order, so the four forward neighbours of a
-    pixel, taken in raster order (right, below left, below, below right), are larger nodes
-    in ascending order: scanning the pixels gives the edges sorted by ``(i, j)``.
-
-    Returns
-    -------
-    edges : numpy.ndarray
-        (E, 2) int64 kept edges, ``i < j``, sorted.
-    gap : numpy.ndarray
-        (M,) float64 3D distance of every candidate pair, kept or not.
-    indptr, indices : numpy.ndarray
-        Adjacency: the neighbours of node ``i`` are its larger ones, ascending, then its
-        smaller ones, ascending.
-    """
-    h, w = index.shape
-    n = points.shape[0]
-    edges = np.empty((4 * n, 2), dtype=np.int64)
-    gap = np.empty(4 * n, dtype=np.float64)
-    kept = pairs = 0
-    for v in range(h):
-        for u in range(w):
-            a = index[v, u]
-            if a < 0:
-                continue
-            # sqrt of the squares summed in order, as numpy's norm over an axis of 3.
-            x = points[a, 0] + shift[0]
-            y = points[a, 1] + shift[1]
-            z = points[a, 2] + shift[2]
-            reach = max_jump * max(np.sqrt(x * x + y * y + z * z), 1e-12)
-            for dv, du in ((0, 1), (1, -1), (1, 0), (1, 1)):
-                vv, uu = v + dv, u + du
-                if vv >= h or not 0 <= uu < w:
-                    continue
-                b = index[vv, uu]
-                if b < 0:
-                    continue
-                dx = points[a, 0] - points[b, 0]
-                dy = points[a, 1] - points[b, 1]
-                dz = points[a, 2] - points[b, 2]
-                g = np.sqrt(dx * dx + dy * dy + dz * dz)
-                gap[pairs] = g
-                pairs += 1
-                if g <= reach:
-                    edges[kept, 0] = a
-                    edges[kept, 1] = b
-                    kept += 1
-    edges = edges[:kept].copy()
-    larger = np.zeros(n, dtype=np.int64)
-    degree = np.zeros(n, dtype=np.int64)
-    for e in range(kept):
-        larger[edges[e, 0]] += 1
-        degree[edges[e, 0]] += 1
-        degree[edges[e, 1]] += 1
-    indptr = np.zeros(n + 1, dtype=np.int64)
-    for i in range(n):
-        indptr[i + 1] = indptr[i] + degree[i]
-    first = indptr[:-1].copy()  # next free slot of each node's larger neighbours
-    second = indptr[:-1] + larger  # ... and of its smaller ones
-    indices = np.empty(2 * kept, dtype=np.int64)
-    for e in range(kept):
-        a, b = edges[e, 0], edges[e, 1]
-        indices[first[a]] = b
-        first[a] += 1
-        indices[second[b]] = a
-        second[b] += 1
-    return edges, gap[:pairs].copy(), indptr, indices
 
 
 class GraphCrfRefiner(Refiner):

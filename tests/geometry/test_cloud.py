@@ -3,12 +3,13 @@
 import numpy as np
 import pytest
 
-from monoplane.datamodel import Frame, intrinsics_matrix, pixel_rays
+from monoplane.datamodel import Frame, default_intrinsics, intrinsics_matrix, pixel_rays
 from monoplane.errors import InvalidInput
 from monoplane.geometry.cloud import (
     PROPAGATION_NEIGHBOURS,
     PROPAGATION_RADIUS_FACTOR,
     PlaneCloud,
+    lattice_stride,
 )
 from monoplane.geometry.distance_transform import nearest_true_pixel
 from monoplane.geometry.graph import NeighbourGraph
@@ -278,3 +279,34 @@ def test_pixel_fields_come_all_or_none():
         PlaneCloud(points=np.zeros((3, 3)), normals=np.tile([0.0, 0.0, 1.0], (3, 1)),
                    colors=None, pixels=np.arange(3), center=np.zeros(3), scale=1.0,
                    shape=None, all_points=np.zeros((3, 3)), all_pixels=None)
+
+
+def test_lattice_stride_is_the_smallest_that_fits():
+    valid = np.ones((48, 64), dtype=bool)
+    assert lattice_stride(valid, 48 * 64) == 1
+    assert lattice_stride(valid, 48 * 64 // 4) == 2  # 24 x 32 lattice points
+    assert lattice_stride(valid, 48 * 64 // 4 - 1) == 3
+    valid[:, 32:] = False  # half the frame: the stride drops with the count
+    assert lattice_stride(valid, 48 * 32 // 4) == 2
+    with pytest.raises(InvalidInput, match="at least 3"):
+        lattice_stride(valid, 2)
+
+
+def test_grid_sampling_keeps_the_valid_lattice_pixels_in_pixel_order():
+    h, w = 30, 40
+    depth = np.full((h, w), 2.0, dtype=np.float32)
+    depth[:5] = 0.0  # invalid rows
+    normals = np.zeros((h, w, 3), dtype=np.float32)
+    normals[..., 2] = -1.0
+    frame = Frame(rgb=None, K=default_intrinsics(w, h, 60.0), depth=depth, normals=normals)
+    cloud = PlaneCloud.from_frame(frame, max_points=300, grid=True)
+    assert cloud.stride == 2
+    v, u = np.divmod(cloud.pixels, w)
+    assert np.all(v % 2 == 1) and np.all(u % 2 == 1) and np.all(v >= 5)
+    assert cloud.size == len(range(5, h, 2)) * len(range(1, w, 2))
+    assert np.all(np.diff(cloud.pixels) > 0)
+    assert cloud.subsampled and cloud.all_points.shape[0] == 25 * 40
+    # Room for every pixel: all of them, on the lattice of stride 1.
+    assert PlaneCloud.from_frame(frame, max_points=10**6, grid=True).stride == 1
+    assert PlaneCloud.from_frame(frame, max_points=300, rng=np.random.default_rng(0)
+                                 ).stride is None

@@ -240,3 +240,51 @@ def test_weighted_adjacency_is_scipys_sorted_csr():
     np.testing.assert_array_equal(data, want.data.astype(np.float32))
     with pytest.raises(InvalidInput, match="weights must be"):
         graph.weighted_adjacency(weights[:-1])
+
+
+def _lattice_frame(h=24, w=32, stride=4, step_at=None):
+    """Points of a fronto-parallel plane at depth 2 (a step to depth 3 from column
+    ``step_at`` on), sampled on the lattice of ``stride``: (points, pixels, shift)."""
+    offset = stride // 2
+    v, u = np.mgrid[offset:h:stride, offset:w:stride]
+    z = np.full(v.shape, 2.0)
+    if step_at is not None:
+        z[:, (u[0] >= step_at)] = 3.0
+    f = 50.0
+    pts = np.stack([(u - w / 2) / f * z, (v - h / 2) / f * z, z], axis=-1).reshape(-1, 3)
+    pixels = (v * w + u).ravel().astype(np.int64)
+    return pts, pixels, np.zeros(3)
+
+
+def test_lattice_graph_links_the_eight_lattice_neighbours():
+    pts, pixels, shift = _lattice_frame()
+    g = NeighbourGraph.from_lattice(pts, pixels, (24, 32), 4, shift, 0.5)
+    rows, cols = 6, 8
+    # 8-neighbourhood on a rows x cols lattice: horizontal, vertical and two diagonals.
+    expected = rows * (cols - 1) + (rows - 1) * cols + 2 * (rows - 1) * (cols - 1)
+    assert g.num_edges == expected
+    assert np.all(g.edges[:, 0] < g.edges[:, 1])
+    order = np.lexsort((g.edges[:, 1], g.edges[:, 0]))
+    np.testing.assert_array_equal(order, np.arange(g.num_edges))
+    # An interior lattice point has all 8 neighbours; the adjacency agrees with the edges.
+    interior = 2 * cols + 3
+    assert sorted(g.neighbours(interior).tolist()) == sorted(
+        interior + d for d in (-cols - 1, -cols, -cols + 1, -1, 1, cols - 1, cols, cols + 1))
+    assert g.tree is None
+    # Spacing: the median lattice pair, axial 4 px at depth 2 and f = 50 is 0.16.
+    assert 0.16 <= g.spacing <= 0.16 * np.sqrt(2)
+
+
+def test_lattice_graph_cuts_at_depth_jumps():
+    pts, pixels, shift = _lattice_frame(step_at=16)
+    # Lattice steps are 4 px / f = 0.08 of the depth, the step 1 / 2: a jump of 0.2 parts them.
+    g = NeighbourGraph.from_lattice(pts, pixels, (24, 32), 4, shift, 0.2)
+    z = pts[:, 2]
+    assert g.num_edges > 0
+    assert np.all(z[g.edges[:, 0]] == z[g.edges[:, 1]])  # no edge crosses the step
+
+
+def test_lattice_graph_rejects_points_off_the_lattice():
+    pts, pixels, shift = _lattice_frame()
+    with pytest.raises(InvalidInput, match="lattice of stride 4"):
+        NeighbourGraph.from_lattice(pts, pixels + 1, (24, 32), 4, shift, 0.05)
