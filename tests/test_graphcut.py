@@ -238,7 +238,8 @@ def reference_proximity_weights(points, edges, normals, colors, ap2, ac2, an2, w
 @pytest.mark.parametrize("seed", range(6))
 def test_proximity_weight_kernel_matches_the_vectorised_formula(seed, threads, monkeypatch):
     monkeypatch.setenv("OMP_NUM_THREADS", str(threads))
-    monkeypatch.setattr("monoplane.algorithm.graph_costs.THREADED_EDGES", 100)  # 600 edges: 3 chunks
+    # 600 edges: 3 chunks
+    monkeypatch.setattr("monoplane.algorithm.graph_costs.THREADED_EDGES", 100)
     rng = np.random.default_rng(seed)
     n = 200
     pts = rng.normal(0, 0.05, (n, 3))

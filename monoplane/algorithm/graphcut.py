@@ -15,8 +15,8 @@ The energy of a labelling L of M points with a neighbourhood graph (paper §III-
   0.5 + k_p + k_c + k_n (paper eqs. kp, kc, kn).
 
 Each edge table is reduced to unaries plus one directed edge (Kolmogorov & Zabih 2004) and the
-energy is minimised exactly by max-flow (:mod:`monoplane.algorithm.mincut`). Nothing here knows about
-stages or frames.
+energy is minimised exactly by max-flow (:mod:`monoplane.algorithm.mincut`). Nothing here
+knows about stages or frames.
 
 Two forms of the same minimisation live here. :class:`BinaryEnergy` (built by
 :func:`gc_ransac_energy`, solved by :func:`minimize`) holds explicit (E, 2, 2) edge tables: the
@@ -300,8 +300,8 @@ def minimize_gc_ransac(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray,
 
     The max-flow starts from a flow rather than from none (:func:`_warm_start`): flow pushed
     straight from each outlier-preferring point to an inlier-preferring neighbour. Any
-    starting flow gives the same cut (see :func:`monoplane.algorithm.mincut.min_cut_flows`); this one
-    leaves less to search. (Starting the local optimisation's relabel from the flow of the
+    starting flow gives the same cut (see :func:`monoplane.algorithm.mincut.min_cut_flows`);
+    this one leaves less to search. (Starting the local optimisation's relabel from the flow of the
     labelling before it was measured too, and saved nothing: docs/evaluation.md.)
 
     Parameters

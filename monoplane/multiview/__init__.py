@@ -29,13 +29,6 @@ z forward).
 """
 
 from monoplane.datamodel import global_label_map, scene_plane_colors
-from monoplane.multiview.writers import (
-    cameras_document,
-    save_scene,
-    save_sfm,
-    scene_document,
-    write_points_ply,
-)
 from monoplane.geometry.mesh import scene_mesh
 from monoplane.multiview.driver import MultiviewResult, reconstruct_multiview
 from monoplane.multiview.registration import (
@@ -49,6 +42,13 @@ from monoplane.multiview.registration import (
     subset_sfm,
 )
 from monoplane.multiview.summaries import scene_summary, sfm_summary, unregistered_names
+from monoplane.multiview.writers import (
+    cameras_document,
+    save_scene,
+    save_sfm,
+    scene_document,
+    write_points_ply,
+)
 
 __all__ = [
     "MultiviewResult", "cameras_document", "global_label_map", "hold_given_intrinsics",
