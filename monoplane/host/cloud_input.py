@@ -17,11 +17,12 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 
 from monoplane.algorithm.ransac import refit_and_renumber
+from monoplane.datamodel import CloudResult
 from monoplane.errors import InvalidInput
 from monoplane.geometry.cloud import PlaneCloud, normalised_cloud
 from monoplane.geometry.orientation import orient_normals
@@ -79,31 +80,6 @@ def estimate_normals(points: np.ndarray, cfg: CloudConfig) -> np.ndarray:
     return np.where(((normals * towards).sum(axis=1) < 0)[:, None], -normals, normals)
 
 
-class CloudFit(NamedTuple):
-    """The planes of a point cloud in its own frame and units (:meth:`Pipeline.run_cloud
-    <monoplane.host.pipeline.Pipeline.run_cloud>`): what
-    :class:`~monoplane.datamodel.CloudResult` holds, but for the configuration."""
-
-    points: np.ndarray
-    """(N, 3) float64 input points, input order (non-finite ones included)."""
-    labels: np.ndarray
-    """(N,) int32 plane of each input point, 1..P, 0 = none (also for NaN/inf points)."""
-    planes: np.ndarray
-    """(P, 4) float64 unit-normal planes, ``n`` on the side the points' normals face."""
-    rmse: np.ndarray
-    """(P,) RMS point-to-plane distance of each plane's points, input units."""
-    support: np.ndarray
-    """(P,) int64 distinct points per plane."""
-    centroids: np.ndarray
-    """(P, 3) mean of each plane's distinct points."""
-    colors: np.ndarray | None
-    """(N, 3) input colours in [0, 1], or None (none given, or unusable)."""
-    notes: list[str]
-    """What was done to the input."""
-    timings: dict[str, float]
-    """Seconds per step."""
-
-
 @dataclass
 class CloudInput:
     """A point cloud prepared for the search (:func:`prepare_cloud`).
@@ -145,7 +121,7 @@ class CloudInput:
         """The normals came with the cloud (they were not estimated from its points)."""
         return self.normals is not None
 
-    def fit(self, labels: np.ndarray, timings: dict[str, float]) -> CloudFit:
+    def fit(self, labels: np.ndarray, timings: dict[str, float]) -> CloudResult:
         """Planes refit on all their distinct points, oriented by their normals.
 
         Parameters
@@ -154,6 +130,12 @@ class CloudInput:
             (U,) int32 plane of each row of ``unique`` (:meth:`PlaneCloud.propagate`).
         timings : dict
             Seconds per step, returned with the fit.
+
+        Returns
+        -------
+        CloudResult
+            Labels in the input order, planes in the cloud's frame and units; no config (the
+            pipeline adds its own).
         """
         renumber, params, rmse, support = refit_and_renumber(self.unique, labels,
                                                              int(labels.max(initial=0)))
@@ -168,8 +150,9 @@ class CloudInput:
         out = np.zeros(self.points.shape[0], dtype=np.int32)
         finite = self.index >= 0
         out[finite] = labels[self.index[finite]]
-        return CloudFit(self.points, out, params.reshape(-1, 4), rmse, support, centroids,
-                        self.colors, self.notes, timings)
+        return CloudResult(points=self.points, labels=out, planes=params.reshape(-1, 4),
+                           rmse=rmse, support=support, centroids=centroids, colors=self.colors,
+                           notes=self.notes, timings=timings)
 
     def _mean_normals(self, labels: np.ndarray, count: int) -> np.ndarray:
         """(count, 3) sum of the normals of each plane's points: all of them when every

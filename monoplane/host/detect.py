@@ -52,8 +52,5 @@ def detect_planes(cloud: Any, preset: str = "cloud",
         Bad overrides, or a refiner that needs pixels (e.g. ``dense-crf``).
     """
     pipe = Pipeline.from_preset(preset, overrides=overrides, pm=pm)
-    fit = pipe.run_cloud(cloud)
-    return CloudPlaneResult(points=fit.points, labels=fit.labels, planes=fit.planes,
-                            rmse=fit.rmse, support=fit.support, centroids=fit.centroids,
-                            colors=fit.colors, notes=fit.notes, config=pipe.config.to_dict(),
-                            timings=fit.timings)
+    # the deprecated subclass keeps the former methods working until 0.3.0
+    return CloudPlaneResult(**vars(pipe.run_cloud(cloud)))

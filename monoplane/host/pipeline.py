@@ -41,12 +41,12 @@ from monoplane.contracts import (
     run_stage,
 )
 from monoplane.cues.given import use_given_cues
-from monoplane.datamodel import Frame, Reconstruction
+from monoplane.datamodel import CloudResult, Frame, Reconstruction
 from monoplane.errors import ConfigError
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.host import config as config_mod
-from monoplane.host.cloud_input import CloudFit, prepare_cloud
+from monoplane.host.cloud_input import prepare_cloud
 from monoplane.host.registry import get_plugin_manager, get_registry
 
 T = TypeVar("T")
@@ -183,7 +183,7 @@ class Pipeline:
                               "a point cloud; use refiner.plugin=graph-crf or none")
         return refiner
 
-    def run_cloud(self, cloud: Any) -> CloudFit:
+    def run_cloud(self, cloud: Any) -> CloudResult:
         """Planes of a point cloud: :func:`~monoplane.host.cloud_input.prepare_cloud`, the
         RANSAC, refiner and planarity test on its subsample (:meth:`segment_cloud`), the labels
         carried to every point (:meth:`PlaneCloud.propagate
@@ -197,8 +197,9 @@ class Pipeline:
 
         Returns
         -------
-        CloudFit
-            Labels in the input order, planes in the cloud's frame and units.
+        CloudResult
+            Labels in the input order, planes in the cloud's frame and units, the resolved
+            configuration.
         """
         start = time.perf_counter()
         self.cloud_refiner()  # a refiner that needs pixels fails before any work
@@ -215,6 +216,7 @@ class Pipeline:
         fit = prepared.fit(prepared.cloud.propagate(labels, planes, graph=graph), timings)
         timings["finalize"] = time.perf_counter() - t
         timings["total"] = time.perf_counter() - start
+        fit.config = self.config.to_dict()
         return fit
 
     def neighbour_graph(self, cloud: PlaneCloud) -> NeighbourGraph:
