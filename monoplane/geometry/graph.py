@@ -16,7 +16,7 @@ import numpy as np
 from monoplane.errors import InvalidInput
 from monoplane.geometry.components import largest_component
 from monoplane.geometry.neighbours import PointIndex
-from monoplane.jit import chunks, kernel, run_threaded
+from monoplane.jit import chunks, inline, kernel, run_threaded
 
 #: Nodes per thread below which the edge list is built on one thread.
 THREADED_NODES = 4096
@@ -302,16 +302,24 @@ def _knn_edges(nbr: np.ndarray, lo_start: int, lo_stop: int) -> np.ndarray:
     return edges[:count].copy()
 
 
-@kernel
-def _adjacency(n: int, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Symmetric CSR adjacency ``indptr`` (N + 1,), ``indices`` (2E,) of (E, 2) int64 edges
-    ``i < j`` sorted by ``(i, j)``, every node's neighbours in ascending order."""
+@inline
+def _row_starts(n: int, edges: np.ndarray) -> np.ndarray:
+    """(N + 1,) int64 CSR row starts of the symmetric adjacency of (E, 2) edges: each edge
+    counts once in the row of each end."""
     indptr = np.zeros(n + 1, dtype=np.int64)
     for e in range(edges.shape[0]):
         indptr[edges[e, 0] + 1] += 1
         indptr[edges[e, 1] + 1] += 1
     for i in range(n):
         indptr[i + 1] += indptr[i]
+    return indptr
+
+
+@kernel
+def _adjacency(n: int, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Symmetric CSR adjacency ``indptr`` (N + 1,), ``indices`` (2E,) of (E, 2) int64 edges
+    ``i < j`` sorted by ``(i, j)``, every node's neighbours in ascending order."""
+    indptr = _row_starts(n, edges)
     indices = np.empty(2 * edges.shape[0], dtype=np.int64)
     pos = indptr[:n].copy()
     # Edges come sorted by (lo, hi): each row receives its smaller neighbours (as hi) before
@@ -329,12 +337,7 @@ def _adjacency(n: int, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def _weighted_adjacency(n: int, edges: np.ndarray, weights: np.ndarray
                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`_adjacency` of the sorted (E, 2) int64 edges, with their (E,) float32 weights."""
-    indptr = np.zeros(n + 1, dtype=np.int64)
-    for e in range(edges.shape[0]):
-        indptr[edges[e, 0] + 1] += 1
-        indptr[edges[e, 1] + 1] += 1
-    for i in range(n):
-        indptr[i + 1] += indptr[i]
+    indptr = _row_starts(n, edges)
     indices = np.empty(2 * edges.shape[0], dtype=np.int64)
     data = np.empty(2 * edges.shape[0], dtype=np.float32)
     pos = indptr[:n].copy()
