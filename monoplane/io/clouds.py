@@ -156,6 +156,14 @@ def _check_points(points: np.ndarray) -> None:
                    f"(the first is point {first}: {points[first].tolist()})")
 
 
+def _float64(values: np.ndarray) -> np.ndarray:
+    """``values`` as float64. A damaged binary file can hold signalling NaNs, whose cast NumPy
+    reports as an invalid operation; they become quiet NaNs here, and the non-finite points
+    are counted and dropped later like any other."""
+    with np.errstate(invalid="ignore"):
+        return values.astype(np.float64)
+
+
 def _text(data: bytes, what: str) -> str:
     try:
         return data.decode("utf-8")
@@ -231,7 +239,7 @@ def _count_rows(text: str) -> int:
 
 
 def _colors(columns: list[np.ndarray], scale: float) -> np.ndarray:
-    return np.stack(columns, axis=1).astype(np.float64) / scale
+    return _float64(np.stack(columns, axis=1)) / scale
 
 
 # ---- PLY -----------------------------------------------------------------------------------
@@ -330,10 +338,10 @@ def _read_ply(data: bytes) -> CloudFile:
                            f"{need + rest} bytes, the file holds {have}")
         table = np.frombuffer(data, dtype, n, offset)
         columns = {name: table[f"p{k}"] for k, name in enumerate(names)}
-    points = np.stack([columns[c] for c in "xyz"], axis=1).astype(np.float64)
+    points = _float64(np.stack([columns[c] for c in "xyz"], axis=1))
     normals = None
     if {"nx", "ny", "nz"} <= set(names):
-        normals = np.stack([columns[c] for c in ("nx", "ny", "nz")], axis=1).astype(np.float64)
+        normals = _float64(np.stack([columns[c] for c in ("nx", "ny", "nz")], axis=1))
     colors = None
     rgb = ("red", "green", "blue")
     if set(rgb) <= set(names):
@@ -430,10 +438,10 @@ def _read_pcd(data: bytes) -> CloudFile:
     else:
         raise _Bad(f"unknown PCD DATA kind {mode[:20]!r}; use ascii, binary or "
                    "binary_compressed")
-    points = np.hstack([columns[a] for a in "xyz"]).astype(np.float64)
+    points = _float64(np.hstack([columns[a] for a in "xyz"]))
     normals = None
     if all(f"normal_{a}" in columns and columns[f"normal_{a}"].shape[1] == 1 for a in "xyz"):
-        normals = np.hstack([columns[f"normal_{a}"] for a in "xyz"]).astype(np.float64)
+        normals = _float64(np.hstack([columns[f"normal_{a}"] for a in "xyz"]))
     colors = None
     packed = columns.get("rgb", columns.get("rgba"))
     if packed is not None and packed.shape[1] == 1 and packed.dtype.itemsize == 4:
