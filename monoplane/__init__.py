@@ -17,25 +17,27 @@ moved_modules.install()
 _MODULES: dict[str, tuple[str, ...]] = {
     "monoplane.host.detect": ("detect_planes",),
     "monoplane.export.rerun_log": ("log_rerun",),
+    "monoplane.export.saving": ("save",),
     "monoplane.errors": ("ConfigError", "InvalidInput", "MonoplaneError", "StageError"),
     "monoplane.hookspecs": ("hookimpl",),
     "monoplane.io.frames": ("load_frame", "save_reconstruction"),
     "monoplane.host.pipeline": ("Pipeline",),
-    "monoplane.datamodel": ("Camera", "Frame", "Reconstruction", "Scene"),
+    "monoplane.datamodel": ("Camera", "CloudResult", "Frame", "Reconstruction", "Scene"),
     "monoplane.version": ("__version__",),
 }
 _LAZY = {name: module for module, names in _MODULES.items() for name in names}
 
 __all__ = [
-    "Camera", "ConfigError", "Frame", "InvalidInput", "MonoplaneError", "Pipeline",
-    "Reconstruction", "Scene", "StageError", "detect_planes", "hookimpl", "load_frame",
-    "log_rerun", "save_reconstruction", "__version__",
+    "Camera", "CloudResult", "ConfigError", "Frame", "InvalidInput", "MonoplaneError",
+    "Pipeline", "Reconstruction", "Scene", "StageError", "detect_planes", "hookimpl",
+    "load_frame", "log_rerun", "save", "save_reconstruction", "__version__",
 ]
 
 if TYPE_CHECKING:
-    from monoplane.datamodel import Camera, Frame, Reconstruction, Scene
+    from monoplane.datamodel import Camera, CloudResult, Frame, Reconstruction, Scene
     from monoplane.errors import ConfigError, InvalidInput, MonoplaneError, StageError
     from monoplane.export.rerun_log import log_rerun
+    from monoplane.export.saving import save
     from monoplane.hookspecs import hookimpl
     from monoplane.host.detect import detect_planes
     from monoplane.host.pipeline import Pipeline
