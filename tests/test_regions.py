@@ -329,6 +329,19 @@ def test_region_moments_match_the_bincount_reference(seed):
         np.testing.assert_array_equal(a, b)
 
 
+@pytest.mark.parametrize("size", [(1, 1), (3, 5), (480, 640)])
+def test_masked_mean_equals_numpy_mean_of_the_gathered_rows(size):
+    # Bit for bit: the centre of the moments must not move from numpy's.
+    from monoplane.algorithm.region_moments import _masked_mean
+
+    rng = np.random.default_rng(size[0])
+    points = (rng.normal(size=(*size, 3)) * [1.0, 0.7, 2.0] + [0.0, 0.0, 3.0]).reshape(-1, 3)
+    for fraction in (0.0, 0.3, 1.0):
+        mask = rng.random(points.shape[0]) < fraction
+        expected = points[mask].mean(axis=0) if mask.any() else np.zeros(3)
+        np.testing.assert_array_equal(_masked_mean(points, mask), expected)
+
+
 def _reference_adjacency(lab, connectivity):
     h, w = lab.shape
     offsets = [(0, 1), (1, 0)] + ([(1, 1), (1, -1)] if connectivity == 8 else [])
