@@ -229,6 +229,21 @@ def _block_mean_probabilities(labels: np.ndarray, block: np.ndarray, num_blocks:
     return total / size[:, None]
 
 
+def _sum_in_place(arrays: list[np.ndarray]) -> np.ndarray:
+    """The sum of same-shape float32 arrays, accumulated into the first, which the caller no
+    longer needs (the kernels' fresh messages, (N, L) each).
+
+    Bit for bit ``sum(arrays, np.zeros(...))``, without its full-size temporaries (8 MB each
+    for the band of a 640x480 frame): adding 0 first turns a -0 into +0, as starting from
+    zeros does, and the float32 additions then run in the same order.
+    """
+    total = arrays[0]
+    total += 0.0
+    for other in arrays[1:]:
+        total += other
+    return total
+
+
 @kernel
 def _final_labels(fine: np.ndarray, labels: np.ndarray, band: np.ndarray, exact: np.ndarray,
                   u_own: np.float32, u_other: np.float32, u_uniform: np.float32,
@@ -433,13 +448,11 @@ def dense_crf(
     order = dearest_first(kernels)
     done = run_threaded([lambda k=kernels[i], f=specs[i][0]: k.messages(q, f) for i in order])
     by_kernel = dict(zip(order, done, strict=True))
-    coarse_pairwise = sum((by_kernel[i][0] for i in range(len(kernels))),
-                          np.zeros(q.shape, np.float32))
+    coarse_pairwise = _sum_in_place([by_kernel[i][0] for i in range(len(kernels))])
     # cv2 maps fine pixel u to coarse position (u + 0.5) / step - 0.5.
     fine = cv2.resize(coarse_pairwise.reshape(hs, ws, num_labels), (ws * step, hs * step),
                       interpolation=cv2.INTER_LINEAR).reshape(hs * step, ws * step, -1)
-    exact = sum((by_kernel[i][1] for i in range(len(kernels))),
-                np.zeros((band.size, num_labels), np.float32))
+    exact = _sum_in_place([by_kernel[i][1] for i in range(len(kernels))])
     # The unary takes three values per label map (own label, other label, uniform): the
     # final argmax reads them instead of an (H W, L) unary array.
     values = unary_from_labels(np.array([1, 0]), num_labels, params.confidence, uniform_label=0)
