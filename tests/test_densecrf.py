@@ -431,9 +431,14 @@ def test_final_labels_kernel_equals_the_numpy_argmax(uniform):
     energy = fine[:h, :w].reshape(-1, num) - unary
     energy[band] = exact - unary[band]
     values = unary_from_labels(np.array([1, 0]), num, 0.55, uniform_label=0)
-    got = _final_labels(fine, lab.astype(np.int64), band, exact, values[0, 1], values[0, 0],
-                        values[1, 0], uniform)
-    np.testing.assert_array_equal(got, energy.argmax(axis=1).reshape(h, w))
+    expected = energy.argmax(axis=1).reshape(h, w)
+    # Whole, and in row pieces (threads) that each find their part of the band.
+    for bounds in ([0, h], [0, 1, 9, 10, h]):
+        got = np.full((h, w), -1, dtype=np.int32)
+        for y0, y1 in zip(bounds[:-1], bounds[1:]):
+            _final_labels(fine, lab.astype(np.int64), band, exact, values[0, 1], values[0, 0],
+                          values[1, 0], uniform, y0, y1, got)
+        np.testing.assert_array_equal(got, expected)
 
 
 def test_label_change_band_matches_max_and_min_filters():

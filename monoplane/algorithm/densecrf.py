@@ -16,6 +16,7 @@ module builds the image CRF on them (features, coarse grid, final labels).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 
 import cv2
 import numpy as np
@@ -31,11 +32,15 @@ from monoplane.algorithm.mean_field import (  # noqa: F401
     unary_from_labels,
 )
 from monoplane.errors import InvalidInput
-from monoplane.jit import kernel, run_threaded
+from monoplane.jit import chunks, kernel, run_threaded
 
 #: Image area (256 x 192) at which the paper's pixel-valued parameters (θ_s = 10 px, minimum
 #: region 300 px) are stated; other resolutions scale them.
 REFERENCE_AREA = 256 * 192
+
+#: Rows per threaded piece of the final full-resolution labelling, below which one thread
+#: labels the whole image.
+_THREADED_ROWS = 64
 
 
 @dataclass(frozen=True)
@@ -247,25 +252,25 @@ def _sum_in_place(arrays: list[np.ndarray]) -> np.ndarray:
 @kernel
 def _final_labels(fine: np.ndarray, labels: np.ndarray, band: np.ndarray, exact: np.ndarray,
                   u_own: np.float32, u_other: np.float32, u_uniform: np.float32,
-                  uniform_nonplanar: bool) -> np.ndarray:
-    """(H, W) int32 argmax over labels of ``message - unary`` at full resolution.
+                  uniform_nonplanar: bool, y0: int, y1: int, out: np.ndarray) -> None:
+    """Rows ``y0:y1`` of the (H, W) int32 ``out``: argmax over labels of ``message - unary``
+    at full resolution.
 
     ``fine`` (≥H, ≥W, L) float32 upsampled coarse messages, ``labels`` (H, W) int64 observed
-    labels, ``band`` (K,) int64 flat pixels whose messages are ``exact`` (K, L) float32
-    instead; the unary of a pixel is ``u_own`` at its label and ``u_other`` elsewhere, or
-    ``u_uniform`` everywhere for label 0 when ``uniform_nonplanar``. float32 arithmetic and the
-    first maximum, as ``(fine - unary).argmax(axis=1)`` gives.
+    labels, ``band`` (K,) int64 ascending flat pixels whose messages are ``exact`` (K, L)
+    float32 instead; the unary of a pixel is ``u_own`` at its label and ``u_other`` elsewhere,
+    or ``u_uniform`` everywhere for label 0 when ``uniform_nonplanar``. float32 arithmetic and
+    the first maximum, as ``(fine - unary).argmax(axis=1)`` gives. Pixels are independent, so
+    row blocks run on parallel threads.
     """
-    h, w = labels.shape
+    w = labels.shape[1]
     num = fine.shape[2]
-    out = np.empty((h, w), dtype=np.int32)
-    row = np.full(h * w, -1, dtype=np.int64)
-    for k in range(band.shape[0]):
-        row[band[k]] = k
-    for y in range(h):
+    # The band is ascending: a pointer walks it along the raster order of the rows.
+    k = np.searchsorted(band, y0 * w)
+    for y in range(y0, y1):
         for x in range(w):
             lab = labels[y, x]
-            k = row[y * w + x]
+            exact_here = k < band.shape[0] and band[k] == y * w + x
             best = -np.inf
             arg = 0
             for label in range(num):
@@ -275,13 +280,15 @@ def _final_labels(fine: np.ndarray, labels: np.ndarray, band: np.ndarray, exact:
                     u = u_own
                 else:
                     u = u_other
-                m = exact[k, label] if k >= 0 else fine[y, x, label]
+                m = exact[k, label] if exact_here else fine[y, x, label]
                 e = np.float32(m - u)
                 if e > best:
                     best = e
                     arg = label
             out[y, x] = arg
-    return out
+            if exact_here:
+                k += 1
+
 
 def _not_constant_3x3(image: np.ndarray) -> np.ndarray:
     """(H, W) bool: the 3 x 3 window around each pixel (clipped at the border) holds two
@@ -456,5 +463,9 @@ def dense_crf(
     # The unary takes three values per label map (own label, other label, uniform): the
     # final argmax reads them instead of an (H W, L) unary array.
     values = unary_from_labels(np.array([1, 0]), num_labels, params.confidence, uniform_label=0)
-    return _final_labels(fine, lab.astype(np.int64), band, exact, values[0, 1], values[0, 0],
-                         values[1, 0], bool(params.uniform_nonplanar))
+    out = np.empty((h, w), dtype=np.int32)
+    lab64 = lab.astype(np.int64)
+    run_threaded([partial(_final_labels, fine, lab64, band, exact, values[0, 1], values[0, 0],
+                          values[1, 0], bool(params.uniform_nonplanar), a, b, out)
+                  for a, b in chunks(h, _THREADED_ROWS)])
+    return out
