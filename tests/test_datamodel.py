@@ -171,6 +171,22 @@ def test_validation_kernels_count_as_the_numpy_checks() -> None:
     assert 0 < bad.sum() < 30
 
 
+def test_valid_mask_is_positive_depth_and_a_non_zero_normal() -> None:
+    rng = np.random.default_rng(6)
+    depth = rng.uniform(0.5, 3.0, size=(20, 30)).astype(np.float32)
+    depth[0, :5] = 0.0
+    normals = rng.normal(size=(20, 30, 3)).astype(np.float32)
+    normals /= np.linalg.norm(normals, axis=-1, keepdims=True)
+    normals[1, :6] = 0.0
+    normals[2, :3] = [[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]]  # one axis left
+    normals[0, 3] = 0.0  # invalid in both
+    frame = Frame(rgb=None, K=default_intrinsics(30, 20), depth=depth, normals=normals)
+    expected = (depth > 0) & np.any(normals != 0, axis=-1)
+    assert frame.valid.dtype == bool and np.array_equal(frame.valid, expected)
+    assert expected.sum() == 20 * 30 - 5 - 6
+    assert np.array_equal(frame.with_(normals=None).valid, depth > 0)
+
+
 def test_every_result_is_a_plane_set_with_planes_ids_and_support() -> None:
     _, labels = box_frame(64, 48, CORNER_PLANES, focal=50.0)
     rec = Reconstruction(frame=frame(), labels=labels, planes=CORNER_PLANES)

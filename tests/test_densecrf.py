@@ -431,9 +431,14 @@ def test_final_labels_kernel_equals_the_numpy_argmax(uniform):
     energy = fine[:h, :w].reshape(-1, num) - unary
     energy[band] = exact - unary[band]
     values = unary_from_labels(np.array([1, 0]), num, 0.55, uniform_label=0)
-    got = _final_labels(fine, lab.astype(np.int64), band, exact, values[0, 1], values[0, 0],
-                        values[1, 0], uniform)
-    np.testing.assert_array_equal(got, energy.argmax(axis=1).reshape(h, w))
+    expected = energy.argmax(axis=1).reshape(h, w)
+    # Whole, and in row pieces (threads) that each find their part of the band.
+    for bounds in ([0, h], [0, 1, 9, 10, h]):
+        got = np.full((h, w), -1, dtype=np.int32)
+        for y0, y1 in zip(bounds[:-1], bounds[1:]):
+            _final_labels(fine, lab.astype(np.int64), band, exact, values[0, 1], values[0, 0],
+                          values[1, 0], uniform, y0, y1, got)
+        np.testing.assert_array_equal(got, expected)
 
 
 def test_label_change_band_matches_max_and_min_filters():
@@ -444,3 +449,19 @@ def test_label_change_band_matches_max_and_min_filters():
         coarse = np.kron(rng.integers(0, 3, (h, w)), np.ones((3, 2), dtype=np.int64))
         expected = ndimage.maximum_filter(coarse, 3) != ndimage.minimum_filter(coarse, 3)
         np.testing.assert_array_equal(_not_constant_3x3(coarse), expected)
+
+
+def test_sum_in_place_equals_the_sum_from_zeros_bit_for_bit() -> None:
+    from monoplane.algorithm.densecrf import _sum_in_place
+
+    rng = np.random.default_rng(3)
+    for count in (1, 2, 3):
+        arrays = [rng.normal(size=(50, 7)).astype(np.float32) for _ in range(count)]
+        for a in arrays:
+            a[rng.random(a.shape) < 0.2] = -0.0
+        expected = sum((a.copy() for a in arrays), np.zeros((50, 7), np.float32))
+        got = _sum_in_place([a.copy() for a in arrays])
+        assert got.dtype == np.float32
+        np.testing.assert_array_equal(got, expected)
+        np.testing.assert_array_equal(np.signbit(got), np.signbit(expected))
+        assert np.signbit(expected).sum() < np.signbit(arrays[0]).sum()  # -0 did occur

@@ -329,6 +329,72 @@ def test_region_moments_match_the_bincount_reference(seed):
         np.testing.assert_array_equal(a, b)
 
 
+@pytest.mark.parametrize("size", [(1, 1), (3, 5), (480, 640)])
+def test_masked_mean_equals_numpy_mean_of_the_gathered_rows(size):
+    # Bit for bit: the centre of the moments must not move from numpy's.
+    from monoplane.algorithm.region_moments import _masked_mean
+
+    rng = np.random.default_rng(size[0])
+    points = (rng.normal(size=(*size, 3)) * [1.0, 0.7, 2.0] + [0.0, 0.0, 3.0]).reshape(-1, 3)
+    for fraction in (0.0, 0.3, 1.0):
+        mask = rng.random(points.shape[0]) < fraction
+        expected = points[mask].mean(axis=0) if mask.any() else np.zeros(3)
+        np.testing.assert_array_equal(_masked_mean(points, mask), expected)
+
+
+def _reference_gate(points, valid, before, after, params, max_distance, normals,
+                    max_angle_deg, patch_px):
+    """The numpy formulation of gate_filled_pixels that its compiled pass replaces."""
+    import cv2
+
+    out = after.astype(np.int32).copy()
+    moved = (out > 0) & (out != before)
+    plane = params[out[moved] - 1]
+    dist = np.abs(np.einsum("nc,nc->n", points[moved], plane[:, :3]) + plane[:, 3])
+    fits = valid[moved] & (dist <= max_distance)
+    if normals is not None and max_angle_deg < 180.0:
+        n = normals[moved]
+        cos = np.abs(np.einsum("nc,nc->n", n, plane[:, :3]))
+        known = np.einsum("nc,nc->n", n, n) > 0.5
+        fits &= ~known | (cos >= np.cos(np.radians(max_angle_deg)))
+    if patch_px > 0 and not fits.all():
+        fail = np.zeros(out.shape, np.uint8)
+        fail[moved] = ~fits
+        kernel = np.ones((2 * patch_px + 1, 2 * patch_px + 1), np.uint8)
+        fits = ~cv2.morphologyEx(fail, cv2.MORPH_OPEN, kernel).astype(bool)[moved]
+    out[moved] = np.where(fits, out[moved], before[moved])
+    return out
+
+
+@pytest.mark.parametrize("seed", range(3))
+@pytest.mark.parametrize(("angle", "patch_px", "with_normals"),
+                         [(180.0, 0, True), (20.0, 0, True), (20.0, 1, True), (20.0, 0, False)])
+def test_gate_filled_pixels_equals_the_numpy_formulation(seed, angle, patch_px, with_normals):
+    rng = np.random.default_rng(seed)
+    h, w = 40, 50
+    before = ndimage.zoom(rng.integers(0, 4, size=(8, 10)), 5, order=0)
+    # Changes in 5x5 blocks, so that the opening keeps some failures.
+    after = np.where(ndimage.zoom(rng.random((8, 10)) < 0.5, 5, order=0),
+                     ndimage.zoom(rng.integers(0, 4, size=(8, 10)), 5, order=0), before)
+    normal = rng.normal(size=(3, 3))
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    params = np.column_stack([normal, rng.uniform(-3.0, -1.0, 3)])
+    points = pixel_rays(intrinsics_matrix(40.0, 40.0, 25.0, 20.0), h, w) * ndimage.zoom(
+        rng.uniform(1.0, 3.0, (8, 10)), 5, order=0)[..., None]
+    valid = rng.random((h, w)) > 0.1
+    normals = rng.normal(size=(h, w, 3)).astype(np.float32)
+    normals /= np.linalg.norm(normals, axis=-1, keepdims=True)
+    normals[rng.random((h, w)) < 0.1] = 0.0
+    normals = normals if with_normals else None
+    expected = _reference_gate(points, valid, before, after, params, 0.8, normals, angle,
+                               patch_px)
+    got = gate_filled_pixels(points, valid, before, after, params, 0.8, normals, angle,
+                             patch_px=patch_px)
+    assert got.dtype == np.int32
+    np.testing.assert_array_equal(got, expected)
+    assert 0 < (expected != after).sum() < (after != before).sum()
+
+
 def _reference_adjacency(lab, connectivity):
     h, w = lab.shape
     offsets = [(0, 1), (1, 0)] + ([(1, 1), (1, -1)] if connectivity == 8 else [])

@@ -16,6 +16,7 @@ module builds the image CRF on them (features, coarse grid, final labels).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 
 import cv2
 import numpy as np
@@ -31,11 +32,15 @@ from monoplane.algorithm.mean_field import (  # noqa: F401
     unary_from_labels,
 )
 from monoplane.errors import InvalidInput
-from monoplane.jit import kernel, run_threaded
+from monoplane.jit import chunks, kernel, run_threaded
 
 #: Image area (256 x 192) at which the paper's pixel-valued parameters (θ_s = 10 px, minimum
 #: region 300 px) are stated; other resolutions scale them.
 REFERENCE_AREA = 256 * 192
+
+#: Rows per threaded piece of the final full-resolution labelling, below which one thread
+#: labels the whole image.
+_THREADED_ROWS = 64
 
 
 @dataclass(frozen=True)
@@ -229,28 +234,43 @@ def _block_mean_probabilities(labels: np.ndarray, block: np.ndarray, num_blocks:
     return total / size[:, None]
 
 
+def _sum_in_place(arrays: list[np.ndarray]) -> np.ndarray:
+    """The sum of same-shape float32 arrays, accumulated into the first, which the caller no
+    longer needs (the kernels' fresh messages, (N, L) each).
+
+    Bit for bit ``sum(arrays, np.zeros(...))``, without its full-size temporaries (8 MB each
+    for the band of a 640x480 frame): adding 0 first turns a -0 into +0, as starting from
+    zeros does, and the float32 additions then run in the same order.
+    """
+    total = arrays[0]
+    total += 0.0
+    for other in arrays[1:]:
+        total += other
+    return total
+
+
 @kernel
 def _final_labels(fine: np.ndarray, labels: np.ndarray, band: np.ndarray, exact: np.ndarray,
                   u_own: np.float32, u_other: np.float32, u_uniform: np.float32,
-                  uniform_nonplanar: bool) -> np.ndarray:
-    """(H, W) int32 argmax over labels of ``message - unary`` at full resolution.
+                  uniform_nonplanar: bool, y0: int, y1: int, out: np.ndarray) -> None:
+    """Rows ``y0:y1`` of the (H, W) int32 ``out``: argmax over labels of ``message - unary``
+    at full resolution.
 
     ``fine`` (≥H, ≥W, L) float32 upsampled coarse messages, ``labels`` (H, W) int64 observed
-    labels, ``band`` (K,) int64 flat pixels whose messages are ``exact`` (K, L) float32
-    instead; the unary of a pixel is ``u_own`` at its label and ``u_other`` elsewhere, or
-    ``u_uniform`` everywhere for label 0 when ``uniform_nonplanar``. float32 arithmetic and the
-    first maximum, as ``(fine - unary).argmax(axis=1)`` gives.
+    labels, ``band`` (K,) int64 ascending flat pixels whose messages are ``exact`` (K, L)
+    float32 instead; the unary of a pixel is ``u_own`` at its label and ``u_other`` elsewhere,
+    or ``u_uniform`` everywhere for label 0 when ``uniform_nonplanar``. float32 arithmetic and
+    the first maximum, as ``(fine - unary).argmax(axis=1)`` gives. Pixels are independent, so
+    row blocks run on parallel threads.
     """
-    h, w = labels.shape
+    w = labels.shape[1]
     num = fine.shape[2]
-    out = np.empty((h, w), dtype=np.int32)
-    row = np.full(h * w, -1, dtype=np.int64)
-    for k in range(band.shape[0]):
-        row[band[k]] = k
-    for y in range(h):
+    # The band is ascending: a pointer walks it along the raster order of the rows.
+    k = np.searchsorted(band, y0 * w)
+    for y in range(y0, y1):
         for x in range(w):
             lab = labels[y, x]
-            k = row[y * w + x]
+            exact_here = k < band.shape[0] and band[k] == y * w + x
             best = -np.inf
             arg = 0
             for label in range(num):
@@ -260,13 +280,15 @@ def _final_labels(fine: np.ndarray, labels: np.ndarray, band: np.ndarray, exact:
                     u = u_own
                 else:
                     u = u_other
-                m = exact[k, label] if k >= 0 else fine[y, x, label]
+                m = exact[k, label] if exact_here else fine[y, x, label]
                 e = np.float32(m - u)
                 if e > best:
                     best = e
                     arg = label
             out[y, x] = arg
-    return out
+            if exact_here:
+                k += 1
+
 
 def _not_constant_3x3(image: np.ndarray) -> np.ndarray:
     """(H, W) bool: the 3 x 3 window around each pixel (clipped at the border) holds two
@@ -433,15 +455,17 @@ def dense_crf(
     order = dearest_first(kernels)
     done = run_threaded([lambda k=kernels[i], f=specs[i][0]: k.messages(q, f) for i in order])
     by_kernel = dict(zip(order, done, strict=True))
-    coarse_pairwise = sum((by_kernel[i][0] for i in range(len(kernels))),
-                          np.zeros(q.shape, np.float32))
+    coarse_pairwise = _sum_in_place([by_kernel[i][0] for i in range(len(kernels))])
     # cv2 maps fine pixel u to coarse position (u + 0.5) / step - 0.5.
     fine = cv2.resize(coarse_pairwise.reshape(hs, ws, num_labels), (ws * step, hs * step),
                       interpolation=cv2.INTER_LINEAR).reshape(hs * step, ws * step, -1)
-    exact = sum((by_kernel[i][1] for i in range(len(kernels))),
-                np.zeros((band.size, num_labels), np.float32))
+    exact = _sum_in_place([by_kernel[i][1] for i in range(len(kernels))])
     # The unary takes three values per label map (own label, other label, uniform): the
     # final argmax reads them instead of an (H W, L) unary array.
     values = unary_from_labels(np.array([1, 0]), num_labels, params.confidence, uniform_label=0)
-    return _final_labels(fine, lab.astype(np.int64), band, exact, values[0, 1], values[0, 0],
-                         values[1, 0], bool(params.uniform_nonplanar))
+    out = np.empty((h, w), dtype=np.int32)
+    lab64 = lab.astype(np.int64)
+    run_threaded([partial(_final_labels, fine, lab64, band, exact, values[0, 1], values[0, 0],
+                          values[1, 0], bool(params.uniform_nonplanar), a, b, out)
+                  for a, b in chunks(h, _THREADED_ROWS)])
+    return out

@@ -47,7 +47,7 @@ class RegionMoments:
         labels = np.asarray(labels)
         mask = np.asarray(valid) & (labels > 0)
         points = np.asarray(points, dtype=np.float64)
-        centre = points[mask].mean(axis=0) if mask.any() else np.zeros(3)
+        centre = _masked_mean(points.reshape(-1, 3), mask.ravel())
         count, total, outer = _moments(points.reshape(-1, 3), mask.ravel(),
                                        labels.ravel().astype(np.int64), int(num), centre)
         return cls(count, total, outer, centre)
@@ -179,6 +179,24 @@ def _radius(points: np.ndarray, valid: np.ndarray) -> float:
                 d2 += (points[i, c] - centre[c]) ** 2
             best = max(best, d2)
     return np.sqrt(best)
+
+
+@kernel
+def _masked_mean(points: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """(3,) float64 mean of the (N, 3) float64 ``points`` where the (N,) bool ``mask`` holds;
+    zeros without any. Summed row after row, as ``points[mask].mean(axis=0)`` sums (numpy
+    adds whole rows along axis 0, without pairwise blocks), so the result equals it bit for
+    bit without gathering the rows."""
+    total = np.zeros(3)
+    n = 0
+    for i in range(mask.shape[0]):
+        if mask[i]:
+            for c in range(3):
+                total[c] += points[i, c]
+            n += 1
+    if n == 0:
+        return total
+    return total / n
 
 
 @kernel

@@ -311,27 +311,56 @@ def gate_filled_pixels(points: np.ndarray, valid: np.ndarray, before: np.ndarray
         (H, W) int32 ``after``, with ``before``'s label restored where the new plane does
         not fit (or the depth is invalid).
     """
-    before = np.asarray(before)
     out = np.asarray(after, dtype=np.int32).copy()
-    moved = (out > 0) & (out != before)
-    plane = params[out[moved] - 1]
-    dist = np.abs(np.einsum("nc,nc->n", points[moved], plane[:, :3]) + plane[:, 3])
-    fits = valid[moved] & (dist <= max_distance)
-    if normals is not None and max_angle_deg < 180.0:
-        n = normals[moved]
-        cos = np.abs(np.einsum("nc,nc->n", n, plane[:, :3]))
-        known = np.einsum("nc,nc->n", n, n) > 0.5
-        fits &= ~known | (cos >= np.cos(np.radians(max_angle_deg)))
-    if patch_px > 0 and not fits.all():
+    test_angle = normals is not None and max_angle_deg < 180.0
+    fail = _gate_failures(
+        out, np.asarray(before, dtype=np.int64), np.ascontiguousarray(points, dtype=np.float64),
+        np.asarray(valid, dtype=bool), np.ascontiguousarray(params, dtype=np.float64),
+        float(max_distance),
+        np.asarray(normals, dtype=np.float32) if test_angle else np.zeros((1, 1, 3), np.float32),
+        float(np.cos(np.radians(max_angle_deg))), test_angle)
+    if patch_px > 0 and fail.any():
         # A morphological opening keeps the failures that form patches: a blob of a curved
         # object or of an object in front, not the thin band along a crease where the cue's
         # blurred normals lie between the two planes' and the CRF is right.
-        fail = np.zeros(out.shape, np.uint8)
-        fail[moved] = ~fits
         kernel = np.ones((2 * patch_px + 1, 2 * patch_px + 1), np.uint8)
-        fits = ~cv2.morphologyEx(fail, cv2.MORPH_OPEN, kernel).astype(bool)[moved]
-    out[moved] = np.where(fits, out[moved], before[moved])
+        fail = cv2.morphologyEx(fail, cv2.MORPH_OPEN, kernel)
+    back = fail.astype(bool)
+    out[back] = np.asarray(before)[back]
     return out
+
+
+@kernel
+def _gate_failures(after: np.ndarray, before: np.ndarray, points: np.ndarray, valid: np.ndarray,
+                   params: np.ndarray, max_distance: float, normals: np.ndarray,
+                   cos_limit: float, test_angle: bool) -> np.ndarray:
+    """(H, W) uint8, 1 at the pixels :func:`gate_filled_pixels` sends back before any opening.
+
+    ``after`` (H, W) int32 and ``before`` (H, W) int64 labels, ``points`` (H, W, 3) float64,
+    ``valid`` (H, W) bool, ``params`` (P, 4) float64, ``normals`` (H, W, 3) float32 (read
+    only when ``test_angle``). The sums run in the order (and the float32 normal length in
+    the precision) of the numpy einsums they replace, so the failures are the same.
+    """
+    h, w = after.shape
+    fail = np.zeros((h, w), dtype=np.uint8)
+    half = np.float32(0.5)
+    for y in range(h):
+        for x in range(w):
+            lab = after[y, x]
+            if lab <= 0 or lab == before[y, x]:
+                continue
+            a, b, c, d = params[lab - 1, 0], params[lab - 1, 1], params[lab - 1, 2], \
+                params[lab - 1, 3]
+            dist = abs(points[y, x, 0] * a + points[y, x, 1] * b + points[y, x, 2] * c + d)
+            fits = valid[y, x] and dist <= max_distance
+            if fits and test_angle:
+                nx, ny, nz = normals[y, x, 0], normals[y, x, 1], normals[y, x, 2]
+                known = nx * nx + ny * ny + nz * nz > half
+                cos = abs(np.float64(nx) * a + np.float64(ny) * b + np.float64(nz) * c)
+                fits = not known or cos >= cos_limit
+            if not fits:
+                fail[y, x] = 1
+    return fail
 
 
 def clean_regions(rec: Reconstruction, labels: np.ndarray, min_area: int,

@@ -245,7 +245,10 @@ class CueNetwork:
                     normals = normals_from_depth(depth, frame.K, **self.normals_options)
                     notes.append("normals: estimated from depth (edge-aware inverse-depth fits)")
                     changes["normals_from_depth"] = True
-            changes["normals"] = np.where((depth > 0)[..., None], normals, 0).astype(np.float32)
+            # A float32 copy zeroed in place: half the cost of np.where and a cast (2 passes).
+            normals = np.array(normals, dtype=np.float32)
+            normals[~(depth > 0)] = 0.0
+            changes["normals"] = normals
         else:
             changes["normals"] = face_camera(frame.normals, frame.K)
         return frame.with_(notes=notes, **changes)
