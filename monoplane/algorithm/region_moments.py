@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from monoplane.jit import kernel
+from monoplane.jit import inline, kernel
 
 
 @dataclass(frozen=True)
@@ -161,16 +161,7 @@ def scene_radius(points: np.ndarray, valid: np.ndarray) -> float:
 def _radius(points: np.ndarray, valid: np.ndarray) -> float:
     """:func:`scene_radius` of (N, 3) float64 points and their (N,) bool mask, in two passes
     without copying the valid points out."""
-    total = np.zeros(3)
-    count = 0
-    for i in range(points.shape[0]):
-        if valid[i]:
-            for c in range(3):
-                total[c] += points[i, c]
-            count += 1
-    if count == 0:
-        return 0.0
-    centre = total / count
+    centre = _mean_where(points, valid)  # zeros without valid points: the loop adds nothing
     best = 0.0
     for i in range(points.shape[0]):
         if valid[i]:
@@ -183,6 +174,12 @@ def _radius(points: np.ndarray, valid: np.ndarray) -> float:
 
 @kernel
 def _masked_mean(points: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """:func:`_mean_where`, compiled for callers outside the kernels."""
+    return _mean_where(points, mask)
+
+
+@inline
+def _mean_where(points: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """(3,) float64 mean of the (N, 3) float64 ``points`` where the (N,) bool ``mask`` holds;
     zeros without any. Summed row after row, as ``points[mask].mean(axis=0)`` sums (numpy
     adds whole rows along axis 0, without pairwise blocks), so the result equals it bit for
