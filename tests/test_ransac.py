@@ -176,9 +176,22 @@ def test_grid_sampling_recovers_the_room_with_the_lattice_graph():
     np.testing.assert_allclose(rec.params[ids - 1], planes, atol=1e-2)
 
 
+def test_lattice_normal_cut_keeps_flat_walls_whole():
+    # Each wall's normals are one vector: a 12 degree cut parts the walls, not a wall.
+    frame, labels, planes = room(h=120, w=160)
+    driver = make("monoplane-nocrf", max_points=4000, sampling="grid", lattice_max_turn_deg=12.0)
+    rec = driver.run(frame)
+    ids = match(rec, labels, planes)
+    assert len(set(ids.tolist())) == len(planes)
+    assert np.mean(ids[labels - 1] == rec.labels) > 0.97
+    np.testing.assert_allclose(rec.planes[ids - 1, :3], planes[:, :3], atol=1e-2)
+
+
 def test_sampling_must_be_named():
     with pytest.raises(ConfigError, match="sampling must be one of random, grid"):
         RansacConfig(sampling="lattice")
+    with pytest.raises(ConfigError, match="lattice_max_turn_deg must lie in"):
+        RansacConfig(lattice_max_turn_deg=0.0)
 
 
 def test_max_planes_and_min_support_stop_the_search():

@@ -121,6 +121,9 @@ class RansacConfig:
         "random", "how a frame's valid pixels are subsampled: 'random' (a uniform draw; the "
         "graph is the kNN graph) or 'grid' (a regular pixel lattice; the graph is its "
         "8-neighbourhood cut at depth jumps, no kNN query). Point clouds always use 'random'")
+    lattice_max_turn_deg: float = param(
+        180.0, "with sampling 'grid', lattice neighbours whose normals differ by more than "
+        "this angle in degrees are not linked either (180: no such cut)")
     lo_iterations: int = param(1, "local optimisation rounds (refit + relabel) per plane")
     split_components: bool = param(
         False, "keep only the largest graph-connected component of each plane's inliers")
@@ -152,6 +155,7 @@ class RansacConfig:
             (self.max_points >= 3, "max_points must be at least 3"),
             (self.sampling in SAMPLINGS,
              f"sampling must be one of {', '.join(SAMPLINGS)}, got {self.sampling!r}"),
+            (0 < self.lattice_max_turn_deg <= 180, "lattice_max_turn_deg must lie in (0, 180]"),
             (self.lo_iterations >= 0, "lo_iterations must be non-negative"),
             (self.noise_factor >= 0, "noise_factor must be non-negative"),
             (self.max_rejections >= 0, "max_rejections must be non-negative"),
@@ -224,6 +228,8 @@ class SequentialRansac:
         t_cloud = time.perf_counter() - t
         t_graph = 0.0
 
+        turn = None if cfg.lattice_max_turn_deg >= 180 else cfg.lattice_max_turn_deg
+
         def build_graph() -> NeighbourGraph:
             nonlocal t_graph
             t = time.perf_counter()
@@ -233,7 +239,7 @@ class SequentialRansac:
                 pixels, shape, _ = cloud.pixel_grid()
                 graph = NeighbourGraph.from_lattice(cloud.points, pixels, shape, cloud.stride,
                                                     cloud.center / cloud.scale,
-                                                    LATTICE_MAX_JUMP)
+                                                    LATTICE_MAX_JUMP, cloud.normals, turn)
             t_graph = time.perf_counter() - t
             return graph
 

@@ -117,8 +117,11 @@ class NeighbourGraph:
 
     @classmethod
     def from_lattice(cls, points: np.ndarray, pixels: np.ndarray, shape: tuple[int, int],
-                     stride: int, shift: np.ndarray, max_jump: float) -> NeighbourGraph:
-        """The 8-neighbourhood of points sampled on a regular pixel lattice, cut at depth jumps.
+                     stride: int, shift: np.ndarray, max_jump: float,
+                     normals: np.ndarray | None = None,
+                     max_turn_deg: float | None = None) -> NeighbourGraph:
+        """The 8-neighbourhood of points sampled on a regular pixel lattice, cut at depth jumps
+        and, optionally, where the normals turn.
 
         On an organised frame sampled every ``stride`` pixels the lattice already says who
         neighbours whom: one scan in raster order (:func:`pixel_grid_edges`) replaces the
@@ -141,6 +144,12 @@ class NeighbourGraph:
         max_jump : float
             Two lattice neighbours are linked unless their 3D distance exceeds ``max_jump``
             times their distance from the camera.
+        normals : numpy.ndarray, optional
+            (N, 3) float64 unit normals of the points; needed with ``max_turn_deg``.
+        max_turn_deg : float, optional
+            Two lattice neighbours whose normals differ by more than this angle in degrees are
+            not linked either: a curved surface (its normals turn from sample to sample) is
+            then no bridge for a plane's labels, a flat one stays linked. None: no such cut.
 
         Returns
         -------
@@ -154,9 +163,16 @@ class NeighbourGraph:
         lattice = np.ascontiguousarray(index.reshape(h, w)[offset::stride, offset::stride])
         if np.count_nonzero(lattice >= 0) != pixels.shape[0]:
             raise InvalidInput(f"the points do not all lie on the lattice of stride {stride}")
+        points = np.ascontiguousarray(points, dtype=np.float64)
+        if max_turn_deg is None:
+            normals, cos_min = np.zeros_like(points), -2.0  # every pair agrees
+        elif normals is None or np.shape(normals) != points.shape:
+            raise InvalidInput(f"max_turn_deg needs (N, 3) normals of the {points.shape[0]} points")
+        else:
+            cos_min = float(np.cos(np.radians(max_turn_deg)))
         edges, gap, indptr, indices = pixel_grid_edges(
-            lattice, np.ascontiguousarray(points, dtype=np.float64),
-            np.asarray(shift, dtype=np.float64), float(max_jump))
+            lattice, points, np.asarray(shift, dtype=np.float64), float(max_jump),
+            np.ascontiguousarray(normals, dtype=np.float64), cos_min)
         spacing = float(np.median(gap)) if gap.size else 0.0
         return cls(int(pixels.shape[0]), edges, indptr, indices, None, spacing)
 
@@ -388,10 +404,15 @@ def _pool_edges(num_nodes: int, edges: np.ndarray, pool: np.ndarray
 
 
 @kernel
-def pixel_grid_edges(index: np.ndarray, points: np.ndarray, shift: np.ndarray, max_jump: float
+def pixel_grid_edges(index: np.ndarray, points: np.ndarray, shift: np.ndarray, max_jump: float,
+                     normals: np.ndarray, cos_min: float
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The 8-connected graph of :func:`monoplane.stages.graph_refiner.pixel_graph`, of the
     (H, W) int64 node ``index`` of each pixel (-1: none).
+
+    A pair is cut when its 3D distance exceeds ``max_jump`` times the first point's distance
+    from the camera, or when the cosine between its ``normals`` ((N, 3) unit) is below
+    ``cos_min`` (-2 keeps every pair whatever its normals).
 
     Nodes number the valid pixels in raster order, so the four forward neighbours of a
     pixel, taken in raster order (right, below left, below, below right), are larger nodes
@@ -435,7 +456,9 @@ def pixel_grid_edges(index: np.ndarray, points: np.ndarray, shift: np.ndarray, m
                 g = np.sqrt(dx * dx + dy * dy + dz * dz)
                 gap[pairs] = g
                 pairs += 1
-                if g <= reach:
+                agree = (normals[a, 0] * normals[b, 0] + normals[a, 1] * normals[b, 1]
+                         + normals[a, 2] * normals[b, 2])
+                if g <= reach and agree >= cos_min:
                     edges[kept, 0] = a
                     edges[kept, 1] = b
                     kept += 1

@@ -112,7 +112,8 @@ def pixel_graph(cloud: PlaneCloud, max_jump: float) -> NeighbourGraph:
     index[pixels] = np.arange(cloud.size)
     # The cloud is centred on the scene; points are compared at their own depth scale.
     edges, gap, indptr, indices = pixel_grid_edges(index.reshape(h, w), cloud.points,
-                                               cloud.center / cloud.scale, float(max_jump))
+                                               cloud.center / cloud.scale, float(max_jump),
+                                               cloud.normals, -2.0)
     spacing = float(np.median(gap)) if gap.size else 0.0
     # No point index: the grid gave the neighbours, and building one over every pixel would
     # cost more than the graph.

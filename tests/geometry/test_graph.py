@@ -288,3 +288,22 @@ def test_lattice_graph_rejects_points_off_the_lattice():
     pts, pixels, shift = _lattice_frame()
     with pytest.raises(InvalidInput, match="lattice of stride 4"):
         NeighbourGraph.from_lattice(pts, pixels + 1, (24, 32), 4, shift, 0.05)
+
+
+def test_lattice_graph_cuts_where_the_normals_turn():
+    pts, pixels, shift = _lattice_frame()
+    u = pixels % 32
+    # Flat depth, but the normals of the right half are turned 30 degrees about the y axis.
+    turn = np.radians(30.0)
+    normals = np.where((u >= 16)[:, None], [np.sin(turn), 0.0, -np.cos(turn)], [0.0, 0.0, -1.0])
+    full = NeighbourGraph.from_lattice(pts, pixels, (24, 32), 4, shift, 0.5)
+    kept = NeighbourGraph.from_lattice(pts, pixels, (24, 32), 4, shift, 0.5, normals, 31.0)
+    np.testing.assert_array_equal(kept.edges, full.edges)  # 30 degrees is within 31
+    cut = NeighbourGraph.from_lattice(pts, pixels, (24, 32), 4, shift, 0.5, normals, 29.0)
+    side = u >= 16
+    assert np.all(side[cut.edges[:, 0]] == side[cut.edges[:, 1]])  # no edge crosses the fold
+    # Only the pairs across the fold went: 6 horizontal ones and 2 diagonal ones in each of
+    # the 5 gaps between lattice rows.
+    assert full.num_edges - cut.num_edges == 6 + 2 * 5
+    with pytest.raises(InvalidInput, match="max_turn_deg needs"):
+        NeighbourGraph.from_lattice(pts, pixels, (24, 32), 4, shift, 0.5, None, 29.0)
