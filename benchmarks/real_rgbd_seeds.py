@@ -48,9 +48,12 @@ def main() -> None:
     tum = sum(not failed_checks("TUM", got["TUM"]) for got in sweep.values())
     other = sum(not (failed_checks("SUN", got["SUN"]) or failed_checks("NYU", got["NYU"]))
                 for got in sweep.values())
+    checks = sum(len(g) for got in sweep.values() for g in got.values())
+    failed = sum(len(failed_checks(name, g)) for got in sweep.values() for name, g in got.items())
     globe = [got["TUM"]["globe"][0] for got in sweep.values()]
     print(f"{' '.join(args.set) or 'preset as shipped'}: TUM {tum}/{len(sweep)}, "
           f"SUN+NYU {other}/{len(sweep)}, all {len(passing_seeds(sweep))}/{len(sweep)}, "
+          f"checks {checks - failed}/{checks}, "
           f"globe planar median {np.median(globe):.0%} (mean {np.mean(globe):.0%})")
 
 

@@ -13,7 +13,7 @@ Subsampling
 -----------
 At high resolution RANSAC runs on a random subset of at most ``max_points`` valid pixels (drawn
 from the caller's generator, so it is deterministic for a seed), or on the valid pixels of a
-regular lattice (``grid``; :func:`lattice_stride`), whose neighbours the lattice itself gives
+regular lattice (``grid``; :func:`lattice_step`), whose neighbours the lattice itself gives
 (:meth:`NeighbourGraph.from_lattice`). :meth:`PlaneCloud.propagate`
 then carries the labels of the subset to every valid pixel. A pixel first takes the label of
 its nearest sampled pixel in the image (a distance transform). Where that is doubtful (the
@@ -92,10 +92,10 @@ class PlaneCloud:
     sampled : numpy.ndarray or None
         (N,) int64 row of ``all_points`` of each point of a subsampled cloud without an image
         (a frame's cloud says it with ``pixels``); None otherwise.
-    stride : int or None
-        Step in pixels of the regular lattice a frame's points were sampled on
-        (:meth:`from_frame` with ``grid``; 1: every valid pixel); None for a random sample or
-        a cloud without an image.
+    lattice : numpy.ndarray or None
+        (R, C) int64 point of each node of the regular lattice a frame's points were sampled
+        on (:meth:`from_frame` with ``grid``), -1 where the lattice pixel is not valid; None
+        for a random sample or a cloud without an image.
     """
 
     points: np.ndarray
@@ -108,7 +108,7 @@ class PlaneCloud:
     all_points: np.ndarray
     all_pixels: np.ndarray | None
     sampled: np.ndarray | None = None
-    stride: int | None = None
+    lattice: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         n = self.points.shape[0]
@@ -184,9 +184,11 @@ class PlaneCloud:
         rng : numpy.random.Generator, optional
             Source of the subsampling; required when random subsampling happens.
         grid : bool
-            Subsample on a regular lattice instead: the valid pixels at ``v, u ≡ s // 2
-            (mod s)`` for the smallest stride ``s`` that keeps at most ``max_points`` of them
-            (:func:`lattice_stride`); ``stride`` records ``s``. Draws nothing from ``rng``.
+            Subsample on a regular lattice instead: the valid pixels of the rows and columns
+            ``⌊(i + ½) s⌋`` for the smallest step ``s >= 1`` (in pixels, not necessarily
+            whole) that keeps at most ``max_points`` of them (:func:`lattice_step`);
+            ``lattice`` records which point each lattice node holds. Draws nothing from
+            ``rng``.
 
         Returns
         -------
@@ -214,17 +216,20 @@ class PlaneCloud:
 
         keep = all_pixels
         points = all_points
-        stride = None
+        lattice = None
         if grid:
-            stride = 1
+            step = 1.0
             if max_points is not None and all_pixels.size > max_points:
-                stride = lattice_stride(valid_image, max_points)
-                offset = stride // 2
-                on_lattice = np.zeros(frame.shape, dtype=bool)
-                on_lattice[offset::stride, offset::stride] = True
-                chosen = np.flatnonzero(on_lattice.ravel()[all_pixels])
-                keep = all_pixels[chosen]
-                points = all_points[chosen]
+                step = lattice_step(valid_image, max_points)
+            rows, cols = lattice_lines(frame.shape[0], step), lattice_lines(frame.shape[1], step)
+            on_lattice = np.zeros(frame.shape, dtype=bool)
+            on_lattice[np.ix_(rows, cols)] = True
+            chosen = np.flatnonzero(on_lattice.ravel()[all_pixels])
+            keep = all_pixels[chosen]
+            points = all_points[chosen]
+            node = np.full(on_lattice.size, -1, dtype=np.int64)
+            node[keep] = np.arange(keep.size)
+            lattice = np.ascontiguousarray(node.reshape(frame.shape)[np.ix_(rows, cols)])
         elif max_points is not None and all_pixels.size > max_points:
             if max_points < 3:
                 raise InvalidInput(f"max_points must be at least 3, got {max_points}")
@@ -244,7 +249,7 @@ class PlaneCloud:
             colors = frame.rgb.reshape(-1, 3)[keep].astype(np.float64) / 255.0
         return cls(points=np.ascontiguousarray(points), normals=normals, colors=colors,
                    pixels=keep, center=center, scale=scale, shape=frame.shape,
-                   all_points=all_points, all_pixels=all_pixels, stride=stride)
+                   all_points=all_points, all_pixels=all_pixels, lattice=lattice)
 
     @classmethod
     def from_points(cls, points: np.ndarray, normals: np.ndarray, colors: np.ndarray | None,
@@ -442,8 +447,31 @@ class PlaneCloud:
         return out
 
 
-def lattice_stride(valid: np.ndarray, max_points: int) -> int:
-    """Smallest lattice step that keeps at most ``max_points`` valid pixels.
+def lattice_lines(size: int, step: float) -> np.ndarray:
+    """Pixel rows (or columns) ``⌊(i + ½) step⌋`` of a lattice across ``size`` pixels.
+
+    A whole ``step`` gives every ``step``-th line from ``step // 2``; a fractional one spaces
+    the lines ``⌊step⌋`` and ``⌈step⌉`` apart, so that the lattice can hold as many points
+    as asked for at any resolution.
+
+    Parameters
+    ----------
+    size : int
+        Image height (or width) in pixels.
+    step : float
+        Lattice step in pixels, >= 1.
+
+    Returns
+    -------
+    numpy.ndarray
+        (L,) int64 ascending distinct lines in ``[0, size)``.
+    """
+    lines = np.floor((np.arange(int(np.ceil(size / step)) + 1) + 0.5) * step).astype(np.int64)
+    return lines[lines < size]
+
+
+def lattice_step(valid: np.ndarray, max_points: int) -> float:
+    """Smallest lattice step (to 0.1 %) that keeps at most ``max_points`` valid pixels.
 
     Parameters
     ----------
@@ -454,18 +482,23 @@ def lattice_stride(valid: np.ndarray, max_points: int) -> int:
 
     Returns
     -------
-    int
-        Stride ``s >= 1`` such that the valid pixels at ``v, u ≡ s // 2 (mod s)`` number at
-        most ``max_points``.
+    float
+        Step ``s >= 1`` in pixels such that the valid pixels on the rows and columns
+        :func:`lattice_lines` ``(·, s)`` number at most ``max_points``.
     """
     if max_points < 3:
         raise InvalidInput(f"max_points must be at least 3, got {max_points}")
-    total = int(np.count_nonzero(valid))
-    # The valid fraction is about the same on every lattice: start from the stride it gives.
-    stride = max(1, int(np.ceil(np.sqrt(total / max_points))))
-    while int(np.count_nonzero(valid[stride // 2::stride, stride // 2::stride])) > max_points:
-        stride += 1
-    return stride
+    h, w = valid.shape
+
+    def kept(step: float) -> int:
+        return int(np.count_nonzero(valid[np.ix_(lattice_lines(h, step), lattice_lines(w, step))]))
+
+    # The valid fraction is about the same on every lattice: start from the step it gives and
+    # grow it by the excess until the lattice fits.
+    step = max(1.0, float(np.sqrt(np.count_nonzero(valid) / max_points)))
+    while (count := kept(step)) > max_points:
+        step *= max(1.001, float(np.sqrt(count / max_points)))
+    return step
 
 
 def normalised_cloud(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
