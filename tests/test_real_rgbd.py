@@ -154,7 +154,10 @@ def surface_truths(frame, name: str) -> dict[str, tuple[str, np.ndarray, np.ndar
     out = {}
     for surface, (kind, polygon) in SURFACES[name].items():
         mask = polygon_mask(polygon, valid.shape) & valid
-        out[surface] = (kind, mask, None) if kind == CURVED else (kind, *surface_truth(points, mask))
+        if kind == CURVED:
+            out[surface] = (kind, mask, None)
+        else:
+            out[surface] = (kind, *surface_truth(points, mask))
     return out
 
 

@@ -180,10 +180,7 @@ class NeighbourGraph:
         edges, gap, indptr, indices = pixel_grid_edges(
             lattice, points, np.asarray(shift, dtype=np.float64), float(max_jump), unit, cos_min)
         spacing = float(np.median(gap)) if gap.size else 0.0
-        scale = None
-        if turn_scale_deg is not None:
-            cos = np.clip(np.sum(unit[edges[:, 0]] * unit[edges[:, 1]], axis=1), -1.0, 1.0)
-            scale = np.exp(-0.5 * (np.degrees(np.arccos(cos)) / turn_scale_deg) ** 2)
+        scale = None if turn_scale_deg is None else _turn_scale(edges, unit, float(turn_scale_deg))
         return cls(int(points.shape[0]), edges, indptr, indices, None, spacing, scale)
 
     def weighted_adjacency(self, weights: np.ndarray
@@ -411,6 +408,21 @@ def _pool_edges(num_nodes: int, edges: np.ndarray, pool: np.ndarray
             ids[count] = e
             count += 1
     return out, ids
+
+
+@kernel
+def _turn_scale(edges: np.ndarray, normals: np.ndarray, sigma_deg: float) -> np.ndarray:
+    """(E,) ``exp(-t² / 2σ²)`` of the (E, 2) edges, t the angle in degrees between the unit
+    ``normals`` (N, 3) of their ends."""
+    out = np.empty(edges.shape[0])
+    to_deg = 180.0 / np.pi
+    for e in range(edges.shape[0]):
+        a, b = edges[e, 0], edges[e, 1]
+        cos = (normals[a, 0] * normals[b, 0] + normals[a, 1] * normals[b, 1]
+               + normals[a, 2] * normals[b, 2])
+        t = np.arccos(min(max(cos, -1.0), 1.0)) * to_deg / sigma_deg
+        out[e] = np.exp(-0.5 * t * t)
+    return out
 
 
 @kernel

@@ -285,7 +285,8 @@ def test_pixel_fields_come_all_or_none():
 def test_lattice_lines_centre_whole_and_fractional_steps():
     # A whole step s gives every s-th line from s // 2, as a slice would.
     for step in (1, 2, 3, 4):
-        np.testing.assert_array_equal(lattice_lines(19, float(step)), np.arange(step // 2, 19, step))
+        np.testing.assert_array_equal(lattice_lines(19, float(step)),
+                                      np.arange(step // 2, 19, step))
     # A fractional step mixes its floor and ceiling and keeps the count it promises.
     lines = lattice_lines(100, 2.5)
     np.testing.assert_array_equal(lines[:4], [1, 3, 6, 8])
