@@ -71,34 +71,47 @@ def _discontinuities(z: np.ndarray, max_jump: float) -> tuple[np.ndarray, np.nda
                 inv[v, u] = np.float32(1.0) / z[v, u]
     rim = np.zeros((h, w), dtype=np.bool_)
     jump = np.float32(max_jump)
-    for axis in range(2):
-        lines, n = (h, w) if axis == 0 else (w, h)
-        for line in range(lines):
-            for i in range(n - 1):
-                a = inv[line, i] if axis == 0 else inv[i, line]
-                b = inv[line, i + 1] if axis == 0 else inv[i + 1, line]
-                if a <= 0 or b <= 0:
-                    continue
-                step = b - a
-                deviation = np.float32(np.inf)
-                if i > 0:
-                    prev = inv[line, i - 1] if axis == 0 else inv[i - 1, line]
-                    if prev > 0:
-                        deviation = min(deviation, abs(step - (a - prev)))
-                if i + 2 < n:
-                    nxt = inv[line, i + 2] if axis == 0 else inv[i + 2, line]
-                    if nxt > 0:
-                        deviation = min(deviation, abs(step - (nxt - b)))
-                if deviation == np.inf:
-                    deviation = abs(step)
-                if step == 0 or not deviation > jump * max(a, b):
-                    continue
-                far = i if step < 0 else i + 1  # the smaller inverse depth
-                if axis == 0:
-                    rim[line, far] = True
-                else:
-                    rim[far, line] = True
+    zero = np.float32(0.0)
+    # Each pair is tested on its own, so the order is free: row by row, both axes, each
+    # row's pairs in a branch-free loop (vectorised), the image border (a missing outer
+    # neighbour) passed as a hole.
+    side = np.zeros(max(h, w), dtype=np.int8)
+    for v in range(h):
+        row = inv[v]
+        for i in range(w - 1):
+            prev = row[i - 1] if i > 0 else zero
+            nxt = row[i + 2] if i + 2 < w else zero
+            side[i] = _pair_edge(prev, row[i], row[i + 1], nxt, jump)
+        for i in range(w - 1):
+            rim[v, i] |= side[i] < 0
+            rim[v, i + 1] |= side[i] > 0
+        if v + 1 < h:
+            above = inv[v - 1] if v > 0 else inv[v] * zero
+            below = inv[v + 2] if v + 2 < h else inv[v] * zero
+            nxt_row = inv[v + 1]
+            for u in range(w):
+                side[u] = _pair_edge(above[u], row[u], nxt_row[u], below[u], jump)
+            for u in range(w):
+                rim[v, u] |= side[u] < 0
+                rim[v + 1, u] |= side[u] > 0
     return inv, rim
+
+
+@inline
+def _pair_edge(prev: float, a: float, b: float, nxt: float, jump: float) -> int:
+    """Whether the step ``a -> b`` of float32 inverse depth between neighbours is a
+    discontinuity (see :func:`_discontinuities`; ``prev`` and ``nxt`` are the outer
+    neighbours, 0 when missing): -1 marks ``a``'s pixel as the rim, +1 ``b``'s, 0 none."""
+    step = b - a
+    inf = np.float32(np.inf)
+    before = abs(step - (a - prev)) if prev > 0 else inf
+    after = abs(step - (nxt - b)) if nxt > 0 else inf
+    deviation = min(before, after)
+    if deviation == inf:
+        deviation = abs(step)
+    if not (a > 0 and b > 0 and step != 0 and deviation > jump * max(a, b)):
+        return 0
+    return -1 if step < 0 else 1
 
 
 @kernel

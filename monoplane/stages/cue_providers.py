@@ -35,7 +35,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
 
 from monoplane.contracts import CueProvider, NetworkCues, Stage, param
 from monoplane.cues.given import use_given_cues
@@ -119,8 +118,8 @@ class GivenCues(CueProvider):
                 f"predict depth from the image use cues.plugin=onnx")
         if frame.normals is not None and not cfg.recompute_normals:
             return use_given_cues(frame)
+        # Already float32 and zero wherever the depth is not positive (or not finite).
         normals = normals_from_depth(frame.depth, frame.K, **cfg.normals_options())
-        normals = np.where((frame.depth > 0)[..., None], normals, 0).astype(np.float32)
         return frame.with_(normals=normals, normals_from_depth=True, notes=[
             *frame.notes, "normals: estimated from depth (edge-aware inverse-depth fits)"])
 
