@@ -265,14 +265,15 @@ def _fit_band(inv: np.ndarray, labels: np.ndarray, rim: np.ndarray, slope: np.nd
 
 @kernel
 def _box_planes(fixed: np.ndarray, r: int, scale: float, tol: float,
-                params: np.ndarray, row0: int, row1: int, centre: np.ndarray,
+                params: np.ndarray, row0: int, row1: int, reach: np.ndarray,
                 out: np.ndarray) -> None:
     """Box fits of rows ``row0:row1`` of the (H, W) float32 inverse depth ``inv``.
 
     A pixel whose whole ``(2r+1)²`` window lies in the image, holds valid samples off the
     ``rim`` only, and is explained by one line of inverse depth to a relative RMS of ``tol``,
-    gets the line's normal in ``out`` and its value at the pixel in ``centre`` ((H, W)
-    float32); other pixels are left as they are (``centre = 0``: no fit).
+    gets the line's normal ``n`` in ``out`` and its inverse distance ``1 / d`` in ``reach``
+    ((H, W) float32; the plane ``n · X + d = 0`` has inverse depth ``-(n · ray) / d`` on the
+    ray ``K^-1 [u, v, 1]``); other pixels are left as they are (``reach = 0``: no fit).
 
     The samples are taken in fixed point, ``round(inv * scale)``, so that the window sums
     are exact integers: they run along the columns (from one row to the next) and then, as
@@ -327,8 +328,7 @@ def _box_planes(fixed: np.ndarray, r: int, scale: float, tol: float,
             a, b = fu * inv_spread, fv * inv_spread
             if float(p2[u + r + 1] - p2[u - r]) - f0 * c - (fu * a + fv * b) > tol2 * c * c:
                 continue
-            centre[v, u] = c * unit
-            _put_normal(out, v, u, a * unit, b * unit, c * unit, params)
+            reach[v, u] = _put_normal(out, v, u, a * unit, b * unit, c * unit, params)
 
 
 @kernel
@@ -361,8 +361,9 @@ def _own_slope(inv: np.ndarray, rim: np.ndarray, v: int, u: int) -> float:
 
 @inline
 def _put_normal(out: np.ndarray, v: int, u: int, grad_u: float, grad_v: float, value: float,
-                params: np.ndarray) -> None:
-    """:func:`_store_normal` for a ``value > 0``, with one division instead of three."""
+                params: np.ndarray) -> float:
+    """:func:`_store_normal` for a ``value > 0``, with one division instead of three; returns
+    the plane's inverse distance ``1 / d`` (``-K^T g = n / d``), 0 if there is none."""
     g2 = value - grad_u * u - grad_v * v
     nx = -(grad_u * params[1] + grad_v * params[4] + g2 * params[7])
     ny = -(grad_u * params[2] + grad_v * params[5] + g2 * params[8])
@@ -373,10 +374,11 @@ def _put_normal(out: np.ndarray, v: int, u: int, grad_u: float, grad_v: float, v
         out[v, u, 0] = nx * k
         out[v, u, 1] = ny * k
         out[v, u, 2] = nz * k
+    return norm
 
 
 @kernel
-def _box_band(inv: np.ndarray, rim: np.ndarray, centre: np.ndarray, params: np.ndarray,
+def _box_band(inv: np.ndarray, rim: np.ndarray, reach: np.ndarray, params: np.ndarray,
               k_inv: np.ndarray, radius: int, r: int, stride: int, min_support: int,
               row0: int, row1: int, out: np.ndarray) -> None:
     """Normals of the valid pixels of rows ``row0:row1`` without a box fit of their own.
@@ -384,13 +386,12 @@ def _box_band(inv: np.ndarray, rim: np.ndarray, centre: np.ndarray, params: np.n
     Such a pixel lies in the window of every box-fitted pixel within ``radius`` (Chebyshev),
     so on that window's one surface. It takes the normal of one of them, on the offsets
     ``{0, ±radius/2}²`` or else ``{0, ±radius}²``: the one whose plane predicts its inverse
-    depth best, within ``max_jump`` (on a crease, its own face). On the plane with normal
-    ``n``, inverse depth is proportional to ``n · ray``, ``ray = K^-1 [u, v, 1]``, so the
-    prediction is ``centre_q (n · ray) / (n · ray_q)``. A pixel without one (a rim pixel, a
-    sliver narrower than a window) fits the samples of its ``(2r+1)²`` window every
-    ``stride`` pixels by the gated rule without the components: within ``max_jump`` of its
-    own inverse depth, plus (off the rim) its own relative slope per pixel of offset.
-    ``k_inv`` is (3, 3) float64 ``K^-1``; ``centre`` and ``out`` hold the box fits.
+    depth ``-(n · ray) / d`` best, within ``max_jump`` (on a crease, its own face). A pixel
+    without one (a rim pixel, a sliver narrower than a window) fits the samples of its
+    ``(2r+1)²`` window every ``stride`` pixels by the gated rule without the components:
+    within ``max_jump`` of its own inverse depth, plus (off the rim) its own relative slope
+    per pixel of offset. ``k_inv`` is (3, 3) float64 ``K^-1``; ``reach`` (``1 / d``) and
+    ``out`` hold the box fits.
     """
     h, w = inv.shape
     max_jump = params[0]
@@ -398,37 +399,32 @@ def _box_band(inv: np.ndarray, rim: np.ndarray, centre: np.ndarray, params: np.n
     half = max(radius // 2, 1)
     offsets = np.empty((16, 2), np.int64)
     k = 0
-    for reach in (half, radius):
-        for dv in (-reach, 0, reach):
-            for du in (-reach, 0, reach):
+    for ring in (half, radius):
+        for dv in (-ring, 0, ring):
+            for du in (-ring, 0, ring):
                 if dv != 0 or du != 0:
                     offsets[k, 0], offsets[k, 1] = dv, du
                     k += 1
     for v in range(row0, row1):
         for u in range(w):
             p = inv[v, u]
-            if not p > 0 or centre[v, u] > 0:
+            if not p > 0 or reach[v, u] > 0:
                 continue
-            # n · ray, with the ray of this pixel
+            # The ray of this pixel
             hx = k_inv[0, 0] * u + k_inv[0, 1] * v + k_inv[0, 2]
             hy = k_inv[1, 0] * u + k_inv[1, 1] * v + k_inv[1, 2]
             hz = k_inv[2, 0] * u + k_inv[2, 1] * v + k_inv[2, 2]
-            best, pick = max_jump, -1
+            best, pick = max_jump * p, -1
             for k in range(offsets.shape[0]):
                 if k == 8 and pick >= 0:  # the inner ring had one
                     break
                 y, x = v + offsets[k, 0], u + offsets[k, 1]
-                if y < 0 or y >= h or x < 0 or x >= w or not centre[y, x] > 0:
+                if y < 0 or y >= h or x < 0 or x >= w or not reach[y, x] > 0:
                     continue
-                nx, ny, nz = out[y, x, 0], out[y, x, 1], out[y, x, 2]
-                there = (nx * (k_inv[0, 0] * x + k_inv[0, 1] * y + k_inv[0, 2])
-                         + ny * (k_inv[1, 0] * x + k_inv[1, 1] * y + k_inv[1, 2])
-                         + nz * (k_inv[2, 0] * x + k_inv[2, 1] * y + k_inv[2, 2]))
-                if not there < 0:  # a fitted normal faces the camera; this one grazes
-                    continue
-                err = abs(centre[y, x] * (nx * hx + ny * hy + nz * hz) / there - p) / p
-                if err <= best:
-                    best, pick = err, k
+                dot = out[y, x, 0] * hx + out[y, x, 1] * hy + out[y, x, 2] * hz
+                miss = abs(dot * reach[y, x] + p)  # |predicted - p|, predicted = -dot / d
+                if miss <= best:
+                    best, pick = miss, k
             if pick >= 0:
                 y, x = v + offsets[pick, 0], u + offsets[pick, 1]
                 out[v, u, 0], out[v, u, 1], out[v, u, 2] = out[y, x, 0], out[y, x, 1], out[y, x, 2]

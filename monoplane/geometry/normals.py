@@ -143,7 +143,7 @@ def normals_from_depth(depth: np.ndarray, K: np.ndarray, *, radius: int | None =
         raise InvalidInput(f"max_jump must be positive, got {max_jump}")
     if method not in NORMALS_METHODS:
         raise InvalidInput(f"method must be one of {', '.join(NORMALS_METHODS)}, got {method!r}")
-    z = np.where(np.isfinite(depth), depth, 0).astype(np.float32)
+    z = np.where(np.isfinite(depth), depth, 0).astype(np.float32, copy=False)
     inv, rim = _discontinuities(z, float(max_jump))
     params = np.array([max_jump, K[0, 0], K[0, 1], K[0, 2], K[1, 0], K[1, 1], K[1, 2],
                        K[2, 0], K[2, 1], K[2, 2]], dtype=np.float64)
@@ -201,18 +201,18 @@ def _box_normals(inv: np.ndarray, rim: np.ndarray, params: np.ndarray, K: np.nda
         return normals
     # 2^24 steps up to the largest inverse depth: the window sums of squares fit in int64.
     scale = float(2.0 ** (24 - np.ceil(np.log2(top))))
-    centre = np.zeros(inv.shape, dtype=np.float32)
+    reach = np.zeros(inv.shape, dtype=np.float32)
     fixed = np.empty(inv.shape, dtype=np.int32)
     pieces = chunks(inv.shape[0], _THREADED_ROWS)
     run_threaded([functools.partial(_fixed_point, inv, rim, scale, a, b, fixed)
                   for a, b in pieces])
     run_threaded([functools.partial(_box_planes, fixed, radius, scale, tol, params, a, b,
-                                    centre, normals) for a, b in pieces])
+                                    reach, normals) for a, b in pieces])
     # The pixels left to the per-sample fit are few but slow (a sample costs as much as a
     # whole box fit): a sparser grid, every r/2 pixels.
     stride = max(stride, radius // 2)
     r = radius - radius % stride
     k_inv = np.linalg.inv(K)
-    run_threaded([functools.partial(_box_band, inv, rim, centre, params, k_inv, radius, r,
+    run_threaded([functools.partial(_box_band, inv, rim, reach, params, k_inv, radius, r,
                                     stride, support, a, b, normals) for a, b in pieces])
     return normals
