@@ -15,7 +15,7 @@ from monoplane.jit import inline, kernel
 
 @kernel
 def _discontinuities(z: np.ndarray, max_jump: float) -> tuple[np.ndarray, np.ndarray]:
-    """Inverse depth and rim mask (far side of each discontinuity) of a (H, W) float32 depth.
+    """Inverse depth and rim mask (near side of each discontinuity) of (H, W) float32 depth.
 
     Along a row or column, the inverse depth of a plane changes by the same step from pixel
     to pixel, however steep the plane (a floor near the horizon). So a discontinuity is a
