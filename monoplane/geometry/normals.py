@@ -200,8 +200,11 @@ def _box_normals(inv: np.ndarray, rim: np.ndarray, params: np.ndarray, K: np.nda
     normals = np.zeros(inv.shape + (3,), dtype=np.float32)
     if not top > 0:
         return normals
-    # 2^24 steps up to the largest inverse depth: the window sums of squares fit in int64.
-    scale = float(2.0 ** (24 - np.ceil(np.log2(top))))
+    # 2^bits steps up to the largest inverse depth; the widest sum, a row's prefix sum of
+    # the windows' column sums of squares (2^(2 bits) * (2 radius + 1) * (W + 1)), stays
+    # below 2^62, so no int64 sum overflows: 24 bits at 640x480, 22 at 1920x1080.
+    bits = min(24, int((62 - np.log2((2 * radius + 1) * (inv.shape[1] + 1))) // 2))
+    scale = float(2.0 ** (bits - np.ceil(np.log2(top))))
     reach = np.zeros(inv.shape, dtype=np.float32)
     fixed = np.empty(inv.shape, dtype=np.int32)
     pieces = chunks(inv.shape[0], _THREADED_ROWS)

@@ -43,6 +43,16 @@ def test_exact_plane_gives_plane_normal(radius: int, stride: int, method: str) -
     assert angles_deg(normals.reshape(-1, 3), n).max() < 0.5
 
 
+def test_box_fits_are_exact_on_wide_images() -> None:
+    # 2000 pixels wide, a 41x41 window: the fixed-point samples get fewer bits (22) so that
+    # the row's int64 prefix sums stay in range, and the fits are still exact.
+    h, w = 60, 2000
+    K = default_intrinsics(w, h)
+    n = unit([0.2, -0.3, -0.9])
+    normals = normals_from_depth(plane_depth(K, h, w, np.r_[n, 2.0]), K, method="box")
+    assert angles_deg(normals.reshape(-1, 3), n).max() < 0.5
+
+
 @pytest.mark.parametrize("method", METHODS)
 def test_normals_face_the_camera_and_ignore_depth_scale(method: str) -> None:
     h, w = 48, 64
