@@ -6,7 +6,7 @@ Frames
     Medians are over all those runs.
 
 Scene complexity
-    With ``objects`` ranges (e.g. :data:`COMPLEXITY_LEVELS`: 1-2, 4-6 and 8-12 objects), every
+    With ``objects`` ranges (e.g. :data:`COMPLEXITY_LEVELS`: 0, 1-2, 4-6 and 8-12 objects), every
     size runs once per range on its own frames: frame ``i`` of range ``(lo, hi)`` is
     ``generate(seed + i, level, width, height, objects=lo + i % (hi - lo + 1))``, the same room
     and camera as the usual scene of that seed, furnished with that many objects in view. Each
@@ -79,7 +79,8 @@ if TYPE_CHECKING:
 #: Sizes benchmarked by default: the paper's working resolution and VGA.
 DEFAULT_SIZES: tuple[tuple[int, int], ...] = ((256, 192), (640, 480))
 #: Scene-complexity levels of ``monoplane bench --complexity``: objects per scene, (min, max).
-COMPLEXITY_LEVELS: tuple[tuple[int, int], ...] = ((1, 2), (4, 6), (8, 12))
+#: The first is the bare room (walls, floor and ceiling: a few large planes, 3-4 in view).
+COMPLEXITY_LEVELS: tuple[tuple[int, int], ...] = ((0, 0), (1, 2), (4, 6), (8, 12))
 #: Stage kinds in pipeline order, for sorting the table.
 _STAGE_ORDER = ("cues", "ransac", "refiner")
 
