@@ -15,7 +15,9 @@ if TYPE_CHECKING:
 
 DESCRIPTION = """Run a preset on seeded synthetic frames at one or more image sizes and print one
 table: the median time of every pipeline stage and sub-step (from the reconstruction's
-timings), the traced memory of each stage, throughput, the first call of a fresh process
+timings), the median CPU time of the whole call (process time, all threads: on a busy machine
+it grows far less than the wall time), the traced memory of each stage, throughput, the first
+call of a fresh process
 (numba kernels loaded from their cache), the peak RSS of each size (each size runs in its own
 process), and every registered baseline timed on the same frames in the same process: its own
 call (without converting the cloud into the library's data structure), its whole call, and
