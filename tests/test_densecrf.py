@@ -150,29 +150,29 @@ def test_lattice_kernels_against_slow_references(dim):
                                rtol=1e-4, atol=1e-5)
 
 
-def test_slicing_at_other_points():
+def test_messages_at_other_points():
     rng = np.random.default_rng(4)
     f = rng.normal(size=(500, 3))
-    lat = PermutohedralLattice(f)
+    kernel = GaussianKernel(f, 2.0)
+    values = rng.random((500, 2)).astype(np.float32)
+    blurred = kernel.blur(values)
 
-    def slice_at(points, blurred):
-        return lk.slice_values(*lat.locate(points), blurred)
+    def message_at(points):
+        out = np.zeros((len(points), 2), np.float32)
+        kernel.add_message_at(blurred, points[:, :1], points[:, 1:], (1.0, 1.0),
+                              (0, len(points)), out)
+        return out
 
-    values = rng.random((500, 2))
-    blurred = lat.blurred(values)
-    # At the lattice's own points slicing is filtering, exactly.
-    np.testing.assert_array_equal(slice_at(f, blurred), lat.filter(values))
     # Far outside the data (outside the key range, or in cells without vertices) nothing.
     far = np.array([[100.0, 0.0, 0.0], [0.0, -1e5, 3.0]])
-    np.testing.assert_array_equal(slice_at(far, blurred), 0.0)
-    # Between the points, the normalised slice follows the exact normalised Gaussian.
+    np.testing.assert_array_equal(message_at(far), 0.0)
+    # Between the points it follows the exact symmetric-normalised Gaussian message
+    # w · D_g^-½ Σ_j k(g, f_j) D_j^-½ v_j (the lattice's overall scale cancels).
     g = rng.normal(size=(200, 3)) * 0.8
-    approx = slice_at(g, blurred) / slice_at(g, lat.blurred(np.ones((500, 1))))
-    k = np.exp(-0.5 * ((g[:, None] - f[None]) ** 2).sum(-1))
-    exact = k @ values / k.sum(axis=1, keepdims=True)
-    assert np.abs(approx - exact).mean() < 0.01
-    with pytest.raises(InvalidInput):
-        lat.locate(np.zeros((3, 2)))
+    k_gf = np.exp(-0.5 * ((g[:, None] - f[None]) ** 2).sum(-1))
+    d_f = np.exp(-0.5 * ((f[:, None] - f[None]) ** 2).sum(-1)).sum(axis=1)
+    exact = 2.0 * (k_gf / np.sqrt(d_f)[None]) @ values / np.sqrt(k_gf.sum(axis=1))[:, None]
+    assert np.abs(message_at(g) - exact).mean() < 0.03 * np.abs(exact).mean()
 
 
 def test_messages_at_own_points_are_the_message():
@@ -180,10 +180,34 @@ def test_messages_at_own_points_are_the_message():
     f = rng.normal(size=(400, 3))
     kernel = GaussianKernel(f, 2.5)
     q = rng.random((400, 3)).astype(np.float32)
-    own, at = kernel.messages(q, f)
+    blurred = kernel.blur(q)
+    own = kernel.message_from(blurred)
     np.testing.assert_array_equal(own, kernel.message(q))
     # At its own points the kernel's message to them is the same normalised response.
+    at = np.zeros((400, 3), np.float32)
+    kernel.add_message_at(blurred, f[:, :2], f[:, 2:] * 4.0, (2.0, 2.0), (0, 400), at)
     np.testing.assert_allclose(at, own, rtol=1e-5, atol=1e-6)
+
+
+def test_fused_messages_at_points_equal_slicing_there():
+    # At the lattice's own points the fused kernel finds their simplices again, so it gives
+    # the sliced, normalised message bit for bit; it adds to what is there, and does only
+    # the rows asked for.
+    rng = np.random.default_rng(6)
+    f = rng.normal(size=(300, 4))
+    kernel = GaussianKernel(f, 1.5)
+    blurred = kernel.blur(rng.random((300, 5)).astype(np.float32))
+    lat = kernel.lattice
+    both = lk.slice_values(lat._vertex_of, lat._weights, np.hstack([blurred, kernel._ones]))
+    expected = 1.5 * both[:, :-1] / np.sqrt(np.maximum(both[:, -1:], 1e-20))
+    start = rng.random((300, 5)).astype(np.float32)
+    out = start.copy()
+    kernel.add_message_at(blurred, f[:, :1], f[:, 1:] * 8.0, (4.0, 2.0), (10, 290), out)
+    np.testing.assert_array_equal(out[:10], start[:10])
+    np.testing.assert_array_equal(out[10:290], start[10:290] + expected[10:290])
+    np.testing.assert_array_equal(out[290:], start[290:])
+    with pytest.raises(InvalidInput):
+        kernel.add_message_at(blurred, f[:, :1], f[:, 1:3], (1.0, 1.0), (0, 1), out)
 
 
 def test_lattice_is_nearly_symmetric_linear_and_local():

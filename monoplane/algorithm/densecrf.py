@@ -42,6 +42,10 @@ REFERENCE_AREA = 256 * 192
 #: labels the whole image.
 _THREADED_ROWS = 64
 
+#: Band pixels per threaded piece of the messages at full resolution, below which one thread
+#: does them all.
+_THREADED_PIXELS = 4096
+
 
 @dataclass(frozen=True)
 class CrfParams:
@@ -192,21 +196,31 @@ class _Cues:
         """(features, weight) of each enabled kernel at positions (u, v) of a grid of
         ``grid_area`` cells (θ_s scales with it), with the cues of flat pixel indices
         ``pixels``: RGB / θ_a (8-bit levels), depth / largest depth / θ_d, normals / θ_n."""
+        pos, columns = self.columns(params, u, v, grid_area, pixels)
+        return [(pos if tail is None else np.hstack([pos, tail / div[0] / div[1]]), weight)
+                for tail, div, weight in columns]
+
+    def columns(self, params: CrfParams, u: np.ndarray, v: np.ndarray, grid_area: int,
+                pixels: np.ndarray
+                ) -> tuple[np.ndarray, list[tuple[np.ndarray | None, tuple[float, float], float]]]:
+        """:meth:`features` before they are put together: the (K, 2) float64 scaled
+        positions, and per enabled kernel its cue (K, c) float64 as read (None for the
+        smoothness kernel), the two numbers the cue is divided by in turn, and the weight."""
         theta_p = params.theta_position * np.sqrt(grid_area / REFERENCE_AREA)
         pos = np.stack([u, v], axis=1).astype(np.float64) / theta_p
-        specs: list[tuple[np.ndarray, float]] = []
+        columns: list[tuple[np.ndarray | None, tuple[float, float], float]] = []
         if params.w_smoothness > 0:
-            specs.append((pos, params.w_smoothness))
+            columns.append((None, (1.0, 1.0), params.w_smoothness))
         if self.rgb is not None:
-            col = self.rgb[pixels].astype(np.float64) / params.theta_color
-            specs.append((np.hstack([pos, col]), params.w_appearance))
+            columns.append((self.rgb[pixels].astype(np.float64), (params.theta_color, 1.0),
+                            params.w_appearance))
         if self.depth is not None:
-            dep = self.depth[pixels].astype(np.float64)[:, None] / self.depth_top
-            specs.append((np.hstack([pos, dep / params.theta_depth]), params.w_depth))
+            columns.append((self.depth[pixels].astype(np.float64)[:, None],
+                            (self.depth_top, params.theta_depth), params.w_depth))
         if self.normals is not None:
-            nor = self.normals[pixels].astype(np.float64) / params.theta_normal
-            specs.append((np.hstack([pos, nor]), params.w_normal))
-        return specs
+            columns.append((self.normals[pixels].astype(np.float64), (params.theta_normal, 1.0),
+                            params.w_normal))
+        return pos, columns
 
 
 def _block_mean_probabilities(labels: np.ndarray, block: np.ndarray, num_blocks: int,
@@ -247,6 +261,31 @@ def _sum_in_place(arrays: list[np.ndarray]) -> np.ndarray:
     for other in arrays[1:]:
         total += other
     return total
+
+
+def _band_messages(kernels: list[GaussianKernel], blurred: list[np.ndarray], pos: np.ndarray,
+                   columns: list[tuple[np.ndarray | None, tuple[float, float], float]]
+                   ) -> np.ndarray:
+    """(K, L) float32 pairwise messages at the band's K pixels: every kernel's lattice values
+    ``blurred`` (M, L) sliced at the pixels' own features (``pos`` and ``columns`` from
+    :meth:`_Cues.columns`), summed in kernel order as :func:`_sum_in_place` sums them.
+
+    Pieces of the band run on parallel threads, each through all kernels in order, so the
+    sums do not depend on the threads.
+    """
+    for tail, _, _ in columns:
+        if tail is not None and not np.all(np.isfinite(tail)):
+            raise InvalidInput("dense CRF cues contain NaN or inf")
+    k = pos.shape[0]
+    out = np.zeros((k, blurred[0].shape[1]), np.float32)
+    none = np.zeros((k, 0))
+
+    def piece(rows: tuple[int, int]) -> None:
+        for kern, values, (tail, div, _) in zip(kernels, blurred, columns, strict=True):
+            kern.add_message_at(values, pos, none if tail is None else tail, div, rows, out)
+
+    run_threaded([partial(piece, rows) for rows in chunks(k, _THREADED_PIXELS)])
+    return out
 
 
 @kernel
@@ -451,15 +490,16 @@ def dense_crf(
     band = np.flatnonzero(edge.ravel()[block])
     fu = (band % w + 0.5) / step - 0.5
     fv = (band // w + 0.5) / step - 0.5
-    specs = cues.features(params, fu, fv, hs * ws, band)
+    pos, columns = cues.columns(params, fu, fv, hs * ws, band)
     order = dearest_first(kernels)
-    done = run_threaded([lambda k=kernels[i], f=specs[i][0]: k.messages(q, f) for i in order])
-    by_kernel = dict(zip(order, done, strict=True))
-    coarse_pairwise = _sum_in_place([by_kernel[i][0] for i in range(len(kernels))])
+    done = dict(zip(order, run_threaded([lambda k=kernels[i]: k.blur(q) for i in order]),
+                    strict=True))
+    blurred = [done[i] for i in range(len(kernels))]
+    coarse_pairwise = _sum_in_place([k.message_from(b) for k, b in zip(kernels, blurred, strict=True)])
+    exact = _band_messages(kernels, blurred, pos, columns)
     # cv2 maps fine pixel u to coarse position (u + 0.5) / step - 0.5.
     fine = cv2.resize(coarse_pairwise.reshape(hs, ws, num_labels), (ws * step, hs * step),
                       interpolation=cv2.INTER_LINEAR).reshape(hs * step, ws * step, -1)
-    exact = _sum_in_place([by_kernel[i][1] for i in range(len(kernels))])
     # The unary takes three values per label map (own label, other label, uniform): the
     # final argmax reads them instead of an (H W, L) unary array.
     values = unary_from_labels(np.array([1, 0]), num_labels, params.confidence, uniform_label=0)
