@@ -337,6 +337,24 @@ def test_working_resolution_cap():
         params(max_pixels=-1)
 
 
+def test_band_margin_limits_exact_messages_to_close_calls():
+    rgb, depth, normals, gt, _ = room_cues(96, 128)
+    rng = np.random.default_rng(3)
+    noisy = np.where(rng.random(gt.shape) < 0.2, rng.integers(0, 6, gt.shape), gt)
+    whole = dense_crf(noisy, 6, params(max_pixels=3100), rgb, depth, normals)
+    # A margin wider than any gap between two labels' energies sends the whole band.
+    wide = dense_crf(noisy, 6, params(max_pixels=3100, band_margin=1e30), rgb, depth, normals)
+    np.testing.assert_array_equal(wide, whole)
+    # Without any exact message (a margin no gap is below) edges follow the 2 x 2 blocks;
+    # a margin of 2 nats gives the whole band's labels back but for a handful of pixels.
+    none = dense_crf(noisy, 6, params(max_pixels=3100, band_margin=1e-30), rgb, depth, normals)
+    two = dense_crf(noisy, 6, params(max_pixels=3100, band_margin=2.0), rgb, depth, normals)
+    assert (none != whole).sum() > 5 * max((two != whole).sum(), 1)
+    assert (two == gt).mean() >= (whole == gt).mean() - 0.001
+    with pytest.raises(InvalidInput, match="band_margin"):
+        params(band_margin=0.0)
+
+
 @pytest.mark.parametrize("max_pixels", [0, 3100])
 def test_a_grid_built_beforehand_gives_the_same_labels(max_pixels):
     # The label-independent part (block grid, cues, lattices) may be built before the labels

@@ -32,7 +32,7 @@ from monoplane.algorithm.mean_field import (  # noqa: F401
     unary_from_labels,
 )
 from monoplane.errors import InvalidInput
-from monoplane.jit import chunks, kernel, run_threaded
+from monoplane.jit import chunks, inline, kernel, run_threaded
 
 #: Image area (256 x 192) at which the paper's pixel-valued parameters (θ_s = 10 px, minimum
 #: region 300 px) are stated; other resolutions scale them.
@@ -82,6 +82,10 @@ class CrfParams:
     runs on a grid coarsened by an integer factor (see :func:`dense_crf`), since building the
     lattices costs time linear in the pixel count while the kernels (θ_s scales with the image)
     are many pixels wide anyway.
+
+    ``band_margin`` (not in the paper; inf = off), with the coarse grid: of the band of
+    pixels next to a coarse label change, only those whose upsampled messages leave the two
+    best labels less than this many nats apart get exact messages (see :func:`dense_crf`).
     """
 
     theta_position: float
@@ -96,6 +100,7 @@ class CrfParams:
     iterations: int
     uniform_nonplanar: bool
     max_pixels: int
+    band_margin: float
 
     def __post_init__(self) -> None:
         for name in ("theta_position", "theta_color", "theta_depth", "theta_normal"):
@@ -108,6 +113,9 @@ class CrfParams:
             raise InvalidInput(f"iterations must be >= 0, got {self.iterations}")
         if self.max_pixels < 0:
             raise InvalidInput(f"max_pixels must be >= 0 (0: no cap), got {self.max_pixels}")
+        if not self.band_margin > 0:
+            raise InvalidInput(f"band_margin must be positive (inf: whole band), got "
+                               f"{self.band_margin}")
 
 
 def crf_features(
@@ -288,6 +296,42 @@ def _band_messages(kernels: list[GaussianKernel], blurred: list[np.ndarray], pos
     return out
 
 
+@inline
+def _unary(label: int, observed: int, u_own: np.float32, u_other: np.float32,
+           u_uniform: np.float32, uniform_nonplanar: bool) -> np.float32:
+    """The unary of ``label`` at a pixel observed with label ``observed`` (see
+    :func:`_final_labels`)."""
+    if uniform_nonplanar and observed == 0:
+        return u_uniform
+    return u_own if label == observed else u_other
+
+
+@kernel
+def _close_calls(fine: np.ndarray, labels: np.ndarray, band: np.ndarray, u_own: np.float32,
+                 u_other: np.float32, u_uniform: np.float32, uniform_nonplanar: bool,
+                 margin: float) -> np.ndarray:
+    """(K,) bool: at which ``band`` pixels the upsampled messages leave the two best labels
+    less than ``margin`` nats apart (arguments as for :func:`_final_labels`)."""
+    w = labels.shape[1]
+    num = fine.shape[2]
+    out = np.zeros(band.shape[0], dtype=np.bool_)
+    for k in range(band.shape[0]):
+        y, x = band[k] // w, band[k] % w
+        lab = labels[y, x]
+        best = -np.inf
+        second = -np.inf
+        for label in range(num):
+            u = _unary(label, lab, u_own, u_other, u_uniform, uniform_nonplanar)
+            e = np.float32(fine[y, x, label] - u)
+            if e > best:
+                second = best
+                best = e
+            elif e > second:
+                second = e
+        out[k] = best - second < margin
+    return out
+
+
 @kernel
 def _final_labels(fine: np.ndarray, labels: np.ndarray, band: np.ndarray, exact: np.ndarray,
                   u_own: np.float32, u_other: np.float32, u_uniform: np.float32,
@@ -313,12 +357,7 @@ def _final_labels(fine: np.ndarray, labels: np.ndarray, band: np.ndarray, exact:
             best = -np.inf
             arg = 0
             for label in range(num):
-                if uniform_nonplanar and lab == 0:
-                    u = u_uniform
-                elif label == lab:
-                    u = u_own
-                else:
-                    u = u_other
+                u = _unary(label, lab, u_own, u_other, u_uniform, uniform_nonplanar)
                 m = exact[k, label] if exact_here else fine[y, x, label]
                 e = np.float32(m - u)
                 if e > best:
@@ -458,7 +497,10 @@ def dense_crf(
     resolution with coarse messages. Away from label changes of the coarse result those
     messages are bilinearly upsampled; in the band of blocks next to a label change each pixel
     gets them from the coarse lattices sliced at its own features
-    (:meth:`GaussianKernel.messages`), so boundaries follow full-resolution edges.
+    (:meth:`GaussianKernel.add_message_at`), so boundaries follow full-resolution edges. With
+    a finite ``params.band_margin`` a band pixel gets them only when the upsampled messages
+    leave its two best labels closer than that margin: elsewhere its own features would have
+    to move the messages by more than the margin to change its label.
     """
     lab = np.asarray(labels)
     if lab.ndim != 2:
@@ -488,24 +530,29 @@ def dense_crf(
     coarse = q.argmax(axis=1).reshape(hs, ws)
     edge = _not_constant_3x3(coarse)
     band = np.flatnonzero(edge.ravel()[block])
-    fu = (band % w + 0.5) / step - 0.5
-    fv = (band // w + 0.5) / step - 0.5
-    pos, columns = cues.columns(params, fu, fv, hs * ws, band)
     order = dearest_first(kernels)
     done = dict(zip(order, run_threaded([lambda k=kernels[i]: k.blur(q) for i in order]),
                     strict=True))
     blurred = [done[i] for i in range(len(kernels))]
-    coarse_pairwise = _sum_in_place([k.message_from(b) for k, b in zip(kernels, blurred, strict=True)])
-    exact = _band_messages(kernels, blurred, pos, columns)
+    coarse_pairwise = _sum_in_place([k.message_from(b)
+                                     for k, b in zip(kernels, blurred, strict=True)])
     # cv2 maps fine pixel u to coarse position (u + 0.5) / step - 0.5.
     fine = cv2.resize(coarse_pairwise.reshape(hs, ws, num_labels), (ws * step, hs * step),
                       interpolation=cv2.INTER_LINEAR).reshape(hs * step, ws * step, -1)
     # The unary takes three values per label map (own label, other label, uniform): the
     # final argmax reads them instead of an (H W, L) unary array.
     values = unary_from_labels(np.array([1, 0]), num_labels, params.confidence, uniform_label=0)
-    out = np.empty((h, w), dtype=np.int32)
+    unary = (values[0, 1], values[0, 0], values[1, 0], bool(params.uniform_nonplanar))
     lab64 = lab.astype(np.int64)
-    run_threaded([partial(_final_labels, fine, lab64, band, exact, values[0, 1], values[0, 0],
-                          values[1, 0], bool(params.uniform_nonplanar), a, b, out)
+    if np.isfinite(params.band_margin):
+        # Where the upsampled messages already decide the label by a wide margin, the
+        # pixel's own features would not overturn it: exact messages only where it is close.
+        band = band[_close_calls(fine, lab64, band, *unary, float(params.band_margin))]
+    fu = (band % w + 0.5) / step - 0.5
+    fv = (band // w + 0.5) / step - 0.5
+    pos, columns = cues.columns(params, fu, fv, hs * ws, band)
+    exact = _band_messages(kernels, blurred, pos, columns)
+    out = np.empty((h, w), dtype=np.int32)
+    run_threaded([partial(_final_labels, fine, lab64, band, exact, *unary, a, b, out)
                   for a, b in chunks(h, _THREADED_ROWS)])
     return out
