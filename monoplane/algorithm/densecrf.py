@@ -271,6 +271,15 @@ def _sum_in_place(arrays: list[np.ndarray]) -> np.ndarray:
     return total
 
 
+def _blurred(kernels: list[GaussianKernel], q: np.ndarray) -> list[np.ndarray]:
+    """Each kernel's :meth:`~GaussianKernel.blur` of the (N, L) marginals ``q``, in kernel
+    order, computed on parallel threads dearest first."""
+    order = dearest_first(kernels)
+    done = dict(zip(order, run_threaded([lambda k=kernels[i]: k.blur(q) for i in order]),
+                    strict=True))
+    return [done[i] for i in range(len(kernels))]
+
+
 def _band_messages(kernels: list[GaussianKernel], blurred: list[np.ndarray], pos: np.ndarray,
                    columns: list[tuple[np.ndarray | None, tuple[float, float], float]]
                    ) -> np.ndarray:
@@ -530,10 +539,7 @@ def dense_crf(
     coarse = q.argmax(axis=1).reshape(hs, ws)
     edge = _not_constant_3x3(coarse)
     band = np.flatnonzero(edge.ravel()[block])
-    order = dearest_first(kernels)
-    done = dict(zip(order, run_threaded([lambda k=kernels[i]: k.blur(q) for i in order]),
-                    strict=True))
-    blurred = [done[i] for i in range(len(kernels))]
+    blurred = _blurred(kernels, q)
     coarse_pairwise = _sum_in_place([k.message_from(b)
                                      for k, b in zip(kernels, blurred, strict=True)])
     # cv2 maps fine pixel u to coarse position (u + 0.5) / step - 0.5.
