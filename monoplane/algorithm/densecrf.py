@@ -246,14 +246,31 @@ def _block_mean_probabilities(labels: np.ndarray, block: np.ndarray, num_blocks:
     row = np.exp(-unary_from_labels(np.array([1, 0]), num_labels, params.confidence,
                                     uniform_label=0))
     p_own, p_other, p_uniform = float(row[0, 1]), float(row[0, 0]), float(row[1, 0])
-    uniform = labels == 0 if params.uniform_nonplanar else np.zeros(labels.shape, bool)
-    size = np.bincount(block, minlength=num_blocks).astype(np.float64)
-    n_uniform = np.bincount(block[uniform], minlength=num_blocks).astype(np.float64)
-    own = np.bincount(block[~uniform] * num_labels + labels[~uniform],
-                      minlength=num_blocks * num_labels).reshape(num_blocks, num_labels)
+    counts, own = _block_counts(np.ascontiguousarray(labels, dtype=np.int64), block,
+                                num_blocks, num_labels, bool(params.uniform_nonplanar))
+    size = counts[:, 0].astype(np.float64)
+    n_uniform = counts[:, 1].astype(np.float64)
     total = own * p_own + ((size - n_uniform)[:, None] - own) * p_other \
         + (n_uniform * p_uniform)[:, None]
     return total / size[:, None]
+
+
+@kernel
+def _block_counts(labels: np.ndarray, block: np.ndarray, num_blocks: int, num_labels: int,
+                  uniform_nonplanar: bool) -> tuple[np.ndarray, np.ndarray]:
+    """One pass over the (N,) int64 ``labels`` and their (N,) int64 ``block``: (B, 2) int64
+    pixels and uniform pixels (label 0 when ``uniform_nonplanar``) of each block, and (B, L)
+    int64 pixels of each block observed with each label, uniform ones left out."""
+    counts = np.zeros((num_blocks, 2), dtype=np.int64)
+    own = np.zeros((num_blocks, num_labels), dtype=np.int64)
+    for i in range(labels.shape[0]):
+        b = block[i]
+        counts[b, 0] += 1
+        if uniform_nonplanar and labels[i] == 0:
+            counts[b, 1] += 1
+        else:
+            own[b, labels[i]] += 1
+    return counts, own
 
 
 def _sum_in_place(arrays: list[np.ndarray]) -> np.ndarray:
