@@ -121,7 +121,7 @@ class DenseCrfRefiner(Refiner):
             "above this many pixels mean field runs on a coarser block grid, edges are decided "
             "at full resolution (0: never)")
         band_margin: float = param(
-            float("inf"),
+            2.0,
             "with the coarse grid, exact full-resolution messages only at band pixels whose "
             "upsampled messages leave the two best labels within this many nats (inf: all)")
         min_area: int = param(
