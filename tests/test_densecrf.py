@@ -460,27 +460,38 @@ def test_block_means_from_counts_equal_the_per_pixel_sums(uniform, num_labels, s
 
 
 @pytest.mark.parametrize("uniform", [True, False])
-def test_final_labels_kernel_equals_the_numpy_argmax(uniform):
-    from monoplane.algorithm.densecrf import _final_labels
+def test_final_labels_kernels_equal_the_numpy_argmax(uniform):
+    from monoplane.algorithm.densecrf import _exact_labels, _upsampled_labels
 
     rng = np.random.default_rng(11)
     h, w, num = 23, 31, 6
     lab = rng.integers(0, num, size=(h, w))
     fine = rng.normal(size=(h + 2, w + 3, num)).astype(np.float32)  # resize may overhang
+    fine[0, 0, 1:3] = fine[0, 0].max() + 1.0  # a tie: the first maximum wins, margin 0
     band = np.sort(rng.choice(h * w, 200, replace=False))
+    band[0] = 0
     exact = rng.normal(size=(200, num)).astype(np.float32)
     unary = unary_from_labels(lab, num, 0.55, uniform_label=0 if uniform else None)
-    energy = fine[:h, :w].reshape(-1, num) - unary
-    energy[band] = exact - unary[band]
+    upsampled = fine[:h, :w].reshape(-1, num) - unary
+    top2 = np.sort(upsampled[band], axis=1)[:, -2:]
     values = unary_from_labels(np.array([1, 0]), num, 0.55, uniform_label=0)
-    expected = energy.argmax(axis=1).reshape(h, w)
-    # Whole, and in row pieces (threads) that each find their part of the band.
-    for bounds in ([0, h], [0, 1, 9, 10, h]):
-        got = np.full((h, w), -1, dtype=np.int32)
-        for y0, y1 in zip(bounds[:-1], bounds[1:]):
-            _final_labels(fine, lab.astype(np.int64), band, exact, values[0, 1], values[0, 0],
-                          values[1, 0], uniform, y0, y1, got)
-        np.testing.assert_array_equal(got, expected)
+    args = (values[0, 1], values[0, 0], values[1, 0], uniform)
+    for margin in (0.5, np.inf):
+        expected_close = top2[:, 1] - top2[:, 0] < margin
+        energy = upsampled.copy()
+        energy[band[expected_close]] = exact[expected_close] - unary[band[expected_close]]
+        expected = energy.argmax(axis=1).reshape(h, w)
+        # Whole, and in row pieces (threads) that each find their part of the band.
+        for bounds in ([0, h], [0, 1, 9, 10, h]):
+            got = np.full((h, w), -1, dtype=np.int32)
+            close = np.zeros(200, bool)
+            for y0, y1 in zip(bounds[:-1], bounds[1:], strict=True):
+                _upsampled_labels(fine, lab.astype(np.int64), band, *args, margin, y0, y1, got,
+                                  close)
+            np.testing.assert_array_equal(close, expected_close)
+            assert close[0]
+            _exact_labels(exact[close], lab.astype(np.int64), band[close], *args, got)
+            np.testing.assert_array_equal(got, expected)
 
 
 def test_label_change_band_matches_max_and_min_filters():

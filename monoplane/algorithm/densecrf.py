@@ -326,51 +326,27 @@ def _band_messages(kernels: list[GaussianKernel], blurred: list[np.ndarray], pos
 def _unary(label: int, observed: int, u_own: np.float32, u_other: np.float32,
            u_uniform: np.float32, uniform_nonplanar: bool) -> np.float32:
     """The unary of ``label`` at a pixel observed with label ``observed`` (see
-    :func:`_final_labels`)."""
+    :func:`_upsampled_labels`)."""
     if uniform_nonplanar and observed == 0:
         return u_uniform
     return u_own if label == observed else u_other
 
 
 @kernel
-def _close_calls(fine: np.ndarray, labels: np.ndarray, band: np.ndarray, u_own: np.float32,
-                 u_other: np.float32, u_uniform: np.float32, uniform_nonplanar: bool,
-                 margin: float) -> np.ndarray:
-    """(K,) bool: at which ``band`` pixels the upsampled messages leave the two best labels
-    less than ``margin`` nats apart (arguments as for :func:`_final_labels`)."""
-    w = labels.shape[1]
-    num = fine.shape[2]
-    out = np.zeros(band.shape[0], dtype=np.bool_)
-    for k in range(band.shape[0]):
-        y, x = band[k] // w, band[k] % w
-        lab = labels[y, x]
-        best = -np.inf
-        second = -np.inf
-        for label in range(num):
-            u = _unary(label, lab, u_own, u_other, u_uniform, uniform_nonplanar)
-            e = np.float32(fine[y, x, label] - u)
-            if e > best:
-                second = best
-                best = e
-            elif e > second:
-                second = e
-        out[k] = best - second < margin
-    return out
-
-
-@kernel
-def _final_labels(fine: np.ndarray, labels: np.ndarray, band: np.ndarray, exact: np.ndarray,
-                  u_own: np.float32, u_other: np.float32, u_uniform: np.float32,
-                  uniform_nonplanar: bool, y0: int, y1: int, out: np.ndarray) -> None:
+def _upsampled_labels(fine: np.ndarray, labels: np.ndarray, band: np.ndarray,
+                      u_own: np.float32, u_other: np.float32, u_uniform: np.float32,
+                      uniform_nonplanar: bool, margin: float, y0: int, y1: int,
+                      out: np.ndarray, close: np.ndarray) -> None:
     """Rows ``y0:y1`` of the (H, W) int32 ``out``: argmax over labels of ``message - unary``
-    at full resolution.
+    at full resolution with the upsampled messages, and at the ``band`` pixels in these rows
+    whether the two best labels lie less than ``margin`` nats apart (``close``).
 
     ``fine`` (≥H, ≥W, L) float32 upsampled coarse messages, ``labels`` (H, W) int64 observed
-    labels, ``band`` (K,) int64 ascending flat pixels whose messages are ``exact`` (K, L)
-    float32 instead; the unary of a pixel is ``u_own`` at its label and ``u_other`` elsewhere,
-    or ``u_uniform`` everywhere for label 0 when ``uniform_nonplanar``. float32 arithmetic and
-    the first maximum, as ``(fine - unary).argmax(axis=1)`` gives. Pixels are independent, so
-    row blocks run on parallel threads.
+    labels, ``band`` (K,) int64 ascending flat pixels, ``close`` (K,) bool; the unary of a
+    pixel is ``u_own`` at its label and ``u_other`` elsewhere, or ``u_uniform`` everywhere for
+    label 0 when ``uniform_nonplanar``. float32 arithmetic and the first maximum, as
+    ``(fine - unary).argmax(axis=1)`` gives. Pixels are independent, so row blocks run on
+    parallel threads.
     """
     w = labels.shape[1]
     num = fine.shape[2]
@@ -379,19 +355,43 @@ def _final_labels(fine: np.ndarray, labels: np.ndarray, band: np.ndarray, exact:
     for y in range(y0, y1):
         for x in range(w):
             lab = labels[y, x]
-            exact_here = k < band.shape[0] and band[k] == y * w + x
             best = -np.inf
+            second = -np.inf
             arg = 0
             for label in range(num):
                 u = _unary(label, lab, u_own, u_other, u_uniform, uniform_nonplanar)
-                m = exact[k, label] if exact_here else fine[y, x, label]
-                e = np.float32(m - u)
+                e = np.float32(fine[y, x, label] - u)
                 if e > best:
+                    second = best
                     best = e
                     arg = label
+                elif e > second:
+                    second = e
             out[y, x] = arg
-            if exact_here:
+            if k < band.shape[0] and band[k] == y * w + x:
+                close[k] = best - second < margin
                 k += 1
+
+
+@kernel
+def _exact_labels(exact: np.ndarray, labels: np.ndarray, pixels: np.ndarray,
+                  u_own: np.float32, u_other: np.float32, u_uniform: np.float32,
+                  uniform_nonplanar: bool, out: np.ndarray) -> None:
+    """:func:`_upsampled_labels`' argmax at the (K,) int64 flat ``pixels`` of ``out``, from
+    their (K, L) float32 ``exact`` messages instead."""
+    w = labels.shape[1]
+    for k in range(pixels.shape[0]):
+        y, x = pixels[k] // w, pixels[k] % w
+        lab = labels[y, x]
+        best = -np.inf
+        arg = 0
+        for label in range(exact.shape[1]):
+            u = _unary(label, lab, u_own, u_other, u_uniform, uniform_nonplanar)
+            e = np.float32(exact[k, label] - u)
+            if e > best:
+                best = e
+                arg = label
+        out[y, x] = arg
 
 
 def _not_constant_3x3(image: np.ndarray) -> np.ndarray:
@@ -541,7 +541,7 @@ def dense_crf(
         raise InvalidInput(f"the CRF grid is for {grid.shape} images, the labels are "
                            f"{lab.shape}")
     h, w = lab.shape
-    step, cues, kernels, block = grid.step, grid.cues, grid.kernels, grid.block
+    step, kernels, block = grid.step, grid.kernels, grid.block
     if step == 1:
         unary = unary_from_labels(lab, num_labels, params.confidence,
                                   uniform_label=0 if params.uniform_nonplanar else None)
@@ -562,20 +562,33 @@ def dense_crf(
     # cv2 maps fine pixel u to coarse position (u + 0.5) / step - 0.5.
     fine = cv2.resize(coarse_pairwise.reshape(hs, ws, num_labels), (ws * step, hs * step),
                       interpolation=cv2.INTER_LINEAR).reshape(hs * step, ws * step, -1)
+    return _full_resolution_labels(grid, params, lab, band, fine, blurred)
+
+
+def _full_resolution_labels(grid: CrfGrid, params: CrfParams, lab: np.ndarray, band: np.ndarray,
+                            fine: np.ndarray, blurred: list[np.ndarray]) -> np.ndarray:
+    """(H, W) int32 final labels of :func:`dense_crf` on a coarse grid: observed labels
+    ``lab`` (H, W), ascending flat pixels of the ``band``, upsampled messages ``fine``
+    (≥H, ≥W, L) float32 and each kernel's lattice values ``blurred``."""
+    (h, w), step = grid.shape, grid.step
+    hs, ws = -(-h // step), -(-w // step)
     # The unary takes three values per label map (own label, other label, uniform): the
     # final argmax reads them instead of an (H W, L) unary array.
-    values = unary_from_labels(np.array([1, 0]), num_labels, params.confidence, uniform_label=0)
+    values = unary_from_labels(np.array([1, 0]), fine.shape[2], params.confidence,
+                               uniform_label=0)
     unary = (values[0, 1], values[0, 0], values[1, 0], bool(params.uniform_nonplanar))
     lab64 = lab.astype(np.int64)
-    if np.isfinite(params.band_margin):
-        # Where the upsampled messages already decide the label by a wide margin, the
-        # pixel's own features would not overturn it: exact messages only where it is close.
-        band = band[_close_calls(fine, lab64, band, *unary, float(params.band_margin))]
+    out = np.empty((h, w), dtype=np.int32)
+    close = np.empty(band.shape[0], dtype=np.bool_)
+    # Every pixel is labelled from the upsampled messages first; where they leave the two
+    # best labels of a band pixel within the margin (any band pixel when it is inf), its own
+    # features might overturn them: those pixels are labelled again from exact messages.
+    run_threaded([partial(_upsampled_labels, fine, lab64, band, *unary,
+                          float(params.band_margin), a, b, out, close)
+                  for a, b in chunks(h, _THREADED_ROWS)])
+    band = band[close]
     fu = (band % w + 0.5) / step - 0.5
     fv = (band // w + 0.5) / step - 0.5
-    pos, columns = cues.columns(params, fu, fv, hs * ws, band)
-    exact = _band_messages(kernels, blurred, pos, columns)
-    out = np.empty((h, w), dtype=np.int32)
-    run_threaded([partial(_final_labels, fine, lab64, band, exact, *unary, a, b, out)
-                  for a, b in chunks(h, _THREADED_ROWS)])
+    pos, columns = grid.cues.columns(params, fu, fv, hs * ws, band)
+    _exact_labels(_band_messages(grid.kernels, blurred, pos, columns), lab64, band, *unary, out)
     return out
