@@ -68,7 +68,7 @@ def _elevation_scale(d: int) -> np.ndarray:
     return scale
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, inline="always")
 def _enclose(f: np.ndarray, scale: np.ndarray, elevated: np.ndarray, rem0: np.ndarray,
              diff: np.ndarray, rank: np.ndarray, bary: np.ndarray) -> None:
     """The enclosing simplex of one (d,) float64 feature vector ``f``: fills ``rem0`` (d+1,)
