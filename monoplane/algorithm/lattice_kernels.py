@@ -336,6 +336,10 @@ def add_messages_at(head: np.ndarray, tail: np.ndarray, div: float, div2: float,
     rank = np.empty(d1, np.int64)
     bary = np.empty(d1 + 1)
     acc = np.empty(num + 1, np.float32)
+    of_rank = np.empty(d1, np.int64)
+    place_sum = 0
+    for k in range(d):
+        place_sum += place[k]
     floor = np.float32(1e-20)
     for i in range(start, stop):
         for k in range(a):
@@ -344,18 +348,36 @@ def add_messages_at(head: np.ndarray, tail: np.ndarray, div: float, div2: float,
             f[a + k] = tail[i, k] / div / div2
         _enclose(f, scale, elevated, rem0, diff, rank, bary)
         acc[:] = 0.0
+        # Vertex r's key is key0 + r, less d+1 where rank > d - r: every key of the simplex
+        # lies in key0 - d .. key0 + d. When they all lie inside the key range, each code
+        # follows from the previous one (the coordinate of rank d - r + 1 drops by d+1).
+        code = 0
+        whole = True
+        for k in range(d):
+            key = np.int64(rem0[k]) - lo[k]
+            whole = whole and key - d >= 0 and key + d < span[k]
+            code += key * place[k]
+            of_rank[rank[k]] = k
+        of_rank[rank[d]] = d
         for r in range(d1):
-            code = 0
-            inside = True
-            for k in range(d):
-                key = np.int64(rem0[k]) - lo[k] + r
-                if rank[k] > d - r:
-                    key -= d1
-                if key < 0 or key >= span[k]:
-                    inside = False
-                code += key * place[k]
-            if not inside:
-                continue
+            if whole:
+                if r > 0:
+                    code += place_sum
+                    k = of_rank[d - r + 1]
+                    if k < d:
+                        code -= d1 * place[k]
+            else:
+                code = 0
+                inside = True
+                for k in range(d):
+                    key = np.int64(rem0[k]) - lo[k] + r
+                    if rank[k] > d - r:
+                        key -= d1
+                    if key < 0 or key >= span[k]:
+                        inside = False
+                    code += key * place[k]
+                if not inside:
+                    continue
             h = _slot(table, code, shift)
             if table[h] != code:
                 continue  # a vertex outside the lattice holds nothing
