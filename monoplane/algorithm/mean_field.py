@@ -95,7 +95,7 @@ class PermutohedralLattice:
 
     def blurred(self, values: np.ndarray) -> np.ndarray:
         """(M, C) float32 lattice values: (N, C) ``values`` splatted and blurred, to be sliced
-        at these points (:meth:`filter`) or at others (:meth:`slice_at`)."""
+        at these points (:meth:`filter`) or at others (:meth:`GaussianKernel.add_message_at`)."""
         v = np.ascontiguousarray(values, dtype=np.float32)
         if v.ndim != 2 or v.shape[0] != self.num_points:
             raise InvalidInput(f"values must be ({self.num_points}, C), got {v.shape}")
