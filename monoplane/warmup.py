@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from monoplane import jit
+from monoplane.algorithm.mincut import min_cut
 from monoplane.export.saving import save as save_outputs
 from monoplane.geometry.planes import planes_from_triplets
 from monoplane.host import config
@@ -154,6 +155,10 @@ def _workloads(report: bool = True) -> Iterator[tuple[str, Callable[[], Any]]]:
     # planes_from_triplets takes; and the presets' samplers let it search in one compiled
     # call, so a sampler that does not (napsac) makes it call the scorer batch by batch.
     yield "triplet planes", lambda: planes_from_triplets(np.eye(3)[None])
+    # The labelers hand the max-flow a network in its own arc layout; the general binary
+    # energies (and plugins) give it edge lists.
+    yield "max-flow of an edge list", lambda: min_cut(
+        2, np.array([0]), np.array([1]), np.ones(1), np.zeros(1), np.array([1.0, -1.0]))
     yield "scorer batch by batch", lambda: Pipeline.from_preset(
         "monoplane", overrides=["sampler.plugin=napsac", "refiner.plugin=none"]).run(frame)
     depth, normals, rgb, K = frame.depth, frame.normals, frame.rgb, frame.K

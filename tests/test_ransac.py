@@ -134,6 +134,17 @@ def test_labeler_pool_preparation_runs_for_every_later_pool(monkeypatch):
                                   make("monoplane-nocrf", max_points=3000).run(frame).labels)
 
 
+def test_pool_subgraphs_taken_from_the_last_pool_change_no_label(monkeypatch):
+    import monoplane.stages.labelers as labelers
+
+    frame, _, _ = room()
+    shrunk = make("monoplane-nocrf", max_points=3000).run(frame)
+    monkeypatch.setattr(labelers, "shrink_subgraph", lambda *args: None)  # the whole graph
+    whole = make("monoplane-nocrf", max_points=3000).run(frame)
+    np.testing.assert_array_equal(shrunk.labels, whole.labels)
+    np.testing.assert_array_equal(shrunk.planes, whole.planes)
+
+
 def test_depth_only_input_without_colour():
     frame, labels, planes = room(rgb=False)
     rec = make("monoplane-nocrf").run(frame)
