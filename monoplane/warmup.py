@@ -137,6 +137,9 @@ def _workloads(report: bool = True) -> Iterator[tuple[str, Callable[[], Any]]]:
     yield "depth only", lambda: Pipeline.from_preset("monoplane").run(frame.with_(normals=None))
     yield "range image", lambda: Pipeline.from_preset("range").run(
         frame.with_(rgb=None, normals=None))
+    # The box method of normals from depth is an option no preset sets.
+    yield "depth only, box normals", lambda: Pipeline.from_preset(
+        "monoplane", ["cues.normals_method=box"]).run(frame.with_(normals=None))
 
     def save() -> None:
         rec = Pipeline.from_preset("monoplane").run(frame)
