@@ -137,6 +137,9 @@ class RansacConfig:
     noise_factor: float = param(
         0.0, "if > 0, a frame whose planes show depth noise σ well below ε is searched again "
         "with ε = noise_factor × σ (a depth sensor; monoplane.geometry.sensor_noise)")
+    noise_planes: int = param(
+        0, "with noise_factor > 0, the first search, which only measures the noise, stops "
+        "after this many planes (0: max_planes); the largest planes show it already")
 
     def __post_init__(self) -> None:
         # No table name: the config loader says which table (and a direct caller knows which
@@ -158,6 +161,7 @@ class RansacConfig:
             (0 < self.lattice_max_turn_deg <= 180, "lattice_max_turn_deg must lie in (0, 180]"),
             (self.lo_iterations >= 0, "lo_iterations must be non-negative"),
             (self.noise_factor >= 0, "noise_factor must be non-negative"),
+            (self.noise_planes >= 0, "noise_planes must be non-negative"),
             (self.max_rejections >= 0, "max_rejections must be non-negative"),
             (self.score_points == 0 or self.score_points >= 3,
              "score_points must be 0 (all) or at least 3"),
@@ -255,7 +259,8 @@ class SequentialRansac:
             in_background(lambda: cloud.image_nearest_sample)
         if meanwhile is not None:
             meanwhile()
-        result = self._run(cloud, graph, rng)
+        first = cfg.noise_planes if cfg.noise_factor > 0 and cfg.noise_planes else None
+        result = self._run(cloud, graph, rng, max_planes=first)
         params = cfg.params
         if cfg.noise_factor > 0:
             result, params = self._noise_limited(cloud, graph, rng, result)
@@ -331,12 +336,14 @@ class SequentialRansac:
         return again._replace(timings=timings), params
 
     def _run(self, cloud: PlaneCloud, get_graph: Callable[[], NeighbourGraph],
-             rng: np.random.Generator, params: RansacParams | None = None) -> CloudPlanes:
+             rng: np.random.Generator, params: RansacParams | None = None,
+             max_planes: int | None = None) -> CloudPlanes:
         """:meth:`run_cloud` with the graph asked for only when the first plane is labelled
         (``get_graph`` may wait for it to be built); ``params`` replace the configured
-        thresholds."""
+        thresholds, ``max_planes`` the configured cap on the planes."""
         cfg = self.config
         params = cfg.params if params is None else params
+        max_planes = cfg.max_planes if max_planes is None else max_planes
         timings = {"ransac.search": 0.0, "ransac.label": 0.0}
         min_support = max(cfg.min_support_points, math.ceil(cfg.min_support * cloud.size))
         point_labels = np.zeros(cloud.size, dtype=np.int32)
@@ -345,7 +352,7 @@ class SequentialRansac:
         context = self.labeler.new_context()  # the labeler's memory of this frame
         prepared: Callable[[], None] | None = None
         rejections = 0
-        while len(found) < cfg.max_planes and pool.size >= min_support:
+        while len(found) < max_planes and pool.size >= min_support:
             t = time.perf_counter()
             best = self._search(cloud, pool, rng, params)
             timings["ransac.search"] += time.perf_counter() - t
