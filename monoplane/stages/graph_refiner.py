@@ -404,12 +404,15 @@ class GraphCrfRefiner(Refiner):
         # lattice nodes' labels (non-planar when the nearest node is): creases stay where the
         # planes meet, not on the lattice's steps.
         image = cloud.propagate(labels, planes, graph=graph).ravel()
-        params, rmse, support = fit_planes_per_label(frame.points().reshape(-1, 3), image,
+        # The fit runs on the normalised points of every valid pixel, which the cloud holds
+        # already: a least-squares plane commutes with the similarity back to the camera.
+        params, rmse, support = fit_planes_per_label(cloud.all_points, image[cloud.all_pixels],
                                                      int(labels.max(initial=0)))
         return Reconstruction(frame=frame, labels=image.reshape(frame.shape),
-                              planes=orient_towards_camera(params) if len(params)
-                              else np.zeros((0, 4)),
-                              rmse=rmse, support=support, timings=dict(rec.timings))
+                              planes=orient_towards_camera(cloud.plane_to_camera(params))
+                              if len(params) else np.zeros((0, 4)),
+                              rmse=rmse * cloud.scale, support=support,
+                              timings=dict(rec.timings))
 
 
 @hookimpl
