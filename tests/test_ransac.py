@@ -428,12 +428,14 @@ def test_noise_factor_lowers_epsilon_to_the_depth_noise():
     np.testing.assert_allclose(rec.planes[box[0, 0] - 1, 3], 1.95, atol=2e-3)
 
 
-def test_noise_planes_caps_only_the_search_that_measures_the_noise(monkeypatch):
-    # Eight fronto-parallel steps, 1 mm noise: the first search measures the noise on one
-    # plane only, the second still finds every step.
+@pytest.mark.parametrize("noise", [0.001, 0.008])
+def test_noise_planes_caps_only_the_search_that_measures_the_noise(monkeypatch, noise):
+    # Eight fronto-parallel steps 10 cm apart: the first search measures the noise on one
+    # plane only, the second still finds every step, with ε lowered to 1 mm noise, or with
+    # the configured ε when 8 mm of noise is too close to it to search again for.
     h, w = 64, 80
     rng = np.random.default_rng(1)
-    depth = 2.0 + 0.1 * (np.arange(w) // 10)[None, :] + rng.normal(0, 0.001, (h, w))
+    depth = 2.0 + 0.1 * (np.arange(w) // 10)[None, :] + rng.normal(0, noise, (h, w))
     normals = np.tile(np.array([0, 0, -1], dtype=np.float32), (h, w, 1))
     frame = Frame(rgb=None, K=default_intrinsics(w, h, 60.0), depth=depth.astype(np.float32),
                   normals=normals)
@@ -448,5 +450,5 @@ def test_noise_planes_caps_only_the_search_that_measures_the_noise(monkeypatch):
     monkeypatch.setattr(SequentialRansac, "_run", counted)
     driver = make("monoplane-nocrf", split_components=True, noise_factor=3.0, noise_planes=1)
     rec = driver.run(frame)
-    assert driver.params_used.epsilon < driver.config.epsilon
+    assert (driver.params_used.epsilon < driver.config.epsilon) == (noise < 0.005)
     assert found == [1, 8] and rec.num_planes == 8

@@ -259,15 +259,14 @@ class SequentialRansac:
             in_background(lambda: cloud.image_nearest_sample)
         if meanwhile is not None:
             meanwhile()
-        first = cfg.noise_planes if cfg.noise_factor > 0 and cfg.noise_planes else None
-        result = self._run(cloud, graph, rng, max_planes=first)
-        params = cfg.params
         if cfg.noise_factor > 0:
-            result, params = self._noise_limited(cloud, graph, rng, result)
+            result, params = self._noise_limited(cloud, graph, rng)
             if params.epsilon < cfg.epsilon:
                 sigma = params.epsilon / cfg.noise_factor * cloud.scale
                 frame.notes.append(f"ransac: depth noise {sigma:.3g} {frame.depth_units} on the "
                                    f"planes, searched again with epsilon {params.epsilon:.3g}")
+        else:
+            result, params = self._run(cloud, graph, rng), cfg.params
         self.params_used = params
 
         t = time.perf_counter()
@@ -315,12 +314,14 @@ class SequentialRansac:
         return self._run(cloud, lambda: graph, rng)
 
     def _noise_limited(self, cloud: PlaneCloud, get_graph: Callable[[], NeighbourGraph],
-                       rng: np.random.Generator, found: CloudPlanes
-                       ) -> tuple[CloudPlanes, RansacParams]:
-        """The search again with ε = ``noise_factor`` × the noise its planes show, when that
-        is below :data:`RESEARCH_BELOW` × ε (:mod:`monoplane.geometry.sensor_noise`); else
-        ``found`` and the configured thresholds. The search time of both passes is counted."""
+                       rng: np.random.Generator) -> tuple[CloudPlanes, RansacParams]:
+        """A first search, then the search again with ε = ``noise_factor`` × the noise its
+        planes show when that is below :data:`RESEARCH_BELOW` × ε
+        (:mod:`monoplane.geometry.sensor_noise`); else the first search's result and the
+        configured thresholds (searched again when ``noise_planes`` cut the first search
+        short). The search time of both passes is counted."""
         cfg = self.config
+        found = self._run(cloud, get_graph, rng, max_planes=cfg.noise_planes or None)
         # Depth along the optical axis of the normalised points (the cloud is centred).
         depth = cloud.points[:, 2] * cloud.scale + cloud.center[2]
         # Least-squares planes of the labels: the search's own planes are fitted to its
@@ -328,9 +329,11 @@ class SequentialRansac:
         planes = fit_planes_per_label(cloud.points, found.labels, len(found.planes))[0]
         sigma = plane_residual_sigma(cloud.points, depth, found.labels, planes)
         epsilon = noise_limited_epsilon(cfg.epsilon, sigma, cfg.noise_factor)
-        if not epsilon < RESEARCH_BELOW * cfg.epsilon:
-            return found, cfg.params
         params = RansacParams(epsilon=epsilon, epsilon_n_deg=cfg.epsilon_n_deg)
+        if not epsilon < RESEARCH_BELOW * cfg.epsilon:
+            if not cfg.noise_planes:
+                return found, cfg.params
+            params = cfg.params
         again = self._run(cloud, get_graph, rng, params)
         timings = {k: found.timings[k] + again.timings[k] for k in found.timings}
         return again._replace(timings=timings), params
