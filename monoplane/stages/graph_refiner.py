@@ -66,6 +66,10 @@ class GraphCrfConfig(ProximityAffinities):
     beta: float = param(2.0, "weight β of the pairwise term against the data term")
     temperature: float = param(0.2, "mean-field temperature (lower = closer to hard ICM)")
     iterations: int = param(8, "mean-field iterations (0 keeps the labels, still splits/merges)")
+    settle: float = param(
+        0.0, "a point whose label probabilities all moved by at most this in an iteration "
+        "counts as settled: its neighbours skip their next update unless another one moved "
+        "(0: only points whose probabilities repeat exactly; labels as without the skip)")
     max_jump: float = param(
         0.05, "image input: relative depth jump that cuts the pixel-grid graph")
     stride: int = param(
@@ -89,6 +93,7 @@ class GraphCrfConfig(ProximityAffinities):
             (self.normal_weight >= 0, "normal_weight must be >= 0"),
             (self.temperature > 0, "temperature must be positive"),
             (self.iterations >= 0, "iterations must be >= 0"),
+            (0 <= self.settle < 1, "settle must lie in [0, 1)"),
             (self.rounds >= 1, "rounds must be >= 1"),
             (self.max_jump > 0, "max_jump must be positive"),
             (self.stride >= 1, "stride must be at least 1"),
@@ -284,7 +289,7 @@ class GraphCrfRefiner(Refiner):
         ptr, cand, costs = candidate_labels(unary, labels, indptr, weights, beta,
                                             c.temperature)
         return potts_mean_field(ptr, cand, costs, indptr, indices, weights, labels, beta,
-                                c.temperature, c.iterations)
+                                c.temperature, c.iterations, c.settle)
 
     def _components(self, graph: NeighbourGraph, labels: np.ndarray, min_size: int
                     ) -> np.ndarray:
