@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -154,18 +154,10 @@ def lattice_cloud(frame: Frame, stride: int) -> PlaneCloud:
         Normalised over all valid pixels (``all_points``), with ``stride`` recorded (the
         cloud of every valid pixel when the lattice holds fewer than 3).
     """
-    cloud = PlaneCloud.from_frame(frame)
     if stride == 1:
-        return cloud
-    on = np.zeros(frame.shape, dtype=bool)
-    on[stride // 2::stride, stride // 2::stride] = True
-    chosen = np.flatnonzero(on.ravel()[cloud.all_pixels])
-    if chosen.size < 3:
-        return cloud
-    return replace(
-        cloud, points=cloud.points[chosen], normals=cloud.normals[chosen],
-        colors=None if cloud.colors is None else cloud.colors[chosen],
-        pixels=cloud.pixels[chosen], stride=stride)
+        return PlaneCloud.from_frame(frame)
+    cloud = PlaneCloud.from_frame(frame, grid=True, stride=stride)
+    return cloud if cloud.size >= 3 else PlaneCloud.from_frame(frame)
 
 
 @kernel
