@@ -170,8 +170,7 @@ class PlaneCloud:
 
     @classmethod
     def from_frame(cls, frame: Frame, max_points: int | None = None,
-                   rng: np.random.Generator | None = None, grid: bool = False,
-                   stride: int | None = None) -> PlaneCloud:
+                   rng: np.random.Generator | None = None, grid: bool = False) -> PlaneCloud:
         """Unproject a frame's valid pixels into a normalised oriented cloud.
 
         Parameters
@@ -188,8 +187,6 @@ class PlaneCloud:
             Subsample on a regular lattice instead: the valid pixels at ``v, u ≡ s // 2
             (mod s)`` for the smallest stride ``s`` that keeps at most ``max_points`` of them
             (:func:`lattice_stride`); ``stride`` records ``s``. Draws nothing from ``rng``.
-        stride : int, optional
-            With ``grid``, this lattice step instead of the one ``max_points`` gives.
 
         Returns
         -------
@@ -215,24 +212,20 @@ class PlaneCloud:
         if scale <= 0:
             raise InvalidInput(f"{frame.name}: all valid pixels unproject to the same point")
 
-        if stride is not None and stride < 1:
-            raise InvalidInput(f"the lattice stride must be at least 1, got {stride}")
         keep = all_pixels
         points = all_points
-        if not grid:
-            stride = None
-        elif stride is None:
+        stride = None
+        if grid:
             stride = 1
             if max_points is not None and all_pixels.size > max_points:
                 stride = lattice_stride(valid_image, max_points)
-        if stride is not None and stride > 1:
-            offset = stride // 2
-            on_lattice = np.zeros(frame.shape, dtype=bool)
-            on_lattice[offset::stride, offset::stride] = True
-            chosen = np.flatnonzero(on_lattice.ravel()[all_pixels])
-            keep = all_pixels[chosen]
-            points = all_points[chosen]
-        elif stride is None and max_points is not None and all_pixels.size > max_points:
+                offset = stride // 2
+                on_lattice = np.zeros(frame.shape, dtype=bool)
+                on_lattice[offset::stride, offset::stride] = True
+                chosen = np.flatnonzero(on_lattice.ravel()[all_pixels])
+                keep = all_pixels[chosen]
+                points = all_points[chosen]
+        elif max_points is not None and all_pixels.size > max_points:
             if max_points < 3:
                 raise InvalidInput(f"max_points must be at least 3, got {max_points}")
             if rng is None:

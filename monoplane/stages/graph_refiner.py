@@ -72,10 +72,10 @@ class GraphCrfConfig(ProximityAffinities):
         "(0: only points whose probabilities repeat exactly; labels as without the skip)")
     max_jump: float = param(
         0.05, "image input: relative depth jump that cuts the pixel-grid graph")
-    stride: int = param(
-        1, "image input: the CRF runs on the valid pixels of every stride-th row and column "
-        "(a regular lattice, like RANSAC's grid sampling) and the other pixels take the "
-        "plane of a lattice neighbour they lie closest to; 1: every pixel")
+    max_points: int = param(
+        0, "image input: the CRF runs on at most this many valid pixels, on the regular "
+        "lattice of RANSAC's grid sampling, and the other pixels take the plane of a lattice "
+        "neighbour they lie closest to; 0: every pixel")
     min_support: float = param(
         0.001, "smallest region kept, fraction of the cloud's points")
     min_support_points: int = param(20, "smallest region kept, points")
@@ -96,7 +96,8 @@ class GraphCrfConfig(ProximityAffinities):
             (0 <= self.settle < 1, "settle must lie in [0, 1)"),
             (self.rounds >= 1, "rounds must be >= 1"),
             (self.max_jump > 0, "max_jump must be positive"),
-            (self.stride >= 1, "stride must be at least 1"),
+            (self.max_points == 0 or self.max_points >= 3,
+             "max_points must be 0 (every pixel) or at least 3"),
             (min(self.alpha_p2, self.alpha_c2, self.alpha_n2) > 0, "bandwidths must be > 0"),
             (0 <= self.min_support < 1, "min_support must lie in [0, 1)"),
             (self.min_support_points >= 3, "min_support_points must be at least 3"),
@@ -138,26 +139,27 @@ def pixel_graph(cloud: PlaneCloud, max_jump: float) -> NeighbourGraph:
     return NeighbourGraph(cloud.size, edges, indptr, indices, None, spacing)
 
 
-def lattice_cloud(frame: Frame, stride: int) -> PlaneCloud:
-    """The cloud of a frame's valid pixels at ``v, u ≡ stride // 2 (mod stride)``.
+def lattice_cloud(frame: Frame, max_points: int) -> PlaneCloud:
+    """The cloud of a frame's valid pixels, on a regular lattice when there are too many.
 
     Parameters
     ----------
     frame : Frame
         With depth and normals.
-    stride : int
-        Lattice step in pixels; 1 keeps every valid pixel.
+    max_points : int
+        At most this many points: the valid pixels at ``v, u ≡ s // 2 (mod s)`` for the
+        smallest step ``s`` that keeps at most this many
+        (:func:`monoplane.geometry.cloud.lattice_stride`); 0: every valid pixel.
 
     Returns
     -------
     PlaneCloud
-        Normalised over all valid pixels (``all_points``), with ``stride`` recorded (the
-        cloud of every valid pixel when the lattice holds fewer than 3).
+        Normalised over all valid pixels (``all_points``), with its lattice step ``stride``
+        (None or 1: every valid pixel).
     """
-    if stride == 1:
+    if max_points == 0:
         return PlaneCloud.from_frame(frame)
-    cloud = PlaneCloud.from_frame(frame, grid=True, stride=stride)
-    return cloud if cloud.size >= 3 else PlaneCloud.from_frame(frame)
+    return PlaneCloud.from_frame(frame, max_points, grid=True)
 
 
 @kernel
@@ -384,14 +386,15 @@ class GraphCrfRefiner(Refiner):
             the camera frame and depth units, facing the camera.
         """
         frame = rec.frame
-        stride = self.config.stride
-        cloud = lattice_cloud(frame, stride)
-        # Diagonal lattice neighbours on a face seen at 70 deg incidence lie 3 √2 stride / f
-        # of their depth apart: a coarse lattice on a low-resolution image would cut such
-        # faces apart at max_jump. Only the cut is loosened, to that: ABW's objects stand
-        # 5-10 % of the depth in front of their background.
-        focal = float(min(frame.K[0, 0], frame.K[1, 1]))
-        jump = max(self.config.max_jump, _INCIDENCE_SPREAD * stride / max(focal, 1e-9))
+        cloud = lattice_cloud(frame, self.config.max_points)
+        jump = self.config.max_jump
+        if cloud.stride is not None and cloud.stride > 1:
+            # Diagonal lattice neighbours on a face seen at 70 deg incidence lie
+            # 3 √2 stride / f of their depth apart: a coarse lattice on a low-resolution image
+            # would cut such faces apart at max_jump. Only the cut is loosened, to that: ABW's
+            # objects stand 5-10 % of the depth in front of their background.
+            focal = float(min(frame.K[0, 0], frame.K[1, 1]))
+            jump = max(jump, _INCIDENCE_SPREAD * cloud.stride / max(focal, 1e-9))
         graph = pixel_graph(cloud, jump)
         pixels = cloud.pixel_grid()[0]
         start = rec.labels.ravel()[pixels]

@@ -310,11 +310,3 @@ def test_grid_sampling_keeps_the_valid_lattice_pixels_in_pixel_order():
     assert PlaneCloud.from_frame(frame, max_points=10**6, grid=True).stride == 1
     assert PlaneCloud.from_frame(frame, max_points=300, rng=np.random.default_rng(0)
                                  ).stride is None
-    # A stated step wins over max_points.
-    three = PlaneCloud.from_frame(frame, max_points=300, grid=True, stride=3)
-    v, u = np.divmod(three.pixels, w)
-    assert three.stride == 3 and np.all(v % 3 == 1) and np.all(u % 3 == 1)
-    assert three.size == len(range(7, h, 3)) * len(range(1, w, 3))
-    assert PlaneCloud.from_frame(frame, grid=True, stride=1).size == 25 * 40
-    with pytest.raises(InvalidInput, match="stride"):
-        PlaneCloud.from_frame(frame, grid=True, stride=0)
