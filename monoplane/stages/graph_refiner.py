@@ -406,11 +406,11 @@ class GraphCrfRefiner(Refiner):
         image = cloud.propagate(labels, planes, graph=graph).ravel()
         # The fit runs on the normalised points of every valid pixel, which the cloud holds
         # already: a least-squares plane commutes with the similarity back to the camera.
-        params, rmse, support = fit_planes_per_label(cloud.all_points, image[cloud.all_pixels],
+        fitted, rmse, support = fit_planes_per_label(cloud.all_points, image[cloud.all_pixels],
                                                      int(labels.max(initial=0)))
         return Reconstruction(frame=frame, labels=image.reshape(frame.shape),
-                              planes=orient_towards_camera(cloud.plane_to_camera(params))
-                              if len(params) else np.zeros((0, 4)),
+                              planes=orient_towards_camera(cloud.plane_to_camera(fitted))
+                              if len(fitted) else np.zeros((0, 4)),
                               rmse=rmse * cloud.scale, support=support,
                               timings=dict(rec.timings))
 
