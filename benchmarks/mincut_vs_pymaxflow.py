@@ -2,7 +2,7 @@
 
 Runs the ``monoplane`` preset on synthetic frames (``monoplane.synth.generate(seed, "mild")``)
 at 256x192 and 640x480, records every graph the graph-cut labeler solves (by wrapping the
-solver that :mod:`monoplane.algorithm.graphcut` calls), then solves each recorded graph with both:
+solvers that :mod:`monoplane.algorithm.graphcut` calls), then solves each recorded graph with both:
 
 * ``monoplane.algorithm.mincut.min_cut_flows``: the arrays as they are, one compiled call;
 * PyMaxflow (``maxflow.Graph[float]``): ``add_nodes``, ``add_edges`` with arrays,
@@ -34,22 +34,27 @@ Graph = tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
 
 def record_graphs(captured: list[Graph]) -> None:
-    """Make :mod:`monoplane.algorithm.graphcut`'s solver calls append their graph to ``captured``."""
-    flows, cut = graphcut.min_cut_flows, graphcut.min_cut
+    """Make :mod:`monoplane.algorithm.graphcut`'s solver calls append their graph to ``captured``
+    (a network given as arcs, :func:`~monoplane.algorithm.mincut.min_cut_arcs`, as the edge list
+    of its arc pairs)."""
+    arcs, cut = graphcut.min_cut_arcs, graphcut.min_cut
 
     def copy(n: int, *arrays: Any) -> Graph:
         t, h, c, r, term = (np.array(a) for a in arrays)
         return int(n), t, h, c.astype(np.float64), r.astype(np.float64), term.astype(np.float64)
 
-    def flows_spy(n: int, t: Any, h: Any, c: Any, r: Any, term: Any, *a: Any) -> Any:
-        captured.append(copy(n, t, h, c, r, term))
-        return flows(n, t, h, c, r, term, *a)
+    def arcs_spy(first: Any, head: Any, sister: Any, rcap: Any, term: Any) -> Any:
+        n = term.shape[0]
+        owner = np.repeat(np.arange(n), np.diff(first))
+        pair = np.flatnonzero(np.arange(head.size) < sister)
+        captured.append(copy(n, owner[pair], head[pair], rcap[pair], rcap[sister[pair]], term))
+        return arcs(first, head, sister, rcap, term)
 
     def cut_spy(n: int, t: Any, h: Any, c: Any, r: Any, term: Any, *a: Any, **k: Any) -> Any:
         captured.append(copy(n, t, h, c, r, term))
         return cut(n, t, h, c, r, term, *a, **k)
 
-    graphcut.min_cut_flows, graphcut.min_cut = flows_spy, cut_spy
+    graphcut.min_cut_arcs, graphcut.min_cut = arcs_spy, cut_spy
 
 
 def pymaxflow_cut(graph: Graph) -> tuple[np.ndarray, float]:

@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from monoplane import jit
+from monoplane.algorithm.mincut import min_cut
 from monoplane.export.saving import save as save_outputs
 from monoplane.geometry.planes import planes_from_triplets
 from monoplane.host import config
@@ -136,6 +137,9 @@ def _workloads(report: bool = True) -> Iterator[tuple[str, Callable[[], Any]]]:
     yield "depth only", lambda: Pipeline.from_preset("monoplane").run(frame.with_(normals=None))
     yield "range image", lambda: Pipeline.from_preset("range").run(
         frame.with_(rgb=None, normals=None))
+    # The box method of normals from depth is an option no preset sets.
+    yield "depth only, box normals", lambda: Pipeline.from_preset(
+        "monoplane", ["cues.normals_method=box"]).run(frame.with_(normals=None))
 
     def save() -> None:
         rec = Pipeline.from_preset("monoplane").run(frame)
@@ -154,6 +158,10 @@ def _workloads(report: bool = True) -> Iterator[tuple[str, Callable[[], Any]]]:
     # No preset samples on the pixel lattice: its graph's turn weights get a run of their own.
     yield "pixel lattice", lambda: Pipeline.from_preset(
         "monoplane-nocrf", overrides=["ransac.sampling=grid"]).run(frame)
+    # The labelers hand the max-flow a network in its own arc layout; the general binary
+    # energies (and plugins) give it edge lists.
+    yield "max-flow of an edge list", lambda: min_cut(
+        2, np.array([0]), np.array([1]), np.ones(1), np.zeros(1), np.array([1.0, -1.0]))
     yield "scorer batch by batch", lambda: Pipeline.from_preset(
         "monoplane", overrides=["sampler.plugin=napsac", "refiner.plugin=none"]).run(frame)
     depth, normals, rgb, K = frame.depth, frame.normals, frame.rgb, frame.K

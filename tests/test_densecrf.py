@@ -150,29 +150,29 @@ def test_lattice_kernels_against_slow_references(dim):
                                rtol=1e-4, atol=1e-5)
 
 
-def test_slicing_at_other_points():
+def test_messages_at_other_points():
     rng = np.random.default_rng(4)
     f = rng.normal(size=(500, 3))
-    lat = PermutohedralLattice(f)
+    kernel = GaussianKernel(f, 2.0)
+    values = rng.random((500, 2)).astype(np.float32)
+    blurred = kernel.blur(values)
 
-    def slice_at(points, blurred):
-        return lk.slice_values(*lat.locate(points), blurred)
+    def message_at(points):
+        out = np.zeros((len(points), 2), np.float32)
+        kernel.add_message_at(blurred, points[:, :1], points[:, 1:], (1.0, 1.0),
+                              (0, len(points)), out)
+        return out
 
-    values = rng.random((500, 2))
-    blurred = lat.blurred(values)
-    # At the lattice's own points slicing is filtering, exactly.
-    np.testing.assert_array_equal(slice_at(f, blurred), lat.filter(values))
     # Far outside the data (outside the key range, or in cells without vertices) nothing.
     far = np.array([[100.0, 0.0, 0.0], [0.0, -1e5, 3.0]])
-    np.testing.assert_array_equal(slice_at(far, blurred), 0.0)
-    # Between the points, the normalised slice follows the exact normalised Gaussian.
+    np.testing.assert_array_equal(message_at(far), 0.0)
+    # Between the points it follows the exact symmetric-normalised Gaussian message
+    # w · D_g^-½ Σ_j k(g, f_j) D_j^-½ v_j (the lattice's overall scale cancels).
     g = rng.normal(size=(200, 3)) * 0.8
-    approx = slice_at(g, blurred) / slice_at(g, lat.blurred(np.ones((500, 1))))
-    k = np.exp(-0.5 * ((g[:, None] - f[None]) ** 2).sum(-1))
-    exact = k @ values / k.sum(axis=1, keepdims=True)
-    assert np.abs(approx - exact).mean() < 0.01
-    with pytest.raises(InvalidInput):
-        lat.locate(np.zeros((3, 2)))
+    k_gf = np.exp(-0.5 * ((g[:, None] - f[None]) ** 2).sum(-1))
+    d_f = np.exp(-0.5 * ((f[:, None] - f[None]) ** 2).sum(-1)).sum(axis=1)
+    exact = 2.0 * (k_gf / np.sqrt(d_f)[None]) @ values / np.sqrt(k_gf.sum(axis=1))[:, None]
+    assert np.abs(message_at(g) - exact).mean() < 0.03 * np.abs(exact).mean()
 
 
 def test_messages_at_own_points_are_the_message():
@@ -180,10 +180,34 @@ def test_messages_at_own_points_are_the_message():
     f = rng.normal(size=(400, 3))
     kernel = GaussianKernel(f, 2.5)
     q = rng.random((400, 3)).astype(np.float32)
-    own, at = kernel.messages(q, f)
+    blurred = kernel.blur(q)
+    own = kernel.message_from(blurred)
     np.testing.assert_array_equal(own, kernel.message(q))
     # At its own points the kernel's message to them is the same normalised response.
+    at = np.zeros((400, 3), np.float32)
+    kernel.add_message_at(blurred, f[:, :2], f[:, 2:] * 4.0, (2.0, 2.0), (0, 400), at)
     np.testing.assert_allclose(at, own, rtol=1e-5, atol=1e-6)
+
+
+def test_fused_messages_at_points_equal_slicing_there():
+    # At the lattice's own points the fused kernel finds their simplices again, so it gives
+    # the sliced, normalised message bit for bit; it adds to what is there, and does only
+    # the rows asked for.
+    rng = np.random.default_rng(6)
+    f = rng.normal(size=(300, 4))
+    kernel = GaussianKernel(f, 1.5)
+    blurred = kernel.blur(rng.random((300, 5)).astype(np.float32))
+    lat = kernel.lattice
+    both = lk.slice_values(lat._vertex_of, lat._weights, np.hstack([blurred, kernel._ones]))
+    expected = 1.5 * both[:, :-1] / np.sqrt(np.maximum(both[:, -1:], 1e-20))
+    start = rng.random((300, 5)).astype(np.float32)
+    out = start.copy()
+    kernel.add_message_at(blurred, f[:, :1], f[:, 1:] * 8.0, (4.0, 2.0), (10, 290), out)
+    np.testing.assert_array_equal(out[:10], start[:10])
+    np.testing.assert_array_equal(out[10:290], start[10:290] + expected[10:290])
+    np.testing.assert_array_equal(out[290:], start[290:])
+    with pytest.raises(InvalidInput):
+        kernel.add_message_at(blurred, f[:, :1], f[:, 1:3], (1.0, 1.0), (0, 1), out)
 
 
 def test_lattice_is_nearly_symmetric_linear_and_local():
@@ -313,6 +337,24 @@ def test_working_resolution_cap():
         params(max_pixels=-1)
 
 
+def test_band_margin_limits_exact_messages_to_close_calls():
+    rgb, depth, normals, gt, _ = room_cues(96, 128)
+    rng = np.random.default_rng(3)
+    noisy = np.where(rng.random(gt.shape) < 0.2, rng.integers(0, 6, gt.shape), gt)
+    whole = dense_crf(noisy, 6, params(max_pixels=3100), rgb, depth, normals)
+    # A margin wider than any gap between two labels' energies sends the whole band.
+    wide = dense_crf(noisy, 6, params(max_pixels=3100, band_margin=1e30), rgb, depth, normals)
+    np.testing.assert_array_equal(wide, whole)
+    # Without any exact message (a margin no gap is below) edges follow the 2 x 2 blocks;
+    # a margin of 2 nats gives the whole band's labels back but for a handful of pixels.
+    none = dense_crf(noisy, 6, params(max_pixels=3100, band_margin=1e-30), rgb, depth, normals)
+    two = dense_crf(noisy, 6, params(max_pixels=3100, band_margin=2.0), rgb, depth, normals)
+    assert (none != whole).sum() > 5 * max((two != whole).sum(), 1)
+    assert (two == gt).mean() >= (whole == gt).mean() - 0.001
+    with pytest.raises(InvalidInput, match="band_margin"):
+        params(band_margin=0.0)
+
+
 @pytest.mark.parametrize("max_pixels", [0, 3100])
 def test_a_grid_built_beforehand_gives_the_same_labels(max_pixels):
     # The label-independent part (block grid, cues, lattices) may be built before the labels
@@ -418,27 +460,38 @@ def test_block_means_from_counts_equal_the_per_pixel_sums(uniform, num_labels, s
 
 
 @pytest.mark.parametrize("uniform", [True, False])
-def test_final_labels_kernel_equals_the_numpy_argmax(uniform):
-    from monoplane.algorithm.densecrf import _final_labels
+def test_final_labels_kernels_equal_the_numpy_argmax(uniform):
+    from monoplane.algorithm.densecrf import _exact_labels, _upsampled_labels
 
     rng = np.random.default_rng(11)
     h, w, num = 23, 31, 6
     lab = rng.integers(0, num, size=(h, w))
     fine = rng.normal(size=(h + 2, w + 3, num)).astype(np.float32)  # resize may overhang
+    fine[0, 0, 1:3] = fine[0, 0].max() + 1.0  # a tie: the first maximum wins, margin 0
     band = np.sort(rng.choice(h * w, 200, replace=False))
+    band[0] = 0
     exact = rng.normal(size=(200, num)).astype(np.float32)
     unary = unary_from_labels(lab, num, 0.55, uniform_label=0 if uniform else None)
-    energy = fine[:h, :w].reshape(-1, num) - unary
-    energy[band] = exact - unary[band]
+    upsampled = fine[:h, :w].reshape(-1, num) - unary
+    top2 = np.sort(upsampled[band], axis=1)[:, -2:]
     values = unary_from_labels(np.array([1, 0]), num, 0.55, uniform_label=0)
-    expected = energy.argmax(axis=1).reshape(h, w)
-    # Whole, and in row pieces (threads) that each find their part of the band.
-    for bounds in ([0, h], [0, 1, 9, 10, h]):
-        got = np.full((h, w), -1, dtype=np.int32)
-        for y0, y1 in zip(bounds[:-1], bounds[1:]):
-            _final_labels(fine, lab.astype(np.int64), band, exact, values[0, 1], values[0, 0],
-                          values[1, 0], uniform, y0, y1, got)
-        np.testing.assert_array_equal(got, expected)
+    args = (values[0, 1], values[0, 0], values[1, 0], uniform)
+    for margin in (0.5, np.inf):
+        expected_close = top2[:, 1] - top2[:, 0] < margin
+        energy = upsampled.copy()
+        energy[band[expected_close]] = exact[expected_close] - unary[band[expected_close]]
+        expected = energy.argmax(axis=1).reshape(h, w)
+        # Whole, and in row pieces (threads) that each find their part of the band.
+        for bounds in ([0, h], [0, 1, 9, 10, h]):
+            got = np.full((h, w), -1, dtype=np.int32)
+            close = np.zeros(200, bool)
+            for y0, y1 in zip(bounds[:-1], bounds[1:], strict=True):
+                _upsampled_labels(fine, lab.astype(np.int64), band, *args, margin, y0, y1, got,
+                                  close)
+            np.testing.assert_array_equal(close, expected_close)
+            assert close[0]
+            _exact_labels(exact[close], lab.astype(np.int64), band[close], *args, got)
+            np.testing.assert_array_equal(got, expected)
 
 
 def test_label_change_band_matches_max_and_min_filters():

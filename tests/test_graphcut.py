@@ -19,8 +19,10 @@ from monoplane.algorithm.graphcut import (
     normal_costs,
     pool_payback,
     proximity_weights,
+    shrink_subgraph,
 )
 from monoplane.errors import InvalidInput
+from monoplane.geometry.graph import NeighbourGraph
 
 
 def brute_force(e: BinaryEnergy) -> tuple[np.ndarray, float]:
@@ -287,3 +289,28 @@ def test_fused_data_costs_match_msac_and_normal_costs():
     assert (f0 > 0).any() and (g1_ref > 0).any()
     f0, data1 = data_costs(pts, nrm, pool, plane, None, eps)
     np.testing.assert_allclose(data1, f1_ref, rtol=1e-12, atol=1e-15)
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_a_shrunk_pool_subgraph_is_the_graphs_own_subgraph_row_for_row(seed):
+    rng = np.random.default_rng(seed)
+    graph = NeighbourGraph.build(rng.random((300, 3)), 6)
+    pool = np.arange(300, dtype=np.int64)
+    edges, edge_ids = graph.edges, np.arange(graph.num_edges)
+    for _ in range(4):  # a RANSAC pool loses a plane's inliers at a time
+        smaller = pool[rng.random(pool.size) < 0.7]
+        shrunk, rows = shrink_subgraph(pool, smaller, edges)
+        expected, expected_ids = graph.subgraph(smaller)
+        np.testing.assert_array_equal(shrunk, expected)
+        np.testing.assert_array_equal(edge_ids[rows], expected_ids)
+        pool, edges, edge_ids = smaller, shrunk, edge_ids[rows]
+
+
+def test_a_pool_not_within_the_last_one_is_not_shrunk():
+    old = np.array([1, 3, 5], dtype=np.int64)
+    edges = np.array([[0, 1], [1, 2]], dtype=np.int64)
+    assert shrink_subgraph(old, np.array([1, 4]), edges) is None
+    assert shrink_subgraph(old, np.array([5, 3]), edges) is None  # not in the same order
+    assert shrink_subgraph(np.zeros(0, dtype=np.int64), np.array([2]), edges[:0]) is None
+    kept, rows = shrink_subgraph(old, np.array([3, 5]), edges)
+    assert kept.tolist() == [[0, 1]] and rows.tolist() == [1]

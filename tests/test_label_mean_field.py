@@ -87,3 +87,26 @@ def test_zero_iterations_return_the_start():
                            0.3, 0.2, 0)
     moved = start != 0
     np.testing.assert_array_equal(got[moved], start[moved])
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_settled_nodes_skip_updates_and_keep_the_clear_winners(seed):
+    unary, adj, start = random_problem(seed)
+    beta, temperature = 0.3, 0.2
+    ptr, cand, costs = candidate_labels(unary, start, adj.indptr, adj.data, beta, temperature)
+    graph = (adj.indptr.astype(np.int64), adj.indices.astype(np.int64),
+             adj.data.astype(np.float32))
+    exact = potts_mean_field(ptr, cand, costs, *graph, start, beta, temperature, 8)
+    # settle = 0 is the exact skip; a tolerance can only change near-ties.
+    np.testing.assert_array_equal(
+        potts_mean_field(ptr, cand, costs, *graph, start, beta, temperature, 8, 0.0), exact)
+    settled = potts_mean_field(ptr, cand, costs, *graph, start, beta, temperature, 8, 1e-4)
+    _, q = dense_mean_field(unary.astype(np.float64), adj, start, beta, temperature, 8)
+    top2 = np.sort(q, axis=1)[:, -2:]
+    clear = top2[:, 1] - top2[:, 0] > 1e-2
+    np.testing.assert_array_equal(settled[clear], exact[clear])
+    # A tolerance of 1 counts every node as settled after the first update: the labels are
+    # those of one update.
+    one = potts_mean_field(ptr, cand, costs, *graph, start, beta, temperature, 1)
+    np.testing.assert_array_equal(
+        potts_mean_field(ptr, cand, costs, *graph, start, beta, temperature, 8, 1.0), one)

@@ -134,6 +134,17 @@ def test_labeler_pool_preparation_runs_for_every_later_pool(monkeypatch):
                                   make("monoplane-nocrf", max_points=3000).run(frame).labels)
 
 
+def test_pool_subgraphs_taken_from_the_last_pool_change_no_label(monkeypatch):
+    import monoplane.stages.labelers as labelers
+
+    frame, _, _ = room()
+    shrunk = make("monoplane-nocrf", max_points=3000).run(frame)
+    monkeypatch.setattr(labelers, "shrink_subgraph", lambda *args: None)  # the whole graph
+    whole = make("monoplane-nocrf", max_points=3000).run(frame)
+    np.testing.assert_array_equal(shrunk.labels, whole.labels)
+    np.testing.assert_array_equal(shrunk.planes, whole.planes)
+
+
 def test_depth_only_input_without_colour():
     frame, labels, planes = room(rgb=False)
     rec = make("monoplane-nocrf").run(frame)
@@ -428,3 +439,29 @@ def test_noise_factor_lowers_epsilon_to_the_depth_noise():
     box, wall = rec.labels[21:39, 31:49], rec.labels[45:, 5:75]
     assert np.all(box == box[0, 0]) and np.all(wall == wall[0, 0]) and box[0, 0] != wall[0, 0]
     np.testing.assert_allclose(rec.planes[box[0, 0] - 1, 3], 1.95, atol=2e-3)
+
+
+@pytest.mark.parametrize("noise", [0.001, 0.008])
+def test_noise_planes_caps_only_the_search_that_measures_the_noise(monkeypatch, noise):
+    # Eight fronto-parallel steps 10 cm apart: the first search measures the noise on one
+    # plane only, the second still finds every step, with ε lowered to 1 mm noise, or with
+    # the configured ε when 8 mm of noise is too close to it to search again for.
+    h, w = 64, 80
+    rng = np.random.default_rng(1)
+    depth = 2.0 + 0.1 * (np.arange(w) // 10)[None, :] + rng.normal(0, noise, (h, w))
+    normals = np.tile(np.array([0, 0, -1], dtype=np.float32), (h, w, 1))
+    frame = Frame(rgb=None, K=default_intrinsics(w, h, 60.0), depth=depth.astype(np.float32),
+                  normals=normals)
+    found: list[int] = []
+    run = SequentialRansac._run
+
+    def counted(self, *args, **kwargs):
+        result = run(self, *args, **kwargs)
+        found.append(len(result.planes))
+        return result
+
+    monkeypatch.setattr(SequentialRansac, "_run", counted)
+    driver = make("monoplane-nocrf", split_components=True, noise_factor=3.0, noise_planes=1)
+    rec = driver.run(frame)
+    assert (driver.params_used.epsilon < driver.config.epsilon) == (noise < 0.005)
+    assert found == [1, 8] and rec.num_planes == 8

@@ -8,6 +8,7 @@ from scipy import ndimage
 
 from monoplane.algorithm.region_moments import RegionMoments, refit_planes, scene_radius
 from monoplane.algorithm.regions import (
+    _renumbered_pairs,
     absorb_small_regions,
     clean_regions,
     gate_filled_pixels,
@@ -467,3 +468,16 @@ def test_gate_tests_a_move_between_planes_too() -> None:
     planes = np.array([[0.0, 0.0, -1.0, 5.0], [0.0, 0.0, -1.0, 9.0]])
     out = gate_filled_pixels(flat_points(z), np.ones(z.shape, bool), before, after, planes, 0.5)
     np.testing.assert_array_equal(out, [[1, 2]])
+
+
+@pytest.mark.parametrize("connectivity", [4, 8])
+def test_renumbered_pairs_are_the_adjacency_of_the_renumbered_labels(connectivity):
+    # The clean-up renumbers the adjacency of the pieces after a merge instead of scanning
+    # the renumbered image again: the same pairs, in the same order.
+    rng = np.random.default_rng(connectivity)
+    for _ in range(30):
+        labels = np.kron(rng.integers(0, 9, (6, 7)), np.ones((3, 3), dtype=np.int64))
+        remap = np.concatenate([[0], rng.integers(0, 5, 8)]).astype(np.int32)
+        pairs = _renumbered_pairs(region_adjacency(labels, connectivity), remap)
+        np.testing.assert_array_equal(pairs, region_adjacency(remap[labels], connectivity))
+        assert pairs.dtype == np.int64

@@ -2,7 +2,8 @@
 
 Past those sizes a unit stops being something one reads whole before changing it; a compiled
 kernel is exempt because numba cannot call back into a helper as cheaply as it runs a loop
-inline.
+inline; so is an ``@inline`` helper, which is compiled into the kernels that call it (two
+kernels may share one long loop that way).
 """
 
 from __future__ import annotations
@@ -16,11 +17,11 @@ MAX_FUNCTION_LINES = 100
 
 
 def _compiled(fn: ast.FunctionDef | ast.AsyncFunctionDef) -> bool:
-    """Decorated with ``@kernel`` / ``@jit.kernel`` or ``@numba.njit(...)``."""
+    """Decorated with ``@kernel`` / ``@jit.kernel``, ``@inline`` or ``@numba.njit(...)``."""
     for d in fn.decorator_list:
         target = d.func if isinstance(d, ast.Call) else d
         name = ast.unparse(target)
-        if name.split(".")[-1] in ("kernel", "njit", "jit"):
+        if name.split(".")[-1] in ("kernel", "inline", "njit", "jit"):
             return True
     return False
 

@@ -32,7 +32,7 @@ from monoplane.algorithm.mean_field import (  # noqa: F401
     unary_from_labels,
 )
 from monoplane.errors import InvalidInput
-from monoplane.jit import chunks, kernel, run_threaded
+from monoplane.jit import chunks, inline, kernel, run_threaded
 
 #: Image area (256 x 192) at which the paper's pixel-valued parameters (θ_s = 10 px, minimum
 #: region 300 px) are stated; other resolutions scale them.
@@ -41,6 +41,10 @@ REFERENCE_AREA = 256 * 192
 #: Rows per threaded piece of the final full-resolution labelling, below which one thread
 #: labels the whole image.
 _THREADED_ROWS = 64
+
+#: Band pixels per threaded piece of the messages at full resolution, below which one thread
+#: does them all.
+_THREADED_PIXELS = 4096
 
 
 @dataclass(frozen=True)
@@ -78,6 +82,10 @@ class CrfParams:
     runs on a grid coarsened by an integer factor (see :func:`dense_crf`), since building the
     lattices costs time linear in the pixel count while the kernels (θ_s scales with the image)
     are many pixels wide anyway.
+
+    ``band_margin`` (not in the paper; inf = off), with the coarse grid: of the band of
+    pixels next to a coarse label change, only those whose upsampled messages leave the two
+    best labels less than this many nats apart get exact messages (see :func:`dense_crf`).
     """
 
     theta_position: float
@@ -92,6 +100,7 @@ class CrfParams:
     iterations: int
     uniform_nonplanar: bool
     max_pixels: int
+    band_margin: float
 
     def __post_init__(self) -> None:
         for name in ("theta_position", "theta_color", "theta_depth", "theta_normal"):
@@ -104,6 +113,9 @@ class CrfParams:
             raise InvalidInput(f"iterations must be >= 0, got {self.iterations}")
         if self.max_pixels < 0:
             raise InvalidInput(f"max_pixels must be >= 0 (0: no cap), got {self.max_pixels}")
+        if not self.band_margin > 0:
+            raise InvalidInput(f"band_margin must be positive (inf: whole band), got "
+                               f"{self.band_margin}")
 
 
 def crf_features(
@@ -192,21 +204,31 @@ class _Cues:
         """(features, weight) of each enabled kernel at positions (u, v) of a grid of
         ``grid_area`` cells (θ_s scales with it), with the cues of flat pixel indices
         ``pixels``: RGB / θ_a (8-bit levels), depth / largest depth / θ_d, normals / θ_n."""
+        pos, columns = self.columns(params, u, v, grid_area, pixels)
+        return [(pos if tail is None else np.hstack([pos, tail / div[0] / div[1]]), weight)
+                for tail, div, weight in columns]
+
+    def columns(self, params: CrfParams, u: np.ndarray, v: np.ndarray, grid_area: int,
+                pixels: np.ndarray
+                ) -> tuple[np.ndarray, list[tuple[np.ndarray | None, tuple[float, float], float]]]:
+        """:meth:`features` before they are put together: the (K, 2) float64 scaled
+        positions, and per enabled kernel its cue (K, c) float64 as read (None for the
+        smoothness kernel), the two numbers the cue is divided by in turn, and the weight."""
         theta_p = params.theta_position * np.sqrt(grid_area / REFERENCE_AREA)
         pos = np.stack([u, v], axis=1).astype(np.float64) / theta_p
-        specs: list[tuple[np.ndarray, float]] = []
+        columns: list[tuple[np.ndarray | None, tuple[float, float], float]] = []
         if params.w_smoothness > 0:
-            specs.append((pos, params.w_smoothness))
+            columns.append((None, (1.0, 1.0), params.w_smoothness))
         if self.rgb is not None:
-            col = self.rgb[pixels].astype(np.float64) / params.theta_color
-            specs.append((np.hstack([pos, col]), params.w_appearance))
+            columns.append((self.rgb[pixels].astype(np.float64), (params.theta_color, 1.0),
+                            params.w_appearance))
         if self.depth is not None:
-            dep = self.depth[pixels].astype(np.float64)[:, None] / self.depth_top
-            specs.append((np.hstack([pos, dep / params.theta_depth]), params.w_depth))
+            columns.append((self.depth[pixels].astype(np.float64)[:, None],
+                            (self.depth_top, params.theta_depth), params.w_depth))
         if self.normals is not None:
-            nor = self.normals[pixels].astype(np.float64) / params.theta_normal
-            specs.append((np.hstack([pos, nor]), params.w_normal))
-        return specs
+            columns.append((self.normals[pixels].astype(np.float64), (params.theta_normal, 1.0),
+                            params.w_normal))
+        return pos, columns
 
 
 def _block_mean_probabilities(labels: np.ndarray, block: np.ndarray, num_blocks: int,
@@ -224,14 +246,31 @@ def _block_mean_probabilities(labels: np.ndarray, block: np.ndarray, num_blocks:
     row = np.exp(-unary_from_labels(np.array([1, 0]), num_labels, params.confidence,
                                     uniform_label=0))
     p_own, p_other, p_uniform = float(row[0, 1]), float(row[0, 0]), float(row[1, 0])
-    uniform = labels == 0 if params.uniform_nonplanar else np.zeros(labels.shape, bool)
-    size = np.bincount(block, minlength=num_blocks).astype(np.float64)
-    n_uniform = np.bincount(block[uniform], minlength=num_blocks).astype(np.float64)
-    own = np.bincount(block[~uniform] * num_labels + labels[~uniform],
-                      minlength=num_blocks * num_labels).reshape(num_blocks, num_labels)
+    counts, own = _block_counts(np.ascontiguousarray(labels, dtype=np.int64), block,
+                                num_blocks, num_labels, bool(params.uniform_nonplanar))
+    size = counts[:, 0].astype(np.float64)
+    n_uniform = counts[:, 1].astype(np.float64)
     total = own * p_own + ((size - n_uniform)[:, None] - own) * p_other \
         + (n_uniform * p_uniform)[:, None]
     return total / size[:, None]
+
+
+@kernel
+def _block_counts(labels: np.ndarray, block: np.ndarray, num_blocks: int, num_labels: int,
+                  uniform_nonplanar: bool) -> tuple[np.ndarray, np.ndarray]:
+    """One pass over the (N,) int64 ``labels`` and their (N,) int64 ``block``: (B, 2) int64
+    pixels and uniform pixels (label 0 when ``uniform_nonplanar``) of each block, and (B, L)
+    int64 pixels of each block observed with each label, uniform ones left out."""
+    counts = np.zeros((num_blocks, 2), dtype=np.int64)
+    own = np.zeros((num_blocks, num_labels), dtype=np.int64)
+    for i in range(labels.shape[0]):
+        b = block[i]
+        counts[b, 0] += 1
+        if uniform_nonplanar and labels[i] == 0:
+            counts[b, 1] += 1
+        else:
+            own[b, labels[i]] += 1
+    return counts, own
 
 
 def _sum_in_place(arrays: list[np.ndarray]) -> np.ndarray:
@@ -249,19 +288,65 @@ def _sum_in_place(arrays: list[np.ndarray]) -> np.ndarray:
     return total
 
 
+def _blurred(kernels: list[GaussianKernel], q: np.ndarray) -> list[np.ndarray]:
+    """Each kernel's :meth:`~GaussianKernel.blur` of the (N, L) marginals ``q``, in kernel
+    order, computed on parallel threads dearest first."""
+    order = dearest_first(kernels)
+    done = dict(zip(order, run_threaded([lambda k=kernels[i]: k.blur(q) for i in order]),
+                    strict=True))
+    return [done[i] for i in range(len(kernels))]
+
+
+def _band_messages(kernels: list[GaussianKernel], blurred: list[np.ndarray], pos: np.ndarray,
+                   columns: list[tuple[np.ndarray | None, tuple[float, float], float]]
+                   ) -> np.ndarray:
+    """(K, L) float32 pairwise messages at the band's K pixels: every kernel's lattice values
+    ``blurred`` (M, L) sliced at the pixels' own features (``pos`` and ``columns`` from
+    :meth:`_Cues.columns`), summed in kernel order as :func:`_sum_in_place` sums them.
+
+    Pieces of the band run on parallel threads, each through all kernels in order, so the
+    sums do not depend on the threads.
+    """
+    for tail, _, _ in columns:
+        if tail is not None and not np.all(np.isfinite(tail)):
+            raise InvalidInput("dense CRF cues contain NaN or inf")
+    k = pos.shape[0]
+    out = np.zeros((k, blurred[0].shape[1]), np.float32)
+    none = np.zeros((k, 0))
+
+    def piece(rows: tuple[int, int]) -> None:
+        for kern, values, (tail, div, _) in zip(kernels, blurred, columns, strict=True):
+            kern.add_message_at(values, pos, none if tail is None else tail, div, rows, out)
+
+    run_threaded([partial(piece, rows) for rows in chunks(k, _THREADED_PIXELS)])
+    return out
+
+
+@inline
+def _unary(label: int, observed: int, u_own: np.float32, u_other: np.float32,
+           u_uniform: np.float32, uniform_nonplanar: bool) -> np.float32:
+    """The unary of ``label`` at a pixel observed with label ``observed`` (see
+    :func:`_upsampled_labels`)."""
+    if uniform_nonplanar and observed == 0:
+        return u_uniform
+    return u_own if label == observed else u_other
+
+
 @kernel
-def _final_labels(fine: np.ndarray, labels: np.ndarray, band: np.ndarray, exact: np.ndarray,
-                  u_own: np.float32, u_other: np.float32, u_uniform: np.float32,
-                  uniform_nonplanar: bool, y0: int, y1: int, out: np.ndarray) -> None:
+def _upsampled_labels(fine: np.ndarray, labels: np.ndarray, band: np.ndarray,
+                      u_own: np.float32, u_other: np.float32, u_uniform: np.float32,
+                      uniform_nonplanar: bool, margin: float, y0: int, y1: int,
+                      out: np.ndarray, close: np.ndarray) -> None:
     """Rows ``y0:y1`` of the (H, W) int32 ``out``: argmax over labels of ``message - unary``
-    at full resolution.
+    at full resolution with the upsampled messages, and at the ``band`` pixels in these rows
+    whether the two best labels lie less than ``margin`` nats apart (``close``).
 
     ``fine`` (≥H, ≥W, L) float32 upsampled coarse messages, ``labels`` (H, W) int64 observed
-    labels, ``band`` (K,) int64 ascending flat pixels whose messages are ``exact`` (K, L)
-    float32 instead; the unary of a pixel is ``u_own`` at its label and ``u_other`` elsewhere,
-    or ``u_uniform`` everywhere for label 0 when ``uniform_nonplanar``. float32 arithmetic and
-    the first maximum, as ``(fine - unary).argmax(axis=1)`` gives. Pixels are independent, so
-    row blocks run on parallel threads.
+    labels, ``band`` (K,) int64 ascending flat pixels, ``close`` (K,) bool; the unary of a
+    pixel is ``u_own`` at its label and ``u_other`` elsewhere, or ``u_uniform`` everywhere for
+    label 0 when ``uniform_nonplanar``. float32 arithmetic and the first maximum, as
+    ``(fine - unary).argmax(axis=1)`` gives. Pixels are independent, so row blocks run on
+    parallel threads.
     """
     w = labels.shape[1]
     num = fine.shape[2]
@@ -270,24 +355,43 @@ def _final_labels(fine: np.ndarray, labels: np.ndarray, band: np.ndarray, exact:
     for y in range(y0, y1):
         for x in range(w):
             lab = labels[y, x]
-            exact_here = k < band.shape[0] and band[k] == y * w + x
             best = -np.inf
+            second = -np.inf
             arg = 0
             for label in range(num):
-                if uniform_nonplanar and lab == 0:
-                    u = u_uniform
-                elif label == lab:
-                    u = u_own
-                else:
-                    u = u_other
-                m = exact[k, label] if exact_here else fine[y, x, label]
-                e = np.float32(m - u)
+                u = _unary(label, lab, u_own, u_other, u_uniform, uniform_nonplanar)
+                e = np.float32(fine[y, x, label] - u)
                 if e > best:
+                    second = best
                     best = e
                     arg = label
+                elif e > second:
+                    second = e
             out[y, x] = arg
-            if exact_here:
+            if k < band.shape[0] and band[k] == y * w + x:
+                close[k] = best - second < margin
                 k += 1
+
+
+@kernel
+def _exact_labels(exact: np.ndarray, labels: np.ndarray, pixels: np.ndarray,
+                  u_own: np.float32, u_other: np.float32, u_uniform: np.float32,
+                  uniform_nonplanar: bool, out: np.ndarray) -> None:
+    """:func:`_upsampled_labels`' argmax at the (K,) int64 flat ``pixels`` of ``out``, from
+    their (K, L) float32 ``exact`` messages instead."""
+    w = labels.shape[1]
+    for k in range(pixels.shape[0]):
+        y, x = pixels[k] // w, pixels[k] % w
+        lab = labels[y, x]
+        best = -np.inf
+        arg = 0
+        for label in range(exact.shape[1]):
+            u = _unary(label, lab, u_own, u_other, u_uniform, uniform_nonplanar)
+            e = np.float32(exact[k, label] - u)
+            if e > best:
+                best = e
+                arg = label
+        out[y, x] = arg
 
 
 def _not_constant_3x3(image: np.ndarray) -> np.ndarray:
@@ -419,7 +523,10 @@ def dense_crf(
     resolution with coarse messages. Away from label changes of the coarse result those
     messages are bilinearly upsampled; in the band of blocks next to a label change each pixel
     gets them from the coarse lattices sliced at its own features
-    (:meth:`GaussianKernel.messages`), so boundaries follow full-resolution edges.
+    (:meth:`GaussianKernel.add_message_at`), so boundaries follow full-resolution edges. With
+    a finite ``params.band_margin`` a band pixel gets them only when the upsampled messages
+    leave its two best labels closer than that margin: elsewhere its own features would have
+    to move the messages by more than the margin to change its label.
     """
     lab = np.asarray(labels)
     if lab.ndim != 2:
@@ -434,7 +541,7 @@ def dense_crf(
         raise InvalidInput(f"the CRF grid is for {grid.shape} images, the labels are "
                            f"{lab.shape}")
     h, w = lab.shape
-    step, cues, kernels, block = grid.step, grid.cues, grid.kernels, grid.block
+    step, kernels, block = grid.step, grid.kernels, grid.block
     if step == 1:
         unary = unary_from_labels(lab, num_labels, params.confidence,
                                   uniform_label=0 if params.uniform_nonplanar else None)
@@ -449,23 +556,39 @@ def dense_crf(
     coarse = q.argmax(axis=1).reshape(hs, ws)
     edge = _not_constant_3x3(coarse)
     band = np.flatnonzero(edge.ravel()[block])
-    fu = (band % w + 0.5) / step - 0.5
-    fv = (band // w + 0.5) / step - 0.5
-    specs = cues.features(params, fu, fv, hs * ws, band)
-    order = dearest_first(kernels)
-    done = run_threaded([lambda k=kernels[i], f=specs[i][0]: k.messages(q, f) for i in order])
-    by_kernel = dict(zip(order, done, strict=True))
-    coarse_pairwise = _sum_in_place([by_kernel[i][0] for i in range(len(kernels))])
+    blurred = _blurred(kernels, q)
+    coarse_pairwise = _sum_in_place([k.message_from(b)
+                                     for k, b in zip(kernels, blurred, strict=True)])
     # cv2 maps fine pixel u to coarse position (u + 0.5) / step - 0.5.
     fine = cv2.resize(coarse_pairwise.reshape(hs, ws, num_labels), (ws * step, hs * step),
                       interpolation=cv2.INTER_LINEAR).reshape(hs * step, ws * step, -1)
-    exact = _sum_in_place([by_kernel[i][1] for i in range(len(kernels))])
+    return _full_resolution_labels(grid, params, lab, band, fine, blurred)
+
+
+def _full_resolution_labels(grid: CrfGrid, params: CrfParams, lab: np.ndarray, band: np.ndarray,
+                            fine: np.ndarray, blurred: list[np.ndarray]) -> np.ndarray:
+    """(H, W) int32 final labels of :func:`dense_crf` on a coarse grid: observed labels
+    ``lab`` (H, W), ascending flat pixels of the ``band``, upsampled messages ``fine``
+    (≥H, ≥W, L) float32 and each kernel's lattice values ``blurred``."""
+    (h, w), step = grid.shape, grid.step
+    hs, ws = -(-h // step), -(-w // step)
     # The unary takes three values per label map (own label, other label, uniform): the
     # final argmax reads them instead of an (H W, L) unary array.
-    values = unary_from_labels(np.array([1, 0]), num_labels, params.confidence, uniform_label=0)
-    out = np.empty((h, w), dtype=np.int32)
+    values = unary_from_labels(np.array([1, 0]), fine.shape[2], params.confidence,
+                               uniform_label=0)
+    unary = (values[0, 1], values[0, 0], values[1, 0], bool(params.uniform_nonplanar))
     lab64 = lab.astype(np.int64)
-    run_threaded([partial(_final_labels, fine, lab64, band, exact, values[0, 1], values[0, 0],
-                          values[1, 0], bool(params.uniform_nonplanar), a, b, out)
+    out = np.empty((h, w), dtype=np.int32)
+    close = np.empty(band.shape[0], dtype=np.bool_)
+    # Every pixel is labelled from the upsampled messages first; where they leave the two
+    # best labels of a band pixel within the margin (any band pixel when it is inf), its own
+    # features might overturn them: those pixels are labelled again from exact messages.
+    run_threaded([partial(_upsampled_labels, fine, lab64, band, *unary,
+                          float(params.band_margin), a, b, out, close)
                   for a, b in chunks(h, _THREADED_ROWS)])
+    band = band[close]
+    fu = (band % w + 0.5) / step - 0.5
+    fv = (band // w + 0.5) / step - 0.5
+    pos, columns = grid.cues.columns(params, fu, fv, hs * ws, band)
+    _exact_labels(_band_messages(grid.kernels, blurred, pos, columns), lab64, band, *unary, out)
     return out

@@ -40,7 +40,7 @@ from monoplane.algorithm.graph_costs import (  # noqa: F401
     normal_costs,
     proximity_weights,
 )
-from monoplane.algorithm.mincut import min_cut, min_cut_flows
+from monoplane.algorithm.mincut import min_cut, min_cut_arcs
 from monoplane.errors import InvalidInput
 from monoplane.jit import kernel
 
@@ -282,6 +282,74 @@ def pool_payback(num_nodes: int, edges: np.ndarray, cut_cost: np.ndarray | float
     return _payback(int(num_nodes), edges, cut, float(lambda_ * pairwise_scale))
 
 
+def shrink_subgraph(old_pool: np.ndarray, pool: np.ndarray, edges: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray] | None:
+    """A pool's subgraph from the subgraph of a larger pool, without the whole graph.
+
+    The RANSAC's pool only shrinks (the inliers of each plane leave it), so the edges among
+    the new pool are those of the last pool's subgraph whose ends both stayed: one pass over
+    that subgraph instead of over every edge of the frame's graph. The result is the
+    :meth:`monoplane.geometry.graph.NeighbourGraph.subgraph` of ``pool``, row for row.
+
+    Parameters
+    ----------
+    old_pool, pool : numpy.ndarray
+        (M,) and (M',) int64 ascending node indices.
+    edges : numpy.ndarray
+        (E, 2) int64 subgraph of ``old_pool``, in ``old_pool`` positions, in graph order.
+
+    Returns
+    -------
+    tuple or None
+        ``(edges', rows)``: the (E', 2) int64 subgraph of ``pool`` in ``pool`` positions and
+        the (E',) int64 rows of ``edges`` it keeps (to carry per-edge arrays along); None when
+        ``pool`` is not a subset of ``old_pool``.
+    """
+    old = np.ascontiguousarray(old_pool, dtype=np.int64)
+    new = np.ascontiguousarray(pool, dtype=np.int64)
+    within, remap = _subset_positions(old, new)
+    if not within:
+        return None
+    return _kept_edges(np.ascontiguousarray(edges, dtype=np.int64), remap)
+
+
+@kernel
+def _subset_positions(old: np.ndarray, new: np.ndarray) -> tuple[bool, np.ndarray]:
+    """Whether the (M',) int64 ``new`` is found in the (M,) int64 ``old`` in order (both
+    ascending: a subset), and the (M,) int64 position in ``new`` of each entry of ``old``
+    (-1: gone)."""
+    remap = np.full(old.shape[0], -1, dtype=np.int64)
+    i = 0
+    for k in range(new.shape[0]):
+        while i < old.shape[0] and old[i] != new[k]:
+            i += 1
+        if i == old.shape[0]:
+            return False, remap
+        remap[i] = k
+        i += 1
+    return True, remap
+
+
+@kernel
+def _kept_edges(edges: np.ndarray, remap: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The (E', 2) edges whose ends both have a position in ``remap``, renumbered, and their
+    (E',) rows."""
+    # One pass into buffers of the input's size, returned as views of their heads: pages of
+    # an empty buffer that are never written to are never touched, so the unused tail costs
+    # nothing (a counting pass first would cost a second read of every edge).
+    out = np.empty((edges.shape[0], 2), dtype=np.int64)
+    rows = np.empty(edges.shape[0], dtype=np.int64)
+    count = 0
+    for e in range(edges.shape[0]):
+        a, b = remap[edges[e, 0]], remap[edges[e, 1]]
+        if a >= 0 and b >= 0:
+            out[count, 0] = a
+            out[count, 1] = b
+            rows[count] = e
+            count += 1
+    return out[:count], rows[:count]
+
+
 def minimize_gc_ransac(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray,
                        cut_cost: np.ndarray | float, lambda_: float,
                        pairwise_scale: float = 1.0, payback: np.ndarray | None = None
@@ -298,10 +366,11 @@ def minimize_gc_ransac(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray,
     neighbours, which leaves the minimisers of the rest unchanged. With the normal term most
     points of other planes are fixed this way, which halves the max-flow graph.
 
-    The max-flow starts from a flow rather than from none (:func:`_warm_start`): flow pushed
-    straight from each outlier-preferring point to an inlier-preferring neighbour. Any
-    starting flow gives the same cut (see :func:`monoplane.algorithm.mincut.min_cut_flows`);
-    this one leaves less to search. (Starting the local optimisation's relabel from the flow of the
+    The max-flow starts from a flow rather than from none (:func:`_gc_ransac_network`, which
+    builds the solver's network in the same pass): flow pushed straight from each
+    outlier-preferring point to an inlier-preferring neighbour. Any starting flow gives the
+    same cut (see :func:`monoplane.algorithm.mincut.min_cut_flows`); this one leaves less to
+    search. (Starting the local optimisation's relabel from the flow of the
     labelling before it was measured too, and saved nothing: docs/evaluation.md.)
 
     Parameters
@@ -357,41 +426,13 @@ def minimize_gc_ransac(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray,
     elif payback.shape != f0.shape:
         raise InvalidInput(f"payback must have one entry per point ({f0.shape[0]}), got "
                            f"{payback.shape}")
-    nodes, src, dst, cap, slope = _gc_ransac_graph(f0, data1, edges, cut, lam, ls, payback)
+    # A positive slope makes label 1 (sink side) dearer: capacity on the source edge.
+    nodes, first, head, sister, rcap, terminal = _gc_ransac_network(f0, data1, edges, cut, lam,
+                                                                    ls, payback)
     labels = np.zeros(f0.shape[0], dtype=bool)
     if nodes.size:
-        # A positive slope makes label 1 (sink side) dearer: capacity on the source edge.
-        forward, reverse, terminal = _warm_start(src, dst, cap, slope)
-        labels[nodes] = min_cut_flows(nodes.size, src, dst, forward, reverse, terminal)[0]
+        labels[nodes] = min_cut_arcs(first, head, sister, rcap, terminal)
     return labels, float(_gc_ransac_energy(f0, data1, edges, cut, lam, ls, labels))
-
-
-@kernel
-def _warm_start(src: np.ndarray, dst: np.ndarray, cap: np.ndarray, slope: np.ndarray
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Residual graph of a starting flow for the max-flow of :func:`minimize_gc_ransac`.
-
-    ``src``, ``dst`` (E,) int64 and ``cap`` (E,) float64 are the graph's edges (no reverse
-    capacity), ``slope`` (F,) the terminal capacities (source minus sink). Along each edge in
-    order, as much flow as its residual, its tail's source capacity and its head's sink capacity
-    allow goes source -> tail -> head -> sink: the paths of length three the max-flow would
-    otherwise find one search at a time. Returns the forward and reverse residual capacities
-    (E,) and the terminals (F,), each edge's flow moved into the terminals of its ends.
-    """
-    forward = np.empty(src.shape[0])
-    reverse = np.zeros(src.shape[0])
-    terminal = slope.copy()
-    for e in range(src.shape[0]):
-        i, j = src[e], dst[e]
-        if terminal[i] > 0.0 and terminal[j] < 0.0:
-            push = min(terminal[i], -terminal[j], cap[e] - reverse[e])
-            if push > 0.0:
-                terminal[i] -= push
-                terminal[j] += push
-                reverse[e] += push
-    for e in range(src.shape[0]):
-        forward[e] = cap[e] - reverse[e]
-    return forward, reverse, terminal
 
 
 @kernel
@@ -414,15 +455,24 @@ def _non_submodular(f0: np.ndarray, edges: np.ndarray, cut: np.ndarray, ls: floa
 
 
 @kernel
-def _gc_ransac_graph(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray, cut: np.ndarray,
-                     lam: float, ls: float, payback: np.ndarray
-                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Max-flow graph of :func:`minimize_gc_ransac` on its undecided points.
+def _gc_ransac_network(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray, cut: np.ndarray,
+                       lam: float, ls: float, payback: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                  np.ndarray]:
+    """Max-flow network of :func:`minimize_gc_ransac` on its undecided points, warm-started.
 
     Inputs are float64 (M,) ``f0``, ``data1``, int64 (E, 2) ``edges``, float64 (E,) cut
     costs, λ, λs and the (M,) :func:`pool_payback`. Returns the (F,) pool positions of the
-    undecided points, the (E',) local ends and capacities of the edges among them, and their
-    (F,) cost slopes ``U(1) - U(0)``.
+    undecided points and their network as :func:`monoplane.algorithm.mincut.min_cut_arcs`
+    takes it: ``first`` (F + 1,), ``head``, ``sister``, ``rcap`` (2E',) of the E' edges among
+    them, and the (F,) terminals, the cost slopes ``U(1) - U(0)`` less the starting flow.
+
+    The starting flow: along each edge in order, as much flow as its capacity, its tail's
+    source capacity and its head's sink capacity allow goes source -> tail -> head -> sink,
+    the paths of length three the max-flow would otherwise find one search at a time. Any
+    starting flow gives the same cut (see :func:`monoplane.algorithm.mincut.min_cut_flows`);
+    this one leaves less to search. Slopes, arcs and pushes are taken in edge order, the
+    arcs laid out as :func:`~monoplane.algorithm.mincut.min_cut` lays out an edge list's.
     """
     m, n_edges = f0.shape[0], edges.shape[0]
     ei, ej = edges[:, 0], edges[:, 1]
@@ -438,20 +488,17 @@ def _gc_ransac_graph(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray, cut: 
     # Outputs are allocated at their size (counted first): untouched tails of oversized
     # buffers and the copies that trim them cost page faults on every call.
     nodes = np.empty(count, dtype=np.int64)
-    slope = np.empty(count)
+    terminal = np.empty(count)
     for p in range(m):
         q = local[p]
         if q >= 0:
             nodes[q] = p
-            slope[q] = keep * (data1[p] - f0[p])
-    inner = 0
-    for e in range(n_edges):
-        if local[ei[e]] >= 0 and local[ej[e]] >= 0:
-            inner += 1
-    src = np.empty(inner, dtype=np.int64)
-    dst = np.empty(inner, dtype=np.int64)
-    cap = np.empty(inner)
-    inner = 0
+            terminal[q] = keep * (data1[p] - f0[p])
+    first = np.zeros(count + 1, dtype=np.int32)
+    # The edges among undecided points, listed for the second pass (only the pages written
+    # to are touched: a few percent of the buffer).
+    inner = np.empty(n_edges, dtype=np.int32)
+    n_inner = 0
     for e in range(n_edges):
         li, lj = local[ei[e]], local[ej[e]]
         if li < 0 and lj < 0:
@@ -460,22 +507,48 @@ def _gc_ransac_graph(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray, cut: 
         b = ls * cut[e]
         if li >= 0 and lj >= 0:
             # e = A + (C - A) x_i + (D - C) x_j + (B + C - A - D)(1 - x_i) x_j, D = 0, B = C.
-            src[inner] = li
-            dst[inner] = lj
-            cap[inner] = max(2.0 * b - a, 0.0)
-            inner += 1
-            slope[li] += b - a
-            slope[lj] -= b
+            inner[n_inner] = e
+            n_inner += 1
+            first[li + 1] += 1
+            first[lj + 1] += 1
+            terminal[li] += b - a
+            terminal[lj] -= b
         else:
             # An edge to a fixed outlier costs e(0,0) = a or e(1,0) = b: a unary of its free end.
-            slope[max(li, lj)] += b - a
-    return nodes, src, dst, cap, slope
+            terminal[max(li, lj)] += b - a
+    for q in range(count):
+        first[q + 1] += first[q]
+    fill = first[1:].copy()
+    arcs = first[count]
+    head = np.empty(arcs, dtype=np.int32)
+    sister = np.empty(arcs, dtype=np.int32)
+    rcap = np.empty(arcs)
+    for k in range(n_inner):
+        e = inner[k]
+        li, lj = local[ei[e]], local[ej[e]]
+        a = 0.5 * ls * (f0[ei[e]] + f0[ej[e]])
+        cap = max(2.0 * ls * cut[e] - a, 0.0)
+        fill[li] -= 1
+        x = fill[li]
+        fill[lj] -= 1
+        y = fill[lj]
+        back = 0.0
+        if terminal[li] > 0.0 and terminal[lj] < 0.0:
+            push = min(terminal[li], -terminal[lj], cap)
+            if push > 0.0:
+                terminal[li] -= push
+                terminal[lj] += push
+                cap -= push
+                back += push
+        head[x], rcap[x], sister[x] = lj, cap, y
+        head[y], rcap[y], sister[y] = li, back, x
+    return nodes, first, head, sister, rcap, terminal
 
 
 @kernel
 def _gc_ransac_energy(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray, cut: np.ndarray,
                       lam: float, ls: float, labels: np.ndarray) -> float:
-    """Energy of a (M,) bool labelling for the inputs of :func:`_gc_ransac_graph`."""
+    """Energy of a (M,) bool labelling for the inputs of :func:`_gc_ransac_network`."""
     ei, ej = edges[:, 0], edges[:, 1]
     total = 0.0
     for p in range(f0.shape[0]):

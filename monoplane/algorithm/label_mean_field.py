@@ -67,8 +67,8 @@ def candidate_labels(unary: np.ndarray, start: np.ndarray, indptr: np.ndarray,
 
 def potts_mean_field(ptr: np.ndarray, labels: np.ndarray, costs: np.ndarray,
                      indptr: np.ndarray, indices: np.ndarray, weights: np.ndarray,
-                     start: np.ndarray, beta: float, temperature: float, iterations: int
-                     ) -> np.ndarray:
+                     start: np.ndarray, beta: float, temperature: float, iterations: int,
+                     settle: float = 0.0) -> np.ndarray:
     """Labels after ``iterations`` mean-field updates on the candidate lists.
 
     Parameters
@@ -84,6 +84,10 @@ def potts_mean_field(ptr: np.ndarray, labels: np.ndarray, costs: np.ndarray,
         Pairwise weight β and temperature T (> 0).
     iterations : int
         Number of updates; with 0 the labels are ``start``.
+    settle : float
+        A node whose probabilities all moved by at most this in an update counts as
+        unchanged, so its neighbours skip their next update unless another neighbour moved
+        (0: only a node whose probabilities repeat to the bit; exact).
 
     Returns
     -------
@@ -96,13 +100,14 @@ def potts_mean_field(ptr: np.ndarray, labels: np.ndarray, costs: np.ndarray,
     weight, scale = np.float32(-beta), np.float32(-1.0 / temperature)
     # A node's update reads only its neighbours' probabilities: when none of them changed in
     # the last iteration, its result would be the same to the bit, so it is copied instead.
-    # Inside a plane the probabilities reach a fixed point after a few iterations.
+    # Inside a plane the probabilities reach a fixed point after a few iterations; with
+    # ``settle`` > 0, those still moving in their last float32 bits count as there too.
     changed = np.ones(start.size, dtype=np.bool_)
     changed_next = np.empty_like(changed)
     for it in range(iterations):
         run_threaded([functools.partial(_update, ptr, labels, costs, indptr, indices, weights,
                                         q, weight, scale, a, b, it == 0, changed, nxt,
-                                        changed_next)
+                                        changed_next, np.float32(settle))
                       for a, b in chunks(start.size, _THREADED_NODES)])
         q, nxt = nxt, q
         changed, changed_next = changed_next, changed
@@ -169,12 +174,13 @@ def _initial(ptr: np.ndarray, labels: np.ndarray, costs: np.ndarray, start: np.n
 def _update(ptr: np.ndarray, labels: np.ndarray, costs: np.ndarray, indptr: np.ndarray,
             indices: np.ndarray, weights: np.ndarray, q: np.ndarray, weight: np.float32,
             scale: np.float32, row0: int, row1: int, first: bool, changed: np.ndarray,
-            out: np.ndarray, changed_out: np.ndarray) -> None:
+            out: np.ndarray, changed_out: np.ndarray, settle: np.float32) -> None:
     """One update of nodes ``row0:row1``: ``out`` (M,) float32 from ``q`` (M,) float32.
 
     ``changed`` (N,) bool says which nodes' probabilities changed in the last iteration; after
     the ``first`` one, a node none of whose neighbours changed keeps its probabilities.
-    ``changed_out`` receives whether each updated node's probabilities changed. The two
+    ``changed_out`` receives whether each updated node's probabilities changed by more than
+    ``settle`` (0: changed at all). The two
     nodes' label lists are ascending, so one merge pass finds the labels they share.
     """
     for i in range(row0, row1):
@@ -215,7 +221,7 @@ def _update(ptr: np.ndarray, labels: np.ndarray, costs: np.ndarray, indptr: np.n
         moved = False
         for s in range(a, b):
             out[s] /= total
-            moved = moved or out[s] != q[s]
+            moved = moved or abs(out[s] - q[s]) > settle
         changed_out[i] = moved
 
 

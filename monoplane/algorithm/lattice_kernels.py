@@ -39,10 +39,7 @@ def enclosing_simplices(f: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarr
     """
     n, d = f.shape
     d1 = d + 1
-    scale = np.empty(d)
-    for k in range(d):
-        # Scale so that the lattice's [1,2,1]^(d+1) blur approximates a unit-deviation Gaussian.
-        scale[k] = np.sqrt(2.0 / 3.0) * d1 / np.sqrt((k + 1.0) * (k + 2.0))
+    scale = _elevation_scale(d)
     key0 = np.empty((n, d), np.int64)
     ranks = np.empty((n, d1), np.int64)
     weights = np.empty((n, d1), np.float32)
@@ -52,47 +49,69 @@ def enclosing_simplices(f: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarr
     rank = np.empty(d1, np.int64)
     bary = np.empty(d1 + 1)
     for i in range(n):
-        # x_0 = Σ_k cf_k, x_j = Σ_{k>=j} cf_k - j cf_{j-1}.
-        tail = 0.0
-        for j in range(d, 0, -1):
-            cf = f[i, j - 1] * scale[j - 1]
-            elevated[j] = tail - j * cf
-            tail += cf
-        elevated[0] = tail
-        total = 0.0
-        for j in range(d1):
-            down = np.floor(elevated[j] / d1) * d1
-            up = down + d1
-            rem0[j] = up if up - elevated[j] < elevated[j] - down else down
-            total += rem0[j]
-        s = np.int64(np.rint(total / d1))
-        for j in range(d1):
-            diff[j] = elevated[j] - rem0[j]
-        for k in range(d1):
-            r = s
-            for j in range(d1):
-                if diff[j] > diff[k] or (j < k and diff[j] == diff[k]):
-                    r += 1
-            rank[k] = r
-        for k in range(d1):
-            if rank[k] < 0:
-                rank[k] += d1
-                rem0[k] += d1
-            elif rank[k] > d:
-                rank[k] -= d1
-                rem0[k] -= d1
-        bary[:] = 0.0
-        for k in range(d1):
-            v = (elevated[k] - rem0[k]) / d1
-            bary[d - rank[k]] += v
-            bary[d - rank[k] + 1] -= v
-        bary[0] += 1.0 + bary[d1]
+        _enclose(f[i], scale, elevated, rem0, diff, rank, bary)
         for k in range(d1):
             ranks[i, k] = rank[k]
             weights[i, k] = bary[k]
         for k in range(d):
             key0[i, k] = np.int64(rem0[k])
     return key0, ranks, weights
+
+
+@numba.njit(cache=True, nogil=True)
+def _elevation_scale(d: int) -> np.ndarray:
+    """(d,) scale of each feature coordinate before elevation, so that the lattice's
+    [1,2,1]^(d+1) blur approximates a unit-deviation Gaussian."""
+    scale = np.empty(d)
+    for k in range(d):
+        scale[k] = np.sqrt(2.0 / 3.0) * (d + 1) / np.sqrt((k + 1.0) * (k + 2.0))
+    return scale
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _enclose(f: np.ndarray, scale: np.ndarray, elevated: np.ndarray, rem0: np.ndarray,
+             diff: np.ndarray, rank: np.ndarray, bary: np.ndarray) -> None:
+    """The enclosing simplex of one (d,) float64 feature vector ``f``: fills ``rem0`` (d+1,)
+    with its remainder-0 vertex (elevated coordinates, float64), ``rank`` (d+1,) with the
+    residual ranks and ``bary`` (d+2,) with the barycentric weights (first d+1 used);
+    ``elevated`` and ``diff`` are (d+1,) scratch. See :func:`enclosing_simplices`."""
+    d = f.shape[0]
+    d1 = d + 1
+    # x_0 = Σ_k cf_k, x_j = Σ_{k>=j} cf_k - j cf_{j-1}.
+    tail = 0.0
+    for j in range(d, 0, -1):
+        cf = f[j - 1] * scale[j - 1]
+        elevated[j] = tail - j * cf
+        tail += cf
+    elevated[0] = tail
+    total = 0.0
+    for j in range(d1):
+        down = np.floor(elevated[j] / d1) * d1
+        up = down + d1
+        rem0[j] = up if up - elevated[j] < elevated[j] - down else down
+        total += rem0[j]
+    s = np.int64(np.rint(total / d1))
+    for j in range(d1):
+        diff[j] = elevated[j] - rem0[j]
+    for k in range(d1):
+        r = s
+        for j in range(d1):
+            if diff[j] > diff[k] or (j < k and diff[j] == diff[k]):
+                r += 1
+        rank[k] = r
+    for k in range(d1):
+        if rank[k] < 0:
+            rank[k] += d1
+            rem0[k] += d1
+        elif rank[k] > d:
+            rank[k] -= d1
+            rem0[k] -= d1
+    bary[:] = 0.0
+    for k in range(d1):
+        v = (elevated[k] - rem0[k]) / d1
+        bary[d - rank[k]] += v
+        bary[d - rank[k] + 1] -= v
+    bary[0] += 1.0 + bary[d1]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -127,7 +146,7 @@ def insert_vertices(key0: np.ndarray, rank: np.ndarray, place: np.ndarray
         (M,) int64 packed key of each vertex, in order of first use.
     table, index : numpy.ndarray
         The hash table: slot -> code (-1 = empty) and slot -> vertex index, for
-        :func:`locate_vertices`.
+        :func:`add_messages_at`.
     """
     n, d = key0.shape
     d1 = d + 1
@@ -198,59 +217,6 @@ def lattice_neighbours(codes: np.ndarray, place: np.ndarray) -> np.ndarray:
 
 
 @numba.njit(cache=True, nogil=True)
-def locate_vertices(key0: np.ndarray, rank: np.ndarray, weights: np.ndarray,
-                    span: np.ndarray, place: np.ndarray, table: np.ndarray,
-                    index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices of other points' simplices in an existing lattice (for slicing only).
-
-    Parameters
-    ----------
-    key0, rank, weights : numpy.ndarray
-        From :func:`enclosing_simplices` for the new points, ``key0`` shifted like the
-        lattice's own keys.
-    span : numpy.ndarray
-        (d,) int64 radix of each key coordinate; a vertex outside ``0 .. span-1`` cannot be in
-        the lattice (and its code would be meaningless).
-    place, table, index : numpy.ndarray
-        The lattice's place values and hash table (:func:`insert_vertices`).
-
-    Returns
-    -------
-    vertex_of : numpy.ndarray
-        (N, d+1) int32 vertex index, 0 where the vertex is not in the lattice.
-    weights : numpy.ndarray
-        (N, d+1) float32 barycentric weights, 0 where the vertex is not in the lattice (it
-        holds no value).
-    """
-    n, d = key0.shape
-    d1 = d + 1
-    bits = 0
-    while (1 << bits) < table.size:
-        bits += 1
-    shift = np.uint64(64 - bits)
-    vertex_of = np.zeros((n, d1), np.int32)
-    out = np.zeros((n, d1), np.float32)
-    for i in range(n):
-        for r in range(d1):
-            code = 0
-            inside = True
-            for k in range(d):
-                key = key0[i, k] + r
-                if rank[i, k] > d - r:
-                    key -= d1
-                if key < 0 or key >= span[k]:
-                    inside = False
-                code += key * place[k]
-            if not inside:
-                continue
-            h = _slot(table, code, shift)
-            if table[h] == code:
-                vertex_of[i, r] = index[h]
-                out[i, r] = weights[i, r]
-    return vertex_of, out
-
-
-@numba.njit(cache=True, nogil=True)
 def _barycentric(vertex_of: np.ndarray, weights: np.ndarray, values: np.ndarray, rows: int,
                  splat: bool) -> np.ndarray:
     """Product with the (N, M) matrix ``B`` of the points' barycentric weights (row i: point
@@ -263,7 +229,7 @@ def _barycentric(vertex_of: np.ndarray, weights: np.ndarray, values: np.ndarray,
     ----------
     vertex_of, weights : numpy.ndarray
         (N, d+1) int32 vertex indices and float32 weights (:func:`insert_vertices`,
-        :func:`locate_vertices`).
+        :func:`enclosing_simplices`).
     values : numpy.ndarray
         (N, C) float32 point values when ``splat``, else (M, C) lattice values.
     rows : int
@@ -317,3 +283,109 @@ def splat_blur(vertex_of: np.ndarray, weights: np.ndarray, neighbours: np.ndarra
 def slice_values(vertex_of: np.ndarray, weights: np.ndarray, lat: np.ndarray) -> np.ndarray:
     """(N, C) float32 barycentric interpolation of lattice values ``lat`` (M, C)."""
     return _barycentric(vertex_of, weights, lat, vertex_of.shape[0], False)
+
+
+@numba.njit(cache=True, nogil=True)
+def add_messages_at(head: np.ndarray, tail: np.ndarray, div: float, div2: float,
+                    lo: np.ndarray, span: np.ndarray, place: np.ndarray, table: np.ndarray,
+                    index: np.ndarray, values: np.ndarray, ones: np.ndarray, weight: np.float32,
+                    start: int, stop: int, out: np.ndarray) -> None:
+    """Rows ``start:stop`` of ``out`` += a normalised lattice message at points not in the
+    lattice, which are located, sliced and normalised one at a time.
+
+    Point k's features are ``[head[k], tail[k] / div / div2]`` (the CRF's positions, shared by
+    its kernels, then a cue). The message is ``weight · (B values) / sqrt(max(B ones,
+    1e-20))`` with ``B`` the point's barycentric weights on the lattice (0 at vertices that
+    are not in it): :func:`enclosing_simplices`, a look-up of the simplex's vertices in the
+    lattice's hash table, :func:`slice_values` and that float32 arithmetic, fused, so that no
+    (K, d+1) arrays are built.
+
+    Parameters
+    ----------
+    head, tail : numpy.ndarray
+        (K, a) and (K, b) float64, ``a + b = d`` the lattice's dimension (``b`` may be 0).
+    div, div2 : float
+        Divisors of ``tail``, applied one after the other (1.0: none).
+    lo, span, place, table, index : numpy.ndarray
+        The lattice's key offset (d,), key radix (d,), place values (d,) and hash table
+        (:func:`insert_vertices`).
+    values : numpy.ndarray
+        (M, L) float32 blurred lattice values.
+    ones : numpy.ndarray
+        (M, 1) float32 blurred lattice values of ones (the normaliser).
+    weight : numpy.float32
+        Kernel weight.
+    start, stop : int
+        Rows to do.
+    out : numpy.ndarray
+        (K, L) float32 sums, added to in place.
+    """
+    a = head.shape[1]
+    d = a + tail.shape[1]
+    d1 = d + 1
+    num = values.shape[1]
+    scale = _elevation_scale(d)
+    bits = 0
+    while (1 << bits) < table.size:
+        bits += 1
+    shift = np.uint64(64 - bits)
+    f = np.empty(d)
+    elevated = np.empty(d1)
+    rem0 = np.empty(d1)
+    diff = np.empty(d1)
+    rank = np.empty(d1, np.int64)
+    bary = np.empty(d1 + 1)
+    acc = np.empty(num + 1, np.float32)
+    of_rank = np.empty(d1, np.int64)
+    place_sum = 0
+    for k in range(d):
+        place_sum += place[k]
+    floor = np.float32(1e-20)
+    for i in range(start, stop):
+        for k in range(a):
+            f[k] = head[i, k]
+        for k in range(d - a):
+            f[a + k] = tail[i, k] / div / div2
+        _enclose(f, scale, elevated, rem0, diff, rank, bary)
+        acc[:] = 0.0
+        # Vertex r's key is key0 + r, less d+1 where rank > d - r: every key of the simplex
+        # lies in key0 - d .. key0 + d. When they all lie inside the key range, each code
+        # follows from the previous one (the coordinate of rank d - r + 1 drops by d+1).
+        code = 0
+        whole = True
+        for k in range(d):
+            key = np.int64(rem0[k]) - lo[k]
+            whole = whole and key - d >= 0 and key + d < span[k]
+            code += key * place[k]
+            of_rank[rank[k]] = k
+        of_rank[rank[d]] = d
+        for r in range(d1):
+            if whole:
+                if r > 0:
+                    code += place_sum
+                    k = of_rank[d - r + 1]
+                    if k < d:
+                        code -= d1 * place[k]
+            else:
+                code = 0
+                inside = True
+                for k in range(d):
+                    key = np.int64(rem0[k]) - lo[k] + r
+                    if rank[k] > d - r:
+                        key -= d1
+                    if key < 0 or key >= span[k]:
+                        inside = False
+                    code += key * place[k]
+                if not inside:
+                    continue
+            h = _slot(table, code, shift)
+            if table[h] != code:
+                continue  # a vertex outside the lattice holds nothing
+            v = index[h]
+            w = np.float32(bary[r])
+            for j in range(num):
+                acc[j] += w * values[v, j]
+            acc[num] += w * ones[v, 0]
+        den = np.float32(np.sqrt(max(acc[num], floor)))
+        for j in range(num):
+            out[i, j] += np.float32(weight * acc[j]) / den

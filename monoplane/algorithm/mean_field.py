@@ -95,38 +95,12 @@ class PermutohedralLattice:
 
     def blurred(self, values: np.ndarray) -> np.ndarray:
         """(M, C) float32 lattice values: (N, C) ``values`` splatted and blurred, to be sliced
-        at these points (:meth:`filter`) or at others (:meth:`slice_at`)."""
+        at these points (:meth:`filter`) or at others (:meth:`GaussianKernel.add_message_at`)."""
         v = np.ascontiguousarray(values, dtype=np.float32)
         if v.ndim != 2 or v.shape[0] != self.num_points:
             raise InvalidInput(f"values must be ({self.num_points}, C), got {v.shape}")
         return lk.splat_blur(self._vertex_of, self._weights, self._neighbours, v,
                              self.num_vertices)
-
-    def locate(self, features: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Simplex vertices and weights of other points (e.g. full-resolution pixels), to
-        slice this lattice's values there with
-        :func:`monoplane.algorithm.lattice_kernels.slice_values`.
-
-        Parameters
-        ----------
-        features : numpy.ndarray
-            (K, d) features in the lattice's units.
-
-        Returns
-        -------
-        vertex_of : numpy.ndarray
-            (K, d+1) int32 vertex indices.
-        weights : numpy.ndarray
-            (K, d+1) float32 barycentric weights; 0 where a vertex is not in the lattice, so
-            a slice gives ``≈ c · Σ_j exp(-½|g_k - f_j|²) values_j`` over the lattice's own
-            points j, and 0 where the whole simplex lies outside it.
-        """
-        g = np.ascontiguousarray(features, dtype=np.float64)
-        if g.ndim != 2 or g.shape[1] != self.dim or not np.all(np.isfinite(g)):
-            raise InvalidInput(f"slice features must be finite (K, {self.dim}), got {g.shape}")
-        key0, rank, weights = lk.enclosing_simplices(g)
-        return lk.locate_vertices(key0 - self._lo, rank, weights, self._radix, self._place,
-                                  self._table, self._index)
 
 
 @dataclass
@@ -162,28 +136,46 @@ class GaussianKernel:
         """(N, L) float32 weighted, normalised kernel response to marginals ``q`` (N, L)."""
         return self.weight * self._norm * self.lattice.filter(self._norm * q)
 
-    def messages(self, q: np.ndarray, features: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`message`, and the message that (K, d) other points get, from one blur.
+    def blur(self, q: np.ndarray) -> np.ndarray:
+        """(M, L) float32 lattice values of marginals ``q`` (N, L): normalised, splatted and
+        blurred, for :meth:`message_from` and :meth:`add_message_at`."""
+        return self.lattice.blurred(self._norm * q)
 
-        The message at other points (full-resolution pixels of a CRF run on a coarser grid)
-        is the same normalised kernel evaluated at points that are not in the lattice:
-        ``w · D_k^-½ Σ_j k(g_k, f_j) D_j^-½ q_j`` with ``D_k = Σ_j k(g_k, f_j)``.
-
-        Returns
-        -------
-        own : numpy.ndarray
-            (N, L) float32, equal to ``message(q)``.
-        at : numpy.ndarray
-            (K, L) float32 messages at ``features``.
-        """
-        blurred = self.lattice.blurred(self._norm * q)
+    def message_from(self, blurred: np.ndarray) -> np.ndarray:
+        """(N, L) float32 :meth:`message` of the marginals :meth:`blur` gave ``blurred``."""
         lat = self.lattice
-        own = self.weight * self._norm * lk.slice_values(lat._vertex_of, lat._weights, blurred)
-        vertex_of, weights = lat.locate(features)
-        # Numerator and normaliser sliced together: one pass over the located vertices.
-        both = lk.slice_values(vertex_of, weights, np.hstack([blurred, self._ones]))
-        at = self.weight * both[:, :-1] / np.sqrt(np.maximum(both[:, -1:], 1e-20))
-        return own, at
+        return self.weight * self._norm * lk.slice_values(lat._vertex_of, lat._weights, blurred)
+
+    def add_message_at(self, blurred: np.ndarray, head: np.ndarray, tail: np.ndarray,
+                       divisors: tuple[float, float], rows: tuple[int, int],
+                       out: np.ndarray) -> None:
+        """Add the message of the marginals :meth:`blur` gave ``blurred`` at other points
+        (full-resolution pixels of a CRF run on a coarser grid) to rows ``rows`` of ``out``.
+
+        It is the same normalised kernel evaluated at points that are not in the lattice:
+        ``w · D_k^-½ Σ_j k(g_k, f_j) D_j^-½ q_j`` with ``D_k = Σ_j k(g_k, f_j)``, where point
+        k's features are ``g_k = [head[k], tail[k] / divisors[0] / divisors[1]]``.
+
+        Parameters
+        ----------
+        blurred : numpy.ndarray
+            (M, L) float32 from :meth:`blur`.
+        head, tail : numpy.ndarray
+            (K, a) and (K, b) float64 feature columns, ``a + b`` the kernel's dimension.
+        divisors : tuple of float
+            What ``tail`` is divided by, in turn.
+        rows : tuple of int
+            ``(start, stop)``: the points done by this call (threads share one ``out``).
+        out : numpy.ndarray
+            (K, L) float32, added to in place.
+        """
+        lat = self.lattice
+        if head.shape[1] + tail.shape[1] != lat.dim:
+            raise InvalidInput(f"features of {head.shape[1] + tail.shape[1]} columns for a "
+                               f"{lat.dim}-d kernel")
+        lk.add_messages_at(head, tail, float(divisors[0]), float(divisors[1]), lat._lo,
+                           lat._radix, lat._place, lat._table, lat._index, blurred, self._ones,
+                           np.float32(self.weight), rows[0], rows[1], out)
 
 
 def unary_from_labels(labels: np.ndarray, num_labels: int, confidence: float,

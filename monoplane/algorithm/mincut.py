@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from monoplane.errors import InvalidInput
-from monoplane.jit import kernel
+from monoplane.jit import inline, kernel
 
 #: Values of ``parent`` for nodes without a parent arc.
 _FREE, _TERMINAL, _ORPHAN = -1, -2, -3
@@ -129,6 +129,38 @@ def min_cut_flows(num_nodes: int, tails: np.ndarray, heads: np.ndarray, caps: np
     return sink_side, reverse
 
 
+def min_cut_arcs(first: np.ndarray, head: np.ndarray, sister: np.ndarray, rcap: np.ndarray,
+                 terminal: np.ndarray) -> np.ndarray:
+    """:func:`min_cut` (unvalidated input) of a graph already laid out as the solver's arcs.
+
+    For callers that build the network themselves in one pass (the graph-cut labelers):
+    the arrays :func:`min_cut` would build from edge lists, and the same cut.
+
+    Parameters
+    ----------
+    first : numpy.ndarray
+        (N + 1,) int32: node i's arcs are the slots ``first[i]:first[i + 1]``. For the cut of
+        :func:`min_cut` bit for bit, they must be in the order it stores them: edges taken in
+        order, each edge's tail -> head arc and head -> tail arc put at the last free slot of
+        their tail's and head's range (so each node's arcs run newest first).
+    head : numpy.ndarray
+        (2E,) int32 node an arc points to.
+    sister : numpy.ndarray
+        (2E,) int32 slot of the opposite arc.
+    rcap : numpy.ndarray
+        (2E,) float64 residual capacity of each arc (overwritten by the final residual).
+    terminal : numpy.ndarray
+        (N,) float64 terminal capacities as for :func:`min_cut` (overwritten).
+
+    Returns
+    -------
+    numpy.ndarray
+        (N,) bool, True for the nodes on the sink side of the cut.
+    """
+    _check_size(terminal.shape[0], head.shape[0] // 2)
+    return _bk_arcs_min_cut(first, head, sister, rcap, terminal)
+
+
 def _check_size(num_nodes: int, num_edges: int) -> None:
     """The solver numbers nodes and arcs (two per edge) in int32."""
     if num_nodes >= 2**31 or 2 * num_edges >= 2**31:
@@ -141,17 +173,36 @@ def _bk_min_cut(n: int, tails: np.ndarray, heads: np.ndarray, caps: np.ndarray,
                 rev_caps: np.ndarray, terminal: np.ndarray
                 ) -> tuple[float, np.ndarray, np.ndarray]:
     """:func:`min_cut` on validated int64 / float64 arrays, and the (E,) final residual
-    capacities from head to tail (:func:`min_cut_flows`).
+    capacities from head to tail (:func:`min_cut_flows`): :func:`_arcs` then
+    :func:`_bk_search`."""
+    first, head, sister, rcap, forward = _arcs(n, tails, heads, caps, rev_caps)
+    flow, sink_side = _bk_search(n, first, head, sister, rcap, terminal.copy())
+    reverse = np.empty(tails.shape[0])
+    for e in range(tails.shape[0]):
+        reverse[e] = rcap[sister[forward[e]]]
+    return flow, sink_side, reverse
 
-    Arcs are numbered by their slot in the per-node lists (node i's arcs are
-    ``first[i]:first[i + 1]``), so a node's arcs are read from contiguous memory; ``sister[a]``
-    is the opposite arc. ``parent[i]`` is the arc from i towards its parent in its search
-    tree, or ``_FREE``, ``_TERMINAL`` or ``_ORPHAN``. Node and arc indices are int32: the
-    arrays the search walks stay half as large, which makes it about 10 % faster
-    (:func:`_check_size` holds the graph to that).
+
+@kernel
+def _bk_arcs_min_cut(first: np.ndarray, head: np.ndarray, sister: np.ndarray,
+                     rcap: np.ndarray, terminal: np.ndarray) -> np.ndarray:
+    """:func:`min_cut_arcs`: the (N,) bool sink side; ``rcap`` and ``terminal`` are
+    consumed (left as the final residual)."""
+    return _bk_search(terminal.shape[0], first, head, sister, rcap, terminal)[1]
+
+
+@inline
+def _arcs(n: int, tails: np.ndarray, heads: np.ndarray, caps: np.ndarray,
+          rev_caps: np.ndarray
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The arc arrays of :func:`min_cut_arcs` for (E,) edges given as ends and capacities,
+    and the (E,) int64 slot of each edge's tail -> head arc.
+
+    Each node's arcs, newest first (the order the reference implementation visits them).
+    Node and arc indices are int32: the arrays the search walks stay half as large, which
+    makes it about 10 % faster (:func:`_check_size` holds the graph to that).
     """
     m = tails.shape[0]
-    # Each node's arcs, newest first (the order the reference implementation visits them).
     first = np.zeros(n + 1, dtype=np.int32)
     for e in range(m):
         first[tails[e] + 1] += 1
@@ -172,7 +223,19 @@ def _bk_min_cut(n: int, tails: np.ndarray, heads: np.ndarray, caps: np.ndarray,
         head[a], rcap[a], sister[a] = v, caps[e], b
         forward[e] = a
         head[b], rcap[b], sister[b] = u, rev_caps[e], a
-    tr = terminal.copy()
+    return first, head, sister, rcap, forward
+
+
+@inline
+def _bk_search(n: int, first: np.ndarray, head: np.ndarray, sister: np.ndarray,
+               rcap: np.ndarray, tr: np.ndarray) -> tuple[float, np.ndarray]:
+    """The Boykov-Kolmogorov search on an arc network (layout of :func:`min_cut_arcs`):
+    the flow and the (N,) bool sink side; ``rcap`` and the terminals ``tr`` end as the
+    final residual.
+
+    ``parent[i]`` is the arc from i towards its parent in its search tree, or ``_FREE``,
+    ``_TERMINAL`` or ``_ORPHAN``.
+    """
     parent = np.full(n, _FREE, dtype=np.int32)
     is_sink = np.zeros(n, dtype=np.bool_)
     ts = np.zeros(n, dtype=np.int64)
@@ -374,7 +437,4 @@ def _bk_min_cut(n: int, tails: np.ndarray, heads: np.ndarray, caps: np.ndarray,
     sink_side = np.zeros(n, dtype=np.bool_)
     for i in range(n):
         sink_side[i] = is_sink[i] and parent[i] != _FREE
-    reverse = np.empty(m)
-    for e in range(m):
-        reverse[e] = rcap[sister[forward[e]]]
-    return flow, sink_side, reverse
+    return flow, sink_side

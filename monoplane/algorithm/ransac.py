@@ -141,6 +141,9 @@ class RansacConfig:
     noise_factor: float = param(
         0.0, "if > 0, a frame whose planes show depth noise σ well below ε is searched again "
         "with ε = noise_factor × σ (a depth sensor; monoplane.geometry.sensor_noise)")
+    noise_planes: int = param(
+        0, "with noise_factor > 0, the first search, which only measures the noise, stops "
+        "after this many planes (0: max_planes); the largest planes show it already")
 
     def __post_init__(self) -> None:
         # No table name: the config loader says which table (and a direct caller knows which
@@ -163,6 +166,7 @@ class RansacConfig:
             (self.lattice_turn_deg >= 0, "lattice_turn_deg must be non-negative"),
             (self.lo_iterations >= 0, "lo_iterations must be non-negative"),
             (self.noise_factor >= 0, "noise_factor must be non-negative"),
+            (self.noise_planes >= 0, "noise_planes must be non-negative"),
             (self.max_rejections >= 0, "max_rejections must be non-negative"),
             (self.score_points == 0 or self.score_points >= 3,
              "score_points must be 0 (all) or at least 3"),
@@ -229,7 +233,8 @@ class SequentialRansac:
         cfg = self.config
         rng = np.random.default_rng(cfg.seed)
         t = time.perf_counter()
-        cloud = PlaneCloud.from_frame(frame, cfg.max_points, rng, grid=cfg.sampling == "grid")
+        cloud = PlaneCloud.from_frame(frame, cfg.max_points, rng, grid=cfg.sampling == "grid",
+                                      fractional=True)
         t_cloud = time.perf_counter() - t
         t_graph = 0.0
 
@@ -260,14 +265,14 @@ class SequentialRansac:
             in_background(lambda: cloud.image_nearest_sample)
         if meanwhile is not None:
             meanwhile()
-        result = self._run(cloud, graph, rng)
-        params = cfg.params
         if cfg.noise_factor > 0:
-            result, params = self._noise_limited(cloud, graph, rng, result)
+            result, params = self._noise_limited(cloud, graph, rng)
             if params.epsilon < cfg.epsilon:
                 sigma = params.epsilon / cfg.noise_factor * cloud.scale
                 frame.notes.append(f"ransac: depth noise {sigma:.3g} {frame.depth_units} on the "
                                    f"planes, searched again with epsilon {params.epsilon:.3g}")
+        else:
+            result, params = self._run(cloud, graph, rng), cfg.params
         self.params_used = params
 
         t = time.perf_counter()
@@ -315,12 +320,14 @@ class SequentialRansac:
         return self._run(cloud, lambda: graph, rng)
 
     def _noise_limited(self, cloud: PlaneCloud, get_graph: Callable[[], NeighbourGraph],
-                       rng: np.random.Generator, found: CloudPlanes
-                       ) -> tuple[CloudPlanes, RansacParams]:
-        """The search again with ε = ``noise_factor`` × the noise its planes show, when that
-        is below :data:`RESEARCH_BELOW` × ε (:mod:`monoplane.geometry.sensor_noise`); else
-        ``found`` and the configured thresholds. The search time of both passes is counted."""
+                       rng: np.random.Generator) -> tuple[CloudPlanes, RansacParams]:
+        """A first search, then the search again with ε = ``noise_factor`` × the noise its
+        planes show when that is below :data:`RESEARCH_BELOW` × ε
+        (:mod:`monoplane.geometry.sensor_noise`); else the first search's result and the
+        configured thresholds (searched again when ``noise_planes`` cut the first search
+        short). The search time of both passes is counted."""
         cfg = self.config
+        found = self._run(cloud, get_graph, rng, max_planes=cfg.noise_planes or None)
         # Depth along the optical axis of the normalised points (the cloud is centred).
         depth = cloud.points[:, 2] * cloud.scale + cloud.center[2]
         # Least-squares planes of the labels: the search's own planes are fitted to its
@@ -328,20 +335,24 @@ class SequentialRansac:
         planes = fit_planes_per_label(cloud.points, found.labels, len(found.planes))[0]
         sigma = plane_residual_sigma(cloud.points, depth, found.labels, planes)
         epsilon = noise_limited_epsilon(cfg.epsilon, sigma, cfg.noise_factor)
-        if not epsilon < RESEARCH_BELOW * cfg.epsilon:
-            return found, cfg.params
         params = RansacParams(epsilon=epsilon, epsilon_n_deg=cfg.epsilon_n_deg)
+        if not epsilon < RESEARCH_BELOW * cfg.epsilon:
+            if not cfg.noise_planes:
+                return found, cfg.params
+            params = cfg.params
         again = self._run(cloud, get_graph, rng, params)
         timings = {k: found.timings[k] + again.timings[k] for k in found.timings}
         return again._replace(timings=timings), params
 
     def _run(self, cloud: PlaneCloud, get_graph: Callable[[], NeighbourGraph],
-             rng: np.random.Generator, params: RansacParams | None = None) -> CloudPlanes:
+             rng: np.random.Generator, params: RansacParams | None = None,
+             max_planes: int | None = None) -> CloudPlanes:
         """:meth:`run_cloud` with the graph asked for only when the first plane is labelled
         (``get_graph`` may wait for it to be built); ``params`` replace the configured
-        thresholds."""
+        thresholds, ``max_planes`` the configured cap on the planes."""
         cfg = self.config
         params = cfg.params if params is None else params
+        max_planes = cfg.max_planes if max_planes is None else max_planes
         timings = {"ransac.search": 0.0, "ransac.label": 0.0}
         min_support = max(cfg.min_support_points, math.ceil(cfg.min_support * cloud.size))
         point_labels = np.zeros(cloud.size, dtype=np.int32)
@@ -350,7 +361,7 @@ class SequentialRansac:
         context = self.labeler.new_context()  # the labeler's memory of this frame
         prepared: Callable[[], None] | None = None
         rejections = 0
-        while len(found) < cfg.max_planes and pool.size >= min_support:
+        while len(found) < max_planes and pool.size >= min_support:
             t = time.perf_counter()
             best = self._search(cloud, pool, rng, params)
             timings["ransac.search"] += time.perf_counter() - t

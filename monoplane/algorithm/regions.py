@@ -422,27 +422,27 @@ def clean_regions(rec: Reconstruction, labels: np.ndarray, min_area: int,
     # Every later step works on the pieces' point moments; regions only ever grow by union.
     moments = RegionMoments.of(points, valid, pieces, origin.size)
     area = np.bincount(pieces.ravel(), minlength=origin.size + 1)[1:]
+    # Merging and absorbing renumber regions: ``to`` maps each piece to its region, and the
+    # pieces' image is renumbered once, at the end.
+    to = np.arange(origin.size + 1, dtype=np.int32)
     if split and (merge or absorb):
         tolerance = max_distance * scene_radius(points, valid)
+        touching = (region_adjacency(pieces, connectivity)
+                    if absorb or (merge and merge_adjacent) else None)
         if merge:
             fitted, _, _ = moments.planes(rec.planes[origin - 1])
-            extra = region_adjacency(pieces, connectivity) if merge_adjacent else None
             remap, origin = _merge_groups(moments, area, origin, fitted, max_angle_deg,
-                                          tolerance, extra)
-            pieces = remap[pieces]
-            moments = moments.combine(remap[1:], origin.size)
-            area = np.bincount(remap[1:], area, origin.size + 1)[1:].astype(np.int64)
+                                          tolerance, touching if merge_adjacent else None)
+            to, moments, area = _regrouped(to, moments, area, remap, origin.size)
+            touching = None if touching is None else _renumbered_pairs(touching, remap)
         if absorb:
             fitted, _, _ = moments.planes(rec.planes[origin - 1])
-            remap = _absorb_remap(moments, area, region_adjacency(pieces, connectivity),
-                                  fitted, min_area, tolerance)
-            pieces = remap[pieces]
-            moments = moments.combine(remap[1:], origin.size)
-            area = np.bincount(remap[1:], area, origin.size + 1)[1:].astype(np.int64)
+            remap = _absorb_remap(moments, area, touching, fitted, min_area, tolerance)
+            to, moments, area = _regrouped(to, moments, area, remap, origin.size)
     kept = np.flatnonzero(area >= min_area) + 1
     remap = np.zeros(area.size + 1, dtype=np.int32)
     remap[kept] = np.arange(1, kept.size + 1, dtype=np.int32)
-    final = remap[pieces]
+    final = remap[to][pieces]
     moments = moments.combine(remap[1:], kept.size)
     source = origin[kept - 1]
     if not split:
@@ -454,6 +454,28 @@ def clean_regions(rec: Reconstruction, labels: np.ndarray, min_area: int,
     params, rmse, support = moments.planes(inherited)
     return Reconstruction(frame=frame, labels=final, planes=params, rmse=rmse, support=support,
                           config=rec.config, timings=dict(rec.timings))
+
+
+def _regrouped(to: np.ndarray, moments: RegionMoments, area: np.ndarray, remap: np.ndarray,
+               num: int) -> tuple[np.ndarray, RegionMoments, np.ndarray]:
+    """Pieces' regions ``to`` (P+1,), moments and (R,) areas after the (R+1,) ``remap`` of
+    regions into ``num`` groups."""
+    area = np.bincount(remap[1:], area, num + 1)[1:].astype(np.int64)
+    return remap[to], moments.combine(remap[1:], num), area
+
+
+def _renumbered_pairs(pairs: np.ndarray, remap: np.ndarray) -> np.ndarray:
+    """:func:`region_adjacency` of ``remap[labels]``, from the (E, 2) pairs of ``labels``.
+
+    Two new labels touch exactly when two old labels that map to them touch, so the
+    renumbered pairs (without 0 and without a label paired with itself) are the new ones;
+    sorted and distinct as :func:`region_adjacency` returns them.
+    """
+    a = remap[pairs[:, 0]].astype(np.int64)
+    b = remap[pairs[:, 1]].astype(np.int64)
+    keep = (a > 0) & (b > 0) & (a != b)
+    new = np.stack([np.minimum(a, b)[keep], np.maximum(a, b)[keep]], axis=1)
+    return np.unique(new, axis=0).reshape(-1, 2)
 
 
 @kernel

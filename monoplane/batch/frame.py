@@ -191,7 +191,8 @@ def process_frame(job: BatchJob, spec: FrameSpec) -> FrameResult:
         pipe = pipeline_for(job.config)
         frame = load_frame(spec.image, depth=spec.depth, normals=spec.normals,
                            intrinsics=spec.intrinsics, depth_scale=spec.depth_scale,
-                           nan_as_invalid=spec.nan_as_invalid, depth_kind=spec.depth_kind)
+                           nan_as_invalid=spec.nan_as_invalid, depth_kind=spec.depth_kind,
+                           depth_encoding=spec.depth_encoding)
         rec = pipe.run(frame.with_(name=spec.name))
         report = None
         if job.report:  # one copy of the 3D viewer (1 MB) for all frame reports

@@ -67,7 +67,7 @@ def load_frame_output(folder: Path, spec: FrameSpec) -> Reconstruction:
     frame = load_frame(spec.image, depth=spec.depth,
                        intrinsics=f"{k['fx']},{k['fy']},{k['cx']},{k['cy']}",
                        depth_scale=spec.depth_scale, nan_as_invalid=spec.nan_as_invalid,
-                       depth_kind=spec.depth_kind)
+                       depth_kind=spec.depth_kind, depth_encoding=spec.depth_encoding)
     return Reconstruction(frame=frame.with_(name=spec.name), labels=labels.astype(np.int32),
                           planes=params)
 
@@ -114,6 +114,7 @@ def record_batch(path: str | Path, source: str | Path, out: str | Path,
                  frames: Sequence[FrameResult], **reading: Any) -> list[str]:
     """:func:`write_batch_recording` of the batch that read ``source`` (a folder of frame
     folders or a manifest, read again with :func:`~monoplane.batch.specs.read_frames` and the
-    same ``reading`` keywords: ``depth_scale``, ``depth_kind``, ``nan_as_invalid``) into
+    same ``reading`` keywords: ``depth_scale``, ``depth_kind``, ``nan_as_invalid``,
+    ``depth_encoding``) into
     ``out``; returns the frames missing from it, as ``"name: reason"``."""
     return write_batch_recording(path, out, read_frames(source, **reading), frames)

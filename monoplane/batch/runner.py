@@ -126,8 +126,9 @@ class BatchOptions:
         Recompute every frame; by default complete frame folders are skipped.
     report : bool
         Write each frame's ``report.html`` and the batch's ``index.html``.
-    depth_scale, depth_kind, nan_as_invalid
-        Defaults for every frame (a manifest's ``depth_scale`` column wins).
+    depth_scale, depth_kind, nan_as_invalid, depth_encoding
+        Defaults for every frame (a manifest's ``depth_scale`` and ``depth_encoding``
+        columns win).
     progress : bool
         Show a progress bar on stderr.
     """
@@ -143,6 +144,7 @@ class BatchOptions:
     depth_scale: float | None = None
     depth_kind: str = "metric"
     nan_as_invalid: bool = False
+    depth_encoding: str = "scaled"
     progress: bool = True
 
     @classmethod
@@ -167,7 +169,7 @@ def _read_specs(source: str | Path | Sequence[FrameSpec], opts: BatchOptions,
     """The frame specs of ``source`` and how to name it in messages; checks their names."""
     if isinstance(source, (str, Path)):
         specs = read_frames(source, opts.depth_scale, opts.depth_kind, opts.nan_as_invalid,
-                            notes)
+                            notes, opts.depth_encoding)
         source_text = str(source)
     else:
         # Workers may run elsewhere (Ray) with another working directory: absolute paths.

@@ -7,7 +7,8 @@ A manifest is a ``.jsonl`` (one JSON object a line) or ``.csv`` (with a header r
 the columns :data:`MANIFEST_COLUMNS`. Paths are relative to the manifest's folder (absolute
 paths are kept). Only ``image`` is required as a column; an empty ``image`` means a
 depth-only frame, which then needs ``depth``. ``intrinsics`` is a JSON file or
-``"fx,fy,cx,cy"``.
+``"fx,fy,cx,cy"``. ``depth_encoding`` names how a row's 16-bit depth holds its values
+(:mod:`monoplane.io.depth_encodings`), so one manifest can list frames of several datasets.
 
 Every problem is reported as one :class:`~monoplane.errors.InvalidInput` line naming the file
 and the row (1-based line number in the file).
@@ -24,8 +25,10 @@ from pathlib import Path
 from typing import Any
 
 from monoplane.errors import InvalidInput
+from monoplane.io.depth_encodings import check_depth_encoding
 
-MANIFEST_COLUMNS = ("name", "image", "depth", "normals", "intrinsics", "depth_scale")
+MANIFEST_COLUMNS = ("name", "image", "depth", "normals", "intrinsics", "depth_scale",
+                    "depth_encoding")
 #: Names the batch output folder uses itself, so no frame may take them.
 RESERVED_NAMES = ("summary.json", "index.html", "index_files")
 _SAFE_NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.+=@,-]*$")
@@ -51,6 +54,9 @@ class FrameSpec:
         Whether the depth has a true scale.
     nan_as_invalid : bool
         Accept NaN/inf depth as invalid pixels.
+    depth_encoding : str
+        How 16-bit depth holds its values: ``"scaled"`` (by ``depth_scale``) or a dataset's
+        own (:mod:`monoplane.io.depth_encodings`).
     """
 
     name: str
@@ -61,6 +67,7 @@ class FrameSpec:
     depth_scale: float | None = None
     depth_kind: str = "metric"
     nan_as_invalid: bool = False
+    depth_encoding: str = "scaled"
 
 
 def absolute_paths(spec: FrameSpec) -> FrameSpec:
@@ -92,7 +99,8 @@ def _first(folder: Path, names: tuple[str, ...]) -> str | None:
 
 def frames_from_folder(root: Path, depth_scale: float | None = None,
                        depth_kind: str = "metric", nan_as_invalid: bool = False,
-                       notes: list[str] | None = None) -> list[FrameSpec]:
+                       notes: list[str] | None = None,
+                       depth_encoding: str = "scaled") -> list[FrameSpec]:
     """One spec per sub-folder of ``root`` that holds a colour image or a depth map.
 
     Sub-folders are taken in name order. Hidden ones (``.name``) and those with neither
@@ -117,7 +125,8 @@ def frames_from_folder(root: Path, depth_scale: float | None = None,
             name=check_name(sub.name, str(sub)), image=image, depth=depth,
             normals=_first(sub, ("normals.npy", "normals.png")),
             intrinsics=_first(sub, ("intrinsics.json",)),
-            depth_scale=depth_scale, depth_kind=depth_kind, nan_as_invalid=nan_as_invalid))
+            depth_scale=depth_scale, depth_kind=depth_kind, nan_as_invalid=nan_as_invalid,
+            depth_encoding=depth_encoding))
     if not specs:
         raise InvalidInput(f"{root}: no frame sub-folders (expected e.g. "
                            f"{root / 'room_000' / 'rgb.png'})")
@@ -184,8 +193,8 @@ def _path(value: Any, base: Path, where: str, column: str) -> str | None:
 
 
 def frames_from_manifest(path: Path, depth_scale: float | None = None,
-                         depth_kind: str = "metric", nan_as_invalid: bool = False
-                         ) -> list[FrameSpec]:
+                         depth_kind: str = "metric", nan_as_invalid: bool = False,
+                         depth_encoding: str = "scaled") -> list[FrameSpec]:
     """Frame specs from a ``.jsonl`` or ``.csv`` manifest (see the module docstring).
 
     Parameters
@@ -193,15 +202,19 @@ def frames_from_manifest(path: Path, depth_scale: float | None = None,
     path : pathlib.Path
         The manifest; relative paths in it are relative to its folder.
     depth_scale : float, optional
-        Default for rows without a ``depth_scale``.
+        Default for ``scaled`` rows without a ``depth_scale``.
     depth_kind, nan_as_invalid
         As in :class:`FrameSpec`, for every row.
+    depth_encoding : str
+        Default for rows without a ``depth_encoding``; a row's encoding other than
+        ``scaled`` drops the default ``depth_scale`` (it gives metres by itself).
 
     Raises
     ------
     InvalidInput
         One line naming the file and row: an unknown or missing column, a file that does not
-        exist, a bad ``depth_scale``, a row with neither image nor depth, a duplicate name.
+        exist, a bad ``depth_scale`` or ``depth_encoding``, a row with neither image nor
+        depth, a duplicate name.
     """
     suffix = path.suffix.lower()
     if suffix == ".jsonl":
@@ -235,8 +248,9 @@ def frames_from_manifest(path: Path, depth_scale: float | None = None,
         elif intr is not None:
             raise InvalidInput(f"{where}: column 'intrinsics' must be a JSON file or "
                                f"'fx,fy,cx,cy', got {intr!r}")
+        encoding = _row_encoding(row.get("depth_encoding"), depth_encoding, where)
         scale_raw = row.get("depth_scale")
-        scale = depth_scale
+        scale = depth_scale if encoding == "scaled" else None
         if scale_raw is not None and str(scale_raw).strip():
             try:
                 scale = float(scale_raw)
@@ -245,6 +259,7 @@ def frames_from_manifest(path: Path, depth_scale: float | None = None,
                                    f"got {scale_raw!r}") from None
             if not scale > 0:
                 raise InvalidInput(f"{where}: depth_scale must be positive, got {scale}")
+            check_depth_encoding(encoding, scale, where)
         if image is None and depth is None:
             raise InvalidInput(f"{where}: a depth-only row (empty image) needs a depth file")
         name = row.get("name")
@@ -258,20 +273,32 @@ def frames_from_manifest(path: Path, depth_scale: float | None = None,
         seen[name] = lineno
         specs.append(FrameSpec(name=name, image=image, depth=depth, normals=normals,
                                intrinsics=intr, depth_scale=scale, depth_kind=depth_kind,
-                               nan_as_invalid=nan_as_invalid))
+                               nan_as_invalid=nan_as_invalid, depth_encoding=encoding))
     return specs
+
+
+def _row_encoding(value: Any, default: str, where: str) -> str:
+    """A row's ``depth_encoding`` (``default`` when empty), checked against the valid ones."""
+    if value is None or (isinstance(value, str) and not value.strip()):
+        return default
+    if not isinstance(value, str):
+        raise InvalidInput(f"{where}: column 'depth_encoding' must be a name, got {value!r}")
+    encoding = value.strip()
+    check_depth_encoding(encoding, None, f"{where}: column 'depth_encoding'")
+    return encoding
 
 
 def read_frames(source: str | Path, depth_scale: float | None = None,
                 depth_kind: str = "metric", nan_as_invalid: bool = False,
-                notes: list[str] | None = None) -> list[FrameSpec]:
+                notes: list[str] | None = None,
+                depth_encoding: str = "scaled") -> list[FrameSpec]:
     """Frame specs from a folder of frame folders or a ``.jsonl``/``.csv`` manifest.
 
     Parameters
     ----------
     source : path
         Folder or manifest.
-    depth_scale, depth_kind, nan_as_invalid
+    depth_scale, depth_kind, nan_as_invalid, depth_encoding
         Defaults for every frame (see :class:`FrameSpec`).
     notes : list of str, optional
         Receives remarks for the user (e.g. sub-folders that are not frames).
@@ -282,10 +309,13 @@ def read_frames(source: str | Path, depth_scale: float | None = None,
         If ``source`` does not exist or is neither a folder nor a manifest, or as
         :func:`frames_from_folder` and :func:`frames_from_manifest`.
     """
+    check_depth_encoding(depth_encoding, depth_scale, "--depth-encoding")
     p = Path(source)
     if p.is_dir():
-        return frames_from_folder(p, depth_scale, depth_kind, nan_as_invalid, notes)
+        return frames_from_folder(p, depth_scale, depth_kind, nan_as_invalid, notes,
+                                  depth_encoding)
     if p.is_file():
-        return frames_from_manifest(p, depth_scale, depth_kind, nan_as_invalid)
+        return frames_from_manifest(p, depth_scale, depth_kind, nan_as_invalid,
+                                    depth_encoding)
     raise InvalidInput(f"batch input not found: {p} (give a folder of frame folders or a "
                        ".jsonl/.csv manifest)")

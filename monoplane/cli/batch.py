@@ -21,8 +21,9 @@ of INPUT at step i of the timeline 'frame'.
 
 INPUT is a folder of frame folders (rgb.png or rgb.jpg, optional depth.npy or depth.png,
 normals.npy, intrinsics.json; the layout of data_samples/room_000) or a .jsonl/.csv manifest
-with the columns name, image, depth, normals, intrinsics, depth_scale (paths relative to the
-manifest; an empty image means a depth-only frame).
+with the columns name, image, depth, normals, intrinsics, depth_scale, depth_encoding (paths
+relative to the manifest; an empty image means a depth-only frame; depth_encoding as
+--depth-encoding, so frames of several datasets can share a manifest).
 
 Frames whose folder is complete are skipped, so a killed batch resumes where it stopped;
 --overwrite recomputes everything. A failing frame is recorded with its reason and the others
@@ -43,7 +44,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                                                   "manifest")
     add_pipeline_args(p)
     add_depth_value_args(p.add_argument_group("inputs"),
-                         scale_note="; a manifest's depth_scale column wins")
+                         scale_note="; a manifest's depth_scale and depth_encoding columns "
+                                    "win")
     out = p.add_argument_group("outputs")
     out.add_argument("--out", required=True, metavar="DIR", help="batch output folder")
     out.add_argument("--overwrite", action="store_true",

@@ -6,7 +6,7 @@ import argparse
 import sys
 from typing import TYPE_CHECKING
 
-from monoplane.cli.common import add_set_arg
+from monoplane.cli.common import add_depth_encoding_args, add_set_arg
 from monoplane.errors import InvalidInput
 from monoplane.evaluation.score_files import write_scores
 
@@ -15,7 +15,9 @@ if TYPE_CHECKING:
 
 DESCRIPTION = """Run a preset on seeded synthetic frames at one or more image sizes and print one
 table: the median time of every pipeline stage and sub-step (from the reconstruction's
-timings), the traced memory of each stage, throughput, the first call of a fresh process
+timings), the median CPU time of the whole call (process time, all threads: on a busy machine
+it grows far less than the wall time), the traced memory of each stage, throughput, the first
+call of a fresh process
 (numba kernels loaded from their cache), the peak RSS of each size (each size runs in its own
 process), and every registered baseline timed on the same frames in the same process: its own
 call (without converting the cloud into the library's data structure), its whole call, and
@@ -23,16 +25,19 @@ the ratio of the preset's total to the baseline's call. See monoplane/evaluation
 method.
 
 --complexity (or --objects with ranges of your own) adds a scene-complexity axis: each size runs
-once per range of objects per scene (default 1-2, 4-6 and 8-12), on scenes of the same rooms and
-cameras furnished with that many objects in view, and a second table gives time against plane
-count: the ground-truth and found planes, the preset's time, each baseline's call and the
-ratio, per range and per frame.
+once per range of objects per scene (default 0, 1-2, 4-6 and 8-12; 0 is the bare room, a few
+large planes), on scenes of the same rooms and cameras furnished with that many objects in
+view, and a second table gives time against plane count: the ground-truth and found planes,
+the preset's time, each baseline's call and the ratio, per range and per frame.
 
 --data DIR times your own frames instead (the layouts 'monoplane batch' reads, or a sequence
 folder with depth/ and image/ such as a Redwood-format capture), at their own size; with
 --depth-only the colour images are left out, so the preset estimates normals from the depth as
-for a range sensor. A second table gives each frame's planes and times. Baselines need normals:
-on depth-only frames they get the ones the preset estimated, outside their timed call.
+for a range sensor. 16-bit depth is divided by --depth-scale, or read in a dataset's own
+encoding with --depth-encoding (tum, sun-rotated, kinect-disparity); frames of several datasets
+go in a manifest whose depth_encoding column names each row's. A second table gives each
+frame's planes and times. Baselines need normals: on depth-only frames they get the ones the
+preset estimated, outside their timed call.
 
 With --batch it times the 'monoplane batch' command instead, on a folder of synthetic frames of
 one size (default 640x480, 20 frames), for each --workers count and --engine in alternation:
@@ -54,6 +59,7 @@ EPILOG = """examples:
   monoplane bench --data livingroom/ --depth-only --depth-scale 1000 \
       --intrinsics 525,525,319.5,239.5 --frames 7 --baseline cgal  # a Redwood-style sequence
   monoplane bench --data frames.jsonl --preset range --no-baselines  # what 'batch' reads
+  monoplane bench --data tum_seq/ --depth-only --depth-encoding tum --frames 7
   monoplane bench --batch --workers 1,2 --repeat 5      # batch throughput, 20 frames 640x480
   monoplane bench --batch --engine local --engine ray --json batch.json
   monoplane bench --batch --frames 1000 --sizes 128x96 --workers 2 --repeat 1   # soak"""
@@ -82,7 +88,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "1-2,4-6,8-12 (default: the usual scenes, about 7-16 objects)")
     p.add_argument("--complexity", action="store_true",
                    help="the scene-complexity axis at its default levels: --objects "
-                        "1-2,4-6,8-12")
+                        "0,1-2,4-6,8-12 (0: bare rooms)")
     p.add_argument("--baseline", dest="baselines", action="append", default=None,
                    metavar="NAME", help="baseline to time on the same frames (repeatable; "
                    "default: every registered one)")
@@ -98,8 +104,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                           "folders or a .jsonl/.csv manifest (what 'monoplane batch' reads), "
                           "or a sequence folder with depth/ (and image/) sorted by name; "
                           "--frames N takes N frames spread over it (default: all)")
-    own.add_argument("--depth-scale", type=float, metavar="S",
-                     help="divisor of 16-bit depth PNGs (1000 for millimetres, 5000 for TUM)")
+    add_depth_encoding_args(own, "; a manifest's depth_scale and depth_encoding columns win")
     own.add_argument("--intrinsics", metavar="FX,FY,CX,CY|JSON",
                      help="intrinsics of every frame (default: each frame's intrinsics.json, "
                           "else a 60 degree field of view)")
@@ -154,17 +159,19 @@ def _data_source(args: argparse.Namespace, settings: dict) -> DataSource | None:
     from monoplane.evaluation.bench_frames import DataSource
 
     if args.data is None:
-        if (args.depth_scale, args.intrinsics, args.depth_only) != (None, None, False):
-            raise InvalidInput("--depth-scale, --intrinsics and --depth-only apply to --data "
-                               "only")
+        if (args.depth_scale, args.depth_encoding, args.intrinsics,
+                args.depth_only) != (None, "scaled", None, False):
+            raise InvalidInput("--depth-scale, --depth-encoding, --intrinsics and --depth-only "
+                               "apply to --data only")
         return None
     if args.sizes is not None:
         raise InvalidInput("--sizes applies to synthetic frames; --data times the frames "
                            "at their own size")
-    settings.update(data=args.data, depth_scale=args.depth_scale, intrinsics=args.intrinsics,
+    settings.update(data=args.data, depth_scale=args.depth_scale,
+                    depth_encoding=args.depth_encoding, intrinsics=args.intrinsics,
                     depth_only=args.depth_only)
     return DataSource(args.data, args.depth_scale, args.intrinsics, args.depth_only,
-                      args.frames)
+                      args.frames, args.depth_encoding)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -7,6 +7,7 @@ from typing import Any
 
 from monoplane.export.files import check_output_dir
 from monoplane.host.pipeline import Pipeline
+from monoplane.io.depth_encodings import DEPTH_ENCODINGS
 
 
 def add_pipeline_args(parser: argparse.ArgumentParser) -> None:
@@ -44,7 +45,7 @@ def add_input_args(parser: argparse.ArgumentParser, per_image: bool = False) -> 
     nargs, each = ("+", "one per image: ") if per_image else (None, "")
     group.add_argument("--depth", nargs=nargs, metavar="FILE",
                        help=f"{each}depth map: .npy float (any unit) or 16-bit PNG with "
-                            "--depth-scale")
+                            "--depth-scale or --depth-encoding")
     group.add_argument("--normals", nargs=nargs, metavar="FILE",
                        help=f"{each}normals: .npy (H, W, 3) in the camera frame (x right, y down, "
                             "z forward), or 8-bit PNG storing (n+1)/2*255")
@@ -56,14 +57,31 @@ def add_input_args(parser: argparse.ArgumentParser, per_image: bool = False) -> 
     add_depth_value_args(group)
 
 
-def add_depth_value_args(group: argparse._ArgumentGroup, scale_note: str = "") -> None:
-    """``--depth-scale``, ``--relative-depth`` and ``--nan-as-invalid``: how depth values read.
+def add_depth_encoding_args(group: argparse._ArgumentGroup, note: str = "") -> None:
+    """``--depth-scale`` and ``--depth-encoding``: how 16-bit depth holds its values (every
+    command that reads depth files takes both; :func:`monoplane.io.frames.read_depth`).
 
-    ``scale_note`` is appended to the ``--depth-scale`` help (e.g. what overrides it).
+    ``note`` is appended to both helps (e.g. what overrides them).
     """
     group.add_argument("--depth-scale", type=float, metavar="S",
-                       help="divide PNG depth by S (1000 for millimetres, 5000 for TUM)"
-                            + scale_note)
+                       help="divide 16-bit depth by S (1000 for millimetres, 5000 for TUM)"
+                            + note)
+    group.add_argument("--depth-encoding", choices=DEPTH_ENCODINGS, default="scaled",
+                       metavar="NAME",
+                       help="how 16-bit depth holds its values: scaled (divided by "
+                            "--depth-scale; default), tum (metres x 5000), sun-rotated (SUN "
+                            "RGB-D's bit-rotated millimetres), kinect-disparity (raw Kinect v1 "
+                            "disparity, e.g. NYU Depth v2's raw .pgm)" + note)
+
+
+def add_depth_value_args(group: argparse._ArgumentGroup, scale_note: str = "") -> None:
+    """``--depth-scale``, ``--depth-encoding``, ``--relative-depth`` and ``--nan-as-invalid``:
+    how depth values read.
+
+    ``scale_note`` is appended to the ``--depth-scale`` and ``--depth-encoding`` helps (e.g.
+    what overrides them).
+    """
+    add_depth_encoding_args(group, scale_note)
     group.add_argument("--relative-depth", action="store_true",
                        help="the given depth is correct only up to scale (e.g. a network output)")
     group.add_argument("--nan-as-invalid", action="store_true",
@@ -71,9 +89,10 @@ def add_depth_value_args(group: argparse._ArgumentGroup, scale_note: str = "") -
 
 
 def depth_reading(args: argparse.Namespace) -> dict[str, Any]:
-    """Keyword arguments ``depth_scale``, ``depth_kind`` and ``nan_as_invalid`` of the loaders,
-    from the options of :func:`add_depth_value_args`."""
-    return dict(depth_scale=args.depth_scale, nan_as_invalid=args.nan_as_invalid,
+    """Keyword arguments ``depth_scale``, ``depth_encoding``, ``depth_kind`` and
+    ``nan_as_invalid`` of the loaders, from the options of :func:`add_depth_value_args`."""
+    return dict(depth_scale=args.depth_scale, depth_encoding=args.depth_encoding,
+                nan_as_invalid=args.nan_as_invalid,
                 depth_kind="relative" if args.relative_depth else "metric")
 
 

@@ -6,7 +6,7 @@ Frames
     Medians are over all those runs.
 
 Scene complexity
-    With ``objects`` ranges (e.g. :data:`COMPLEXITY_LEVELS`: 1-2, 4-6 and 8-12 objects), every
+    With ``objects`` ranges (e.g. :data:`COMPLEXITY_LEVELS`: 0, 1-2, 4-6 and 8-12 objects), every
     size runs once per range on its own frames: frame ``i`` of range ``(lo, hi)`` is
     ``generate(seed + i, level, width, height, objects=lo + i % (hi - lo + 1))``, the same room
     and camera as the usual scene of that seed, furnished with that many objects in view. Each
@@ -28,7 +28,10 @@ Time
     ``ransac``, ``refiner``), their sub-steps (``ransac.graph``, ``refiner.crf``, ...) and the
     wall time of the whole call (``total``); throughput is ``1 / median total``. The first call
     of a fresh process is reported apart (``first call``): it loads the numba kernels from
-    their on-disk cache (or compiles them once, the first time ever).
+    their on-disk cache (or compiles them once, the first time ever). ``total CPU`` is the
+    median process time (:func:`time.process_time`, every thread of the process) of the whole
+    call: on a machine shared with other jobs it grows far less than the wall time, so it is
+    the figure to compare across runs there.
 
 Baselines
     Every registered baseline (``monoplane_register_baselines``: the built-in one and those of
@@ -79,7 +82,8 @@ if TYPE_CHECKING:
 #: Sizes benchmarked by default: the paper's working resolution and VGA.
 DEFAULT_SIZES: tuple[tuple[int, int], ...] = ((256, 192), (640, 480))
 #: Scene-complexity levels of ``monoplane bench --complexity``: objects per scene, (min, max).
-COMPLEXITY_LEVELS: tuple[tuple[int, int], ...] = ((1, 2), (4, 6), (8, 12))
+#: The first is the bare room (walls, floor and ceiling: a few large planes, 3-4 in view).
+COMPLEXITY_LEVELS: tuple[tuple[int, int], ...] = ((0, 0), (1, 2), (4, 6), (8, 12))
 #: Stage kinds in pipeline order, for sorting the table.
 _STAGE_ORDER = ("cues", "ransac", "refiner")
 
@@ -193,6 +197,7 @@ class BenchResult:
     gt_planes: float = float("nan")
     per_frame: list[FrameBench] = field(default_factory=list)
     data: str | None = None
+    cpu_s: float = float("nan")
 
     @property
     def column(self) -> str:
@@ -229,14 +234,17 @@ class BenchResult:
                 "fps": self.fps,
                 "stages": [asdict(s) for s in self.stages],
                 "baselines": [{**asdict(b), "ratio": self.ratio(b)} for b in self.baselines],
-                "per_frame": [asdict(f) for f in self.per_frame], "data": self.data}
+                "per_frame": [asdict(f) for f in self.per_frame], "data": self.data,
+                "cpu_s": None if np.isnan(self.cpu_s) else self.cpu_s}
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> BenchResult:
         """Inverse of :meth:`to_dict` (derived fields are recomputed; files written before
-        the complexity axis have no ``objects``, ``gt_planes`` or ``per_frame``)."""
+        the complexity axis have no ``objects``, ``gt_planes`` or ``per_frame``, those before
+        the CPU time no ``cpu_s``)."""
         objects = data.get("objects")
         gt_planes = data.get("gt_planes")
+        cpu_s = data.get("cpu_s")
         return cls(data["preset"], data["width"], data["height"], data["repeat"],
                    [StageBench(**s) for s in data["stages"]], data["planes"],
                    data["max_rss_mib"], data.get("frames", 1), data.get("first_call_s", 0.0),
@@ -244,7 +252,8 @@ class BenchResult:
                     for b in data.get("baselines", [])],
                    None if objects is None else (int(objects[0]), int(objects[1])),
                    float("nan") if gt_planes is None else float(gt_planes),
-                   [FrameBench(**f) for f in data.get("per_frame", [])], data.get("data"))
+                   [FrameBench(**f) for f in data.get("per_frame", [])], data.get("data"),
+                   float("nan") if cpu_s is None else float(cpu_s))
 
 
 def _order(key: str) -> tuple[int, str, int]:
@@ -415,13 +424,15 @@ def _bench_size(preset: str, overrides: list[str], size: tuple[int, int], seed: 
     rss = _max_rss_mib()  # before any baseline runs: the preset's own peak
     fns = [get_baseline(name, pm) for name in baselines]
     runs: list[dict[str, float]] = []
+    cpu: list[float] = []
     planes = []
     calls: list[list[float]] = [[] for _ in baselines]
     totals: list[list[float]] = [[] for _ in baselines]
     for i, frame in enumerate(views):
         for _ in range(repeat):
-            start = time.perf_counter()
+            start, start_cpu = time.perf_counter(), time.process_time()
             rec = pipe.run(frame)
+            cpu.append(time.process_time() - start_cpu)
             timings = dict(rec.timings)
             timings.setdefault("total", time.perf_counter() - start)
             runs.append(timings)
@@ -448,7 +459,7 @@ def _bench_size(preset: str, overrides: list[str], size: tuple[int, int], seed: 
     return BenchResult(preset, width, height, repeat, stages, float(np.mean(planes)), rss,
                        frames, first_call, timed, objects,
                        float(np.mean(known)) if known else float("nan"), per_frame,
-                       None if data is None else data.path)
+                       None if data is None else data.path, float(np.median(cpu)))
 
 
 def parse_sizes(text: str) -> list[tuple[int, int]]:
@@ -481,6 +492,8 @@ def format_bench(results: Sequence[BenchResult], markdown: bool = False) -> str:
             row.append(f"{1000 * s.median_s:.1f}" if s else "-")
             row.append(f"{s.peak_mib:.1f}" if s and s.peak_mib is not None else "")
         rows.append(row)
+    rows.append(["total CPU (process time)",
+                 *[c for r in results for c in (_number(1000 * r.cpu_s), "")]])
     rows.append(["throughput (frames/s)", *[c for r in results for c in (f"{r.fps:.2f}", "")]])
     rows.append(["first call (fresh process)",
                  *[c for r in results for c in (f"{1000 * r.first_call_s:.1f}", "")]])

@@ -8,6 +8,13 @@ Layouts read
       room): ``depth/`` with one depth map per frame, sorted by name, and optionally
       ``image/`` with as many colour images and ``intrinsics.json``. No trajectory is needed.
 
+Depth encodings
+    ``depth_encoding`` says how every frame's 16-bit depth holds its values (``scaled`` by
+    ``depth_scale``, ``tum``, ``sun-rotated``, ``kinect-disparity``;
+    :mod:`monoplane.io.depth_encodings`). Frames of several datasets, each in its own
+    encoding (e.g. one TUM, one SUN RGB-D and one NYU frame in one folder), are listed in a
+    manifest whose ``depth_encoding`` column names each row's.
+
 Depth-only
     With ``depth_only`` the colour images are not read, so the pipeline sees what a range
     sensor gives: depth alone, normals left to the cue stage (estimated from the depth). This
@@ -55,6 +62,9 @@ class DataSource:
         Do not read colour images (module docstring).
     frames : int or None
         At most this many frames, spread evenly; None: all.
+    depth_encoding : str
+        How 16-bit depth holds its values (module docstring); a manifest's
+        ``depth_encoding`` column wins for its rows.
     """
 
     path: str
@@ -62,6 +72,7 @@ class DataSource:
     intrinsics: str | None = None
     depth_only: bool = False
     frames: int | None = None
+    depth_encoding: str = "scaled"
 
 
 def _spread(n: int, count: int | None) -> list[int]:
@@ -106,7 +117,7 @@ def load_data_frames(source: DataSource) -> list[Frame]:
     ------
     InvalidInput
         One line naming the folder, file or argument: a missing folder, an empty listing, a
-        depth PNG without a scale, unreadable files.
+        depth PNG without a scale or encoding, a bad encoding, unreadable files.
     """
     from monoplane.io.frames import load_frame  # loads OpenCV
 
@@ -117,11 +128,14 @@ def load_data_frames(source: DataSource) -> list[Frame]:
         rows = _sequence(root, source)
         scales = [source.depth_scale] * len(rows)
         kinds = ["metric"] * len(rows)
+        encodings = [source.depth_encoding] * len(rows)
     else:
-        specs = read_frames(root, depth_scale=source.depth_scale)
+        specs = read_frames(root, depth_scale=source.depth_scale,
+                            depth_encoding=source.depth_encoding)
         rows = [(s.name, s.image, s.depth, s.normals, s.intrinsics) for s in specs]
         scales = [s.depth_scale for s in specs]
         kinds = [s.depth_kind for s in specs]
+        encodings = [s.depth_encoding for s in specs]
         if source.depth_only:
             missing = next((s.name for s in specs if s.depth is None), None)
             if missing is not None:
@@ -132,6 +146,7 @@ def load_data_frames(source: DataSource) -> list[Frame]:
         name, image, depth, normals, intr = rows[i]
         frame = load_frame(image, depth=depth, normals=normals,
                            intrinsics=source.intrinsics or intr,
-                           depth_scale=scales[i], depth_kind=kinds[i])
+                           depth_scale=scales[i], depth_kind=kinds[i],
+                           depth_encoding=encodings[i])
         frames.append(frame.with_(name=name))
     return frames

@@ -13,7 +13,8 @@ Subsampling
 -----------
 At high resolution RANSAC runs on a random subset of at most ``max_points`` valid pixels (drawn
 from the caller's generator, so it is deterministic for a seed), or on the valid pixels of a
-regular lattice (``grid``; :func:`lattice_step`), whose neighbours the lattice itself gives
+regular lattice (``grid``; :func:`lattice_stride`, or :func:`lattice_step` for a step that
+need not be whole), whose neighbours the lattice itself gives
 (:meth:`NeighbourGraph.from_lattice`). :meth:`PlaneCloud.propagate`
 then carries the labels of the subset to every valid pixel. A pixel first takes the label of
 its nearest sampled pixel in the image (a distance transform). Where that is doubtful (the
@@ -39,6 +40,7 @@ from monoplane.datamodel import Frame
 from monoplane.errors import InvalidInput
 from monoplane.geometry.distance_transform import nearest_true_pixel
 from monoplane.geometry.graph import NeighbourGraph
+from monoplane.geometry.lattice import lattice_lines, lattice_step, lattice_stride
 from monoplane.geometry.neighbours import PointIndex
 from monoplane.geometry.propagation import closest_plane, propagate_labels
 from monoplane.jit import chunks, kernel, run_threaded
@@ -92,6 +94,10 @@ class PlaneCloud:
     sampled : numpy.ndarray or None
         (N,) int64 row of ``all_points`` of each point of a subsampled cloud without an image
         (a frame's cloud says it with ``pixels``); None otherwise.
+    stride : int or None
+        Whole step in pixels of the regular lattice a frame's points were sampled on
+        (:meth:`from_frame` with ``grid``; 1: every valid pixel); None for a fractional step,
+        a random sample or a cloud without an image.
     lattice : numpy.ndarray or None
         (R, C) int64 point of each node of the regular lattice a frame's points were sampled
         on (:meth:`from_frame` with ``grid``), -1 where the lattice pixel is not valid; None
@@ -108,6 +114,7 @@ class PlaneCloud:
     all_points: np.ndarray
     all_pixels: np.ndarray | None
     sampled: np.ndarray | None = None
+    stride: int | None = None
     lattice: np.ndarray | None = None
 
     def __post_init__(self) -> None:
@@ -170,7 +177,8 @@ class PlaneCloud:
 
     @classmethod
     def from_frame(cls, frame: Frame, max_points: int | None = None,
-                   rng: np.random.Generator | None = None, grid: bool = False) -> PlaneCloud:
+                   rng: np.random.Generator | None = None, grid: bool = False,
+                   fractional: bool = False) -> PlaneCloud:
         """Unproject a frame's valid pixels into a normalised oriented cloud.
 
         Parameters
@@ -185,10 +193,14 @@ class PlaneCloud:
             Source of the subsampling; required when random subsampling happens.
         grid : bool
             Subsample on a regular lattice instead: the valid pixels of the rows and columns
-            ``⌊(i + ½) s⌋`` for the smallest step ``s >= 1`` (in pixels, not necessarily
-            whole) that keeps at most ``max_points`` of them (:func:`lattice_step`);
-            ``lattice`` records which point each lattice node holds. Draws nothing from
-            ``rng``.
+            ``⌊(i + ½) s⌋`` (:func:`lattice_lines`; for a whole ``s``, ``v, u ≡ s // 2
+            (mod s)``) for the smallest whole step ``s`` that keeps at most ``max_points`` of
+            them (:func:`lattice_stride`); ``stride`` records ``s`` and ``lattice`` which
+            point each lattice node holds. Draws nothing from ``rng``.
+        fractional : bool
+            With ``grid``: the smallest step that need not be whole (:func:`lattice_step`),
+            so that the lattice holds about ``max_points`` points at any resolution;
+            ``stride`` is then None.
 
         Returns
         -------
@@ -216,11 +228,15 @@ class PlaneCloud:
 
         keep = all_pixels
         points = all_points
-        lattice = None
+        stride = lattice = None
         if grid:
-            step = 1.0
+            step, stride = 1.0, 1
             if max_points is not None and all_pixels.size > max_points:
-                step = lattice_step(valid_image, max_points)
+                if fractional:
+                    step, stride = lattice_step(valid_image, max_points), None
+                else:
+                    stride = lattice_stride(valid_image, max_points)
+                    step = float(stride)
             rows, cols = lattice_lines(frame.shape[0], step), lattice_lines(frame.shape[1], step)
             on_lattice = np.zeros(frame.shape, dtype=bool)
             on_lattice[np.ix_(rows, cols)] = True
@@ -249,7 +265,8 @@ class PlaneCloud:
             colors = frame.rgb.reshape(-1, 3)[keep].astype(np.float64) / 255.0
         return cls(points=np.ascontiguousarray(points), normals=normals, colors=colors,
                    pixels=keep, center=center, scale=scale, shape=frame.shape,
-                   all_points=all_points, all_pixels=all_pixels, lattice=lattice)
+                   all_points=all_points, all_pixels=all_pixels, stride=stride,
+                   lattice=lattice)
 
     @classmethod
     def from_points(cls, points: np.ndarray, normals: np.ndarray, colors: np.ndarray | None,
@@ -445,60 +462,6 @@ class PlaneCloud:
             out[start:start + len(part)] = closest_plane(
                 part, d_k.reshape(len(part), k), n_k.reshape(len(part), k), labels, planes)
         return out
-
-
-def lattice_lines(size: int, step: float) -> np.ndarray:
-    """Pixel rows (or columns) ``⌊(i + ½) step⌋`` of a lattice across ``size`` pixels.
-
-    A whole ``step`` gives every ``step``-th line from ``step // 2``; a fractional one spaces
-    the lines ``⌊step⌋`` and ``⌈step⌉`` apart, so that the lattice can hold as many points
-    as asked for at any resolution.
-
-    Parameters
-    ----------
-    size : int
-        Image height (or width) in pixels.
-    step : float
-        Lattice step in pixels, >= 1.
-
-    Returns
-    -------
-    numpy.ndarray
-        (L,) int64 ascending distinct lines in ``[0, size)``.
-    """
-    lines = np.floor((np.arange(int(np.ceil(size / step)) + 1) + 0.5) * step).astype(np.int64)
-    return lines[lines < size]
-
-
-def lattice_step(valid: np.ndarray, max_points: int) -> float:
-    """Smallest lattice step (to 0.1 %) that keeps at most ``max_points`` valid pixels.
-
-    Parameters
-    ----------
-    valid : numpy.ndarray
-        (H, W) bool valid pixels.
-    max_points : int
-        Most lattice pixels to keep, >= 3.
-
-    Returns
-    -------
-    float
-        Step ``s >= 1`` in pixels such that the valid pixels on the rows and columns
-        :func:`lattice_lines` ``(·, s)`` number at most ``max_points``.
-    """
-    if max_points < 3:
-        raise InvalidInput(f"max_points must be at least 3, got {max_points}")
-    h, w = valid.shape
-
-    def kept(step: float) -> int:
-        return int(np.count_nonzero(valid[np.ix_(lattice_lines(h, step), lattice_lines(w, step))]))
-
-    # The valid fraction is about the same on every lattice: start from the step it gives and
-    # grow it by the excess until the lattice fits.
-    step = max(1.0, float(np.sqrt(np.count_nonzero(valid) / max_points)))
-    while (count := kept(step)) > max_points:
-        step *= max(1.001, float(np.sqrt(count / max_points)))
-    return step
 
 
 def normalised_cloud(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:

@@ -208,47 +208,68 @@ def _largest_component(members: np.ndarray, edges: np.ndarray) -> np.ndarray:
 
 @kernel
 def _label_regions(lab: np.ndarray, corners: bool) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`label_regions` of a (H, W) int64 image (``corners``: 8-connectivity)."""
+    """:func:`label_regions` of a (H, W) int64 image (``corners``: 8-connectivity).
+
+    Works on runs (maximal row segments of one label) rather than pixels: a run joins the
+    runs of its label in the row above that it touches, so the union-find has one node per
+    run, a small fraction of the pixels on label maps made of regions.
+    """
     h, w = lab.shape
     n = h * w
-    flat = lab.ravel()
-    # Union-find whose root is always the smallest pixel index of its set, i.e. the region's
-    # first pixel in raster order.
-    parent = np.arange(n)
-    for p in range(n):
-        value = flat[p]
-        if value == 0:
-            continue
-        v, u = p // w, p % w
-        for dv, du in ((0, -1), (-1, 0), (-1, -1), (-1, 1)):
-            if (dv == -1 and du != 0 and not corners) or v + dv < 0 or not 0 <= u + du < w:
-                continue
-            q = p + dv * w + du
-            if flat[q] != value:
-                continue
-            _union(parent, p, q)
-    top = flat.max() if n else 0
+    # Runs in raster order: start column, end column (exclusive), row, label.
+    start = np.empty(n, dtype=np.int64)
+    end = np.empty(n, dtype=np.int64)
+    row = np.empty(n, dtype=np.int64)
+    value = np.empty(n, dtype=np.int64)
+    first = np.zeros(h + 1, dtype=np.int64)  # runs of row y: first[y]:first[y + 1]
+    count = 0
+    for y in range(h):
+        x = 0
+        while x < w:
+            v = lab[y, x]
+            x0 = x
+            while x < w and lab[y, x] == v:
+                x += 1
+            if v != 0:
+                start[count], end[count], row[count], value[count] = x0, x, y, v
+                count += 1
+        first[y + 1] = count
+    # Union-find over runs whose root is always the smallest run index of its set, i.e. the
+    # run holding the region's first pixel in raster order.
+    parent = np.arange(count)
+    reach = 1 if corners else 0  # 8-connectivity also joins runs that touch at a corner
+    for y in range(1, h):
+        j = first[y - 1]
+        for i in range(first[y], first[y + 1]):
+            # Runs above that end left of this one end left of the next ones too.
+            while j < first[y] and end[j] + reach <= start[i]:
+                j += 1
+            k = j
+            while k < first[y] and start[k] < end[i] + reach:
+                if value[k] == value[i]:
+                    _union(parent, i, k)
+                k += 1
+    top = 0
+    for r in range(count):
+        top = max(top, value[r])
     per_label = np.zeros(top + 2, dtype=np.int64)
-    for p in range(n):
-        if flat[p] != 0 and parent[p] == p:
-            per_label[flat[p] + 1] += 1
-    for value in range(top + 1):
-        per_label[value + 1] += per_label[value]
-    count = per_label[top + 1]
-    origin = np.empty(count, dtype=np.int64)
-    number = np.zeros(n, dtype=np.int32)
+    for r in range(count):
+        if parent[r] == r:
+            per_label[value[r] + 1] += 1
+    for v in range(top + 1):
+        per_label[v + 1] += per_label[v]
+    origin = np.empty(per_label[top + 1], dtype=np.int64)
+    number = np.zeros(count, dtype=np.int32)
     nxt = per_label[:-1].copy()
-    out = np.zeros(n, dtype=np.int32)
-    for p in range(n):
-        value = flat[p]
-        if value == 0:
-            continue
-        root = p
+    out = np.zeros((h, w), dtype=np.int32)
+    for r in range(count):
+        root = r
         while parent[root] != root:
             root = parent[root]
-        if root == p:
-            nxt[value] += 1
-            number[p] = nxt[value]
-            origin[nxt[value] - 1] = value
-        out[p] = number[root]
-    return out.reshape(h, w), origin
+        if root == r:
+            nxt[value[r]] += 1
+            number[r] = nxt[value[r]]
+            origin[nxt[value[r]] - 1] = value[r]
+        for x in range(start[r], end[r]):
+            out[row[r], x] = number[root]
+    return out, origin

@@ -5,6 +5,8 @@ Inputs
 * Image: anything OpenCV reads (8- or 16-bit, grey or colour; alpha is dropped).
 * Depth: ``.npy`` float in any unit, or a 16-bit PNG divided by ``depth_scale`` (1000 for mm,
   5000 for TUM). 0 marks invalid pixels; NaN/inf are rejected unless ``nan_as_invalid``.
+  16-bit depth in a dataset's own encoding (TUM, SUN RGB-D's rotated bits, NYU's raw Kinect
+  disparity ``.pgm``) is read with ``depth_encoding`` (:mod:`monoplane.io.depth_encodings`).
 * Normals: ``.npy`` (H, W, 3) camera frame, or an 8-bit PNG storing ``(n + 1) / 2 * 255`` with
   R, G, B = x, y, z.
 * Intrinsics: ``"fx,fy,cx,cy"`` or a JSON file ``{"fx":…, "fy":…, "cx":…, "cy":…}``.
@@ -31,6 +33,7 @@ import numpy as np
 from monoplane.cues.intrinsics import assume_intrinsics
 from monoplane.datamodel import Frame, Reconstruction, intrinsics_matrix
 from monoplane.errors import InvalidInput
+from monoplane.io.depth_encodings import check_depth_encoding, decode_depth
 from monoplane.export.saving import save, select_exporters, write_outputs
 from monoplane.io.checks import MAX_MAGNITUDE, load_npy, read_png
 
@@ -84,37 +87,52 @@ def _read_raster(p: Path, what: str) -> np.ndarray | None:
 
 
 def read_depth(path: str | Path, depth_scale: float | None = None,
-               nan_as_invalid: bool = False) -> np.ndarray:
+               nan_as_invalid: bool = False, depth_encoding: str = "scaled") -> np.ndarray:
     """Read a depth map.
 
     Parameters
     ----------
     path : str or Path
-        ``.npy`` (float, any unit) or 16-bit ``.png``.
+        ``.npy`` (float, any unit) or a 16-bit image (``.png``, or any format OpenCV reads as
+        16-bit single-channel, e.g. ``.pgm``).
     depth_scale : float, optional
-        Divisor for PNG values (1000 for millimetres, 5000 for TUM). Required for PNG, ignored
-        for ``.npy`` unless given (then the array is divided by it too).
+        Divisor for 16-bit values (1000 for millimetres, 5000 for TUM) in the ``scaled``
+        encoding. Required for 16-bit images there, ignored for ``.npy`` unless given (then
+        the array is divided by it too).
     nan_as_invalid : bool
         Treat NaN/inf as invalid pixels (0) instead of rejecting the file.
+    depth_encoding : str
+        How the 16-bit values hold depth: ``"scaled"`` (divided by ``depth_scale``), or a
+        dataset's own encoding giving metres (``"tum"``, ``"sun-rotated"``,
+        ``"kinect-disparity"``; :mod:`monoplane.io.depth_encodings`), which then needs a
+        16-bit image or a uint16 ``.npy`` and no ``depth_scale``.
 
     Returns
     -------
     numpy.ndarray
         (H, W) float32 z-depth; 0 = invalid.
     """
+    check_depth_encoding(depth_encoding, depth_scale, "--depth-encoding")
     p = _require_file(path, "depth")
     if p.suffix.lower() == ".npy":
-        depth = load_npy(p, "depth").astype(np.float64)
+        depth = load_npy(p, "depth")
+        if depth_encoding != "scaled":
+            depth = decode_depth(depth, depth_encoding, f"depth {p}")
+        depth = depth.astype(np.float64)
     else:
         raw = _read_raster(p, "depth PNG")
         if raw is None:
             raise InvalidInput(f"cannot read depth {p}: use .npy or a 16-bit PNG")
         if raw.dtype != np.uint16 or raw.ndim != 2:
-            raise InvalidInput(f"depth PNG {p} must be single-channel 16-bit, "
+            raise InvalidInput(f"depth image {p} must be single-channel 16-bit, "
                                f"got {raw.dtype} with shape {raw.shape}")
-        if depth_scale is None:
-            raise InvalidInput(f"depth PNG {p} needs --depth-scale (1000 for mm, 5000 for TUM)")
-        depth = raw.astype(np.float64)
+        if depth_encoding != "scaled":
+            depth = decode_depth(raw, depth_encoding, f"depth {p}")
+        elif depth_scale is None:
+            raise InvalidInput(f"depth image {p} needs --depth-scale (1000 for mm) or "
+                               "--depth-encoding (e.g. tum)")
+        else:
+            depth = raw.astype(np.float64)
     if depth_scale is not None and not 0 < depth_scale < np.inf:
         raise InvalidInput(f"--depth-scale must be a positive finite number, got {depth_scale}")
     if depth.ndim == 3 and depth.shape[2] == 1:
@@ -295,7 +313,8 @@ def read_redwood_log(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
 def load_frame(image: str | Path | None = None, depth: str | Path | None = None,
                normals: str | Path | None = None, intrinsics: str | Path | None = None,
                depth_scale: float | None = None, nan_as_invalid: bool = False,
-               depth_kind: str = "metric", depth_units: str | None = None) -> Frame:
+               depth_kind: str = "metric", depth_units: str | None = None,
+               depth_encoding: str = "scaled") -> Frame:
     """Build a :class:`Frame` from files.
 
     Parameters
@@ -308,18 +327,22 @@ def load_frame(image: str | Path | None = None, depth: str | Path | None = None,
         ``"fx,fy,cx,cy"`` or JSON; without it a 60° horizontal field of view is assumed and
         noted in ``frame.notes``.
     depth_scale : float, optional
-        Divisor for 16-bit depth PNGs.
+        Divisor for 16-bit depth images in the ``scaled`` encoding.
     nan_as_invalid : bool
         Accept NaN/inf in depth as invalid pixels.
     depth_kind : {"metric", "relative"}
         Whether the given depth has a true scale.
     depth_units : str, optional
-        Unit label for outputs; ``"m"`` when a depth scale is given, else ``"input"``.
+        Unit label for outputs; ``"m"`` when a depth scale or a named encoding is given, else
+        ``"input"``.
+    depth_encoding : str
+        How 16-bit depth holds its values (see :func:`read_depth`); default ``"scaled"``.
     """
     if image is None and depth is None:
         raise InvalidInput("give an image, a depth map, or both")
     rgb = read_image(image) if image is not None else None
-    d = read_depth(depth, depth_scale, nan_as_invalid) if depth is not None else None
+    d = (read_depth(depth, depth_scale, nan_as_invalid, depth_encoding) if depth is not None
+         else None)
     n = read_normals(normals) if normals is not None else None
     shape = rgb.shape[:2] if rgb is not None else d.shape  # type: ignore[union-attr]
     notes: list[str] = []
@@ -330,7 +353,7 @@ def load_frame(image: str | Path | None = None, depth: str | Path | None = None,
         notes.append(note)
     name = Path(image if image is not None else depth).stem  # type: ignore[arg-type]
     if depth_units is None:
-        depth_units = "m" if depth_scale is not None else "input"
+        depth_units = "m" if depth_scale is not None or depth_encoding != "scaled" else "input"
     if depth_kind == "relative":
         depth_units = "relative"
     return Frame(rgb=rgb, K=K, depth=d, normals=n, depth_kind=depth_kind,  # type: ignore[arg-type]

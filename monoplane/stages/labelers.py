@@ -26,6 +26,7 @@ from monoplane.algorithm.graphcut import (
     minimize_gc_ransac,
     pool_payback,
     proximity_weights,
+    shrink_subgraph,
 )
 from monoplane.contracts import (
     Labeler,
@@ -72,10 +73,14 @@ class GraphCutConfig:
 class _PoolTerms:
     """What a graph-cut labeler keeps of the pool it labels, whatever the hypothesis."""
 
+    graph: NeighbourGraph
+    """The frame's graph."""
+    pool: np.ndarray
+    """(M,) int64 the pool's points, ascending (a copy: identifies the pool)."""
     edges: np.ndarray
     """(E', 2) the pool's subgraph, in pool positions."""
     edge_ids: np.ndarray
-    """(E',) rows of the graph's edges it comes from: identifies the pool."""
+    """(E',) rows of the graph's edges it comes from."""
     cut: np.ndarray | float
     """(E',) cut cost of each subgraph edge (or one for all)."""
     scale: float
@@ -130,14 +135,25 @@ class _PoolGraphCut(Labeler):
 
     def _terms(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray,
                context: GraphCutContext) -> _PoolTerms:
-        """The terms of ``pool``, built when it is not the pool of the last call."""
-        edges, edge_ids = graph.subgraph(pool)
+        """The terms of ``pool``, built when it is not the pool of the last call; the
+        subgraph and cut costs of a pool within the last one are taken from the last one's
+        (:func:`~monoplane.algorithm.graphcut.shrink_subgraph`)."""
         scale = degree_normalisation(graph.mean_degree) if self.config.normalise else 1.0
         last = context.pool
-        if last is None or last.edge_ids is not edge_ids or last.scale != scale:
+        same_graph = last is not None and last.graph is graph and last.scale == scale
+        if same_graph and np.array_equal(last.pool, pool):
+            return last
+        shrunk = shrink_subgraph(last.pool, pool, last.edges) if same_graph else None
+        if shrunk is None:
+            edges, edge_ids = graph.subgraph(pool)
             cut = self._cut(cloud, graph, edge_ids, context)
-            payback = pool_payback(pool.size, edges, cut, self.config.lambda_, scale)
-            last = context.pool = _PoolTerms(edges, edge_ids, cut, scale, payback)
+        else:
+            edges, rows = shrunk
+            edge_ids = last.edge_ids[rows]
+            cut = last.cut[rows] if isinstance(last.cut, np.ndarray) else last.cut
+        payback = pool_payback(pool.size, edges, cut, self.config.lambda_, scale)
+        last = context.pool = _PoolTerms(graph, np.array(pool, dtype=np.int64), edges, edge_ids,
+                                         cut, scale, payback)
         return last
 
     def prepare_pool(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray,

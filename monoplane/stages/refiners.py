@@ -120,6 +120,10 @@ class DenseCrfRefiner(Refiner):
             REFERENCE_AREA // 8,
             "above this many pixels mean field runs on a coarser block grid, edges are decided "
             "at full resolution (0: never)")
+        band_margin: float = param(
+            2.0,
+            "with the coarse grid, exact full-resolution messages only at band pixels whose "
+            "upsampled messages leave the two best labels within this many nats (inf: all)")
         min_area: int = param(
             MIN_AREA_AT_REFERENCE,
             "smallest region kept, pixels at 256x192 (scaled with image area); 0 keeps all")

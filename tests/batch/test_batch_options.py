@@ -17,7 +17,7 @@ def test_keywords_replace_fields_of_the_options() -> None:
 
 
 def test_an_unknown_keyword_names_the_options(tmp_path: Path) -> None:
-    with pytest.raises(TypeError, match="'wrokers'; options: config, depth_kind"):
+    with pytest.raises(TypeError, match="'wrokers'; options: config, depth_encoding, depth_kind"):
         run_batch([], tmp_path / "out", wrokers=2)
 
 

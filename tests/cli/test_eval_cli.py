@@ -106,7 +106,8 @@ def test_bench_complexity_is_the_default_objects_ranges() -> None:
     from monoplane.evaluation.bench import COMPLEXITY_LEVELS
     from monoplane.evaluation.bench_options import parse_object_ranges
 
-    assert parse_object_ranges(None, True) == list(COMPLEXITY_LEVELS) == [(1, 2), (4, 6), (8, 12)]
+    levels = [(0, 0), (1, 2), (4, 6), (8, 12)]  # the first: bare rooms
+    assert parse_object_ranges(None, True) == list(COMPLEXITY_LEVELS) == levels
     assert parse_object_ranges(None, False) is None
     assert parse_object_ranges("0, 3-5", False) == [(0, 0), (3, 5)]
 

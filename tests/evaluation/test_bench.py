@@ -81,6 +81,11 @@ def test_bench_runs_a_preset_and_a_baseline_on_several_frames() -> None:
         assert total.peak_mib is not None
         assert total.peak_mib >= max(s.peak_mib or 0.0 for s in r.stages[:-1])
         assert r.frames == 2 and r.first_call_s > 0 and r.max_rss_mib > 0
+        # Process time of the whole call: positive, and it reaches the table and the JSON.
+        assert r.cpu_s > 0 and r.to_dict()["cpu_s"] == r.cpu_s
+        cpu_row = next(line for line in format_bench([r]).splitlines()
+                       if line.startswith("total CPU (process time)"))
+        assert cpu_row.split()[-1] == f"{1000 * r.cpu_s:.1f}"
         (peer,) = r.baselines
         assert peer.name == "open3d-ransac" and 0 < peer.call_s <= peer.total_s
 
@@ -117,10 +122,15 @@ def test_bench_complexity_axis_times_each_objects_range() -> None:
 def test_bench_json_before_the_complexity_axis_still_reads() -> None:
     result = BenchResult("monoplane", 256, 192, 3, [StageBench("total", 0.1, 1.0)], 8.0, 400.0)
     old = {k: v for k, v in result.to_dict().items()
-           if k not in ("objects", "gt_planes", "per_frame")}
+           if k not in ("objects", "gt_planes", "per_frame", "cpu_s")}
     again = BenchResult.from_dict(old)
     assert again.objects is None and np.isnan(again.gt_planes) and again.per_frame == []
     assert "time against plane count" not in format_bench([again])
+    # Files written before the CPU time show it as unknown.
+    assert np.isnan(again.cpu_s)
+    cpu_row = next(line for line in format_bench([again]).splitlines()
+                   if line.startswith("total CPU"))
+    assert cpu_row.split()[-1] == "-"
 
 
 @pytest.mark.parametrize("objects", [[(3, 2)], [(-1, 2)], []])

@@ -11,6 +11,7 @@ from monoplane.geometry.cloud import (
     PlaneCloud,
     lattice_lines,
     lattice_step,
+    lattice_stride,
 )
 from monoplane.geometry.distance_transform import nearest_true_pixel
 from monoplane.geometry.graph import NeighbourGraph
@@ -293,6 +294,17 @@ def test_lattice_lines_centre_whole_and_fractional_steps():
     assert set(np.diff(lines)) == {2, 3} and lines.size == 40 and lines[-1] < 100
 
 
+def test_lattice_stride_is_the_smallest_that_fits():
+    valid = np.ones((48, 64), dtype=bool)
+    assert lattice_stride(valid, 48 * 64) == 1
+    assert lattice_stride(valid, 48 * 64 // 4) == 2  # 24 x 32 lattice points
+    assert lattice_stride(valid, 48 * 64 // 4 - 1) == 3
+    valid[:, 32:] = False  # half the frame: the stride drops with the count
+    assert lattice_stride(valid, 48 * 32 // 4) == 2
+    with pytest.raises(InvalidInput, match="at least 3"):
+        lattice_stride(valid, 2)
+
+
 def test_lattice_step_is_the_smallest_that_fits():
     valid = np.ones((48, 64), dtype=bool)
     assert lattice_step(valid, 48 * 64) == 1.0
@@ -314,7 +326,15 @@ def test_grid_sampling_keeps_the_valid_lattice_pixels_in_pixel_order():
     normals = np.zeros((h, w, 3), dtype=np.float32)
     normals[..., 2] = -1.0
     frame = Frame(rgb=None, K=default_intrinsics(w, h, 60.0), depth=depth, normals=normals)
-    cloud = PlaneCloud.from_frame(frame, max_points=300, grid=True)
+    # A whole stride: 2, the valid pixels at odd rows and columns.
+    whole = PlaneCloud.from_frame(frame, max_points=300, grid=True)
+    v, u = np.divmod(whole.pixels, w)
+    assert whole.stride == 2 and np.all(v % 2 == 1) and np.all(u % 2 == 1)
+    assert whole.size == len(range(5, h, 2)) * len(range(1, w, 2))
+    assert whole.lattice.shape == (15, 20)
+    # A fractional step keeps more of the 300 allowed points.
+    cloud = PlaneCloud.from_frame(frame, max_points=300, grid=True, fractional=True)
+    assert cloud.stride is None and whole.size < cloud.size
     step = lattice_step(frame.valid, 300)
     rows, cols = lattice_lines(h, step), lattice_lines(w, step)
     v, u = np.divmod(cloud.pixels, w)
@@ -327,8 +347,8 @@ def test_grid_sampling_keeps_the_valid_lattice_pixels_in_pixel_order():
     assert np.all(cloud.lattice[rows < 5] == -1)
     np.testing.assert_array_equal(cloud.lattice[rows >= 5].ravel(), np.arange(cloud.size))
     # Room for every pixel: all of them, on the lattice of step 1.
-    every = PlaneCloud.from_frame(frame, max_points=10**6, grid=True)
-    assert every.lattice.shape == (h, w) and not every.subsampled
+    every = PlaneCloud.from_frame(frame, max_points=10**6, grid=True, fractional=True)
+    assert every.lattice.shape == (h, w) and not every.subsampled and every.stride == 1
     assert PlaneCloud.from_frame(frame, max_points=300, rng=np.random.default_rng(0)
                                  ).lattice is None
 

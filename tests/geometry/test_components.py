@@ -53,6 +53,27 @@ def test_diagonal_touch_joins_only_with_eight_connectivity():
     assert label_regions(lab, 4)[0].tolist() == [[1, 0], [0, 2]]
 
 
+@pytest.mark.parametrize("connectivity", [4, 8])
+def test_runs_joined_across_rows_as_ndimage_joins_pixels(connectivity):
+    # Regions are found on row runs: a comb whose teeth join only through its back row, a
+    # U that joins at its bottom, teeth of another label between them touching at corners.
+    structure = ndimage.generate_binary_structure(2, 1 if connectivity == 4 else 2)
+    lab = np.zeros((9, 13), dtype=np.int64)
+    lab[1:8:2, 0:12:2] = 1                # dotted teeth
+    lab[8, :] = 1                         # the comb's back
+    lab[0:6, 1:12:4] = 2                  # another label's teeth, touching 1 at corners
+    lab[2:7, 9] = 3
+    lab[6, 9:13] = 3                      # an L of label 3
+    regions, origin = label_regions(lab, connectivity)
+    offset = 0
+    for value in (1, 2, 3):
+        comp, count = ndimage.label(lab == value, structure=structure)
+        np.testing.assert_array_equal(regions[lab == value], comp[lab == value] + offset)
+        assert origin[offset:offset + count].tolist() == [value] * count
+        offset += count
+    assert origin.size == offset
+
+
 @pytest.mark.parametrize("labels, connectivity, match", [
     (np.zeros(3), 8, r"\(H, W\)"),
     (np.zeros((2, 2)), 6, "4 or 8"),

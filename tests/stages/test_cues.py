@@ -77,6 +77,8 @@ def test_given_config_is_validated() -> None:
         GivenCuesConfig(normals_radius=2, normals_stride=3)
     with pytest.raises(ConfigError):
         GivenCuesConfig(normals_radius=-1)
+    with pytest.raises(ConfigError, match="gated, box"):
+        GivenCuesConfig(normals_method="integral")
 
 
 def test_given_on_real_rgbd_frame() -> None:

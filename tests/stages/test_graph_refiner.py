@@ -16,6 +16,7 @@ from monoplane.stages.graph_refiner import (
     GraphCrfRefiner,
     _stable_order,
     _touching_pairs,
+    lattice_cloud,
     pixel_graph,
 )
 from monoplane.testing import box_frame
@@ -177,6 +178,39 @@ def test_pixel_graph_links_the_8_neighbours_within_the_jump():
         row = graph.indices[graph.indptr[i]:graph.indptr[i + 1]]
         assert sorted(row) == sorted({b for a, b in expected if a == i}
                                      | {a for a, b in expected if b == i})
+
+
+def test_a_lattice_clouds_graph_links_its_8_lattice_neighbours():
+    frame, _ = box_frame(width=64, height=48)
+    # 3072 pixels: a lattice of step 2 has 768, of step 3 336.
+    cloud = lattice_cloud(frame, 400)
+    assert cloud.stride == 3 and np.all(cloud.pixels // 64 % 3 == 1)
+    graph = pixel_graph(cloud, 0.05)
+    pts = cloud.points * cloud.scale + cloud.center
+    node = {int(p): i for i, p in enumerate(cloud.pixels)}
+    expected = set()
+    for p, i in node.items():
+        v, u = divmod(p, 64)
+        for dv, du in ((0, 3), (3, -3), (3, 0), (3, 3)):
+            j = node.get((v + dv) * 64 + u + du) if 0 <= u + du < 64 else None
+            if j is not None and (np.linalg.norm(pts[i] - pts[j])
+                                  <= 0.05 * np.linalg.norm(pts[i])):
+                expected.add((i, j))
+    assert [tuple(e) for e in graph.edges] == sorted(expected)
+
+
+def test_refinement_on_a_lattice_labels_every_pixel_like_the_full_one():
+    # A lattice step of 2 pixels must stay well below the depth-jump cut on the box's
+    # slanted faces: a finer image than box_frame's default.
+    frame, true_labels = box_frame(width=256, height=192, focal=160.0)
+    rec = Pipeline.from_preset("range", overrides=["refiner.plugin=none"]).run(frame)
+    full = GraphCrfRefiner(GraphCrfConfig()).refine(rec, PARAMS)
+    # 49 152 pixels, 12 288 on a lattice of step 2.
+    coarse = GraphCrfRefiner(GraphCrfConfig(max_points=20000)).refine(rec, PARAMS)
+    assert segcomp(coarse.labels, true_labels).correct == 3
+    # Off the lattice too: the box's pixels get the labels of the full-resolution CRF
+    # (up to the regions' numbering, which is by size in both).
+    assert np.mean(coarse.labels == full.labels) > 0.99
 
 
 def test_the_threaded_mean_field_does_not_depend_on_the_threads(monkeypatch):

@@ -1,0 +1,461 @@
+"""Compiled kernels of :mod:`monoplane.geometry.normals`: the depth discontinuities, the gated
+per-sample fits and the box fits (the window sums and the pixels near edges).
+
+Kept apart from the module that orchestrates them so that each stays small; the inline helpers
+live here beside every kernel that calls them (numba's disk cache of a kernel follows its own
+source file).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from monoplane.jit import inline, kernel
+
+
+@kernel
+def _discontinuities(z: np.ndarray, max_jump: float) -> tuple[np.ndarray, np.ndarray]:
+    """Inverse depth and rim mask (near side of each discontinuity) of (H, W) float32 depth.
+
+    Along a row or column, the inverse depth of a plane changes by the same step from pixel
+    to pixel, however steep the plane (a floor near the horizon). So a discontinuity is a
+    step that differs from *both* neighbouring steps by more than ``max_jump`` relative to the
+    inverse depth; a step whose neighbours are missing (holes, image border) is compared with
+    zero instead. Arithmetic is float32, like the inputs.
+
+    Returns
+    -------
+    inv : numpy.ndarray
+        (H, W) float32 ``1 / z``, 0 on holes (``z <= 0``).
+    rim : numpy.ndarray
+        (H, W) bool.
+    """
+    h, w = z.shape
+    inv = np.zeros((h, w), dtype=np.float32)
+    for v in range(h):
+        for u in range(w):
+            if z[v, u] > 0:
+                inv[v, u] = np.float32(1.0) / z[v, u]
+    rim = np.zeros((h, w), dtype=np.bool_)
+    jump = np.float32(max_jump)
+    zero = np.float32(0.0)
+    # Each pair is tested on its own, so the order is free: row by row, both axes, each
+    # row's pairs in a branch-free loop (vectorised), the image border (a missing outer
+    # neighbour) passed as a hole.
+    side = np.zeros(max(h, w), dtype=np.int8)
+    for v in range(h):
+        row = inv[v]
+        for i in range(w - 1):
+            prev = row[i - 1] if i > 0 else zero
+            nxt = row[i + 2] if i + 2 < w else zero
+            side[i] = _pair_edge(prev, row[i], row[i + 1], nxt, jump)
+        for i in range(w - 1):
+            rim[v, i] |= side[i] < 0
+            rim[v, i + 1] |= side[i] > 0
+        if v + 1 < h:
+            above = inv[v - 1] if v > 0 else inv[v] * zero
+            below = inv[v + 2] if v + 2 < h else inv[v] * zero
+            nxt_row = inv[v + 1]
+            for u in range(w):
+                side[u] = _pair_edge(above[u], row[u], nxt_row[u], below[u], jump)
+            for u in range(w):
+                rim[v, u] |= side[u] < 0
+                rim[v + 1, u] |= side[u] > 0
+    return inv, rim
+
+
+@inline
+def _pair_edge(prev: float, a: float, b: float, nxt: float, jump: float) -> int:
+    """Whether the step ``a -> b`` of float32 inverse depth between neighbours is a
+    discontinuity (see :func:`_discontinuities`; ``prev`` and ``nxt`` are the outer
+    neighbours, 0 when missing): -1 marks ``a``'s pixel as the rim, +1 ``b``'s, 0 none."""
+    step = b - a
+    inf = np.float32(np.inf)
+    before = abs(step - (a - prev)) if prev > 0 else inf
+    after = abs(step - (nxt - b)) if nxt > 0 else inf
+    deviation = min(before, after)
+    if deviation == inf:
+        deviation = abs(step)
+    if not (a > 0 and b > 0 and step != 0 and deviation > jump * max(a, b)):
+        return 0
+    return -1 if step < 0 else 1
+
+
+@kernel
+def _relative_slope(inv: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    """(H, W) float32 per-pixel step of inverse depth relative to its value, per pixel.
+
+    Per axis, the smaller of the two one-sided steps to neighbours of the same component (so a
+    step across an edge does not count); the larger of the two axes. 0 where unknown.
+    """
+    h, w = inv.shape
+    slope = np.zeros((h, w), dtype=np.float32)
+    for v in range(h):
+        for u in range(w):
+            if not inv[v, u] > 0:
+                continue
+            lab = labels[v, u]
+            best = np.float32(0.0)
+            for dv, du in ((0, 1), (1, 0)):
+                smaller = np.float32(np.inf)
+                for sign in (-1, 1):
+                    y, x = v + sign * dv, u + sign * du
+                    if 0 <= y < h and 0 <= x < w and lab > 0 and labels[y, x] == lab:
+                        smaller = min(smaller, abs(inv[y, x] - inv[v, u]))
+                if smaller != np.inf:
+                    best = max(best, smaller)
+            slope[v, u] = best / inv[v, u]
+    return slope
+
+
+@inline
+def _line_fit(cnt: float, su: float, sv: float, suu: float, suv: float, svv: float,
+              ru: float, rv: float, r1: float, min_support: int,
+              stride: int) -> tuple[float, float, float, bool]:
+    """Least-squares fit ``y ≈ a du + b dv + c`` from its window sums: sample count, ``Σdu``,
+    ``Σdv``, ``Σdu²``, ``Σdu dv``, ``Σdv²``, ``Σdu y``, ``Σdv y`` and ``Σy``. Returns ``a, b,
+    c`` and whether the fit is well posed (enough samples, not all on one line)."""
+    # Cramer's rule on the symmetric 3x3 normal equations.
+    c00 = svv * cnt - sv * sv
+    c01 = su * sv - suv * cnt
+    c02 = suv * sv - svv * su
+    c11 = suu * cnt - su * su
+    c12 = suv * su - suu * sv
+    c22 = suu * svv - suv * suv
+    det = suu * c00 + suv * c01 + su * c02
+    # Samples on (nearly) one line give a singular system: no plane is defined there.
+    n = max(cnt, 1.0)
+    if not (cnt >= min_support and det > 1e-2 * (stride * stride) ** 2 * (n * n * n)):
+        return 0.0, 0.0, 0.0, False
+    inv_det = 1.0 / det
+    return ((c00 * ru + c01 * rv + c02 * r1) * inv_det,
+            (c01 * ru + c11 * rv + c12 * r1) * inv_det,
+            (c02 * ru + c12 * rv + c22 * r1) * inv_det, True)
+
+
+@inline
+def _store_normal(out: np.ndarray, v: int, u: int, grad_u: float, grad_v: float, value: float,
+                  params: np.ndarray) -> None:
+    """Write the normal of the local linear model of inverse depth at pixel ``(v, u)``.
+
+    ``w(u', v') ≈ value + grad_u (u' - u) + grad_v (v' - v)`` (any positive scale) gives
+    ``g = [grad_u, grad_v, value - grad_u u - grad_v v]`` and ``n ∝ -K^T g``. Since
+    ``n · K^-1 [u, v, 1] = -g · [u, v, 1] = -value``, a positive value already means the normal
+    faces the camera, and a non-positive one that the fit is unusable (left zero).
+    """
+    if not value > 0:
+        return
+    g2 = value - grad_u * u - grad_v * v
+    nx = -(grad_u * params[1] + grad_v * params[4] + g2 * params[7])
+    ny = -(grad_u * params[2] + grad_v * params[5] + g2 * params[8])
+    nz = -(grad_u * params[3] + grad_v * params[6] + g2 * params[9])
+    norm = np.sqrt(nx * nx + ny * ny + nz * nz)
+    if norm > 0:
+        out[v, u, 0] = nx / norm
+        out[v, u, 1] = ny / norm
+        out[v, u, 2] = nz / norm
+
+
+@inline
+def _window_sums(inv: np.ndarray, labels: np.ndarray, v: int, u: int, r: int, stride: int,
+                 lab: int, on_rim: bool, ungated: bool, tol: float, max_jump: float
+                 ) -> tuple[float, float, float, float, float, float, float, float, float]:
+    """Window sums of the accepted samples around pixel ``(v, u)``, in the order of
+    :func:`_line_fit`, the fitted value being the sample's inverse depth relative to the
+    centre's, ``e = w / w_p - 1`` (so the fit's gradients are relative and one tolerance fits
+    every depth range).
+
+    ``ungated``: every valid sample is accepted. Otherwise a rim pixel (``on_rim``) accepts
+    samples within ``max_jump`` of its own inverse depth, any other pixel samples of its own
+    component ``lab`` whose ``|e|`` stays within ``tol`` per pixel of offset (Chebyshev).
+    """
+    h, w = inv.shape
+    c = inv[v, u]
+    cnt = su = sv = suu = suv = svv = ru = rv = r1 = 0.0
+    for dv in range(-r, r + 1, stride):
+        y = v + dv
+        if y < 0 or y >= h:
+            continue
+        for du in range(-r, r + 1, stride):
+            x = u + du
+            if x < 0 or x >= w:
+                continue
+            q = inv[y, x]
+            e = q / c - 1.0
+            if ungated or on_rim:
+                if not (q > 0 and (ungated or abs(e) <= max_jump)):
+                    continue
+            elif labels[y, x] != lab or not abs(e) <= tol * max(abs(du), abs(dv), 1):
+                continue
+            fu, fv = float(du), float(dv)
+            cnt += 1.0
+            su += fu
+            sv += fv
+            suu += fu * fu
+            suv += fu * fv
+            svv += fv * fv
+            ru += e * fu
+            rv += e * fv
+            r1 += e
+    return cnt, su, sv, suu, suv, svv, ru, rv, r1
+
+
+@kernel
+def _fit_interior(inv: np.ndarray, labels: np.ndarray, interior: np.ndarray, sums: np.ndarray,
+                  params: np.ndarray, r: int, stride: int, min_support: int, row0: int,
+                  row1: int, out: np.ndarray) -> None:
+    """Normals of the ``interior`` pixels of rows ``row0:row1`` into ``out`` ((H, W, 3)
+    float32), each from the fit of absolute inverse depth over its whole window.
+
+    ``sums`` is (4, H, W) float32: per window, the count of valid samples and ``Σdu w``,
+    ``Σdv w``, ``Σw``. A window with every sample valid has the same sums of offsets
+    everywhere; one with holes gets them from its samples (:func:`_window_sums` ungated, so
+    ``labels`` is not read). ``params`` is ``[max_jump, K (row-major)]``.
+    """
+    w = inv.shape[1]
+    side = (2 * r) // stride + 1
+    full = float(side * side)
+    spread = 0.0  # Σdu² over a full window (= Σdv²)
+    for d in range(-r, r + 1, stride):
+        spread += float(d * d) * side
+    for v in range(row0, row1):
+        for u in range(w):
+            if not interior[v, u]:
+                continue
+            cnt = float(sums[0, v, u])
+            su = sv = suv = 0.0
+            suu = svv = spread
+            if cnt < full:  # holes: the offsets of the valid samples, ungated
+                cnt, su, sv, suu, suv, svv, _, _, _ = _window_sums(
+                    inv, labels, v, u, r, stride, 0, False, True, 0.0, 0.0)
+            a, b, c, good = _line_fit(cnt, su, sv, suu, suv, svv, float(sums[1, v, u]),
+                                      float(sums[2, v, u]), float(sums[3, v, u]),
+                                      min_support, stride)
+            if good:  # the line is absolute inverse depth: its centre value is c
+                _store_normal(out, v, u, a, b, c, params)
+
+
+@kernel
+def _fit_band(inv: np.ndarray, labels: np.ndarray, rim: np.ndarray, slope: np.ndarray,
+              band: np.ndarray, params: np.ndarray, r: int, stride: int, min_support: int,
+              row0: int, row1: int, out: np.ndarray) -> None:
+    """Edge-aware normals of the ``band`` pixels of rows ``row0:row1`` into ``out``.
+
+    Each window sample is gated: a rim pixel accepts samples within ``max_jump`` of its own
+    inverse depth, any other pixel samples of its own component within ``max_jump`` plus its
+    own relative ``slope`` per pixel of offset (Chebyshev). The fit is of inverse depth
+    relative to the centre's (:func:`_window_sums`). ``params`` is ``[max_jump, K
+    (row-major)]``.
+    """
+    w = inv.shape[1]
+    max_jump = params[0]
+    for v in range(row0, row1):
+        for u in range(w):
+            if not band[v, u]:
+                continue
+            cnt, su, sv, suu, suv, svv, ru, rv, r1 = _window_sums(
+                inv, labels, v, u, r, stride, labels[v, u], rim[v, u], False,
+                max_jump + slope[v, u], max_jump)
+            a, b, c0, good = _line_fit(cnt, su, sv, suu, suv, svv, ru, rv, r1, min_support,
+                                       stride)
+            if good:  # near the centre w = w_p (1 + c0 + a du + b dv); w_p > 0 drops out
+                _store_normal(out, v, u, a, b, 1.0 + c0, params)
+
+
+
+@kernel
+def _box_planes(fixed: np.ndarray, r: int, scale: float, tol: float,
+                params: np.ndarray, row0: int, row1: int, reach: np.ndarray,
+                out: np.ndarray) -> None:
+    """Box fits of rows ``row0:row1`` of the (H, W) float32 inverse depth ``inv``.
+
+    A pixel whose whole ``(2r+1)²`` window lies in the image, holds valid samples off the
+    ``rim`` only, and is explained by one line of inverse depth to a relative RMS of ``tol``,
+    gets the line's normal ``n`` in ``out`` and its inverse distance ``1 / d`` in ``reach``
+    ((H, W) float32; the plane ``n · X + d = 0`` has inverse depth ``-(n · ray) / d`` on the
+    ray ``K^-1 [u, v, 1]``); other pixels are left as they are (``reach = 0``: no fit).
+
+    The samples are taken in fixed point, ``round(inv * scale)``, so that the window sums
+    are exact integers: they run along the columns (from one row to the next) and then, as
+    prefix sums, along the row, each an O(1) update per pixel, and do not depend on where a
+    thread's rows start.
+    """
+    h, w = fixed.shape
+    side = 2 * r + 1
+    full = side * side
+    spread = 0  # Σdu² over the window (= Σdv²)
+    for d in range(-r, r + 1):
+        spread += d * d * side
+    # Multiplications by reciprocals: these fits run on most pixels of the frame.
+    inv_full, inv_spread, unit, tol2 = 1.0 / full, 1.0 / spread, 1.0 / scale, tol * tol * full
+    col = np.zeros(w, np.int64)      # Σ over the window's rows of the sample
+    ramp = np.zeros(w, np.int64)     # Σ of dv × sample
+    sq = np.zeros(w, np.int64)       # Σ of its square
+    cnt = np.zeros(w, np.int64)      # how many samples are valid non-rim
+    prefix = np.zeros((5, w + 1), np.int64)
+    p0, p1, pv, p2, pn = prefix[0], prefix[1], prefix[2], prefix[3], prefix[4]
+    start = max(row0, r)
+    for v in range(start, min(row1, h - r)):
+        if v == start:
+            for dv in range(-r, r + 1):
+                for u in range(w):
+                    q = np.int64(fixed[v + dv, u])
+                    col[u] += q
+                    ramp[u] += dv * q
+                    sq[u] += q * q
+                    cnt[u] += 1 if q > 0 else 0
+        else:  # slide down one row: drop row v - r - 1, add row v + r
+            for u in range(w):
+                old, new = np.int64(fixed[v - r - 1, u]), np.int64(fixed[v + r, u])
+                col[u] += new - old
+                ramp[u] += r * old + r * new - col[u] + new
+                sq[u] += new * new - old * old
+                cnt[u] += (1 if new > 0 else 0) - (1 if old > 0 else 0)
+        # Prefix sums along the row, so that each window's sums are differences.
+        for u in range(w):
+            p0[u + 1] = p0[u] + col[u]
+            p1[u + 1] = p1[u] + u * col[u]
+            pv[u + 1] = pv[u] + ramp[u]
+            p2[u + 1] = p2[u] + sq[u]
+            pn[u + 1] = pn[u] + cnt[u]
+        for u in range(r, w - r):
+            if pn[u + r + 1] - pn[u - r] < full:
+                continue
+            f0 = float(p0[u + r + 1] - p0[u - r])
+            fu = float(p1[u + r + 1] - p1[u - r]) - u * f0
+            fv = float(pv[u + r + 1] - pv[u - r])
+            c = f0 * inv_full
+            a, b = fu * inv_spread, fv * inv_spread
+            if float(p2[u + r + 1] - p2[u - r]) - f0 * c - (fu * a + fv * b) > tol2 * c * c:
+                continue
+            reach[v, u] = _put_normal(out, v, u, a * unit, b * unit, c * unit, params)
+
+
+@kernel
+def _fixed_point(inv: np.ndarray, rim: np.ndarray, scale: float, row0: int, row1: int,
+                 fixed: np.ndarray) -> None:
+    """Rows ``row0:row1`` of the (H, W) int32 fixed-point inverse depth ``round(inv *
+    scale)`` of the valid non-rim pixels, 0 elsewhere."""
+    for v in range(row0, row1):
+        for u in range(inv.shape[1]):
+            ok = inv[v, u] > 0 and not rim[v, u]
+            fixed[v, u] = np.int32(inv[v, u] * scale + 0.5) if ok else np.int32(0)
+
+
+@inline
+def _own_slope(inv: np.ndarray, rim: np.ndarray, v: int, u: int) -> float:
+    """Step of inverse depth per pixel at ``(v, u)``: per axis the smaller one-sided step to
+    a valid non-rim neighbour, the larger of the two axes (0 if unknown)."""
+    h, w = inv.shape
+    best = 0.0
+    for dv, du in ((0, 1), (1, 0)):
+        smaller = np.inf
+        for sign in (-1, 1):
+            y, x = v + sign * dv, u + sign * du
+            if 0 <= y < h and 0 <= x < w and inv[y, x] > 0 and not rim[y, x]:
+                smaller = min(smaller, abs(float(inv[y, x]) - float(inv[v, u])))
+        if smaller != np.inf:
+            best = max(best, smaller)
+    return best
+
+
+@inline
+def _put_normal(out: np.ndarray, v: int, u: int, grad_u: float, grad_v: float, value: float,
+                params: np.ndarray) -> float:
+    """:func:`_store_normal` for a ``value > 0``, with one division instead of three; returns
+    the plane's inverse distance ``1 / d`` (``-K^T g = n / d``), 0 if there is none."""
+    g2 = value - grad_u * u - grad_v * v
+    nx = -(grad_u * params[1] + grad_v * params[4] + g2 * params[7])
+    ny = -(grad_u * params[2] + grad_v * params[5] + g2 * params[8])
+    nz = -(grad_u * params[3] + grad_v * params[6] + g2 * params[9])
+    norm = np.sqrt(nx * nx + ny * ny + nz * nz)
+    if norm > 0:
+        k = 1.0 / norm
+        out[v, u, 0] = nx * k
+        out[v, u, 1] = ny * k
+        out[v, u, 2] = nz * k
+    return norm
+
+
+@kernel
+def _box_band(inv: np.ndarray, rim: np.ndarray, reach: np.ndarray, params: np.ndarray,
+              k_inv: np.ndarray, radius: int, r: int, stride: int, min_support: int,
+              row0: int, row1: int, out: np.ndarray) -> None:
+    """Normals of the valid pixels of rows ``row0:row1`` without a box fit of their own.
+
+    Such a pixel lies in the window of every box-fitted pixel within ``radius`` (Chebyshev),
+    so on that window's one surface. It takes the normal of one of them, on the offsets
+    ``{0, ±radius/2}²`` or else ``{0, ±radius}²``: the one whose plane predicts its inverse
+    depth ``-(n · ray) / d`` best, within ``max_jump`` (on a crease, its own face). A pixel
+    without one (a rim pixel, a sliver narrower than a window) fits the samples of its
+    ``(2r+1)²`` window every ``stride`` pixels by the gated rule without the components:
+    within ``max_jump`` of its own inverse depth, plus (off the rim) its own relative slope
+    per pixel of offset. ``k_inv`` is (3, 3) float64 ``K^-1``; ``reach`` (``1 / d``) and
+    ``out`` hold the box fits.
+    """
+    h, w = inv.shape
+    max_jump = params[0]
+    # The inner ring first, then the outer one.
+    half = max(radius // 2, 1)
+    offsets = np.empty((16, 2), np.int64)
+    k = 0
+    for ring in (half, radius):
+        for dv in (-ring, 0, ring):
+            for du in (-ring, 0, ring):
+                if dv != 0 or du != 0:
+                    offsets[k, 0], offsets[k, 1] = dv, du
+                    k += 1
+    for v in range(row0, row1):
+        for u in range(w):
+            p = inv[v, u]
+            if not p > 0 or reach[v, u] > 0:
+                continue
+            # The ray of this pixel
+            hx = k_inv[0, 0] * u + k_inv[0, 1] * v + k_inv[0, 2]
+            hy = k_inv[1, 0] * u + k_inv[1, 1] * v + k_inv[1, 2]
+            hz = k_inv[2, 0] * u + k_inv[2, 1] * v + k_inv[2, 2]
+            best, pick = max_jump * p, -1
+            for k in range(offsets.shape[0]):
+                if k == 8 and pick >= 0:  # the inner ring had one
+                    break
+                y, x = v + offsets[k, 0], u + offsets[k, 1]
+                if y < 0 or y >= h or x < 0 or x >= w or not reach[y, x] > 0:
+                    continue
+                dot = out[y, x, 0] * hx + out[y, x, 1] * hy + out[y, x, 2] * hz
+                miss = abs(dot * reach[y, x] + p)  # |predicted - p|, predicted = -dot / d
+                if miss <= best:
+                    best, pick = miss, k
+            if pick >= 0:
+                y, x = v + offsets[pick, 0], u + offsets[pick, 1]
+                out[v, u, 0], out[v, u, 1], out[v, u, 2] = out[y, x, 0], out[y, x, 1], out[y, x, 2]
+                continue
+            # Samples within max_jump of the pixel's inverse depth, plus (off the rim) its
+            # own relative slope per pixel of offset, e = w / w_p - 1 (the gated fit's rule
+            # without the components), accumulated with 0/1 weights.
+            to_e = 1.0 / p
+            slope = 0.0 if rim[v, u] else _own_slope(inv, rim, v, u) * to_e
+            cnt = su = sv = suu = suv = svv = ru = rv = r1 = 0.0
+            lo_u = u - r if u >= r else u - r + ((r - u + stride - 1) // stride) * stride
+            for dv in range(-r, r + 1, stride):
+                y = v + dv
+                if y < 0 or y >= h:
+                    continue
+                fv = float(dv)
+                for x in range(lo_u, min(u + r, w - 1) + 1, stride):
+                    e = inv[y, x] * to_e - 1.0
+                    tol = max_jump + slope * max(abs(x - u), abs(dv), 1)
+                    keep = 1.0 if inv[y, x] > 0 and abs(e) <= tol else 0.0
+                    fu = float(x - u)
+                    cnt += keep
+                    su += keep * fu
+                    sv += keep * fv
+                    suu += keep * fu * fu
+                    suv += keep * fu * fv
+                    svv += keep * fv * fv
+                    ru += keep * e * fu
+                    rv += keep * e * fv
+                    r1 += keep * e
+            a, b, c0, good = _line_fit(cnt, su, sv, suu, suv, svv, ru, rv, r1, min_support,
+                                       stride)
+            if good:
+                _store_normal(out, v, u, a, b, 1.0 + c0, params)
