@@ -134,6 +134,18 @@ def _line_fit(cnt: float, su: float, sv: float, suu: float, suv: float, svv: flo
 
 
 @inline
+def _camera_normal(u: int, v: int, grad_u: float, grad_v: float, value: float,
+                   params: np.ndarray) -> tuple[float, float, float, float]:
+    """``-K^T g`` of the inverse-depth model ``g`` at pixel ``(v, u)`` (see
+    :func:`_store_normal`) and its norm; ``params[1:10]`` is K row-major."""
+    g2 = value - grad_u * u - grad_v * v
+    nx = -(grad_u * params[1] + grad_v * params[4] + g2 * params[7])
+    ny = -(grad_u * params[2] + grad_v * params[5] + g2 * params[8])
+    nz = -(grad_u * params[3] + grad_v * params[6] + g2 * params[9])
+    return nx, ny, nz, np.sqrt(nx * nx + ny * ny + nz * nz)
+
+
+@inline
 def _store_normal(out: np.ndarray, v: int, u: int, grad_u: float, grad_v: float, value: float,
                   params: np.ndarray) -> None:
     """Write the normal of the local linear model of inverse depth at pixel ``(v, u)``.
@@ -145,11 +157,7 @@ def _store_normal(out: np.ndarray, v: int, u: int, grad_u: float, grad_v: float,
     """
     if not value > 0:
         return
-    g2 = value - grad_u * u - grad_v * v
-    nx = -(grad_u * params[1] + grad_v * params[4] + g2 * params[7])
-    ny = -(grad_u * params[2] + grad_v * params[5] + g2 * params[8])
-    nz = -(grad_u * params[3] + grad_v * params[6] + g2 * params[9])
-    norm = np.sqrt(nx * nx + ny * ny + nz * nz)
+    nx, ny, nz, norm = _camera_normal(u, v, grad_u, grad_v, value, params)
     if norm > 0:
         out[v, u, 0] = nx / norm
         out[v, u, 1] = ny / norm
@@ -364,11 +372,7 @@ def _put_normal(out: np.ndarray, v: int, u: int, grad_u: float, grad_v: float, v
                 params: np.ndarray) -> float:
     """:func:`_store_normal` for a ``value > 0``, with one division instead of three; returns
     the plane's inverse distance ``1 / d`` (``-K^T g = n / d``), 0 if there is none."""
-    g2 = value - grad_u * u - grad_v * v
-    nx = -(grad_u * params[1] + grad_v * params[4] + g2 * params[7])
-    ny = -(grad_u * params[2] + grad_v * params[5] + g2 * params[8])
-    nz = -(grad_u * params[3] + grad_v * params[6] + g2 * params[9])
-    norm = np.sqrt(nx * nx + ny * ny + nz * nz)
+    nx, ny, nz, norm = _camera_normal(u, v, grad_u, grad_v, value, params)
     if norm > 0:
         k = 1.0 / norm
         out[v, u, 0] = nx * k
