@@ -155,6 +155,9 @@ def _workloads(report: bool = True) -> Iterator[tuple[str, Callable[[], Any]]]:
     # planes_from_triplets takes; and the presets' samplers let it search in one compiled
     # call, so a sampler that does not (napsac) makes it call the scorer batch by batch.
     yield "triplet planes", lambda: planes_from_triplets(np.eye(3)[None])
+    # No preset samples on the pixel lattice: its graph's turn weights get a run of their own.
+    yield "pixel lattice", lambda: Pipeline.from_preset(
+        "monoplane-nocrf", overrides=["ransac.sampling=grid"]).run(frame)
     # The labelers hand the max-flow a network in its own arc layout; the general binary
     # energies (and plugins) give it edge lists.
     yield "max-flow of an edge list", lambda: min_cut(

@@ -257,6 +257,14 @@ def test_proximity_weight_kernel_matches_the_vectorised_formula(seed, threads, m
                 proximity_weights(pts, edges, normals, colors, *params),
                 reference_proximity_weights(pts, edges, normals, colors, *params),
                 rtol=1e-12)
+    # A per-edge scale shrinks the affinity above the 0.5 floor, chunk by chunk alike.
+    scale = rng.random(600)
+    np.testing.assert_allclose(
+        proximity_weights(pts, edges, nrm, col, *params, scale=scale),
+        0.5 + scale * (reference_proximity_weights(pts, edges, nrm, col, *params) - 0.5),
+        rtol=1e-12)
+    with pytest.raises(InvalidInput, match=r"scale must be \(600,\)"):
+        proximity_weights(pts, edges, nrm, col, *params, scale=scale[:-1])
 
 
 def test_fused_data_costs_match_msac_and_normal_costs():

@@ -203,6 +203,8 @@ def test_sampling_must_be_named():
         RansacConfig(sampling="lattice")
     with pytest.raises(ConfigError, match="lattice_max_turn_deg must lie in"):
         RansacConfig(lattice_max_turn_deg=0.0)
+    with pytest.raises(ConfigError, match="lattice_turn_deg must be non-negative"):
+        RansacConfig(lattice_turn_deg=-1.0)
 
 
 def test_max_planes_and_min_support_stop_the_search():

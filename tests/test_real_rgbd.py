@@ -132,33 +132,43 @@ def test_fit_plane_recovers_a_tilted_plane():
 
 
 real = pytest.mark.skipif(not REAL.is_dir(), reason=f"real RGB-D frames not found at {REAL}")
+COLOURS = {"TUM": "TUM_color.png", "SUN": "SUN_color.jpg", "NYU": "NYU_color.ppm"}
+#: Seeds of the sweep that counts, per sampling, how many seeds pass every check.
+SWEEP_SEEDS = range(12)
 
 
-@pytest.fixture(scope="module")
-def real_runs(tmp_path_factory):
-    pipe = Pipeline.from_preset("rgbd")
-    out = {}
-    colours = {"TUM": "TUM_color.png", "SUN": "SUN_color.jpg", "NYU": "NYU_color.ppm"}
-    folder = tmp_path_factory.mktemp("real")
-    for name, colour in colours.items():
+def real_frames(folder: Path) -> dict:
+    """The three frames, loaded through a metric ``.npy`` depth written to ``folder``."""
+    frames = {}
+    for name, colour in COLOURS.items():
         np.save(folder / f"{name}.npy", real_depth(name))
-        frame = load_frame(REAL / colour, depth=folder / f"{name}.npy", intrinsics=INTRINSICS)
-        out[name] = pipe.run(frame)
+        frames[name] = load_frame(REAL / colour, depth=folder / f"{name}.npy",
+                                  intrinsics=INTRINSICS)
+    return frames
+
+
+def surface_truths(frame, name: str) -> dict[str, tuple[str, np.ndarray, np.ndarray | None]]:
+    """Per surface of ``name``: (kind, truth mask, truth normal or None), from the depth only."""
+    points = frame.points()
+    valid = frame.depth > 0
+    out = {}
+    for surface, (kind, polygon) in SURFACES[name].items():
+        mask = polygon_mask(polygon, valid.shape) & valid
+        if kind == CURVED:
+            out[surface] = (kind, mask, None)
+        else:
+            out[surface] = (kind, *surface_truth(points, mask))
     return out
 
 
-def coverage(rec, name: str) -> dict[str, tuple[float, float]]:
+def coverage(rec, truths: dict) -> dict[str, tuple[float, float]]:
     """Per surface: (fraction covered by its best plane, that plane's angle in degrees) for a
     plane, (fraction labelled planar, 0) for a curved surface."""
-    points = rec.frame.points()
-    valid = rec.frame.depth > 0
     out = {}
-    for surface, (kind, polygon) in SURFACES[name].items():
-        mask = polygon_mask(polygon, rec.labels.shape) & valid
+    for surface, (kind, truth, normal) in truths.items():
         if kind == CURVED:
-            out[surface] = (float((rec.labels[mask] > 0).mean()), 0.0)
+            out[surface] = (float((rec.labels[truth] > 0).mean()), 0.0)
             continue
-        truth, normal = surface_truth(points, mask)
         counts = np.bincount(rec.labels[truth], minlength=rec.num_planes + 1)[1:]
         best = int(np.argmax(counts))
         cos = abs(rec.planes[best, :3] @ normal)
@@ -166,20 +176,92 @@ def coverage(rec, name: str) -> dict[str, tuple[float, float]]:
     return out
 
 
+def failed_checks(name: str, got: dict[str, tuple[float, float]]) -> list[str]:
+    """The checks of frame ``name`` that ``got`` (:func:`coverage`) fails, as messages.
+
+    TUM: desk top >= 70 % within 10 degrees, globe <= 15 % planar, partition within 10 degrees,
+    cabinet front and floor >= 80 % within 5 degrees; SUN and NYU: every surface >= 80 % within
+    5 degrees."""
+    failed = []
+    for surface, (cover, angle) in got.items():
+        if name == "TUM" and surface == "desk top":
+            ok = cover >= 0.7 and angle <= 10
+        elif surface == "globe":
+            ok = cover <= 0.15
+        elif name == "TUM" and surface == "partition":
+            ok = angle <= 10
+        else:
+            ok = cover >= 0.8 and angle <= 5
+        if not ok:
+            failed.append(f"{name} {surface}: {cover:.0%} at {angle:.1f} deg")
+    return failed
+
+
+def seed_sweep(frames: dict, truths: dict, overrides: dict, seeds=SWEEP_SEEDS
+               ) -> dict[int, dict[str, dict[str, tuple[float, float]]]]:
+    """:func:`coverage` of each frame under the ``rgbd`` preset with ``overrides``, per
+    ``ransac.seed``."""
+    out = {}
+    for seed in seeds:
+        pipe = Pipeline.from_preset("rgbd", overrides={**overrides, "ransac.seed": seed})
+        out[seed] = {name: coverage(pipe.run(frame), truths[name])
+                     for name, frame in frames.items()}
+    return out
+
+
+def passing_seeds(sweep: dict) -> list[int]:
+    """The seeds of a :func:`seed_sweep` at which every check of every frame holds."""
+    return [seed for seed, got in sweep.items()
+            if not any(failed_checks(name, g) for name, g in got.items())]
+
+
+@pytest.fixture(scope="module")
+def real_truths(tmp_path_factory):
+    frames = real_frames(tmp_path_factory.mktemp("real"))
+    return frames, {name: surface_truths(frame, name) for name, frame in frames.items()}
+
+
+@pytest.fixture(scope="module")
+def real_runs(real_truths):
+    frames, _ = real_truths
+    pipe = Pipeline.from_preset("rgbd")
+    return {name: pipe.run(frame) for name, frame in frames.items()}
+
+
+def test_failed_checks_name_what_fails():
+    good = {"desk top": (0.9, 2.0), "globe": (0.05, 0.0), "partition": (0.5, 3.0),
+            "cabinet front": (0.85, 4.0), "floor": (0.95, 1.0)}
+    assert failed_checks("TUM", good) == []
+    bad = {**good, "globe": (0.55, 0.0), "floor": (0.95, 6.0)}
+    assert failed_checks("TUM", bad) == ["TUM globe: 55% at 0.0 deg", "TUM floor: 95% at 6.0 deg"]
+    assert failed_checks("NYU", {"floor": (0.75, 1.0)}) == ["NYU floor: 75% at 1.0 deg"]
+
+
 @real
-def test_tum_desk_globe_and_partition(real_runs):
-    got = coverage(real_runs["TUM"], "TUM")
-    cover, angle = got["desk top"]
-    assert cover >= 0.7 and angle <= 10, f"desk top seen at a grazing angle: {got}"
-    assert got["globe"][0] <= 0.15, f"the globe is curved: {got}"
-    assert got["partition"][1] <= 10, f"the bottles and the bag tilt the partition: {got}"
-    for surface in ("cabinet front", "floor"):
-        assert got[surface][0] >= 0.8 and got[surface][1] <= 5, f"{surface}: {got}"
+def test_tum_desk_globe_and_partition(real_runs, real_truths):
+    got = coverage(real_runs["TUM"], real_truths[1]["TUM"])
+    assert failed_checks("TUM", got) == [], got
 
 
 @real
 @pytest.mark.parametrize("name", ["SUN", "NYU"])
-def test_sun_and_nyu_surfaces(real_runs, name):
-    got = coverage(real_runs[name], name)
-    for surface, (cover, angle) in got.items():
-        assert cover >= 0.8 and angle <= 5, f"{name} {surface}: {got}"
+def test_sun_and_nyu_surfaces(real_runs, real_truths, name):
+    got = coverage(real_runs[name], real_truths[1][name])
+    assert failed_checks(name, got) == [], got
+
+
+#: Seeds of :data:`SWEEP_SEEDS` that pass every check, at least, per ``ransac.sampling`` of
+#: the ``rgbd`` preset (measured: docs/evaluation.md, "The pixel-lattice graph").
+SWEEP_FLOOR = {"random": 1, "grid": 2}
+
+
+@real
+@pytest.mark.slow
+@pytest.mark.parametrize("sampling", sorted(SWEEP_FLOOR))
+def test_real_frames_pass_at_enough_seeds(real_truths, sampling):
+    # One seed decides the fast tests above; the sampling is judged over twelve.
+    frames, truths = real_truths
+    sweep = seed_sweep(frames, truths, {"ransac.sampling": sampling})
+    fails = {seed: [m for name, g in got.items() for m in failed_checks(name, g)]
+             for seed, got in sweep.items()}
+    assert len(passing_seeds(sweep)) >= SWEEP_FLOOR[sampling], fails

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from monoplane.errors import InvalidInput
 from monoplane.jit import chunks, kernel, run_threaded
 
 #: Edges per thread below which proximity weights are computed on one thread.
@@ -147,7 +148,8 @@ def _data_costs(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, plane
 def proximity_weights(points: np.ndarray, edges: np.ndarray, normals: np.ndarray | None = None,
                       colors: np.ndarray | None = None, alpha_p2: float = 0.005,
                       alpha_c2: float = 0.1, alpha_n2: float = 5.0, w_p: float = 1.0,
-                      w_c: float = 1.0, w_n: float = 1.0) -> np.ndarray:
+                      w_c: float = 1.0, w_n: float = 1.0, scale: np.ndarray | None = None
+                      ) -> np.ndarray:
     """Cost of cutting each edge in the proximity-guided pairwise term, 0.5 + k_p + k_c + k_n.
 
     k_p = w_p exp(-|p_i - p_j|² / 2α_p²)  (eq. kp),
@@ -169,6 +171,11 @@ def proximity_weights(points: np.ndarray, edges: np.ndarray, normals: np.ndarray
         Squared bandwidths α_p², α_c², α_n² (paper: 0.005, 0.1, 5.0).
     w_p, w_c, w_n : float
         Term weights (paper: 1).
+    scale : numpy.ndarray, optional
+        (E,) factors in [0, 1] on each edge's affinity ``k_p + k_c + k_n``: the cost becomes
+        ``0.5 + scale (cost - 0.5)`` (the lattice graph's down-weighting of pairs whose
+        normals turn, :meth:`~monoplane.geometry.graph.NeighbourGraph.from_lattice`). The 0.5
+        floor keeps every edge's table submodular.
 
     Returns
     -------
@@ -180,11 +187,18 @@ def proximity_weights(points: np.ndarray, edges: np.ndarray, normals: np.ndarray
     pairs = np.ascontiguousarray(np.asarray(edges, dtype=np.int64).reshape(-1, 2))
     nor = none if normals is None else np.ascontiguousarray(normals, dtype=np.float64)
     col = none if colors is None else np.ascontiguousarray(colors, dtype=np.float64)
+    if scale is None:
+        factor = np.zeros(0)
+    else:
+        factor = np.ascontiguousarray(scale, dtype=np.float64)
+        if factor.shape != (pairs.shape[0],):
+            raise InvalidInput(f"scale must be ({pairs.shape[0]},), got {factor.shape}")
     # Each edge's weight is computed alone: chunks of edges on parallel threads change nothing.
     parts = run_threaded([
         lambda a=a, b=b: _proximity_weights(pts, pairs[a:b], nor, col, float(alpha_p2),
                                             float(alpha_c2), float(alpha_n2), float(w_p),
-                                            float(w_c), float(w_n))
+                                            float(w_c), float(w_n),
+                                            factor[a:b] if factor.size else factor)
         for a, b in chunks(pairs.shape[0], THREADED_EDGES)])
     return np.concatenate(parts) if len(parts) > 1 else parts[0]
 
@@ -192,9 +206,10 @@ def proximity_weights(points: np.ndarray, edges: np.ndarray, normals: np.ndarray
 @kernel
 def _proximity_weights(points: np.ndarray, edges: np.ndarray, normals: np.ndarray,
                        colors: np.ndarray, alpha_p2: float, alpha_c2: float, alpha_n2: float,
-                       w_p: float, w_c: float, w_n: float) -> np.ndarray:
-    """:func:`proximity_weights` in one pass; empty (0, 3) ``normals``/``colors`` drop a term."""
-    use_n, use_c = normals.shape[0] > 0, colors.shape[0] > 0
+                       w_p: float, w_c: float, w_n: float, scale: np.ndarray) -> np.ndarray:
+    """:func:`proximity_weights` in one pass; empty (0, 3) ``normals``/``colors`` drop a term,
+    an empty ``scale`` scales nothing."""
+    use_n, use_c, use_s = normals.shape[0] > 0, colors.shape[0] > 0, scale.shape[0] > 0
     out = np.empty(edges.shape[0])
     for e in range(edges.shape[0]):
         i, j = edges[e, 0], edges[e, 1]
@@ -213,5 +228,5 @@ def _proximity_weights(points: np.ndarray, edges: np.ndarray, normals: np.ndarra
             for c in range(3):
                 dot += normals[i, c] * normals[j, c]
             w += w_n * np.exp(pos - np.arccos(min(max(dot, -1.0), 1.0)) / (2.0 * alpha_n2))
-        out[e] = w
+        out[e] = 0.5 + scale[e] * (w - 0.5) if use_s else w
     return out

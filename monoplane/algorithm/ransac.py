@@ -124,6 +124,10 @@ class RansacConfig:
     lattice_max_turn_deg: float = param(
         180.0, "with sampling 'grid', lattice neighbours whose normals differ by more than "
         "this angle in degrees are not linked either (180: no such cut)")
+    lattice_turn_deg: float = param(
+        10.0, "with sampling 'grid', the proximity labeler's affinity of two lattice neighbours "
+        "(their cut cost above its 0.5 floor) is scaled by exp(-t²/2σ²), t the angle between "
+        "their normals: this σ in degrees (0: not scaled)")
     lo_iterations: int = param(1, "local optimisation rounds (refit + relabel) per plane")
     split_components: bool = param(
         False, "keep only the largest graph-connected component of each plane's inliers")
@@ -159,6 +163,7 @@ class RansacConfig:
             (self.sampling in SAMPLINGS,
              f"sampling must be one of {', '.join(SAMPLINGS)}, got {self.sampling!r}"),
             (0 < self.lattice_max_turn_deg <= 180, "lattice_max_turn_deg must lie in (0, 180]"),
+            (self.lattice_turn_deg >= 0, "lattice_turn_deg must be non-negative"),
             (self.lo_iterations >= 0, "lo_iterations must be non-negative"),
             (self.noise_factor >= 0, "noise_factor must be non-negative"),
             (self.noise_planes >= 0, "noise_planes must be non-negative"),
@@ -228,7 +233,8 @@ class SequentialRansac:
         cfg = self.config
         rng = np.random.default_rng(cfg.seed)
         t = time.perf_counter()
-        cloud = PlaneCloud.from_frame(frame, cfg.max_points, rng, grid=cfg.sampling == "grid")
+        cloud = PlaneCloud.from_frame(frame, cfg.max_points, rng, grid=cfg.sampling == "grid",
+                                      fractional=True)
         t_cloud = time.perf_counter() - t
         t_graph = 0.0
 
@@ -237,13 +243,13 @@ class SequentialRansac:
         def build_graph() -> NeighbourGraph:
             nonlocal t_graph
             t = time.perf_counter()
-            if cloud.stride is None:
+            if cloud.lattice is None:
                 graph = NeighbourGraph.build(cloud.points, cfg.knn, tree=cloud.tree)
             else:
-                pixels, shape, _ = cloud.pixel_grid()
-                graph = NeighbourGraph.from_lattice(cloud.points, pixels, shape, cloud.stride,
+                graph = NeighbourGraph.from_lattice(cloud.points, cloud.lattice,
                                                     cloud.center / cloud.scale,
-                                                    LATTICE_MAX_JUMP, cloud.normals, turn)
+                                                    LATTICE_MAX_JUMP, cloud.normals, turn,
+                                                    cfg.lattice_turn_deg or None)
             t_graph = time.perf_counter() - t
             return graph
 

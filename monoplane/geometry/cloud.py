@@ -13,7 +13,8 @@ Subsampling
 -----------
 At high resolution RANSAC runs on a random subset of at most ``max_points`` valid pixels (drawn
 from the caller's generator, so it is deterministic for a seed), or on the valid pixels of a
-regular lattice (``grid``; :func:`lattice_stride`), whose neighbours the lattice itself gives
+regular lattice (``grid``; :func:`lattice_stride`, or :func:`lattice_step` for a step that
+need not be whole), whose neighbours the lattice itself gives
 (:meth:`NeighbourGraph.from_lattice`). :meth:`PlaneCloud.propagate`
 then carries the labels of the subset to every valid pixel. A pixel first takes the label of
 its nearest sampled pixel in the image (a distance transform). Where that is doubtful (the
@@ -39,6 +40,7 @@ from monoplane.datamodel import Frame
 from monoplane.errors import InvalidInput
 from monoplane.geometry.distance_transform import nearest_true_pixel
 from monoplane.geometry.graph import NeighbourGraph
+from monoplane.geometry.lattice import lattice_lines, lattice_step, lattice_stride
 from monoplane.geometry.neighbours import PointIndex
 from monoplane.geometry.propagation import closest_plane, propagate_labels
 from monoplane.jit import chunks, kernel, run_threaded
@@ -93,9 +95,13 @@ class PlaneCloud:
         (N,) int64 row of ``all_points`` of each point of a subsampled cloud without an image
         (a frame's cloud says it with ``pixels``); None otherwise.
     stride : int or None
-        Step in pixels of the regular lattice a frame's points were sampled on
-        (:meth:`from_frame` with ``grid``; 1: every valid pixel); None for a random sample or
-        a cloud without an image.
+        Whole step in pixels of the regular lattice a frame's points were sampled on
+        (:meth:`from_frame` with ``grid``; 1: every valid pixel); None for a fractional step,
+        a random sample or a cloud without an image.
+    lattice : numpy.ndarray or None
+        (R, C) int64 point of each node of the regular lattice a frame's points were sampled
+        on (:meth:`from_frame` with ``grid``), -1 where the lattice pixel is not valid; None
+        for a random sample or a cloud without an image.
     """
 
     points: np.ndarray
@@ -109,6 +115,7 @@ class PlaneCloud:
     all_pixels: np.ndarray | None
     sampled: np.ndarray | None = None
     stride: int | None = None
+    lattice: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         n = self.points.shape[0]
@@ -170,7 +177,8 @@ class PlaneCloud:
 
     @classmethod
     def from_frame(cls, frame: Frame, max_points: int | None = None,
-                   rng: np.random.Generator | None = None, grid: bool = False) -> PlaneCloud:
+                   rng: np.random.Generator | None = None, grid: bool = False,
+                   fractional: bool = False) -> PlaneCloud:
         """Unproject a frame's valid pixels into a normalised oriented cloud.
 
         Parameters
@@ -184,9 +192,15 @@ class PlaneCloud:
         rng : numpy.random.Generator, optional
             Source of the subsampling; required when random subsampling happens.
         grid : bool
-            Subsample on a regular lattice instead: the valid pixels at ``v, u ≡ s // 2
-            (mod s)`` for the smallest stride ``s`` that keeps at most ``max_points`` of them
-            (:func:`lattice_stride`); ``stride`` records ``s``. Draws nothing from ``rng``.
+            Subsample on a regular lattice instead: the valid pixels of the rows and columns
+            ``⌊(i + ½) s⌋`` (:func:`lattice_lines`; for a whole ``s``, ``v, u ≡ s // 2
+            (mod s)``) for the smallest whole step ``s`` that keeps at most ``max_points`` of
+            them (:func:`lattice_stride`); ``stride`` records ``s`` and ``lattice`` which
+            point each lattice node holds. Draws nothing from ``rng``.
+        fractional : bool
+            With ``grid``: the smallest step that need not be whole (:func:`lattice_step`),
+            so that the lattice holds about ``max_points`` points at any resolution;
+            ``stride`` is then None.
 
         Returns
         -------
@@ -214,17 +228,24 @@ class PlaneCloud:
 
         keep = all_pixels
         points = all_points
-        stride = None
+        stride = lattice = None
         if grid:
-            stride = 1
+            step, stride = 1.0, 1
             if max_points is not None and all_pixels.size > max_points:
-                stride = lattice_stride(valid_image, max_points)
-                offset = stride // 2
-                on_lattice = np.zeros(frame.shape, dtype=bool)
-                on_lattice[offset::stride, offset::stride] = True
-                chosen = np.flatnonzero(on_lattice.ravel()[all_pixels])
-                keep = all_pixels[chosen]
-                points = all_points[chosen]
+                if fractional:
+                    step, stride = lattice_step(valid_image, max_points), None
+                else:
+                    stride = lattice_stride(valid_image, max_points)
+                    step = float(stride)
+            rows, cols = lattice_lines(frame.shape[0], step), lattice_lines(frame.shape[1], step)
+            on_lattice = np.zeros(frame.shape, dtype=bool)
+            on_lattice[np.ix_(rows, cols)] = True
+            chosen = np.flatnonzero(on_lattice.ravel()[all_pixels])
+            keep = all_pixels[chosen]
+            points = all_points[chosen]
+            node = np.full(on_lattice.size, -1, dtype=np.int64)
+            node[keep] = np.arange(keep.size)
+            lattice = np.ascontiguousarray(node.reshape(frame.shape)[np.ix_(rows, cols)])
         elif max_points is not None and all_pixels.size > max_points:
             if max_points < 3:
                 raise InvalidInput(f"max_points must be at least 3, got {max_points}")
@@ -244,7 +265,8 @@ class PlaneCloud:
             colors = frame.rgb.reshape(-1, 3)[keep].astype(np.float64) / 255.0
         return cls(points=np.ascontiguousarray(points), normals=normals, colors=colors,
                    pixels=keep, center=center, scale=scale, shape=frame.shape,
-                   all_points=all_points, all_pixels=all_pixels, stride=stride)
+                   all_points=all_points, all_pixels=all_pixels, stride=stride,
+                   lattice=lattice)
 
     @classmethod
     def from_points(cls, points: np.ndarray, normals: np.ndarray, colors: np.ndarray | None,
@@ -440,32 +462,6 @@ class PlaneCloud:
             out[start:start + len(part)] = closest_plane(
                 part, d_k.reshape(len(part), k), n_k.reshape(len(part), k), labels, planes)
         return out
-
-
-def lattice_stride(valid: np.ndarray, max_points: int) -> int:
-    """Smallest lattice step that keeps at most ``max_points`` valid pixels.
-
-    Parameters
-    ----------
-    valid : numpy.ndarray
-        (H, W) bool valid pixels.
-    max_points : int
-        Most lattice pixels to keep, >= 3.
-
-    Returns
-    -------
-    int
-        Stride ``s >= 1`` such that the valid pixels at ``v, u ≡ s // 2 (mod s)`` number at
-        most ``max_points``.
-    """
-    if max_points < 3:
-        raise InvalidInput(f"max_points must be at least 3, got {max_points}")
-    total = int(np.count_nonzero(valid))
-    # The valid fraction is about the same on every lattice: start from the stride it gives.
-    stride = max(1, int(np.ceil(np.sqrt(total / max_points))))
-    while int(np.count_nonzero(valid[stride // 2::stride, stride // 2::stride])) > max_points:
-        stride += 1
-    return stride
 
 
 def normalised_cloud(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:

@@ -42,6 +42,10 @@ class NeighbourGraph:
         that needed none (the pixel-grid graph of :mod:`monoplane.stages.graph_refiner`).
     spacing : float
         Median distance from a point to its nearest other point, in the points' unit.
+    affinity_scale : numpy.ndarray or None
+        (E,) factor in [0, 1] on each edge's affinity in the proximity labeler's cut cost
+        (:func:`monoplane.algorithm.graph_costs.proximity_weights`), or None: 1 for all
+        (the lattice graph's, :meth:`from_lattice` with ``turn_scale_deg``).
     """
 
     num_nodes: int
@@ -50,6 +54,7 @@ class NeighbourGraph:
     _indices: np.ndarray | None
     tree: PointIndex | None
     spacing: float
+    affinity_scale: np.ndarray | None = None
     _last_subgraph: tuple[np.ndarray, np.ndarray, np.ndarray] | None = field(
         default=None, init=False, repr=False, compare=False)
     _lock: threading.Lock = field(default_factory=threading.Lock, init=False, repr=False,
@@ -116,28 +121,25 @@ class NeighbourGraph:
         return cls(n, edges, None, None, tree, spacing)
 
     @classmethod
-    def from_lattice(cls, points: np.ndarray, pixels: np.ndarray, shape: tuple[int, int],
-                     stride: int, shift: np.ndarray, max_jump: float,
-                     normals: np.ndarray | None = None,
-                     max_turn_deg: float | None = None) -> NeighbourGraph:
+    def from_lattice(cls, points: np.ndarray, lattice: np.ndarray, shift: np.ndarray,
+                     max_jump: float, normals: np.ndarray | None = None,
+                     max_turn_deg: float | None = None, turn_scale_deg: float | None = None
+                     ) -> NeighbourGraph:
         """The 8-neighbourhood of points sampled on a regular pixel lattice, cut at depth jumps
-        and, optionally, where the normals turn.
+        and, optionally, cut or weakened where the normals turn.
 
-        On an organised frame sampled every ``stride`` pixels the lattice already says who
-        neighbours whom: one scan in raster order (:func:`pixel_grid_edges`) replaces the
-        kNN query, and builds the adjacency with the sorted edges.
+        On an organised frame sampled on a lattice the lattice already says who neighbours
+        whom: one scan in raster order (:func:`pixel_grid_edges`) replaces the kNN query,
+        and builds the adjacency with the sorted edges.
 
         Parameters
         ----------
         points : numpy.ndarray
             (N, 3) float64 normalised points, in ascending pixel order.
-        pixels : numpy.ndarray
-            (N,) int64 flat pixel index ``v * W + u`` of each point, all on the lattice
-            ``v, u ≡ stride // 2 (mod stride)``.
-        shape : tuple of int
-            ``(H, W)`` of the frame.
-        stride : int
-            Lattice step in pixels, >= 1.
+        lattice : numpy.ndarray
+            (R, C) int64 point at each lattice node, -1 where there is none
+            (:attr:`monoplane.geometry.cloud.PlaneCloud.lattice`): every point once, in
+            raster order.
         shift : numpy.ndarray
             (3,) float64 camera centre's offset in the normalised frame (``center / scale``):
             a jump is judged relative to the points' distance from the camera.
@@ -150,31 +152,36 @@ class NeighbourGraph:
             Two lattice neighbours whose normals differ by more than this angle in degrees are
             not linked either: a curved surface (its normals turn from sample to sample) is
             then no bridge for a plane's labels, a flat one stays linked. None: no such cut.
+        turn_scale_deg : float, optional
+            σ in degrees: each kept pair's :attr:`affinity_scale` is ``exp(-t² / 2σ²)``, t the
+            angle between its normals, so that a plane's labels spread less readily where the
+            normals turn; unlike ``max_turn_deg`` no pair is cut for the noise of sensor or
+            network normals. Needs ``normals``. None: no :attr:`affinity_scale`.
 
         Returns
         -------
         NeighbourGraph
             Without a point index; ``spacing`` is the median length of the lattice pairs.
         """
-        h, w = shape
-        offset = stride // 2
-        index = np.full(h * w, -1, dtype=np.int64)
-        index[pixels] = np.arange(pixels.shape[0])
-        lattice = np.ascontiguousarray(index.reshape(h, w)[offset::stride, offset::stride])
-        if np.count_nonzero(lattice >= 0) != pixels.shape[0]:
-            raise InvalidInput(f"the points do not all lie on the lattice of stride {stride}")
+        lattice = np.ascontiguousarray(lattice, dtype=np.int64)
+        nodes = lattice[lattice >= 0]
+        if lattice.ndim != 2 or not np.array_equal(nodes, np.arange(points.shape[0])):
+            raise InvalidInput(f"the lattice must hold each of the {points.shape[0]} points "
+                               "once, in raster order")
         points = np.ascontiguousarray(points, dtype=np.float64)
-        if max_turn_deg is None:
-            normals, cos_min = np.zeros_like(points), -2.0  # every pair agrees
-        elif normals is None or np.shape(normals) != points.shape:
-            raise InvalidInput(f"max_turn_deg needs (N, 3) normals of the {points.shape[0]} points")
-        else:
-            cos_min = float(np.cos(np.radians(max_turn_deg)))
+        uses_normals = max_turn_deg is not None or turn_scale_deg is not None
+        if uses_normals and (normals is None or np.shape(normals) != points.shape):
+            raise InvalidInput("max_turn_deg and turn_scale_deg need (N, 3) normals of the "
+                               f"{points.shape[0]} points")
+        unit = np.ascontiguousarray(normals if uses_normals else np.zeros_like(points),
+                                    dtype=np.float64)
+        # cos_min -2: every pair agrees.
+        cos_min = -2.0 if max_turn_deg is None else float(np.cos(np.radians(max_turn_deg)))
         edges, gap, indptr, indices = pixel_grid_edges(
-            lattice, points, np.asarray(shift, dtype=np.float64), float(max_jump),
-            np.ascontiguousarray(normals, dtype=np.float64), cos_min)
+            lattice, points, np.asarray(shift, dtype=np.float64), float(max_jump), unit, cos_min)
         spacing = float(np.median(gap)) if gap.size else 0.0
-        return cls(int(pixels.shape[0]), edges, indptr, indices, None, spacing)
+        scale = None if turn_scale_deg is None else _turn_scale(edges, unit, float(turn_scale_deg))
+        return cls(int(points.shape[0]), edges, indptr, indices, None, spacing, scale)
 
     def weighted_adjacency(self, weights: np.ndarray
                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -401,6 +408,21 @@ def _pool_edges(num_nodes: int, edges: np.ndarray, pool: np.ndarray
             ids[count] = e
             count += 1
     return out, ids
+
+
+@kernel
+def _turn_scale(edges: np.ndarray, normals: np.ndarray, sigma_deg: float) -> np.ndarray:
+    """(E,) ``exp(-t² / 2σ²)`` of the (E, 2) edges, t the angle in degrees between the unit
+    ``normals`` (N, 3) of their ends."""
+    out = np.empty(edges.shape[0])
+    to_deg = 180.0 / np.pi
+    for e in range(edges.shape[0]):
+        a, b = edges[e, 0], edges[e, 1]
+        cos = (normals[a, 0] * normals[b, 0] + normals[a, 1] * normals[b, 1]
+               + normals[a, 2] * normals[b, 2])
+        t = np.arccos(min(max(cos, -1.0), 1.0)) * to_deg / sigma_deg
+        out[e] = np.exp(-0.5 * t * t)
+    return out
 
 
 @kernel

@@ -212,7 +212,7 @@ class ProximityGraphCutLabeler(_PoolGraphCut):
         weights = context.weights
         if weights is None:  # they depend on the frame only: once per frame
             weights = proximity_weights(cloud.points, graph.edges, cloud.normals, cloud.colors,
-                                        *self.config.affinities())
+                                        *self.config.affinities(), scale=graph.affinity_scale)
             weights.flags.writeable = False  # shared by every pool of the frame
             context.weights = weights
         # Ascending distinct edge rows as many as the graph's are all of them, in order.

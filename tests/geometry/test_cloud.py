@@ -9,6 +9,8 @@ from monoplane.geometry.cloud import (
     PROPAGATION_NEIGHBOURS,
     PROPAGATION_RADIUS_FACTOR,
     PlaneCloud,
+    lattice_lines,
+    lattice_step,
     lattice_stride,
 )
 from monoplane.geometry.distance_transform import nearest_true_pixel
@@ -281,6 +283,17 @@ def test_pixel_fields_come_all_or_none():
                    shape=None, all_points=np.zeros((3, 3)), all_pixels=None)
 
 
+def test_lattice_lines_centre_whole_and_fractional_steps():
+    # A whole step s gives every s-th line from s // 2, as a slice would.
+    for step in (1, 2, 3, 4):
+        np.testing.assert_array_equal(lattice_lines(19, float(step)),
+                                      np.arange(step // 2, 19, step))
+    # A fractional step mixes its floor and ceiling and keeps the count it promises.
+    lines = lattice_lines(100, 2.5)
+    np.testing.assert_array_equal(lines[:4], [1, 3, 6, 8])
+    assert set(np.diff(lines)) == {2, 3} and lines.size == 40 and lines[-1] < 100
+
+
 def test_lattice_stride_is_the_smallest_that_fits():
     valid = np.ones((48, 64), dtype=bool)
     assert lattice_stride(valid, 48 * 64) == 1
@@ -292,6 +305,20 @@ def test_lattice_stride_is_the_smallest_that_fits():
         lattice_stride(valid, 2)
 
 
+def test_lattice_step_is_the_smallest_that_fits():
+    valid = np.ones((48, 64), dtype=bool)
+    assert lattice_step(valid, 48 * 64) == 1.0
+    assert lattice_step(valid, 48 * 64 // 4) == 2.0  # 24 x 32 lattice points
+    # Between whole steps the lattice keeps nearly as many points as allowed, not a quarter.
+    step = lattice_step(valid, 48 * 64 // 3)
+    kept = lattice_lines(48, step).size * lattice_lines(64, step).size
+    assert 1.6 < step < 1.8 and 0.97 * 48 * 64 // 3 <= kept <= 48 * 64 // 3
+    valid[:, 32:] = False  # half the frame: the step drops with the count
+    assert lattice_step(valid, 48 * 32 // 4) == 2.0
+    with pytest.raises(InvalidInput, match="at least 3"):
+        lattice_step(valid, 2)
+
+
 def test_grid_sampling_keeps_the_valid_lattice_pixels_in_pixel_order():
     h, w = 30, 40
     depth = np.full((h, w), 2.0, dtype=np.float32)
@@ -299,14 +326,30 @@ def test_grid_sampling_keeps_the_valid_lattice_pixels_in_pixel_order():
     normals = np.zeros((h, w, 3), dtype=np.float32)
     normals[..., 2] = -1.0
     frame = Frame(rgb=None, K=default_intrinsics(w, h, 60.0), depth=depth, normals=normals)
-    cloud = PlaneCloud.from_frame(frame, max_points=300, grid=True)
-    assert cloud.stride == 2
+    # A whole stride: 2, the valid pixels at odd rows and columns.
+    whole = PlaneCloud.from_frame(frame, max_points=300, grid=True)
+    v, u = np.divmod(whole.pixels, w)
+    assert whole.stride == 2 and np.all(v % 2 == 1) and np.all(u % 2 == 1)
+    assert whole.size == len(range(5, h, 2)) * len(range(1, w, 2))
+    assert whole.lattice.shape == (15, 20)
+    # A fractional step keeps more of the 300 allowed points.
+    cloud = PlaneCloud.from_frame(frame, max_points=300, grid=True, fractional=True)
+    assert cloud.stride is None and whole.size < cloud.size
+    step = lattice_step(frame.valid, 300)
+    rows, cols = lattice_lines(h, step), lattice_lines(w, step)
     v, u = np.divmod(cloud.pixels, w)
-    assert np.all(v % 2 == 1) and np.all(u % 2 == 1) and np.all(v >= 5)
-    assert cloud.size == len(range(5, h, 2)) * len(range(1, w, 2))
+    assert np.all(np.isin(v, rows)) and np.all(np.isin(u, cols)) and np.all(v >= 5)
+    assert cloud.size == np.count_nonzero(rows >= 5) * cols.size <= 300
     assert np.all(np.diff(cloud.pixels) > 0)
     assert cloud.subsampled and cloud.all_points.shape[0] == 25 * 40
-    # Room for every pixel: all of them, on the lattice of stride 1.
-    assert PlaneCloud.from_frame(frame, max_points=10**6, grid=True).stride == 1
+    # The lattice: one node per lattice pixel, its point or -1 on the invalid rows.
+    assert cloud.lattice.shape == (rows.size, cols.size)
+    assert np.all(cloud.lattice[rows < 5] == -1)
+    np.testing.assert_array_equal(cloud.lattice[rows >= 5].ravel(), np.arange(cloud.size))
+    # Room for every pixel: all of them, on the lattice of step 1.
+    every = PlaneCloud.from_frame(frame, max_points=10**6, grid=True, fractional=True)
+    assert every.lattice.shape == (h, w) and not every.subsampled and every.stride == 1
     assert PlaneCloud.from_frame(frame, max_points=300, rng=np.random.default_rng(0)
-                                 ).stride is None
+                                 ).lattice is None
+
+

@@ -244,7 +244,7 @@ def test_weighted_adjacency_is_scipys_sorted_csr():
 
 def _lattice_frame(h=24, w=32, stride=4, step_at=None):
     """Points of a fronto-parallel plane at depth 2 (a step to depth 3 from column
-    ``step_at`` on), sampled on the lattice of ``stride``: (points, pixels, shift)."""
+    ``step_at`` on), sampled on the lattice of ``stride``: (points, lattice, shift)."""
     offset = stride // 2
     v, u = np.mgrid[offset:h:stride, offset:w:stride]
     z = np.full(v.shape, 2.0)
@@ -252,13 +252,13 @@ def _lattice_frame(h=24, w=32, stride=4, step_at=None):
         z[:, (u[0] >= step_at)] = 3.0
     f = 50.0
     pts = np.stack([(u - w / 2) / f * z, (v - h / 2) / f * z, z], axis=-1).reshape(-1, 3)
-    pixels = (v * w + u).ravel().astype(np.int64)
-    return pts, pixels, np.zeros(3)
+    lattice = np.arange(v.size, dtype=np.int64).reshape(v.shape)
+    return pts, lattice, np.zeros(3)
 
 
 def test_lattice_graph_links_the_eight_lattice_neighbours():
-    pts, pixels, shift = _lattice_frame()
-    g = NeighbourGraph.from_lattice(pts, pixels, (24, 32), 4, shift, 0.5)
+    pts, lattice, shift = _lattice_frame()
+    g = NeighbourGraph.from_lattice(pts, lattice, shift, 0.5)
     rows, cols = 6, 8
     # 8-neighbourhood on a rows x cols lattice: horizontal, vertical and two diagonals.
     expected = rows * (cols - 1) + (rows - 1) * cols + 2 * (rows - 1) * (cols - 1)
@@ -276,34 +276,55 @@ def test_lattice_graph_links_the_eight_lattice_neighbours():
 
 
 def test_lattice_graph_cuts_at_depth_jumps():
-    pts, pixels, shift = _lattice_frame(step_at=16)
+    pts, lattice, shift = _lattice_frame(step_at=16)
     # Lattice steps are 4 px / f = 0.08 of the depth, the step 1 / 2: a jump of 0.2 parts them.
-    g = NeighbourGraph.from_lattice(pts, pixels, (24, 32), 4, shift, 0.2)
+    g = NeighbourGraph.from_lattice(pts, lattice, shift, 0.2)
     z = pts[:, 2]
     assert g.num_edges > 0
     assert np.all(z[g.edges[:, 0]] == z[g.edges[:, 1]])  # no edge crosses the step
 
 
 def test_lattice_graph_rejects_points_off_the_lattice():
-    pts, pixels, shift = _lattice_frame()
-    with pytest.raises(InvalidInput, match="lattice of stride 4"):
-        NeighbourGraph.from_lattice(pts, pixels + 1, (24, 32), 4, shift, 0.05)
+    pts, lattice, shift = _lattice_frame()
+    with pytest.raises(InvalidInput, match="each of the 48 points once"):
+        NeighbourGraph.from_lattice(pts, lattice[::-1], shift, 0.05)
+    holes = np.where(lattice % 5 == 0, -1, lattice)
+    with pytest.raises(InvalidInput, match="each of the 48 points once"):
+        NeighbourGraph.from_lattice(pts, holes, shift, 0.05)
 
 
 def test_lattice_graph_cuts_where_the_normals_turn():
-    pts, pixels, shift = _lattice_frame()
-    u = pixels % 32
+    pts, lattice, shift = _lattice_frame()
+    u = (pts[:, 0] * 50 / 2 + 16).round()
     # Flat depth, but the normals of the right half are turned 30 degrees about the y axis.
     turn = np.radians(30.0)
     normals = np.where((u >= 16)[:, None], [np.sin(turn), 0.0, -np.cos(turn)], [0.0, 0.0, -1.0])
-    full = NeighbourGraph.from_lattice(pts, pixels, (24, 32), 4, shift, 0.5)
-    kept = NeighbourGraph.from_lattice(pts, pixels, (24, 32), 4, shift, 0.5, normals, 31.0)
+    full = NeighbourGraph.from_lattice(pts, lattice, shift, 0.5)
+    kept = NeighbourGraph.from_lattice(pts, lattice, shift, 0.5, normals, 31.0)
     np.testing.assert_array_equal(kept.edges, full.edges)  # 30 degrees is within 31
-    cut = NeighbourGraph.from_lattice(pts, pixels, (24, 32), 4, shift, 0.5, normals, 29.0)
+    cut = NeighbourGraph.from_lattice(pts, lattice, shift, 0.5, normals, 29.0)
     side = u >= 16
     assert np.all(side[cut.edges[:, 0]] == side[cut.edges[:, 1]])  # no edge crosses the fold
     # Only the pairs across the fold went: 6 horizontal ones and 2 diagonal ones in each of
     # the 5 gaps between lattice rows.
     assert full.num_edges - cut.num_edges == 6 + 2 * 5
-    with pytest.raises(InvalidInput, match="max_turn_deg needs"):
-        NeighbourGraph.from_lattice(pts, pixels, (24, 32), 4, shift, 0.5, None, 29.0)
+    with pytest.raises(InvalidInput, match="max_turn_deg and turn_scale_deg need"):
+        NeighbourGraph.from_lattice(pts, lattice, shift, 0.5, None, 29.0)
+
+
+def test_lattice_graph_weakens_pairs_whose_normals_turn():
+    pts, lattice, shift = _lattice_frame()
+    u = (pts[:, 0] * 50 / 2 + 16).round()
+    turn = np.radians(30.0)
+    normals = np.where((u >= 16)[:, None], [np.sin(turn), 0.0, -np.cos(turn)], [0.0, 0.0, -1.0])
+    plain = NeighbourGraph.from_lattice(pts, lattice, shift, 0.5, normals)
+    assert plain.affinity_scale is None
+    soft = NeighbourGraph.from_lattice(pts, lattice, shift, 0.5, normals, None, 10.0)
+    np.testing.assert_array_equal(soft.edges, plain.edges)  # no pair is cut
+    side = u >= 16
+    across = side[soft.edges[:, 0]] != side[soft.edges[:, 1]]
+    # exp(-t^2 / 2 sigma^2): 1 where the normals agree, exp(-4.5) across the 30 degree fold.
+    np.testing.assert_allclose(soft.affinity_scale[~across], 1.0)
+    np.testing.assert_allclose(soft.affinity_scale[across], np.exp(-4.5))
+    with pytest.raises(InvalidInput, match="turn_scale_deg need"):
+        NeighbourGraph.from_lattice(pts, lattice, shift, 0.5, None, None, 10.0)

@@ -198,3 +198,18 @@ def test_degree_normalisation_decides_whether_an_isolated_far_point_is_absorbed(
     assert lab.inliers[lifted] == (0.05 * 36 < 0.95 * s * deg)
     assert lab.inliers[lifted] != normalise
     assert lab.inliers[np.arange(400) != lifted].all()
+
+
+def test_proximity_labeler_scales_the_affinities_of_a_graph_that_has_a_scale():
+    # The lattice graph weakens the pairs whose normals turn (NeighbourGraph.affinity_scale):
+    # the labeler's cut costs are 0.5 + scale × (proximity weight - 0.5).
+    cloud, _, _, _ = grid_cloud()
+    graph = NeighbourGraph.build(cloud.points, k=8)
+    graph.affinity_scale = np.linspace(0.0, 1.0, graph.num_edges)
+    labeler = ProximityGraphCutLabeler()
+    context = labeler.new_context()
+    labeler.label(cloud, graph, np.arange(cloud.size, dtype=np.int64), PLANE,
+                  np.array([0.0, 0.0, -1.0]), RansacParams(epsilon=EPS, epsilon_n_deg=10.0),
+                  context)
+    full = proximity_weights(cloud.points, graph.edges, cloud.normals, cloud.colors)
+    np.testing.assert_allclose(context.weights, 0.5 + graph.affinity_scale * (full - 0.5))
