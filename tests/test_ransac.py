@@ -184,7 +184,7 @@ def test_grid_sampling_recovers_the_room_with_the_lattice_graph():
     ids = match(rec, labels, planes)
     assert len(set(ids.tolist())) == len(planes)
     assert np.mean(ids[labels - 1] == rec.labels) > 0.97
-    np.testing.assert_allclose(rec.params[ids - 1], planes, atol=1e-2)
+    np.testing.assert_allclose(rec.planes[ids - 1], planes, atol=1e-2)
 
 
 def test_lattice_normal_cut_keeps_flat_walls_whole():

@@ -13,32 +13,6 @@ import numpy as np
 from monoplane.errors import InvalidInput
 
 
-def lattice_stride(valid: np.ndarray, max_points: int) -> int:
-    """Smallest whole lattice step that keeps at most ``max_points`` valid pixels.
-
-    Parameters
-    ----------
-    valid : numpy.ndarray
-        (H, W) bool valid pixels.
-    max_points : int
-        Most lattice pixels to keep, >= 3.
-
-    Returns
-    -------
-    int
-        Stride ``s >= 1`` such that the valid pixels at ``v, u ≡ s // 2 (mod s)`` number at
-        most ``max_points``.
-    """
-    if max_points < 3:
-        raise InvalidInput(f"max_points must be at least 3, got {max_points}")
-    total = int(np.count_nonzero(valid))
-    # The valid fraction is about the same on every lattice: start from the stride it gives.
-    stride = max(1, int(np.ceil(np.sqrt(total / max_points))))
-    while int(np.count_nonzero(valid[stride // 2::stride, stride // 2::stride])) > max_points:
-        stride += 1
-    return stride
-
-
 def lattice_lines(size: int, step: float) -> np.ndarray:
     """Pixel rows (or columns) ``⌊(i + ½) step⌋`` of a lattice across ``size`` pixels.
 
@@ -62,8 +36,9 @@ def lattice_lines(size: int, step: float) -> np.ndarray:
     return lines[lines < size]
 
 
-def lattice_step(valid: np.ndarray, max_points: int) -> float:
-    """Smallest lattice step (to 0.1 %) that keeps at most ``max_points`` valid pixels.
+def lattice_step(valid: np.ndarray, max_points: int, *, whole: bool = False) -> float:
+    """Smallest lattice step (to 0.1 %, or a whole one) that keeps at most ``max_points`` valid
+    pixels.
 
     Parameters
     ----------
@@ -71,12 +46,14 @@ def lattice_step(valid: np.ndarray, max_points: int) -> float:
         (H, W) bool valid pixels.
     max_points : int
         Most lattice pixels to keep, >= 3.
+    whole : bool
+        Only whole steps: every ``s``-th pixel of every ``s``-th row from ``s // 2``.
 
     Returns
     -------
     float
-        Step ``s >= 1`` in pixels such that the valid pixels on the rows and columns
-        :func:`lattice_lines` ``(·, s)`` number at most ``max_points``.
+        Step ``s >= 1`` in pixels (a whole number with ``whole``) such that the valid pixels on
+        the rows and columns :func:`lattice_lines` ``(·, s)`` number at most ``max_points``.
     """
     if max_points < 3:
         raise InvalidInput(f"max_points must be at least 3, got {max_points}")
@@ -86,8 +63,15 @@ def lattice_step(valid: np.ndarray, max_points: int) -> float:
         return int(np.count_nonzero(valid[np.ix_(lattice_lines(h, step), lattice_lines(w, step))]))
 
     # The valid fraction is about the same on every lattice: start from the step it gives and
-    # grow it by the excess until the lattice fits.
+    # grow it by the excess (or by one pixel) until the lattice fits.
     step = max(1.0, float(np.sqrt(np.count_nonzero(valid) / max_points)))
+    if whole:
+        step = float(np.ceil(step))
     while (count := kept(step)) > max_points:
-        step *= max(1.001, float(np.sqrt(count / max_points)))
+        step = step + 1.0 if whole else step * max(1.001, float(np.sqrt(count / max_points)))
     return step
+
+
+def lattice_stride(valid: np.ndarray, max_points: int) -> int:
+    """:func:`lattice_step` with ``whole``, as an int."""
+    return int(lattice_step(valid, max_points, whole=True))
