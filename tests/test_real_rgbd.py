@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from monoplane import Pipeline, load_frame
+from monoplane.io.frames import read_depth
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "rgbd-livingroom"
 pytestmark = pytest.mark.skipif(not DATA.is_dir(), reason=f"real RGB-D frames not found at {DATA}")
@@ -81,17 +82,14 @@ SURFACES = {
 
 
 def real_depth(name: str) -> np.ndarray:
-    """(480, 640) float32 metres of one shared frame, 0 = invalid (formats: its README)."""
-    import cv2
+    """(480, 640) float32 metres of one shared frame, 0 = invalid, read by the product's own
+    decoder of the frame's encoding (formats: its README)."""
+    file, encoding = REAL_DEPTH[name]
+    return read_depth(REAL / file, depth_encoding=encoding)
 
-    if name == "TUM":
-        return cv2.imread(str(REAL / "TUM_depth.png"), cv2.IMREAD_UNCHANGED) / np.float32(5000)
-    if name == "SUN":
-        d = cv2.imread(str(REAL / "SUN_depth.png"), cv2.IMREAD_UNCHANGED).astype(np.uint16)
-        return ((d >> 3) | (d << 13)).astype(np.float32) / 1000
-    d = cv2.imread(str(REAL / "NYU_depth.pgm"), cv2.IMREAD_UNCHANGED).byteswap()
-    d = d.astype(np.float32)
-    return np.where(d < 1092.5, 351.3 / (1092.5 - d), 0).astype(np.float32)
+
+REAL_DEPTH = {"TUM": ("TUM_depth.png", "tum"), "SUN": ("SUN_depth.png", "sun-rotated"),
+              "NYU": ("NYU_depth.pgm", "kinect-disparity")}
 
 
 def polygon_mask(polygon: list[tuple[int, int]], shape: tuple[int, int]) -> np.ndarray:
