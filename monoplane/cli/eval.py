@@ -10,6 +10,7 @@ from typing import Any
 from monoplane.cli.common import add_set_arg
 from monoplane.errors import InvalidInput
 from monoplane.evaluation.score_files import write_scores
+from monoplane.io.depth_encodings import DEPTH_ENCODINGS, check_depth_encoding
 
 DESCRIPTION = """Score pipeline presets and external baselines on N seeded synthetic indoor
 scenes with exact plane ground truth (monoplane.synth), using the paper's single-view protocol:
@@ -102,8 +103,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     posed = p.add_argument_group("posed RGB-D sequences (--multiview --data DIR)")
     posed.add_argument("--intrinsics", metavar="fx,fy,cx,cy|K.json",
                        help="pinhole intrinsics of the sequence (default: DIR/intrinsics.json)")
-    posed.add_argument("--depth-scale", type=float, default=1000.0, metavar="S",
-                       help="divide the depth files' values by S (default: 1000, millimetres)")
+    posed.add_argument("--depth-scale", type=float, metavar="S",
+                       help="divide the depth files' values by S (default: 1000, millimetres; "
+                            "only with --depth-encoding scaled)")
+    posed.add_argument("--depth-encoding", default="scaled", choices=DEPTH_ENCODINGS,
+                       help="how the depth files hold depth: scaled (by --depth-scale) or a "
+                            "dataset's own 16-bit encoding (default: scaled)")
     posed.add_argument("--mode", default="all",
                        choices=(*POSED_MODES, *POSED_MODE_GROUPS),
                        help="what each view gets: its sensor depth (rgbd); depth corrupted as "
@@ -196,15 +201,17 @@ def _run_posed_sequence(args: argparse.Namespace) -> int:
     if args.mode == "both":
         print("monoplane: note: --mode both is deprecated (it runs rgbd and mono); use --mode "
               "all for rgbd, mono and mono-depth", file=sys.stderr)
+    check_depth_encoding(args.depth_encoding, args.depth_scale, "--depth-encoding")
     results = evaluate_posed_sequence(
         args.data, args.intrinsics, mode=args.mode, split=args.split,
         n=10 if args.n is None else args.n, views=args.views if args.views > 2 else None,
         pairs=args.pairs, preset=args.presets[0] if args.presets else "monoplane",
-        overrides=args.overrides, depth_scale=args.depth_scale, min_angle=args.min_angle,
-        max_angle=args.max_angle, min_overlap=args.min_overlap,
+        overrides=args.overrides,
+        depth_scale=1000.0 if args.depth_scale is None else args.depth_scale,
+        min_angle=args.min_angle, max_angle=args.max_angle, min_overlap=args.min_overlap,
         rotation_threshold=args.rotation_threshold,
         translation_threshold=args.translation_threshold, seed=args.seed, level=args.level,
-        progress=not args.no_progress)
+        progress=not args.no_progress, depth_encoding=args.depth_encoding)
     print(format_posed_sequence(results))
     if args.json:
         _write_json(args.json, results)

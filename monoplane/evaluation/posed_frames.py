@@ -18,6 +18,7 @@ import numpy as np
 from monoplane.datamodel import Frame
 from monoplane.errors import InvalidInput
 from monoplane.geometry.normals import normals_from_depth
+from monoplane.io.depth_encodings import check_depth_encoding
 from monoplane.io.frames import load_frame, read_depth, read_intrinsics, read_redwood_log
 from monoplane.synth.corrupt import LEVEL_PARAMS, corrupt_depth, corrupt_normals
 
@@ -53,7 +54,10 @@ class PosedSequence:
     K : numpy.ndarray
         (3, 3) float64 intrinsics in pixels, shared by all frames.
     depth_scale : float
-        Divisor of the depth files' values (1000 for millimetre PNGs).
+        Divisor of the depth files' values (1000 for millimetre PNGs) in the ``scaled``
+        encoding.
+    depth_encoding : str
+        How the depth files hold depth (:func:`monoplane.io.frames.read_depth`).
     """
 
     root: Path
@@ -64,6 +68,7 @@ class PosedSequence:
     t: np.ndarray
     K: np.ndarray
     depth_scale: float
+    depth_encoding: str = "scaled"
 
     def __len__(self) -> int:
         return len(self.ids)
@@ -77,7 +82,9 @@ class PosedSequence:
 
     def depth(self, k: int) -> np.ndarray:
         """(H, W) float32 metric depth of trajectory entry ``k``, 0 = no measurement."""
-        return read_depth(self.depths[k], self.depth_scale)
+        scaled = self.depth_encoding == "scaled"
+        return read_depth(self.depths[k], self.depth_scale if scaled else None,
+                          depth_encoding=self.depth_encoding)
 
 
 def sequence_intrinsics(data_dir: str | Path, intrinsics: str | Path | np.ndarray | None
@@ -114,7 +121,8 @@ def _listing(folder: Path, suffixes: tuple[str, ...], what: str) -> list[Path]:
 
 
 def load_posed_sequence(data_dir: str | Path, intrinsics: str | Path | np.ndarray | None = None,
-                        depth_scale: float = 1000.0) -> PosedSequence:
+                        depth_scale: float = 1000.0,
+                        depth_encoding: str = "scaled") -> PosedSequence:
     """Read a sequence's layout and trajectory (images and depth are read when needed).
 
     Parameters
@@ -124,7 +132,10 @@ def load_posed_sequence(data_dir: str | Path, intrinsics: str | Path | np.ndarra
     intrinsics : str, Path or numpy.ndarray, optional
         See :func:`sequence_intrinsics`.
     depth_scale : float
-        Divisor of the depth values (1000 for millimetres).
+        Divisor of the depth values (1000 for millimetres) in the ``scaled`` encoding.
+    depth_encoding : str
+        ``"scaled"`` or a dataset's own encoding (``"tum"``, ``"sun-rotated"``,
+        ``"kinect-disparity"``; :mod:`monoplane.io.depth_encodings`).
 
     Raises
     ------
@@ -136,6 +147,7 @@ def load_posed_sequence(data_dir: str | Path, intrinsics: str | Path | np.ndarra
         raise InvalidInput(f"--data {root} is not a folder")
     if not depth_scale > 0:
         raise InvalidInput(f"--depth-scale must be positive, got {depth_scale}")
+    check_depth_encoding(depth_encoding, None, "--depth-encoding")
     K = sequence_intrinsics(root, intrinsics)
     images = _listing(root / "image", IMAGE_SUFFIXES, "colour images")
     depths = _listing(root / "depth", DEPTH_SUFFIXES, "depth maps")
@@ -150,7 +162,7 @@ def load_posed_sequence(data_dir: str | Path, intrinsics: str | Path | np.ndarra
     t = -np.einsum("nij,nj->ni", R, c2w[:, :3, 3])
     return PosedSequence(root=root, ids=ids, images=[images[i] for i in ids],
                          depths=[depths[i] for i in ids], R=R, t=t, K=K,
-                         depth_scale=float(depth_scale))
+                         depth_scale=float(depth_scale), depth_encoding=depth_encoding)
 
 
 def mode_list(mode: str) -> list[str]:

@@ -253,7 +253,8 @@ def evaluate_posed_sequence(data_dir: str | Path,
                             max_angle: float = 40.0, min_overlap: float = 0.4,
                             rotation_threshold: float = 5.0,
                             translation_threshold: float = 10.0, seed: int = 0,
-                            level: str = "mild", progress: bool = False) -> dict[str, Any]:
+                            level: str = "mild", progress: bool = False,
+                            depth_encoding: str = "scaled") -> dict[str, Any]:
     """Score sparse-view registration on a posed RGB-D sequence.
 
     Parameters
@@ -279,7 +280,7 @@ def evaluate_posed_sequence(data_dir: str | Path,
         (``network`` mode needs one that predicts depth from the image, e.g.
         ``cues.plugin=onnx``).
     depth_scale : float
-        Divisor of the depth files' values.
+        Divisor of the depth files' values in the ``scaled`` encoding.
     min_angle, max_angle : float
         True relative rotation of candidate pairs, degrees.
     min_overlap : float
@@ -293,6 +294,9 @@ def evaluate_posed_sequence(data_dir: str | Path,
         Corruption level of the monocular modes (ignored by ``rgbd`` and ``network``).
     progress : bool
         Progress bar on stderr.
+    depth_encoding : str
+        How the depth files hold depth: ``"scaled"`` (divided by ``depth_scale``) or a
+        dataset's own encoding (:mod:`monoplane.io.depth_encodings`).
 
     Raises
     ------
@@ -308,7 +312,7 @@ def evaluate_posed_sequence(data_dir: str | Path,
         ``time_s``).
     """
     modes = _checked_modes(mode, level, n, rotation_threshold, translation_threshold)
-    seq = load_posed_sequence(data_dir, intrinsics, depth_scale)
+    seq = load_posed_sequence(data_dir, intrinsics, depth_scale, depth_encoding)
     # Build the pipeline before the costly selection so a bad --set fails at once.
     pipe = Pipeline.from_preset(preset, overrides=given_cues_overrides(overrides))
     fixed = hold_intrinsics_fixed(pipe)
@@ -320,6 +324,7 @@ def evaluate_posed_sequence(data_dir: str | Path,
                      "intrinsics": [float(seq.K[0, 0]), float(seq.K[1, 1]), float(seq.K[0, 2]),
                                     float(seq.K[1, 2])],
                      "intrinsics_fixed": fixed, "depth_scale": seq.depth_scale,
+                     "depth_encoding": seq.depth_encoding,
                      "min_angle": min_angle, "max_angle": max_angle, "min_overlap": min_overlap,
                      "rotation_threshold": rotation_threshold,
                      "translation_threshold": translation_threshold, "seed": seed,

@@ -379,6 +379,35 @@ def test_missing_intrinsics_is_one_line(tmp_path: Path, walk: Path) -> None:
         load_posed_sequence(copy, "100,100,127.5,95.5")
 
 
+def test_depth_encoding_reads_a_sequence_stored_in_tum_units(tmp_path: Path, walk: Path) -> None:
+    import shutil
+
+    import cv2
+
+    copy = tmp_path / "tum"
+    shutil.copytree(walk, copy)
+    for f in sorted((copy / "depth").glob("*.png")):
+        mm = cv2.imread(str(f), cv2.IMREAD_UNCHANGED)
+        # Millimetres to TUM's fifths of a millimetre (depths here stay below 13 m).
+        cv2.imwrite(str(f), (mm.astype(np.uint32) * 5).astype(np.uint16))
+    base, tum = load_posed_sequence(walk), load_posed_sequence(copy, depth_encoding="tum")
+    assert tum.depth_encoding == "tum"
+    np.testing.assert_allclose(tum.depth(1), base.depth(1), rtol=1e-6)
+    with pytest.raises(InvalidInput, match="--depth-encoding: unknown depth encoding 'mm'"):
+        load_posed_sequence(copy, depth_encoding="mm")
+
+
+def test_cli_rejects_a_depth_scale_with_a_named_encoding(walk: Path,
+                                                         capsys: pytest.CaptureFixture) -> None:
+    from monoplane.cli import main
+
+    code = main(["eval", "--multiview", "--data", str(walk), "--depth-encoding", "tum",
+                 "--depth-scale", "5000", "--mode", "rgbd"])
+    err = capsys.readouterr().err
+    assert code != 0 and "applies to the 'scaled' encoding only" in err
+    assert len(err.strip().splitlines()) == 1
+
+
 def test_rgbd_views_register_with_small_errors(walk: Path) -> None:
     pytest.importorskip("pycolmap")
     from monoplane.evaluation.posed_sequences import (
