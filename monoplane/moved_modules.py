@@ -75,3 +75,4 @@ def install() -> None:
     """Put the alias finder last on ``sys.meta_path`` (once), after the real path finders."""
     if not any(isinstance(finder, _Alias) for finder in sys.meta_path):
         sys.meta_path.append(_Alias())
+

@@ -267,7 +267,7 @@ def test_file_outputs_trigger_no_report() -> None:
 #: importing what it loads. Every form of import counts, as in the cycle check.
 LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("foundation", ("monoplane.errors", "monoplane.version", "monoplane.jit",
-                    "monoplane.palette")),
+                    "monoplane.palette", "monoplane.deprecation")),
     ("data model", ("monoplane.datamodel",)),
     # the compiled solvers and geometry; io.checks holds the input limits and checks that
     # detect_planes shares with the file readers

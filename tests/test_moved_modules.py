@@ -51,3 +51,20 @@ def test_classes_pickle_under_their_new_path() -> None:
 def test_an_unknown_module_still_fails_as_usual() -> None:
     with pytest.raises(ModuleNotFoundError):
         importlib.import_module("monoplane.no_such_module")
+
+
+def test_renamed_names_warn_and_return_the_new_object() -> None:
+    import warnings
+
+    from monoplane.deprecation import renamed_names
+
+    getattr_ = renamed_names("pkg.old", {"old_sqrt": "math:sqrt"})
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        import math
+
+        assert getattr_("old_sqrt") is math.sqrt
+    assert [str(w.message) for w in caught] == [
+        "pkg.old.old_sqrt is now math.sqrt; the old name goes in 0.3.0"]
+    with pytest.raises(AttributeError, match="module 'pkg.old' has no attribute 'other'"):
+        getattr_("other")

@@ -16,9 +16,6 @@ A profile can also be declared in TOML, with no Python at all (:mod:`monoplane.c
 networks to ONNX.
 """
 
-import warnings
-from typing import Any
-
 from monoplane.cues.intrinsics import (
     ASSUMED_INTRINSICS_NOTE,
     DEFAULT_HFOV_DEG,
@@ -55,6 +52,7 @@ from monoplane.cues.transforms import (
     restore_map,
     scaled_intrinsics,
 )
+from monoplane.deprecation import renamed_names
 
 __all__ = [
     "ASSUMED_INTRINSICS_NOTE", "BUILTIN_PROFILES", "CueNetwork", "DEFAULT_HFOV_DEG",
@@ -67,10 +65,5 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str) -> Any:
-    # the old name of face_camera (monoplane.geometry.orientation.orient_normals is another)
-    if name == "orient_normals":
-        warnings.warn("monoplane.cues.orient_normals is now face_camera; the old name goes in "
-                      "0.3.0", DeprecationWarning, stacklevel=2)
-        return face_camera
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+# The old name of face_camera (monoplane.geometry.orientation.orient_normals is another).
+__getattr__ = renamed_names(__name__, {"orient_normals": "monoplane.cues.transforms:face_camera"})

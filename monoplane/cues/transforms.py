@@ -6,14 +6,13 @@ Every function is pure numpy/OpenCV so plugins can reuse them with their own ses
 
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass
-from typing import Any
 
 import cv2
 import numpy as np
 
 from monoplane.cues.profiles import ModelSpec, parse_axes
+from monoplane.deprecation import renamed_names
 from monoplane.errors import InvalidInput
 
 
@@ -262,10 +261,5 @@ def face_camera(normals: np.ndarray, K: np.ndarray) -> np.ndarray:
     return np.where((dot > 0)[..., None], -normals, normals)
 
 
-def __getattr__(name: str) -> Any:
-    # the old name of face_camera, which also named the cloud orientation of geometry
-    if name == "orient_normals":
-        warnings.warn("monoplane.cues.transforms.orient_normals is now face_camera; the old "
-                      "name goes in 0.3.0", DeprecationWarning, stacklevel=2)
-        return face_camera
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+# The old name of face_camera, which also named the cloud orientation of geometry.
+__getattr__ = renamed_names(__name__, {"orient_normals": "monoplane.cues.transforms:face_camera"})

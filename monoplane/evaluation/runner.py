@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from monoplane.datamodel import Frame, Reconstruction
+from monoplane.deprecation import renamed_names
 from monoplane.errors import ConfigError, InvalidInput, MonoplaneError
 from monoplane.evaluation.baselines import CALL_TIMING, baseline_names, bind_baseline
 from monoplane.evaluation.recall import DEPTH_THRESHOLDS, plane_recall
@@ -415,10 +416,5 @@ def format_table(results: EvalResults) -> str:
     return "\n".join([title, line(header), rule, *[line(r) for r in rows]])
 
 
-def __getattr__(name: str) -> Any:
-    # FrameResult was also monoplane.batch's per-frame outcome; the old name goes in 0.3.0
-    if name == "FrameResult":
-        warnings.warn("monoplane.evaluation.runner.FrameResult is now FrameScores; the old "
-                      "name goes in 0.3.0", DeprecationWarning, stacklevel=2)
-        return FrameScores
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+# FrameResult was also monoplane.batch's per-frame outcome.
+__getattr__ = renamed_names(__name__, {"FrameResult": "monoplane.evaluation.runner:FrameScores"})

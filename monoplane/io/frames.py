@@ -33,9 +33,9 @@ import numpy as np
 from monoplane.cues.intrinsics import assume_intrinsics
 from monoplane.datamodel import Frame, Reconstruction, intrinsics_matrix
 from monoplane.errors import InvalidInput
-from monoplane.io.depth_encodings import check_depth_encoding, decode_depth
 from monoplane.export.saving import save, select_exporters, write_outputs
 from monoplane.io.checks import MAX_MAGNITUDE, load_npy, read_png
+from monoplane.io.depth_encodings import check_depth_encoding, decode_depth
 
 #: Accepted pinhole intrinsics, in pixels. A focal length below 0.1 px is a field of view of
 #: nearly 180 degrees on any image; no sensor is near 1e8 px wide. Beyond these bounds a value

@@ -9,7 +9,6 @@ Frames: world frame of the SfM model; cameras world-to-camera ``x_cam = R x_worl
 
 from __future__ import annotations
 
-import warnings
 from typing import TYPE_CHECKING, Any
 
 from monoplane.contracts import Adjuster, Fuser
@@ -20,6 +19,7 @@ from monoplane.datamodel import (  # noqa: F401 - the last two: re-exported
     global_label_map,
     scene_plane_colors,
 )
+from monoplane.deprecation import renamed_names
 
 if TYPE_CHECKING:
     from monoplane.host.pipeline import Pipeline
@@ -60,15 +60,6 @@ def fuse_and_adjust(pipe: Pipeline, views: list[Reconstruction], sfm: SfmResult,
     return scene, fused, sfm, plane_matches, adjustment
 
 
-def __getattr__(name: str) -> Any:
-    """``scene_mesh`` moved to :mod:`monoplane.geometry.mesh` in 0.2.0; the old path (this
-    module was ``monoplane.multiview.fusion``) works until 0.3.0."""
-    if name == "scene_mesh":
-        # loads OpenCV, and a top-level import would make the old path skip the warning
-        from monoplane.geometry.mesh import scene_mesh
-
-        warnings.warn("monoplane.multiview.fusion.scene_mesh moved to "
-                      "monoplane.geometry.mesh.scene_mesh; the old path goes in 0.3.0",
-                      DeprecationWarning, stacklevel=2)
-        return scene_mesh
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+# scene_mesh moved in 0.2.0 (this module was monoplane.multiview.fusion); loaded on first use,
+# since it loads OpenCV.
+__getattr__ = renamed_names(__name__, {"scene_mesh": "monoplane.geometry.mesh:scene_mesh"})
