@@ -275,18 +275,19 @@ def _fit_band(inv: np.ndarray, labels: np.ndarray, rim: np.ndarray, slope: np.nd
 def _box_planes(fixed: np.ndarray, r: int, scale: float, tol: float,
                 params: np.ndarray, row0: int, row1: int, reach: np.ndarray,
                 out: np.ndarray) -> None:
-    """Box fits of rows ``row0:row1`` of the (H, W) float32 inverse depth ``inv``.
+    """Box fits of rows ``row0:row1`` of the (H, W) int32 fixed-point inverse depth ``fixed``
+    (:func:`_fixed_point`; 0 on holes and rims).
 
     A pixel whose whole ``(2r+1)²`` window lies in the image, holds valid samples off the
-    ``rim`` only, and is explained by one line of inverse depth to a relative RMS of ``tol``,
+    rim only, and is explained by one line of inverse depth to a relative RMS of ``tol``,
     gets the line's normal ``n`` in ``out`` and its inverse distance ``1 / d`` in ``reach``
     ((H, W) float32; the plane ``n · X + d = 0`` has inverse depth ``-(n · ray) / d`` on the
     ray ``K^-1 [u, v, 1]``); other pixels are left as they are (``reach = 0``: no fit).
 
     The samples are taken in fixed point, ``round(inv * scale)``, so that the window sums
-    are exact integers: they run along the columns (from one row to the next) and then, as
-    prefix sums, along the row, each an O(1) update per pixel, and do not depend on where a
-    thread's rows start.
+    are exact integers: they run along the columns (from one row to the next) and then along
+    the row (one column in, one out), each an O(1) update per pixel, and do not depend on
+    where a thread's rows start or in which order they are added.
     """
     h, w = fixed.shape
     side = 2 * r + 1
@@ -300,8 +301,6 @@ def _box_planes(fixed: np.ndarray, r: int, scale: float, tol: float,
     ramp = np.zeros(w, np.int64)     # Σ of dv × sample
     sq = np.zeros(w, np.int64)       # Σ of its square
     cnt = np.zeros(w, np.int64)      # how many samples are valid non-rim
-    prefix = np.zeros((5, w + 1), np.int64)
-    p0, p1, pv, p2, pn = prefix[0], prefix[1], prefix[2], prefix[3], prefix[4]
     start = max(row0, r)
     for v in range(start, min(row1, h - r)):
         if v == start:
@@ -319,24 +318,43 @@ def _box_planes(fixed: np.ndarray, r: int, scale: float, tol: float,
                 ramp[u] += r * old + r * new - col[u] + new
                 sq[u] += new * new - old * old
                 cnt[u] += (1 if new > 0 else 0) - (1 if old > 0 else 0)
-        # Prefix sums along the row, so that each window's sums are differences.
-        for u in range(w):
-            p0[u + 1] = p0[u] + col[u]
-            p1[u + 1] = p1[u] + u * col[u]
-            pv[u + 1] = pv[u] + ramp[u]
-            p2[u + 1] = p2[u] + sq[u]
-            pn[u + 1] = pn[u] + cnt[u]
+        # The window's sums of the columns u - r .. u + r (Σ u' col for the du moment),
+        # slid along the row.
+        s0 = s1 = sv = s2 = sn = np.int64(0)
+        for u in range(2 * r):
+            s0 += col[u]
+            s1 += u * col[u]
+            sv += ramp[u]
+            s2 += sq[u]
+            sn += cnt[u]
         for u in range(r, w - r):
-            if pn[u + r + 1] - pn[u - r] < full:
-                continue
-            f0 = float(p0[u + r + 1] - p0[u - r])
-            fu = float(p1[u + r + 1] - p1[u - r]) - u * f0
-            fv = float(pv[u + r + 1] - pv[u - r])
-            c = f0 * inv_full
-            a, b = fu * inv_spread, fv * inv_spread
-            if float(p2[u + r + 1] - p2[u - r]) - f0 * c - (fu * a + fv * b) > tol2 * c * c:
-                continue
-            reach[v, u] = _put_normal(out, v, u, a * unit, b * unit, c * unit, params)
+            j = u + r
+            s0 += col[j]
+            s1 += j * col[j]
+            sv += ramp[j]
+            s2 += sq[j]
+            sn += cnt[j]
+            if sn >= full:
+                f0 = float(s0)
+                fu = float(s1) - u * f0
+                fv = float(sv)
+                c = f0 * inv_full
+                a, b = fu * inv_spread, fv * inv_spread
+                if not float(s2) - f0 * c - (fu * a + fv * b) > tol2 * c * c:
+                    nx, ny, nz, norm = _camera_normal(u, v, a * unit, b * unit, c * unit,
+                                                      params)
+                    if norm > 0:
+                        k = 1.0 / norm
+                        out[v, u, 0] = nx * k
+                        out[v, u, 1] = ny * k
+                        out[v, u, 2] = nz * k
+                    reach[v, u] = norm
+            i = u - r
+            s0 -= col[i]
+            s1 -= i * col[i]
+            sv -= ramp[i]
+            s2 -= sq[i]
+            sn -= cnt[i]
 
 
 @kernel
@@ -365,20 +383,6 @@ def _own_slope(inv: np.ndarray, rim: np.ndarray, v: int, u: int) -> float:
         if smaller != np.inf:
             best = max(best, smaller)
     return best
-
-
-@inline
-def _put_normal(out: np.ndarray, v: int, u: int, grad_u: float, grad_v: float, value: float,
-                params: np.ndarray) -> float:
-    """:func:`_store_normal` for a ``value > 0``, with one division instead of three; returns
-    the plane's inverse distance ``1 / d`` (``-K^T g = n / d``), 0 if there is none."""
-    nx, ny, nz, norm = _camera_normal(u, v, grad_u, grad_v, value, params)
-    if norm > 0:
-        k = 1.0 / norm
-        out[v, u, 0] = nx * k
-        out[v, u, 1] = ny * k
-        out[v, u, 2] = nz * k
-    return norm
 
 
 @kernel
