@@ -14,8 +14,21 @@ from monoplane.jit import inline, kernel
 
 
 @kernel
-def _discontinuities(z: np.ndarray, max_jump: float) -> tuple[np.ndarray, np.ndarray]:
-    """Inverse depth and rim mask (near side of each discontinuity) of (H, W) float32 depth.
+def _inverse_depth(z: np.ndarray, row0: int, row1: int, inv: np.ndarray) -> None:
+    """Rows ``row0:row1`` of the (H, W) float32 inverse depth ``inv = 1 / z`` of the (H, W)
+    float32 depth ``z``, 0 on holes (``z <= 0``, NaN; ``1 / inf`` is 0 as well)."""
+    for v in range(row0, row1):
+        for u in range(z.shape[1]):
+            if z[v, u] > 0:
+                inv[v, u] = np.float32(1.0) / z[v, u]
+            else:
+                inv[v, u] = 0
+
+
+@kernel
+def _rims(inv: np.ndarray, max_jump: float, row0: int, row1: int, rim: np.ndarray) -> None:
+    """Rows ``row0:row1`` of the (H, W) bool rim mask (near side of each discontinuity) of the
+    (H, W) float32 inverse depth ``inv`` (0 on holes).
 
     Along a row or column, the inverse depth of a plane changes by the same step from pixel
     to pixel, however steep the plane (a floor near the horizon). So a discontinuity is a
@@ -23,27 +36,20 @@ def _discontinuities(z: np.ndarray, max_jump: float) -> tuple[np.ndarray, np.nda
     inverse depth; a step whose neighbours are missing (holes, image border) is compared with
     zero instead. Arithmetic is float32, like the inputs.
 
-    Returns
-    -------
-    inv : numpy.ndarray
-        (H, W) float32 ``1 / z``, 0 on holes (``z <= 0``).
-    rim : numpy.ndarray
-        (H, W) bool.
+    Each pair is tested on its own, so the order is free: row by row, both axes, each row's
+    pairs in a branch-free loop (vectorised), the image border (a missing outer neighbour)
+    passed as a hole. Only rows ``row0:row1`` are written (the vertical pairs that cross
+    their first and last row are tested by both neighbouring pieces), so pieces of rows can
+    run on parallel threads.
     """
-    h, w = z.shape
-    inv = np.zeros((h, w), dtype=np.float32)
-    for v in range(h):
-        for u in range(w):
-            if z[v, u] > 0:
-                inv[v, u] = np.float32(1.0) / z[v, u]
-    rim = np.zeros((h, w), dtype=np.bool_)
+    h, w = inv.shape
     jump = np.float32(max_jump)
     zero = np.float32(0.0)
-    # Each pair is tested on its own, so the order is free: row by row, both axes, each
-    # row's pairs in a branch-free loop (vectorised), the image border (a missing outer
-    # neighbour) passed as a hole.
     side = np.zeros(max(h, w), dtype=np.int8)
-    for v in range(h):
+    for v in range(row0, row1):
+        for u in range(w):
+            rim[v, u] = False
+    for v in range(row0, row1):
         row = inv[v]
         for i in range(w - 1):
             prev = row[i - 1] if i > 0 else zero
@@ -52,22 +58,25 @@ def _discontinuities(z: np.ndarray, max_jump: float) -> tuple[np.ndarray, np.nda
         for i in range(w - 1):
             rim[v, i] |= side[i] < 0
             rim[v, i + 1] |= side[i] > 0
-        if v + 1 < h:
-            above = inv[v - 1] if v > 0 else inv[v] * zero
-            below = inv[v + 2] if v + 2 < h else inv[v] * zero
-            nxt_row = inv[v + 1]
+    # The vertical pairs (p, p + 1) that touch the rows.
+    for p in range(max(row0 - 1, 0), min(row1, h - 1)):
+        row, nxt_row = inv[p], inv[p + 1]
+        above = inv[p - 1] if p > 0 else row * zero
+        below = inv[p + 2] if p + 2 < h else row * zero
+        for u in range(w):
+            side[u] = _pair_edge(above[u], row[u], nxt_row[u], below[u], jump)
+        if p >= row0:
             for u in range(w):
-                side[u] = _pair_edge(above[u], row[u], nxt_row[u], below[u], jump)
+                rim[p, u] |= side[u] < 0
+        if p + 1 < row1:
             for u in range(w):
-                rim[v, u] |= side[u] < 0
-                rim[v + 1, u] |= side[u] > 0
-    return inv, rim
+                rim[p + 1, u] |= side[u] > 0
 
 
 @inline
 def _pair_edge(prev: float, a: float, b: float, nxt: float, jump: float) -> int:
     """Whether the step ``a -> b`` of float32 inverse depth between neighbours is a
-    discontinuity (see :func:`_discontinuities`; ``prev`` and ``nxt`` are the outer
+    discontinuity (see :func:`_rims`; ``prev`` and ``nxt`` are the outer
     neighbours, 0 when missing): -1 marks ``a``'s pixel as the rim, +1 ``b``'s, 0 none."""
     step = b - a
     inf = np.float32(np.inf)

@@ -57,11 +57,12 @@ from monoplane.errors import InvalidInput
 from monoplane.geometry.normal_kernels import (
     _box_band,
     _box_planes,
-    _discontinuities,
     _fit_band,
     _fit_interior,
     _fixed_point,
+    _inverse_depth,
     _relative_slope,
+    _rims,
 )
 from monoplane.jit import chunks, run_threaded
 
@@ -144,13 +145,15 @@ def normals_from_depth(depth: np.ndarray, K: np.ndarray, *, radius: int | None =
         raise InvalidInput(f"max_jump must be positive, got {max_jump}")
     if method not in NORMALS_METHODS:
         raise InvalidInput(f"method must be one of {', '.join(NORMALS_METHODS)}, got {method!r}")
-    z = np.where(np.isfinite(depth), depth, 0).astype(np.float32, copy=False)
-    inv, rim = _discontinuities(z, float(max_jump))
     params = np.array([max_jump, K[0, 0], K[0, 1], K[0, 2], K[1, 0], K[1, 1], K[1, 2],
                        K[2, 0], K[2, 1], K[2, 2]], dtype=np.float64)
     if method == "box":
+        # Holes need no zeroing here: the inverse depth of 0, NaN and inf is 0 either way.
+        inv, rim = _discontinuities(depth.astype(np.float32, copy=False), max_jump)
         return _box_normals(inv, rim, params, K, radius, stride, max(min_support, 3),
                             _ONE_SURFACE_RMS)
+    z = np.where(np.isfinite(depth), depth, 0).astype(np.float32, copy=False)
+    inv, rim = _discontinuities(z, max_jump)
     valid = z > 0
     # 4-connected components of the valid non-rim pixels; only equality of labels matters.
     labels = cv2.connectedComponents((valid & ~rim).view(np.uint8), connectivity=4,
@@ -191,6 +194,18 @@ def normals_from_depth(depth: np.ndarray, K: np.ndarray, *, radius: int | None =
 
     run_threaded([functools.partial(fit, a, b) for a, b in chunks(z.shape[0], _THREADED_ROWS)])
     return normals
+
+
+def _discontinuities(z: np.ndarray, max_jump: float) -> tuple[np.ndarray, np.ndarray]:
+    """(H, W) float32 inverse depth (0 on holes) and bool rim mask (the near side of each
+    depth discontinuity, :func:`~monoplane.geometry.normal_kernels._rims`) of (H, W) float32
+    depth ``z``, in pieces of rows on the frame's threads."""
+    inv = np.empty(z.shape, dtype=np.float32)
+    rim = np.empty(z.shape, dtype=np.bool_)
+    pieces = chunks(z.shape[0], _THREADED_ROWS)
+    run_threaded([functools.partial(_inverse_depth, z, a, b, inv) for a, b in pieces])
+    run_threaded([functools.partial(_rims, inv, float(max_jump), a, b, rim) for a, b in pieces])
+    return inv, rim
 
 
 def _box_normals(inv: np.ndarray, rim: np.ndarray, params: np.ndarray, K: np.ndarray,
