@@ -234,9 +234,11 @@ def in_background(task: Callable[[], T], role: str = "background") -> Callable[[
     return _executor(1, role).submit(task).result
 
 
-def chunks(n: int, min_size: int) -> list[tuple[int, int]]:
-    """Split ``range(n)`` into at most :func:`thread_budget` contiguous ``(start, stop)``
-    pieces of at least ``min_size`` items (one piece when ``n`` is small)."""
-    parts = max(1, min(thread_budget(), n // max(min_size, 1)))
+def chunks(n: int, min_size: int, per_thread: int = 1) -> list[tuple[int, int]]:
+    """Split ``range(n)`` into at most ``per_thread`` × :func:`thread_budget` contiguous
+    ``(start, stop)`` pieces of at least ``min_size`` items (one piece when ``n`` is small).
+    More pieces than threads balance work that is uneven along ``range(n)``: each thread
+    takes the next piece when it is free."""
+    parts = max(1, min(per_thread * thread_budget(), n // max(min_size, 1)))
     bounds = [round(i * n / parts) for i in range(parts + 1)]
     return list(zip(bounds[:-1], bounds[1:], strict=True))

@@ -72,6 +72,9 @@ NORMALS_METHODS = ("gated", "box")
 #: Rows of the image per threaded piece of the fit below which one thread does it all.
 _THREADED_ROWS = 64
 
+#: Pieces of rows per thread for the box method's pixels near edges.
+_BAND_PIECES = 4
+
 #: Relative RMS of inverse depth about its fitted line above which a box window is taken to
 #: hold more than one surface (a crease, a blurred edge) and is not fitted.
 _ONE_SURFACE_RMS = 0.0125
@@ -215,9 +218,9 @@ def _box_normals(inv: np.ndarray, rim: np.ndarray, params: np.ndarray, K: np.nda
     normals = np.zeros(inv.shape + (3,), dtype=np.float32)
     if not top > 0:
         return normals
-    # 2^bits steps up to the largest inverse depth; the widest sum, a row's prefix sum of
-    # the windows' column sums of squares (2^(2 bits) * (2 radius + 1) * (W + 1)), stays
-    # below 2^62, so no int64 sum overflows: 24 bits at 640x480, 22 at 1920x1080.
+    # 2^bits steps up to the largest inverse depth, with 2^(2 bits) * (2 radius + 1) * (W + 1)
+    # below 2^62: it bounds every int64 sum (the widest, a window's Σ u' × column sum, is
+    # below 2^bits (2 radius + 1)² W), so none overflows: 24 bits at 640x480, 22 at 1920x1080.
     bits = min(24, int((62 - np.log2((2 * radius + 1) * (inv.shape[1] + 1))) // 2))
     scale = float(2.0 ** (bits - np.ceil(np.log2(top))))
     reach = np.zeros(inv.shape, dtype=np.float32)
@@ -232,6 +235,11 @@ def _box_normals(inv: np.ndarray, rim: np.ndarray, params: np.ndarray, K: np.nda
     stride = max(stride, radius // 2)
     r = radius - radius % stride
     k_inv = np.linalg.inv(K)
+    # Their cost follows the depth edges, which a frame may hold mostly in one half: smaller
+    # pieces, handed to whichever thread is free, keep the threads busy alike.
     run_threaded([functools.partial(_box_band, inv, rim, reach, params, k_inv, radius, r,
-                                    stride, support, a, b, normals) for a, b in pieces])
+                                    stride, support, a, b, normals)
+                  for a, b in chunks(inv.shape[0], _THREADED_ROWS // _BAND_PIECES,
+                                     _BAND_PIECES)])
     return normals
+
