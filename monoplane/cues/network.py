@@ -245,9 +245,11 @@ class CueNetwork:
                     normals = normals_from_depth(depth, frame.K, **self.normals_options)
                     notes.append("normals: estimated from depth (edge-aware inverse-depth fits)")
                     changes["normals_from_depth"] = True
-            # A float32 copy zeroed in place: half the cost of np.where and a cast (2 passes).
-            normals = np.array(normals, dtype=np.float32)
-            normals[~(depth > 0)] = 0.0
+            if not changes.get("normals_from_depth"):
+                # A float32 copy zeroed in place: half the cost of np.where and a cast (2
+                # passes). Normals from depth are float32 and zero there already.
+                normals = np.array(normals, dtype=np.float32)
+                normals[~(depth > 0)] = 0.0
             changes["normals"] = normals
         else:
             changes["normals"] = face_camera(frame.normals, frame.K)
