@@ -1,11 +1,11 @@
 """monoplane.jit: kernels compile on first call, and run uncached (with a warning) when numba
-has no writable cache directory."""
+has no writable cache directory; row pieces for threads."""
 
 import numba
 import numpy as np
 import pytest
 
-from monoplane.jit import kernel
+from monoplane.jit import chunks, kernel
 
 
 def test_kernel_compiles_on_first_call_and_keeps_the_python_function():
@@ -100,3 +100,14 @@ def test_run_threaded_inside_run_threaded_runs_on_the_worker(monkeypatch):
 
     result = run_threaded([lambda k=k: outer(k) for k in range(2)])
     assert result == [[(k, j, True) for j in range(2)] for k in range(2)]
+
+
+def test_chunks_cover_the_range_in_pieces_per_thread(monkeypatch):
+    monkeypatch.setenv("OMP_NUM_THREADS", "2")
+    assert chunks(480, 64) == [(0, 240), (240, 480)]
+    pieces = chunks(480, 16, per_thread=4)
+    assert len(pieces) == 8 and pieces[0] == (0, 60) and pieces[-1] == (420, 480)
+    assert all(a[1] == b[0] for a, b in zip(pieces, pieces[1:]))
+    # Never more pieces than min_size allows, and one for a short range.
+    assert chunks(40, 16, per_thread=4) == [(0, 20), (20, 40)]
+    assert chunks(10, 16, per_thread=4) == [(0, 10)]

@@ -151,9 +151,7 @@ def normals_from_depth(depth: np.ndarray, K: np.ndarray, *, radius: int | None =
     params = np.array([max_jump, K[0, 0], K[0, 1], K[0, 2], K[1, 0], K[1, 1], K[1, 2],
                        K[2, 0], K[2, 1], K[2, 2]], dtype=np.float64)
     if method == "box":
-        # Holes need no zeroing here: the inverse depth of 0, NaN and inf is 0 either way.
-        inv, rim = _discontinuities(depth.astype(np.float32, copy=False), max_jump)
-        return _box_normals(inv, rim, params, K, radius, stride, max(min_support, 3),
+        return _box_normals(depth, max_jump, params, K, radius, stride, max(min_support, 3),
                             _ONE_SURFACE_RMS)
     z = np.where(np.isfinite(depth), depth, 0).astype(np.float32, copy=False)
     inv, rim = _discontinuities(z, max_jump)
@@ -211,9 +209,11 @@ def _discontinuities(z: np.ndarray, max_jump: float) -> tuple[np.ndarray, np.nda
     return inv, rim
 
 
-def _box_normals(inv: np.ndarray, rim: np.ndarray, params: np.ndarray, K: np.ndarray,
+def _box_normals(depth: np.ndarray, max_jump: float, params: np.ndarray, K: np.ndarray,
                  radius: int, stride: int, support: int, tol: float) -> np.ndarray:
-    """The ``box`` method of :func:`normals_from_depth` on its discontinuities."""
+    """The ``box`` method of :func:`normals_from_depth`."""
+    # Holes need no zeroing here: the inverse depth of 0, NaN and inf is 0 either way.
+    inv, rim = _discontinuities(depth.astype(np.float32, copy=False), max_jump)
     top = float(inv.max())
     normals = np.zeros(inv.shape + (3,), dtype=np.float32)
     if not top > 0:

@@ -192,18 +192,21 @@ def test_small_images_keep_creases_sharp(method: str) -> None:
 
 
 @pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("threads", ["2", "3"])
 def test_the_threaded_row_pieces_give_the_same_normals(monkeypatch: pytest.MonkeyPatch,
-                                                       method: str) -> None:
-    # Two planes meeting at a depth jump, with holes: interior, band and rim pixels in every
-    # piece of rows, and windows cut by the pieces' boundaries.
+                                                       method: str, threads: str) -> None:
+    # Three planes meeting at depth jumps, with holes: interior, band and rim pixels in every
+    # piece of rows, windows cut by the pieces' boundaries, and (at two threads) a jump
+    # between rows 99 and 100, where the pieces of the rim test meet.
     h, w = 200, 160
     K = default_intrinsics(w, h)
     depth = plane_depth(K, h, w, np.r_[unit([0.2, -0.7, -0.6]), 2.0])
     depth[:, 80:] = plane_depth(K, h, w, np.r_[unit([-0.3, 0.1, -0.9]), 3.5])[:, 80:]
+    depth[100:, 120:] = plane_depth(K, h, w, np.r_[unit([0.1, 0.2, -0.9]), 2.5])[100:, 120:]
     depth[90:110, 20:40] = 0.0
     monkeypatch.setenv("OMP_NUM_THREADS", "1")
     one = normals_from_depth(depth, K, method=method)
-    monkeypatch.setenv("OMP_NUM_THREADS", "2")
+    monkeypatch.setenv("OMP_NUM_THREADS", threads)
     np.testing.assert_array_equal(normals_from_depth(depth, K, method=method), one)
     assert (np.abs(one).sum(-1) > 0).mean() > 0.95
 
