@@ -107,7 +107,7 @@ def test_chunks_cover_the_range_in_pieces_per_thread(monkeypatch):
     assert chunks(480, 64) == [(0, 240), (240, 480)]
     pieces = chunks(480, 16, per_thread=4)
     assert len(pieces) == 8 and pieces[0] == (0, 60) and pieces[-1] == (420, 480)
-    assert all(a[1] == b[0] for a, b in zip(pieces, pieces[1:]))
+    assert all(a[1] == b[0] for a, b in zip(pieces[:-1], pieces[1:], strict=True))
     # Never more pieces than min_size allows, and one for a short range.
     assert chunks(40, 16, per_thread=4) == [(0, 20), (20, 40)]
     assert chunks(10, 16, per_thread=4) == [(0, 10)]

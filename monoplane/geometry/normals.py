@@ -72,8 +72,8 @@ NORMALS_METHODS = ("gated", "box")
 #: Rows of the image per threaded piece of the fit below which one thread does it all.
 _THREADED_ROWS = 64
 
-#: Pieces of rows per thread for the box method's pixels near edges.
-_BAND_PIECES = 4
+#: Pieces of rows per thread for the fits near depth edges, whose cost is uneven over rows.
+_PIECES = 4
 
 #: Relative RMS of inverse depth about its fitted line above which a box window is taken to
 #: hold more than one surface (a crease, a blurred edge) and is not fitted.
@@ -150,9 +150,16 @@ def normals_from_depth(depth: np.ndarray, K: np.ndarray, *, radius: int | None =
         raise InvalidInput(f"method must be one of {', '.join(NORMALS_METHODS)}, got {method!r}")
     params = np.array([max_jump, K[0, 0], K[0, 1], K[0, 2], K[1, 0], K[1, 1], K[1, 2],
                        K[2, 0], K[2, 1], K[2, 2]], dtype=np.float64)
+    support = max(min_support, 3)
     if method == "box":
-        return _box_normals(depth, max_jump, params, K, radius, stride, max(min_support, 3),
+        return _box_normals(depth, max_jump, params, K, radius, stride, support,
                             _ONE_SURFACE_RMS)
+    return _gated_normals(depth, max_jump, params, radius, stride, support)
+
+
+def _gated_normals(depth: np.ndarray, max_jump: float, params: np.ndarray, radius: int,
+                   stride: int, support: int) -> np.ndarray:
+    """The ``gated`` method of :func:`normals_from_depth`."""
     z = np.where(np.isfinite(depth), depth, 0).astype(np.float32, copy=False)
     inv, rim = _discontinuities(z, max_jump)
     valid = z > 0
@@ -187,13 +194,14 @@ def normals_from_depth(depth: np.ndarray, K: np.ndarray, *, radius: int | None =
     slope = _relative_slope(inv, labels)
     normals = np.zeros(z.shape + (3,), dtype=np.float32)
     band = valid & ~interior
-    support = max(min_support, 3)
 
     def fit(a: int, b: int) -> None:
         _fit_interior(inv, labels, interior, sums, params, r, stride, support, a, b, normals)
         _fit_band(inv, labels, rim, slope, band, params, r, stride, support, a, b, normals)
 
-    run_threaded([functools.partial(fit, a, b) for a, b in chunks(z.shape[0], _THREADED_ROWS)])
+    # The band's cost follows the depth edges: smaller pieces keep the threads busy alike.
+    run_threaded([functools.partial(fit, a, b)
+                  for a, b in chunks(z.shape[0], _THREADED_ROWS // _PIECES, _PIECES)])
     return normals
 
 
@@ -239,7 +247,6 @@ def _box_normals(depth: np.ndarray, max_jump: float, params: np.ndarray, K: np.n
     # pieces, handed to whichever thread is free, keep the threads busy alike.
     run_threaded([functools.partial(_box_band, inv, rim, reach, params, k_inv, radius, r,
                                     stride, support, a, b, normals)
-                  for a, b in chunks(inv.shape[0], _THREADED_ROWS // _BAND_PIECES,
-                                     _BAND_PIECES)])
+                  for a, b in chunks(inv.shape[0], _THREADED_ROWS // _PIECES, _PIECES)])
     return normals
 
