@@ -240,14 +240,15 @@ def _fit_interior(inv: np.ndarray, labels: np.ndarray, interior: np.ndarray, sum
             if not interior[v, u]:
                 continue
             cnt = float(sums[0, v, u])
-            su = sv = suv = 0.0
-            suu = svv = spread
+            ru, rv, r1 = float(sums[1, v, u]), float(sums[2, v, u]), float(sums[3, v, u])
             if cnt < full:  # holes: the offsets of the valid samples, ungated
                 cnt, su, sv, suu, suv, svv, _, _, _ = _window_sums(
                     inv, labels, v, u, r, stride, 0, False, True, 0.0, 0.0)
-            a, b, c, good = _line_fit(cnt, su, sv, suu, suv, svv, float(sums[1, v, u]),
-                                      float(sums[2, v, u]), float(sums[3, v, u]),
-                                      min_support, stride)
+                a, b, c, good = _line_fit(cnt, su, sv, suu, suv, svv, ru, rv, r1,
+                                          min_support, stride)
+            else:  # the same fit with the sums of offsets as constants the compiler can hoist
+                a, b, c, good = _line_fit(full, 0.0, 0.0, spread, 0.0, spread, ru, rv, r1,
+                                          min_support, stride)
             if good:  # the line is absolute inverse depth: its centre value is c
                 _store_normal(out, v, u, a, b, c, params)
 
