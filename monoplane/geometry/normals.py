@@ -249,4 +249,3 @@ def _box_normals(depth: np.ndarray, max_jump: float, params: np.ndarray, K: np.n
                                     stride, support, a, b, normals)
                   for a, b in chunks(inv.shape[0], _THREADED_ROWS // _PIECES, _PIECES)])
     return normals
-
