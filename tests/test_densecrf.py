@@ -555,3 +555,17 @@ def test_certified_cells_give_the_labels_the_upsampled_argmax_gives(uniform, ste
                      step, ws, slack, hard, 0, h, expected, expected_close)
     np.testing.assert_array_equal(got, expected)
     np.testing.assert_array_equal(close, expected_close)
+
+
+def test_softmax_equals_the_numpy_formula_bit_for_bit() -> None:
+    from monoplane.algorithm.mean_field import _softmax
+
+    rng = np.random.default_rng(5)
+    for shape in ((1, 1), (7, 2), (300, 16), (50, 41)):
+        x = (rng.normal(size=shape) * 5).astype(np.float32)
+        x[0, -1] = x[0, 0]  # a tie for the maximum
+        e = np.exp(x - x.max(axis=1, keepdims=True))
+        expected = e / e.sum(axis=1, keepdims=True)
+        got = _softmax(x.copy())
+        assert got.dtype == np.float32
+        np.testing.assert_array_equal(got, expected)
