@@ -36,6 +36,8 @@ import numpy as np
 
 from monoplane import jit
 from monoplane.algorithm.mincut import min_cut
+from monoplane.algorithm.region_moments import refit_planes
+from monoplane.algorithm.regions import region_adjacency
 from monoplane.export.saving import save as save_outputs
 from monoplane.geometry.planes import planes_from_triplets
 from monoplane.host import config
@@ -171,6 +173,12 @@ def _workloads(report: bool = True) -> Iterator[tuple[str, Callable[[], Any]]]:
     z = depth[valid].astype(np.float64)
     points = np.stack([(u - K[0, 2]) * z / K[0, 0], (v - K[1, 2]) * z / K[1, 1], z], axis=1)
     yield "point cloud", lambda: detect_planes(points)
+    # The refiner reads its regions in one scan (region_scan); the clean-up's public steps
+    # (moments of any label map, adjacency) keep kernels of their own.
+    pieces = np.eye(3, dtype=np.int64)
+    yield "region moments and adjacency", lambda: (
+        refit_planes(np.ones((3, 3, 3)), np.ones((3, 3), bool), pieces, np.zeros((1, 4))),
+        region_adjacency(pieces))
 
     def cloud_with_normals() -> None:
         import open3d as o3d

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 
+import cv2
 import numpy as np
 import pytest
 from scipy import ndimage
@@ -461,7 +462,7 @@ def test_block_means_from_counts_equal_the_per_pixel_sums(uniform, num_labels, s
 
 @pytest.mark.parametrize("uniform", [True, False])
 def test_final_labels_kernels_equal_the_numpy_argmax(uniform):
-    from monoplane.algorithm.densecrf import _exact_labels, _upsampled_labels
+    from monoplane.algorithm.crf_labels import exact_labels, upsampled_labels
 
     rng = np.random.default_rng(11)
     h, w, num = 23, 31, 6
@@ -486,11 +487,13 @@ def test_final_labels_kernels_equal_the_numpy_argmax(uniform):
             got = np.full((h, w), -1, dtype=np.int32)
             close = np.zeros(200, bool)
             for y0, y1 in zip(bounds[:-1], bounds[1:], strict=True):
-                _upsampled_labels(fine, lab.astype(np.int64), band, *args, margin, y0, y1, got,
-                                  close)
+                # No certified cells: every pixel reads its messages.
+                upsampled_labels(fine, lab.astype(np.int64), band, *args, margin,
+                                 np.full(1, -1), np.zeros(1), h + w, 1, 0.0, 0.0, y0, y1, got,
+                                 close)
             np.testing.assert_array_equal(close, expected_close)
             assert close[0]
-            _exact_labels(exact[close], lab.astype(np.int64), band[close], *args, got)
+            exact_labels(exact[close], lab.astype(np.int64), band[close], *args, got)
             np.testing.assert_array_equal(got, expected)
 
 
@@ -518,3 +521,51 @@ def test_sum_in_place_equals_the_sum_from_zeros_bit_for_bit() -> None:
         np.testing.assert_array_equal(got, expected)
         np.testing.assert_array_equal(np.signbit(got), np.signbit(expected))
         assert np.signbit(expected).sum() < np.signbit(arrays[0]).sum()  # -0 did occur
+
+
+@pytest.mark.parametrize("uniform", [True, False])
+@pytest.mark.parametrize("step, shape", [(8, (45, 70)), (3, (31, 40))])
+def test_certified_cells_give_the_labels_the_upsampled_argmax_gives(uniform, step, shape):
+    # Coarse messages with plateaus (one label ahead by 0.5-6 nats) and a few cells where two
+    # labels are close; observed labels mostly the plateau's, some another or 0.
+    from monoplane.algorithm.crf_labels import certified_cells, upsampled_labels
+
+    rng = np.random.default_rng(step)
+    h, w = shape
+    hs, ws, num = -(-h // step), -(-w // step), 5
+    ahead = np.kron(rng.integers(0, num, (hs // 4 + 1, ws // 4 + 1)), np.ones((4, 4), int))
+    coarse = rng.normal(0.0, 0.2, (hs, ws, num)).astype(np.float32)
+    lead = rng.uniform(0.5, 6.0, (hs, ws)).astype(np.float32)
+    lead[rng.random((hs, ws)) < 0.1] = 0.01
+    np.put_along_axis(coarse, ahead[:hs, :ws, None], lead[..., None] + 1.0, axis=2)
+    fine = cv2.resize(coarse, (ws * step, hs * step), interpolation=cv2.INTER_LINEAR)
+    block = ahead[:hs, :ws].repeat(step, 0).repeat(step, 1)[:h, :w]
+    lab = np.where(rng.random((h, w)) < 0.2, rng.integers(0, num, (h, w)), block)
+    band = np.sort(rng.choice(h * w, 40, replace=False))
+    values = unary_from_labels(np.array([1, 0]), num, 0.55, uniform_label=0)
+    args = (values[0, 1], values[0, 0], values[1, 0], uniform, 2.0)
+    cell_label, cell_gap, slack = certified_cells(coarse)
+    hard = float(values[0, 0]) - float(values[0, 1]) + slack
+    assert (cell_label >= 0).mean() > 0.3
+    got, expected = (np.full((h, w), -1, np.int32) for _ in range(2))
+    close, expected_close = np.zeros(40, bool), np.zeros(40, bool)
+    upsampled_labels(fine, lab.astype(np.int64), band, *args, cell_label, cell_gap, step, ws,
+                     slack, hard, 0, h, got, close)
+    upsampled_labels(fine, lab.astype(np.int64), band, *args, np.full(hs * ws, -1), cell_gap,
+                     step, ws, slack, hard, 0, h, expected, expected_close)
+    np.testing.assert_array_equal(got, expected)
+    np.testing.assert_array_equal(close, expected_close)
+
+
+def test_softmax_equals_the_numpy_formula_bit_for_bit() -> None:
+    from monoplane.algorithm.mean_field import _softmax
+
+    rng = np.random.default_rng(5)
+    for shape in ((1, 1), (7, 2), (300, 16), (50, 41)):
+        x = (rng.normal(size=shape) * 5).astype(np.float32)
+        x[0, -1] = x[0, 0]  # a tie for the maximum
+        e = np.exp(x - x.max(axis=1, keepdims=True))
+        expected = e / e.sum(axis=1, keepdims=True)
+        got = _softmax(x.copy())
+        assert got.dtype == np.float32
+        np.testing.assert_array_equal(got, expected)

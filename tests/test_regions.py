@@ -7,6 +7,7 @@ import pytest
 from scipy import ndimage
 
 from monoplane.algorithm.region_moments import RegionMoments, refit_planes, scene_radius
+from monoplane.algorithm.region_scan import scan_pieces
 from monoplane.algorithm.regions import (
     _renumbered_pairs,
     absorb_small_regions,
@@ -481,3 +482,34 @@ def test_renumbered_pairs_are_the_adjacency_of_the_renumbered_labels(connectivit
         pairs = _renumbered_pairs(region_adjacency(labels, connectivity), remap)
         np.testing.assert_array_equal(pairs, region_adjacency(remap[labels], connectivity))
         assert pairs.dtype == np.int64
+
+
+@pytest.mark.parametrize("connectivity", [4, 8, None])
+@pytest.mark.parametrize("seed", range(4))
+def test_scan_of_pieces_equals_the_separate_passes_bit_for_bit(seed, connectivity):
+    # Blocky pieces (runs of several pixels, some at the borders) and speckle, a third of the
+    # points invalid: moments, areas, radius and adjacency as the separate passes give them.
+    rng = np.random.default_rng(seed)
+    lab = ndimage.zoom(rng.integers(0, 9, size=(6, 8)), 4, order=0)[:21, :29]
+    lab = np.where(rng.random(lab.shape) < 0.1, rng.integers(0, 9, lab.shape), lab)
+    pieces = split_components(lab, connectivity or 8)[0]
+    num = int(pieces.max())
+    valid = rng.random(lab.shape) > 0.3
+    points = rng.normal(size=(*lab.shape, 3)) * [1.0, 2.0, 0.5] + [0.0, 0.0, 4.0]
+    scan = scan_pieces(points, valid, pieces, num, connectivity)
+    moments = RegionMoments.of(points, valid, pieces, num)
+    for a, b in zip((scan.moments.count, scan.moments.total, scan.moments.outer,
+                     scan.moments.centre),
+                    (moments.count, moments.total, moments.outer, moments.centre), strict=True):
+        np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(scan.area, np.bincount(pieces.ravel(), minlength=num + 1)[1:])
+    assert scan.radius == scene_radius(points, valid)
+    if connectivity is None:
+        assert scan.touching is None
+    else:
+        np.testing.assert_array_equal(scan.touching, _reference_adjacency(pieces, connectivity))
+
+
+def test_scan_of_pieces_rejects_labels_beyond_the_count():
+    with pytest.raises(InvalidInput, match="0..2"):
+        scan_pieces(np.zeros((2, 2, 3)), np.ones((2, 2), bool), np.array([[0, 1], [2, 3]]), 2)

@@ -23,6 +23,7 @@ import numpy as np
 
 # PermutohedralLattice and pairwise are not used here: they stay importable from this module, where
 # they lived until the split into mean_field.py.
+from monoplane.algorithm.crf_labels import certified_cells, exact_labels, upsampled_labels
 from monoplane.algorithm.mean_field import (  # noqa: F401
     GaussianKernel,
     PermutohedralLattice,
@@ -32,7 +33,7 @@ from monoplane.algorithm.mean_field import (  # noqa: F401
     unary_from_labels,
 )
 from monoplane.errors import InvalidInput
-from monoplane.jit import chunks, inline, kernel, run_threaded
+from monoplane.jit import chunks, kernel, run_threaded
 
 #: Image area (256 x 192) at which the paper's pixel-valued parameters (θ_s = 10 px, minimum
 #: region 300 px) are stated; other resolutions scale them.
@@ -322,78 +323,6 @@ def _band_messages(kernels: list[GaussianKernel], blurred: list[np.ndarray], pos
     return out
 
 
-@inline
-def _unary(label: int, observed: int, u_own: np.float32, u_other: np.float32,
-           u_uniform: np.float32, uniform_nonplanar: bool) -> np.float32:
-    """The unary of ``label`` at a pixel observed with label ``observed`` (see
-    :func:`_upsampled_labels`)."""
-    if uniform_nonplanar and observed == 0:
-        return u_uniform
-    return u_own if label == observed else u_other
-
-
-@kernel
-def _upsampled_labels(fine: np.ndarray, labels: np.ndarray, band: np.ndarray,
-                      u_own: np.float32, u_other: np.float32, u_uniform: np.float32,
-                      uniform_nonplanar: bool, margin: float, y0: int, y1: int,
-                      out: np.ndarray, close: np.ndarray) -> None:
-    """Rows ``y0:y1`` of the (H, W) int32 ``out``: argmax over labels of ``message - unary``
-    at full resolution with the upsampled messages, and at the ``band`` pixels in these rows
-    whether the two best labels lie less than ``margin`` nats apart (``close``).
-
-    ``fine`` (≥H, ≥W, L) float32 upsampled coarse messages, ``labels`` (H, W) int64 observed
-    labels, ``band`` (K,) int64 ascending flat pixels, ``close`` (K,) bool; the unary of a
-    pixel is ``u_own`` at its label and ``u_other`` elsewhere, or ``u_uniform`` everywhere for
-    label 0 when ``uniform_nonplanar``. float32 arithmetic and the first maximum, as
-    ``(fine - unary).argmax(axis=1)`` gives. Pixels are independent, so row blocks run on
-    parallel threads.
-    """
-    w = labels.shape[1]
-    num = fine.shape[2]
-    # The band is ascending: a pointer walks it along the raster order of the rows.
-    k = np.searchsorted(band, y0 * w)
-    for y in range(y0, y1):
-        for x in range(w):
-            lab = labels[y, x]
-            best = -np.inf
-            second = -np.inf
-            arg = 0
-            for label in range(num):
-                u = _unary(label, lab, u_own, u_other, u_uniform, uniform_nonplanar)
-                e = np.float32(fine[y, x, label] - u)
-                if e > best:
-                    second = best
-                    best = e
-                    arg = label
-                elif e > second:
-                    second = e
-            out[y, x] = arg
-            if k < band.shape[0] and band[k] == y * w + x:
-                close[k] = best - second < margin
-                k += 1
-
-
-@kernel
-def _exact_labels(exact: np.ndarray, labels: np.ndarray, pixels: np.ndarray,
-                  u_own: np.float32, u_other: np.float32, u_uniform: np.float32,
-                  uniform_nonplanar: bool, out: np.ndarray) -> None:
-    """:func:`_upsampled_labels`' argmax at the (K,) int64 flat ``pixels`` of ``out``, from
-    their (K, L) float32 ``exact`` messages instead."""
-    w = labels.shape[1]
-    for k in range(pixels.shape[0]):
-        y, x = pixels[k] // w, pixels[k] % w
-        lab = labels[y, x]
-        best = -np.inf
-        arg = 0
-        for label in range(exact.shape[1]):
-            u = _unary(label, lab, u_own, u_other, u_uniform, uniform_nonplanar)
-            e = np.float32(exact[k, label] - u)
-            if e > best:
-                best = e
-                arg = label
-        out[y, x] = arg
-
-
 def _not_constant_3x3(image: np.ndarray) -> np.ndarray:
     """(H, W) bool: the 3 x 3 window around each pixel (clipped at the border) holds two
     different values, i.e. some pixel of it differs from the centre."""
@@ -560,16 +489,19 @@ def dense_crf(
     coarse_pairwise = _sum_in_place([k.message_from(b)
                                      for k, b in zip(kernels, blurred, strict=True)])
     # cv2 maps fine pixel u to coarse position (u + 0.5) / step - 0.5.
-    fine = cv2.resize(coarse_pairwise.reshape(hs, ws, num_labels), (ws * step, hs * step),
+    coarse_messages = coarse_pairwise.reshape(hs, ws, num_labels)
+    fine = cv2.resize(coarse_messages, (ws * step, hs * step),
                       interpolation=cv2.INTER_LINEAR).reshape(hs * step, ws * step, -1)
-    return _full_resolution_labels(grid, params, lab, band, fine, blurred)
+    return _full_resolution_labels(grid, params, lab, band, coarse_messages, fine, blurred)
 
 
 def _full_resolution_labels(grid: CrfGrid, params: CrfParams, lab: np.ndarray, band: np.ndarray,
-                            fine: np.ndarray, blurred: list[np.ndarray]) -> np.ndarray:
+                            coarse: np.ndarray, fine: np.ndarray, blurred: list[np.ndarray]
+                            ) -> np.ndarray:
     """(H, W) int32 final labels of :func:`dense_crf` on a coarse grid: observed labels
-    ``lab`` (H, W), ascending flat pixels of the ``band``, upsampled messages ``fine``
-    (≥H, ≥W, L) float32 and each kernel's lattice values ``blurred``."""
+    ``lab`` (H, W), ascending flat pixels of the ``band``, coarse messages ``coarse``
+    (hs, ws, L) float32 and their upsampling ``fine`` (≥H, ≥W, L), and each kernel's lattice
+    values ``blurred``."""
     (h, w), step = grid.shape, grid.step
     hs, ws = -(-h // step), -(-w // step)
     # The unary takes three values per label map (own label, other label, uniform): the
@@ -580,15 +512,19 @@ def _full_resolution_labels(grid: CrfGrid, params: CrfParams, lab: np.ndarray, b
     lab64 = lab.astype(np.int64)
     out = np.empty((h, w), dtype=np.int32)
     close = np.empty(band.shape[0], dtype=np.bool_)
-    # Every pixel is labelled from the upsampled messages first; where they leave the two
-    # best labels of a band pixel within the margin (any band pixel when it is inf), its own
+    # Every pixel is labelled from the upsampled messages first (most of them, away from the
+    # band, by their coarse cells alone: certified_cells); where they leave the two best
+    # labels of a band pixel within the margin (any band pixel when it is inf), its own
     # features might overturn them: those pixels are labelled again from exact messages.
-    run_threaded([partial(_upsampled_labels, fine, lab64, band, *unary,
-                          float(params.band_margin), a, b, out, close)
+    cell_label, cell_gap, slack = certified_cells(coarse)
+    hard = float(values[0, 0]) - float(values[0, 1]) + slack
+    run_threaded([partial(upsampled_labels, fine, lab64, band, *unary,
+                          float(params.band_margin), cell_label, cell_gap, step, ws, slack,
+                          hard, a, b, out, close)
                   for a, b in chunks(h, _THREADED_ROWS)])
     band = band[close]
     fu = (band % w + 0.5) / step - 0.5
     fv = (band // w + 0.5) / step - 0.5
     pos, columns = grid.cues.columns(params, fu, fv, hs * ws, band)
-    _exact_labels(_band_messages(grid.kernels, blurred, pos, columns), lab64, band, *unary, out)
+    exact_labels(_band_messages(grid.kernels, blurred, pos, columns), lab64, band, *unary, out)
     return out

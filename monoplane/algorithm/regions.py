@@ -34,6 +34,7 @@ from monoplane.algorithm.region_moments import (  # noqa: F401
     refit_planes,
     scene_radius,
 )
+from monoplane.algorithm.region_scan import scan_pieces
 from monoplane.datamodel import Reconstruction
 from monoplane.errors import InvalidInput
 from monoplane.geometry.components import graph_components, label_regions
@@ -420,15 +421,17 @@ def clean_regions(rec: Reconstruction, labels: np.ndarray, min_area: int,
         # RANSAC outliers carry no evidence about any plane: they may be labelled, not fitted.
         valid = valid & (np.asarray(rec.labels) > 0)
     # Every later step works on the pieces' point moments; regions only ever grow by union.
-    moments = RegionMoments.of(points, valid, pieces, origin.size)
-    area = np.bincount(pieces.ravel(), minlength=origin.size + 1)[1:]
+    # One scan reads them, the areas, the scene radius and which pieces touch.
+    scan = scan_pieces(points, valid, pieces, origin.size,
+                       connectivity if split and (absorb or (merge and merge_adjacent))
+                       else None)
+    moments, area = scan.moments, scan.area
     # Merging and absorbing renumber regions: ``to`` maps each piece to its region, and the
     # pieces' image is renumbered once, at the end.
     to = np.arange(origin.size + 1, dtype=np.int32)
     if split and (merge or absorb):
-        tolerance = max_distance * scene_radius(points, valid)
-        touching = (region_adjacency(pieces, connectivity)
-                    if absorb or (merge and merge_adjacent) else None)
+        tolerance = max_distance * scan.radius
+        touching = scan.touching
         if merge:
             fitted, _, _ = moments.planes(rec.planes[origin - 1])
             remap, origin = _merge_groups(moments, area, origin, fitted, max_angle_deg,

@@ -24,6 +24,7 @@ from monoplane.algorithm.regions import (
 )
 from monoplane.contracts import RansacParams, Refiner, Stage, param
 from monoplane.datamodel import Frame, Reconstruction
+from monoplane.datamodel.pinhole import pixel_rays
 from monoplane.errors import ConfigError, InvalidInput, check_config
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
@@ -177,6 +178,9 @@ class DenseCrfRefiner(Refiner):
             raise ConfigError(f"refiner: {exc}") from exc
 
     _pending: tuple[Frame, Callable[[], _FrameWork]] | None = None
+    #: The pixel rays of the last camera seen, keyed by its intrinsics and image size: the
+    #: frames of a sequence share them, and building them costs more than the points do.
+    _rays: tuple[bytes, tuple[int, int], np.ndarray] | None = None
 
     def prepare(self, frame: Frame) -> None:
         """Build the CRF's lattices, the 3D points and the fill tolerance of ``frame`` on the
@@ -194,11 +198,22 @@ class DenseCrfRefiner(Refiner):
         c = self.config
         grid = crf_grid(frame.shape, self.crf, rgb=frame.rgb, depth=frame.depth,
                         normals=frame.normals, threaded=threaded)
-        points = frame.points()
+        points = self._points(frame)
         tolerance = np.inf
         if np.isfinite(c.fill_distance):
             tolerance = c.fill_distance * scene_radius(points, frame.depth > 0)
         return _FrameWork(grid, points, tolerance)
+
+    def _points(self, frame: Frame) -> np.ndarray:
+        """``frame.points()`` (H, W, 3) float64, with the pixel rays of the frame's camera
+        reused from the previous frame when its intrinsics and size are the same (the same
+        values: the rays times the depth as float64)."""
+        assert frame.depth is not None
+        key = (np.asarray(frame.K, dtype=np.float64).tobytes(), frame.shape)
+        cached = self._rays
+        if cached is None or cached[:2] != key:
+            cached = self._rays = (*key, pixel_rays(frame.K, *frame.shape))
+        return cached[2] * frame.depth[..., None].astype(np.float64)
 
     def refine(self, rec: Reconstruction, params: RansacParams) -> Reconstruction:
         """Refine ``rec``'s labels and refit its planes.

@@ -63,6 +63,22 @@ def test_dense_crf_work_prepared_in_the_background_changes_nothing(monkeypatch):
     assert refiner._pending is None
 
 
+def test_points_reuse_the_rays_of_the_same_camera_only():
+    refiner = DenseCrfRefiner()
+    frame = room()[0]
+    np.testing.assert_array_equal(refiner._points(frame), frame.points())
+    rays = refiner._rays[2]
+    other = room(seed=1)[0]  # same camera, other depth: the rays are reused
+    np.testing.assert_array_equal(refiner._points(other), other.points())
+    assert refiner._rays[2] is rays
+    wider = frame.with_(K=frame.K * np.array([[1.1], [1.1], [1.0]]))
+    np.testing.assert_array_equal(refiner._points(wider), wider.points())
+    assert refiner._rays[2] is not rays
+    smaller = Frame(rgb=None, K=frame.K, depth=frame.depth[:80, :100].copy())
+    np.testing.assert_array_equal(refiner._points(smaller), smaller.points())
+    assert refiner._rays[2].shape == (80, 100, 3)
+
+
 def test_none_refiner_is_the_identity():
     frame, gt = room()
     rec = noisy_reconstruction(frame, gt)

@@ -1,0 +1,147 @@
+"""Final full-resolution labels of the dense CRF run on a coarse grid (:mod:`.densecrf`).
+
+Every pixel's label is the argmax over labels of ``message - unary``, with the coarse
+messages bilinearly upsampled (``cv2.resize``), or with exact messages at the band pixels
+whose upsampled ones leave the two best labels close. Most pixels need not read their
+upsampled messages at all: where every coarse cell that the interpolation of a pixel can
+draw on has the same best label by a gap larger than anything the pixel's unary can add,
+that label wins (:func:`certified_cells`), exactly as the argmax would decide it.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from monoplane.jit import inline, kernel
+
+#: Slack of the certificate, relative to the largest coarse message: the float32 bilinear
+#: interpolation (weights summing to 1) and the subtraction of the unary round by a few
+#: units of 2^-24 of it, far below this.
+_SLACK = 1e-3
+
+
+def certified_cells(coarse: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """Which coarse cells decide the labels of their pixels without the upsampled messages.
+
+    A pixel's bilinear interpolation reads coarse cells of the 3 x 3 neighbourhood of its own
+    block only. When all of them have the same best label ``a`` and each leads every other
+    label by at least ``g``, the interpolated messages lead by ``g`` less the rounding; the
+    unary lowers ``a`` against another label by at most ``u_other - u_own`` (at a pixel
+    observed with another plane), and by nothing at a pixel observed with ``a`` or a uniform
+    one. So the argmax is ``a`` wherever ``g`` beats that by the returned slack.
+
+    Parameters
+    ----------
+    coarse : numpy.ndarray
+        (hs, ws, L) float32 coarse messages (what is upsampled), L >= 2.
+
+    Returns
+    -------
+    label : numpy.ndarray
+        (hs ws,) int64 the label every 3 x 3 neighbourhood (clipped at the border) agrees on,
+        -1 where it does not.
+    gap : numpy.ndarray
+        (hs ws,) float64 the smallest lead of the best label over that neighbourhood.
+    slack : float
+        What the lead must exceed beyond the unary's advantage.
+    """
+    hs, ws, num = coarse.shape
+    flat = coarse.reshape(-1, num).astype(np.float64)
+    best = flat.argmax(axis=1)
+    top2 = np.partition(flat, num - 2, axis=1)[:, -2:]
+    square = np.ones((3, 3), np.uint8)
+    # Erosion and dilation pad with +inf and -inf: the minimum and maximum over the window
+    # clipped at the border. Labels are small integers, exact in float32.
+    grid = best.reshape(hs, ws).astype(np.float32)
+    agree = (cv2.erode(grid, square) == cv2.dilate(grid, square)).ravel()
+    gap = cv2.erode((top2[:, 1] - top2[:, 0]).reshape(hs, ws), square).ravel()
+    label = np.where(agree, best, -1).astype(np.int64)
+    return label, gap, _SLACK * (1.0 + float(np.abs(flat).max()))
+
+
+@inline
+def _unary(label: int, observed: int, u_own: np.float32, u_other: np.float32,
+           u_uniform: np.float32, uniform_nonplanar: bool) -> np.float32:
+    """The unary of ``label`` at a pixel observed with label ``observed`` (see
+    :func:`upsampled_labels`)."""
+    if uniform_nonplanar and observed == 0:
+        return u_uniform
+    return u_own if label == observed else u_other
+
+
+@kernel
+def upsampled_labels(fine: np.ndarray, labels: np.ndarray, band: np.ndarray,
+                     u_own: np.float32, u_other: np.float32, u_uniform: np.float32,
+                     uniform_nonplanar: bool, margin: float, cell_label: np.ndarray,
+                     cell_gap: np.ndarray, step: int, ws: int, easy_gap: float,
+                     hard_gap: float, y0: int, y1: int, out: np.ndarray,
+                     close: np.ndarray) -> None:
+    """Rows ``y0:y1`` of the (H, W) int32 ``out``: argmax over labels of ``message - unary``
+    at full resolution with the upsampled messages, and at the ``band`` pixels in these rows
+    whether the two best labels lie less than ``margin`` nats apart (``close``).
+
+    ``fine`` (≥H, ≥W, L) float32 upsampled coarse messages, ``labels`` (H, W) int64 observed
+    labels, ``band`` (K,) int64 ascending flat pixels, ``close`` (K,) bool; the unary of a
+    pixel is ``u_own`` at its label and ``u_other`` elsewhere, or ``u_uniform`` everywhere for
+    label 0 when ``uniform_nonplanar``. float32 arithmetic and the first maximum, as
+    ``(fine - unary).argmax(axis=1)`` gives. A pixel outside the band whose block (``step``
+    pixels, ``ws`` blocks a row) has a ``cell_label`` (:func:`certified_cells`) gets it
+    without reading ``fine`` when the block's ``cell_gap`` exceeds ``easy_gap`` (the pixel
+    is observed with that label or uniform) or ``hard_gap`` (another label). Pixels are
+    independent, so row blocks run on parallel threads.
+    """
+    w = labels.shape[1]
+    num = fine.shape[2]
+    # The band is ascending: a pointer walks it along the raster order of the rows.
+    k = np.searchsorted(band, y0 * w)
+    for y in range(y0, y1):
+        row = (y // step) * ws
+        for x in range(w):
+            lab = labels[y, x]
+            in_band = k < band.shape[0] and band[k] == y * w + x
+            if not in_band:
+                cell = row + x // step
+                a = cell_label[cell]
+                if a >= 0:
+                    easy = a == lab or (uniform_nonplanar and lab == 0)
+                    if cell_gap[cell] > (easy_gap if easy else hard_gap):
+                        out[y, x] = a
+                        continue
+            best = -np.inf
+            second = -np.inf
+            arg = 0
+            for label in range(num):
+                u = _unary(label, lab, u_own, u_other, u_uniform, uniform_nonplanar)
+                e = np.float32(fine[y, x, label] - u)
+                if e > best:
+                    second = best
+                    best = e
+                    arg = label
+                elif e > second:
+                    second = e
+            out[y, x] = arg
+            if in_band:
+                close[k] = best - second < margin
+                k += 1
+
+
+@kernel
+def exact_labels(exact: np.ndarray, labels: np.ndarray, pixels: np.ndarray,
+                 u_own: np.float32, u_other: np.float32, u_uniform: np.float32,
+                 uniform_nonplanar: bool, out: np.ndarray) -> None:
+    """:func:`upsampled_labels`' argmax at the (K,) int64 flat ``pixels`` of ``out``, from
+    their (K, L) float32 ``exact`` messages instead."""
+    w = labels.shape[1]
+    for k in range(pixels.shape[0]):
+        y, x = pixels[k] // w, pixels[k] % w
+        lab = labels[y, x]
+        best = -np.inf
+        arg = 0
+        for label in range(exact.shape[1]):
+            u = _unary(label, lab, u_own, u_other, u_uniform, uniform_nonplanar)
+            e = np.float32(exact[k, label] - u)
+            if e > best:
+                best = e
+                arg = label
+        out[y, x] = arg
