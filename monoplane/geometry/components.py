@@ -3,7 +3,8 @@
 Both the region clean-up after refinement (every plane label split into its connected regions)
 and the depth-edge segmentation of normal estimation need the connected regions of an image
 whose pixels carry integer labels; RANSAC keeps the largest connected part of each plane's
-inliers in the neighbourhood graph. Both are union-find passes sharing :func:`_union`. One
+inliers in the neighbourhood graph (on a pixel lattice also across thin occluders,
+:func:`lattice_largest_component`). Both are union-find passes sharing :func:`_union`. One
 pass over the pixels finds the regions of all labels at once, where labelling each label's mask
 separately would scan the image once per label.
 
@@ -253,7 +254,6 @@ def _label_regions(lab: np.ndarray, corners: bool) -> tuple[np.ndarray, np.ndarr
         for x in range(start[r], end[r]):
             out[row[r], x] = number[root]
     return out, origin
-
 
 
 def lattice_largest_component(members: np.ndarray, lattice: np.ndarray, points: np.ndarray,

@@ -1,4 +1,5 @@
-"""Connected regions of label images: scipy.ndimage.label as the reference."""
+"""Connected regions of label images (scipy.ndimage.label as the reference), and the largest
+part of a plane's inliers on a pixel lattice."""
 
 import numpy as np
 import pytest
@@ -8,8 +9,8 @@ from monoplane.errors import InvalidInput
 from monoplane.geometry.components import (
     graph_components,
     label_regions,
-    lattice_largest_component,
     largest_component,
+    lattice_largest_component,
     same_label_components,
 )
 
