@@ -198,6 +198,31 @@ def test_lattice_normal_cut_keeps_flat_walls_whole():
     np.testing.assert_allclose(rec.planes[ids - 1, :3], planes[:, :3], atol=1e-2)
 
 
+@pytest.mark.parametrize("reach,whole", [(6, True), (1, False)])
+def test_lattice_split_joins_a_plane_behind_a_thin_post(reach, whole):
+    # A post 4 px wide, 1 m from the camera, parts floor and back wall in the image from top
+    # to bottom: in 3D each wall's two sides lie 0.035 of their distance apart (4 px at
+    # f = 114 px), within the jump limit, so they join across the post with reach 6 (the
+    # post is 2 lattice steps wide); with the lattice graph's links only, each wall's
+    # inliers fall into two parts and the smaller one becomes a plane of its own.
+    frame, labels, _ = room(h=120, w=160)
+    depth = frame.depth.copy()
+    post = np.zeros(labels.shape, dtype=bool)
+    post[:, 78:82] = True
+    depth[post] = 1.0
+    normals = frame.normals.copy()
+    normals[post] = (0.0, 0.0, -1.0)
+    frame = frame.with_(depth=depth, normals=normals)
+    driver = make("monoplane-nocrf", max_points=4000, sampling="grid", split_components=True,
+                  lattice_split_reach=reach)
+    rec = driver.run(frame)
+    for wall in (1, 2):  # floor, back wall
+        counts = np.sort(np.bincount(rec.labels[(labels == wall) & ~post])[1:])
+        # Split: a second plane holds 40-50 % of the wall; whole: none more than 10 %.
+        assert (counts[-2] < 0.1 * counts.sum()) == whole
+        assert counts[-1] > 0.4 * counts.sum()
+
+
 def test_sampling_must_be_named():
     with pytest.raises(ConfigError, match="sampling must be one of random, grid"):
         RansacConfig(sampling="lattice")
@@ -205,6 +230,8 @@ def test_sampling_must_be_named():
         RansacConfig(lattice_max_turn_deg=0.0)
     with pytest.raises(ConfigError, match="lattice_turn_deg must be non-negative"):
         RansacConfig(lattice_turn_deg=-1.0)
+    with pytest.raises(ConfigError, match="lattice_split_reach must be at least 1"):
+        RansacConfig(lattice_split_reach=0)
 
 
 def test_max_planes_and_min_support_stop_the_search():

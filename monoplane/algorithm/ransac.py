@@ -12,9 +12,10 @@ One plane at a time, on the points not yet assigned (the *pool*):
    subgraph of the pool);
 3. local optimisation: least-squares refit on the inliers (model normal θ_n = mean predicted
    normal of the inliers), relabel, and keep the refit while the labeler's energy decreases;
-4. with ``split_components``, only the largest connected component (in the neighbourhood graph)
-   of the inliers is kept; the other components return to the pool and can become planes of
-   their own later (two table tops at the same height are two planes);
+4. with ``split_components``, only the largest connected component (in the neighbourhood graph;
+   on a lattice also across thin occluders, ``lattice_split_reach``) of the inliers is kept;
+   the other components return to the pool and can become planes of their own later (two
+   table tops at the same height are two planes);
 5. the plane is accepted if its support reaches ``min_support``, otherwise the search stops;
    its inliers leave the pool. With ``max_rejections`` > 0 a too-small plane (its labelled
    points leave the pool as non-planar), or a search that found no hypothesis, is passed over
@@ -57,6 +58,7 @@ from monoplane.contracts import (
 from monoplane.datamodel import Frame, Reconstruction, orient_towards_camera
 from monoplane.errors import InvalidInput, check_config
 from monoplane.geometry.cloud import PlaneCloud
+from monoplane.geometry.components import lattice_largest_component
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.geometry.hypotheses import (
     SearchRule,
@@ -128,6 +130,11 @@ class RansacConfig:
         10.0, "with sampling 'grid', the proximity labeler's affinity of two lattice neighbours "
         "(their cut cost above its 0.5 floor) is scaled by exp(-t²/2σ²), t the angle between "
         "their normals: this σ in degrees (0: not scaled)")
+    lattice_split_reach: int = param(
+        6, "with sampling 'grid' and split_components, a plane's inliers also connect across "
+        "up to this many lattice steps along a lattice line when every sample between them lies "
+        "in front of them or has no depth (a thin occluder such as a table leg); 1: the lattice "
+        "graph's links only")
     lo_iterations: int = param(1, "local optimisation rounds (refit + relabel) per plane")
     split_components: bool = param(
         False, "keep only the largest graph-connected component of each plane's inliers")
@@ -164,6 +171,7 @@ class RansacConfig:
              f"sampling must be one of {', '.join(SAMPLINGS)}, got {self.sampling!r}"),
             (0 < self.lattice_max_turn_deg <= 180, "lattice_max_turn_deg must lie in (0, 180]"),
             (self.lattice_turn_deg >= 0, "lattice_turn_deg must be non-negative"),
+            (self.lattice_split_reach >= 1, "lattice_split_reach must be at least 1"),
             (self.lo_iterations >= 0, "lo_iterations must be non-negative"),
             (self.noise_factor >= 0, "noise_factor must be non-negative"),
             (self.noise_planes >= 0, "noise_planes must be non-negative"),
@@ -380,8 +388,8 @@ class SequentialRansac:
                                          context)
             labelled = inliers.copy()
             if cfg.split_components and inliers.any():
-                members = np.flatnonzero(inliers)
-                inliers[members[~graph.largest_component_within(pool, inliers)]] = False
+                inliers[np.flatnonzero(inliers)[~self._largest_part(cloud, graph, pool,
+                                                                     inliers)]] = False
             timings["ransac.label"] += time.perf_counter() - t
             if inliers.sum() < min_support:
                 # The best plane left is too small, or falls apart into pieces that each are:
@@ -404,6 +412,23 @@ class SequentialRansac:
             prepared()  # nothing of this frame runs on after it
         planes = np.array(found, dtype=np.float64).reshape(-1, 4)
         return CloudPlanes(labels=point_labels, planes=planes, timings=timings)
+
+    def _largest_part(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray,
+                      inliers: np.ndarray) -> np.ndarray:
+        """(K,) bool over ``pool[inliers]``: the largest connected part of a plane's inliers.
+
+        In the neighbourhood graph; on a lattice cloud with ``lattice_split_reach`` > 1 the
+        inliers also link across thin occluders (:func:`lattice_largest_component`): the
+        lattice graph links image neighbours only, so a plane behind a table leg would fall
+        into parts that the kNN graph, which links in 3D, keeps together.
+        """
+        reach = self.config.lattice_split_reach
+        if cloud.lattice is None or reach <= 1:
+            return graph.largest_component_within(pool, inliers)
+        members = np.zeros(cloud.size, dtype=bool)
+        members[pool[inliers]] = True  # the pool is ascending: so are its inliers
+        return lattice_largest_component(members, cloud.lattice, cloud.points,
+                                         cloud.center / cloud.scale, LATTICE_MAX_JUMP, reach)
 
     def _search(self, cloud: PlaneCloud, pool: np.ndarray, rng: np.random.Generator,
                 params: RansacParams) -> tuple[np.ndarray, np.ndarray] | None:

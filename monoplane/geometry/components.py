@@ -3,7 +3,8 @@
 Both the region clean-up after refinement (every plane label split into its connected regions)
 and the depth-edge segmentation of normal estimation need the connected regions of an image
 whose pixels carry integer labels; RANSAC keeps the largest connected part of each plane's
-inliers in the neighbourhood graph. Both are union-find passes sharing :func:`_union`. One
+inliers in the neighbourhood graph (on a pixel lattice also across thin occluders,
+:func:`lattice_largest_component`). Both are union-find passes sharing :func:`_union`. One
 pass over the pixels finds the regions of all labels at once, where labelling each label's mask
 separately would scan the image once per label.
 
@@ -178,32 +179,12 @@ def _union(parent: np.ndarray, a: int, b: int) -> None:
 @kernel
 def _largest_component(members: np.ndarray, edges: np.ndarray) -> np.ndarray:
     """:func:`largest_component` of (M,) bool ``members`` and (E, 2) int64 ``edges``."""
-    m = members.shape[0]
-    parent = np.arange(m)
+    parent = np.arange(members.shape[0])
     for e in range(edges.shape[0]):
         a, b = edges[e, 0], edges[e, 1]
         if members[a] and members[b]:
             _union(parent, a, b)
-    size = np.zeros(m, dtype=np.int64)
-    root = np.empty(m, dtype=np.int64)
-    for p in range(m):
-        if members[p]:
-            r = p
-            while parent[r] != r:
-                r = parent[r]
-            root[p] = r
-            size[r] += 1
-    best = -1
-    for p in range(m):  # ascending, so ties go to the component of the lowest member
-        if members[p] and (best < 0 or size[root[p]] > size[best]):
-            best = root[p]
-    out = np.zeros(members.sum(), dtype=np.bool_)
-    k = 0
-    for p in range(m):
-        if members[p]:
-            out[k] = root[p] == best
-            k += 1
-    return out
+    return _largest_root_members(members, parent)
 
 
 @kernel
@@ -273,3 +254,118 @@ def _label_regions(lab: np.ndarray, corners: bool) -> tuple[np.ndarray, np.ndarr
         for x in range(start[r], end[r]):
             out[row[r], x] = number[root]
     return out, origin
+
+
+def lattice_largest_component(members: np.ndarray, lattice: np.ndarray, points: np.ndarray,
+                              shift: np.ndarray, max_jump: float, reach: int) -> np.ndarray:
+    """Largest connected part of some points sampled on a pixel lattice, linked across thin
+    occluders.
+
+    Two members are linked when they are the nearest members along one of the lattice's four
+    line directions (row, column, both diagonals), at most ``reach`` steps apart, every node
+    between them has no point or a point nearer to the camera than the first member by more
+    than its jump limit (an occluder in front), and their 3D distance is within ``max_jump``
+    times the first member's distance from the camera (the jump test of
+    :func:`monoplane.geometry.graph.pixel_grid_edges`). With ``reach`` 1 these are the
+    lattice graph's own links; with more, a plane seen on both sides of a table leg stays one
+    part, as the kNN graph, which links in 3D, keeps it. A node between them that lies as far
+    as the members or farther (the rest of a curved surface, a floor seen through a ring)
+    ends the line: inliers scattered over one surface stay apart.
+
+    Parameters
+    ----------
+    members : numpy.ndarray
+        (N,) bool selection of the points.
+    lattice : numpy.ndarray
+        (R, C) int64 point at each lattice node, -1 where there is none
+        (:attr:`monoplane.geometry.cloud.PlaneCloud.lattice`).
+    points : numpy.ndarray
+        (N, 3) float64 normalised points.
+    shift : numpy.ndarray
+        (3,) float64 camera centre's offset in the normalised frame (``center / scale``).
+    max_jump : float
+        Jump limit as a fraction of a point's distance from the camera.
+    reach : int
+        Most lattice steps between two linked members, >= 1.
+
+    Returns
+    -------
+    numpy.ndarray
+        (K,) bool over the K members in ascending point order, True on the largest part;
+        among equally large ones, the one holding the lowest-numbered member.
+    """
+    if reach < 1:
+        raise InvalidInput(f"reach must be at least 1, got {reach}")
+    return _lattice_largest_component(np.ascontiguousarray(members, dtype=np.bool_),
+                                      np.ascontiguousarray(lattice, dtype=np.int64),
+                                      np.ascontiguousarray(points, dtype=np.float64),
+                                      np.ascontiguousarray(shift, dtype=np.float64),
+                                      float(max_jump), int(reach))
+
+
+@kernel
+def _lattice_largest_component(members: np.ndarray, lattice: np.ndarray, points: np.ndarray,
+                               shift: np.ndarray, max_jump: float, reach: int) -> np.ndarray:
+    """:func:`lattice_largest_component`."""
+    n = members.shape[0]
+    parent = np.arange(n)
+    distance = np.zeros(n)  # from the camera, of the members and the nodes between them
+    for p in range(n):
+        x = points[p, 0] + shift[0]
+        y = points[p, 1] + shift[1]
+        z = points[p, 2] + shift[2]
+        distance[p] = np.sqrt(x * x + y * y + z * z)
+    rows, cols = lattice.shape
+    for v in range(rows):
+        for u in range(cols):
+            a = lattice[v, u]
+            if a < 0 or not members[a]:
+                continue
+            limit = max_jump * distance[a]
+            for dv, du in ((0, 1), (1, -1), (1, 0), (1, 1)):
+                vv, uu = v, u
+                for _ in range(reach):
+                    vv += dv
+                    uu += du
+                    if vv >= rows or uu < 0 or uu >= cols:
+                        break
+                    b = lattice[vv, uu]
+                    if b < 0:
+                        continue  # no depth here: it may hide the plane
+                    if members[b]:
+                        dx = points[a, 0] - points[b, 0]
+                        dy = points[a, 1] - points[b, 1]
+                        dz = points[a, 2] - points[b, 2]
+                        if dx * dx + dy * dy + dz * dz <= limit * limit:
+                            _union(parent, a, b)
+                        break
+                    if distance[b] > distance[a] - limit:
+                        break  # not an occluder in front of the plane: its part ends here
+    return _largest_root_members(members, parent)
+
+
+@inline
+def _largest_root_members(members: np.ndarray, parent: np.ndarray) -> np.ndarray:
+    """(K,) bool over the members in order: in the union-find forest ``parent``, True on the
+    largest set of members (the one of the lowest member on ties)."""
+    m = members.shape[0]
+    size = np.zeros(m, dtype=np.int64)
+    root = np.empty(m, dtype=np.int64)
+    for p in range(m):
+        if members[p]:
+            r = p
+            while parent[r] != r:
+                r = parent[r]
+            root[p] = r
+            size[r] += 1
+    best = -1
+    for p in range(m):  # ascending, so ties go to the component of the lowest member
+        if members[p] and (best < 0 or size[root[p]] > size[best]):
+            best = root[p]
+    out = np.zeros(members.sum(), dtype=np.bool_)
+    k = 0
+    for p in range(m):
+        if members[p]:
+            out[k] = root[p] == best
+            k += 1
+    return out

@@ -1,4 +1,5 @@
-"""Connected regions of label images: scipy.ndimage.label as the reference."""
+"""Connected regions of label images (scipy.ndimage.label as the reference), and the largest
+part of a plane's inliers on a pixel lattice."""
 
 import numpy as np
 import pytest
@@ -8,6 +9,8 @@ from monoplane.errors import InvalidInput
 from monoplane.geometry.components import (
     graph_components,
     label_regions,
+    largest_component,
+    lattice_largest_component,
     same_label_components,
 )
 
@@ -116,3 +119,67 @@ def test_same_label_components_are_those_of_the_same_label_edges(seed):
                                   graph_components(500, edges[same]))
     with pytest.raises(InvalidInput, match="edge ends"):
         same_label_components(labels[:10], edges)
+
+
+def floor_behind_a_post(post_depth: float, gap_cols: int = 3):
+    """A 6 x 12 lattice of a fronto-parallel plane at depth 2 (x spacing 0.02), whose columns
+    4 .. 4 + gap_cols - 1 hold instead a post at ``post_depth``: (members, lattice, points)."""
+    rows, cols = 6, 12
+    v, u = np.mgrid[0:rows, 0:cols]
+    points = np.stack([0.02 * u, 0.02 * v, np.full(u.shape, 2.0)], axis=-1).reshape(-1, 3)
+    post = (u >= 4) & (u < 4 + gap_cols)
+    points[post.ravel(), 2] = post_depth
+    lattice = np.arange(rows * cols, dtype=np.int64).reshape(rows, cols)
+    return ~post.ravel(), lattice, points
+
+
+def test_lattice_parts_join_across_a_thin_occluder_in_front():
+    members, lattice, points = floor_behind_a_post(post_depth=1.0)
+    keep = lattice_largest_component(members, lattice, points, np.zeros(3), 0.05, 6)
+    assert keep.all()  # both sides: 0.08 apart, within 5 % of the distance 2
+    # A reach shorter than the post is wide: the left part (24 < 36 on the right) is dropped.
+    keep = lattice_largest_component(members, lattice, points, np.zeros(3), 0.05, 3)
+    assert keep.sum() == 6 * 5 and not keep[0] and keep[-1]
+    # The jump limit still holds: 0.08 is more than 2 % of 2.
+    keep = lattice_largest_component(members, lattice, points, np.zeros(3), 0.02, 6)
+    assert keep.sum() == 30
+
+
+def test_lattice_parts_stay_apart_across_samples_of_the_same_surface_or_behind():
+    # Between the parts the surface goes on at the same depth (or farther away): no occluder,
+    # so inliers scattered over one surface are not joined across the samples between them.
+    for depth in (2.0, 3.0):
+        members, lattice, points = floor_behind_a_post(post_depth=depth, gap_cols=1)
+        keep = lattice_largest_component(members, lattice, points, np.zeros(3), 0.05, 6)
+        assert keep.sum() == 6 * 7 and keep[-1] and not keep[0]
+
+
+def test_lattice_nodes_without_depth_do_not_end_a_part():
+    members, lattice, points = floor_behind_a_post(post_depth=1.0)
+    lattice[:, 4:7] = -1  # the post's samples have no depth: no lattice node holds them
+    keep = lattice_largest_component(members, lattice, points, np.zeros(3), 0.05, 6)
+    assert keep.all()
+    keep = lattice_largest_component(members, lattice, points, np.zeros(3), 0.05, 3)
+    assert keep.sum() == 30
+
+
+def test_lattice_reach_one_is_the_eight_neighbourhood():
+    rng = np.random.default_rng(3)
+    rows, cols = 9, 11
+    v, u = np.mgrid[0:rows, 0:cols]
+    points = np.stack([0.01 * u, 0.01 * v, np.ones(u.shape)], axis=-1).reshape(-1, 3)
+    lattice = np.arange(rows * cols, dtype=np.int64).reshape(rows, cols)
+    for _ in range(20):
+        members = rng.random(rows * cols) < 0.45
+        expected = largest_component(members, _eight_neighbour_edges(rows, cols))
+        got = lattice_largest_component(members, lattice, points, np.zeros(3), 0.05, 1)
+        np.testing.assert_array_equal(got, expected)
+    with pytest.raises(InvalidInput, match="reach must be at least 1"):
+        lattice_largest_component(members, lattice, points, np.zeros(3), 0.05, 0)
+
+
+def _eight_neighbour_edges(rows: int, cols: int) -> np.ndarray:
+    index = np.arange(rows * cols).reshape(rows, cols)
+    pairs = [(index[:, :-1], index[:, 1:]), (index[:-1, :], index[1:, :]),
+             (index[:-1, :-1], index[1:, 1:]), (index[:-1, 1:], index[1:, :-1])]
+    return np.concatenate([np.stack([a.ravel(), b.ravel()], axis=1) for a, b in pairs])
