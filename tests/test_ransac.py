@@ -135,11 +135,11 @@ def test_labeler_pool_preparation_runs_for_every_later_pool(monkeypatch):
 
 
 def test_pool_subgraphs_taken_from_the_last_pool_change_no_label(monkeypatch):
-    import monoplane.stages.labelers as labelers
+    import monoplane.geometry.graph as graph
 
     frame, _, _ = room()
     shrunk = make("monoplane-nocrf", max_points=3000).run(frame)
-    monkeypatch.setattr(labelers, "shrink_subgraph", lambda *args: None)  # the whole graph
+    monkeypatch.setattr(graph, "shrink_subgraph", lambda *args: None)  # the whole graph
     whole = make("monoplane-nocrf", max_points=3000).run(frame)
     np.testing.assert_array_equal(shrunk.labels, whole.labels)
     np.testing.assert_array_equal(shrunk.planes, whole.planes)
@@ -296,7 +296,9 @@ class _BatchByBatch:
 @pytest.mark.parametrize("sampler", [NormalConsistentSampler, UniformSampler])
 def test_the_compiled_search_equals_the_batch_by_batch_loop(sampler):
     # search_batches runs the whole adaptive search in one call when the sampler and scorer
-    # allow it; it must give the loop's hypothesis and leave the generator where it does.
+    # allow it; it must give the loop's hypothesis and leave the generator where it does
+    # (it gives up hypotheses that cannot beat the best so far; the scorer's costs are all
+    # exact).
     from monoplane.synth import generate
 
     frame = generate(3, "mild", width=128, height=96, n_views=1, objects=6).views[0].frame
