@@ -26,7 +26,6 @@ from monoplane.algorithm.graphcut import (
     minimize_gc_ransac,
     pool_payback,
     proximity_weights,
-    shrink_subgraph,
 )
 from monoplane.contracts import (
     Labeler,
@@ -135,22 +134,17 @@ class _PoolGraphCut(Labeler):
 
     def _terms(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray,
                context: GraphCutContext) -> _PoolTerms:
-        """The terms of ``pool``, built when it is not the pool of the last call; the
-        subgraph and cut costs of a pool within the last one are taken from the last one's
-        (:func:`~monoplane.algorithm.graphcut.shrink_subgraph`)."""
+        """The terms of ``pool``, built when it is not the pool of the last call. The
+        subgraph comes from the graph's cache (a pool within the last one from the last
+        one's subgraph, :meth:`~monoplane.geometry.graph.NeighbourGraph.subgraph`), which
+        the driver's component split then finds filled."""
         scale = degree_normalisation(graph.mean_degree) if self.config.normalise else 1.0
         last = context.pool
-        same_graph = last is not None and last.graph is graph and last.scale == scale
-        if same_graph and np.array_equal(last.pool, pool):
+        if (last is not None and last.graph is graph and last.scale == scale
+                and np.array_equal(last.pool, pool)):
             return last
-        shrunk = shrink_subgraph(last.pool, pool, last.edges) if same_graph else None
-        if shrunk is None:
-            edges, edge_ids = graph.subgraph(pool)
-            cut = self._cut(cloud, graph, edge_ids, context)
-        else:
-            edges, rows = shrunk
-            edge_ids = last.edge_ids[rows]
-            cut = last.cut[rows] if isinstance(last.cut, np.ndarray) else last.cut
+        edges, edge_ids = graph.subgraph(pool)
+        cut = self._cut(cloud, graph, edge_ids, context)
         payback = pool_payback(pool.size, edges, cut, self.config.lambda_, scale)
         last = context.pool = _PoolTerms(graph, np.array(pool, dtype=np.int64), edges, edge_ids,
                                          cut, scale, payback)
