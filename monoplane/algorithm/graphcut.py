@@ -412,7 +412,8 @@ def _gc_ransac_network(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray, cut
     m, n_edges = f0.shape[0], edges.shape[0]
     ei, ej = edges[:, 0], edges[:, 1]
     keep = 1.0 - lam
-    local = np.full(m, -1, dtype=np.int64)
+    # int32 positions: the edge loop's random reads of them stay twice as dense in cache.
+    local = np.full(m, -1, dtype=np.int32)
     count = 0
     for p in range(m):
         # Submodularity makes e(0,1) the most an edge gives back when its end turns inlier,
