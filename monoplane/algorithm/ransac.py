@@ -327,7 +327,11 @@ class SequentialRansac:
         configured thresholds (searched again when ``noise_planes`` cut the first search
         short). The search time of both passes is counted."""
         cfg = self.config
-        found = self._run(cloud, get_graph, rng, max_planes=cfg.noise_planes or None)
+        # Both searches label the same frame's graph: what the labeler keeps of it (the cut
+        # costs of every edge, ...) serves the second too, whatever ε.
+        context = self.labeler.new_context()
+        found = self._run(cloud, get_graph, rng, max_planes=cfg.noise_planes or None,
+                          context=context)
         # Depth along the optical axis of the normalised points (the cloud is centred).
         depth = cloud.points[:, 2] * cloud.scale + cloud.center[2]
         # Least-squares planes of the labels: the search's own planes are fitted to its
@@ -340,16 +344,18 @@ class SequentialRansac:
             if not cfg.noise_planes:
                 return found, cfg.params
             params = cfg.params
-        again = self._run(cloud, get_graph, rng, params)
+        again = self._run(cloud, get_graph, rng, params, context=context)
         timings = {k: found.timings[k] + again.timings[k] for k in found.timings}
         return again._replace(timings=timings), params
 
     def _run(self, cloud: PlaneCloud, get_graph: Callable[[], NeighbourGraph],
              rng: np.random.Generator, params: RansacParams | None = None,
-             max_planes: int | None = None) -> CloudPlanes:
+             max_planes: int | None = None, context: LabelingContext | None = None
+             ) -> CloudPlanes:
         """:meth:`run_cloud` with the graph asked for only when the first plane is labelled
         (``get_graph`` may wait for it to be built); ``params`` replace the configured
-        thresholds, ``max_planes`` the configured cap on the planes."""
+        thresholds, ``max_planes`` the configured cap on the planes, and ``context`` is the
+        labeler's memory of this frame when an earlier search of it made one."""
         cfg = self.config
         params = cfg.params if params is None else params
         max_planes = cfg.max_planes if max_planes is None else max_planes
@@ -358,8 +364,19 @@ class SequentialRansac:
         point_labels = np.zeros(cloud.size, dtype=np.int32)
         pool = np.arange(cloud.size, dtype=np.int64)
         found: list[np.ndarray] = []
-        context = self.labeler.new_context()  # the labeler's memory of this frame
-        prepared: Callable[[], None] | None = None
+        if context is None:
+            context = self.labeler.new_context()  # the labeler's memory of this frame
+        labeler = self.labeler
+
+        def prepare(pool: np.ndarray) -> Callable[[], None]:
+            """The pool's hypothesis-independent labelling work (its subgraph, ...), started
+            on the second core while this thread searches the pool's next plane."""
+            return in_background(lambda: _call(labeler, labeler.prepare_pool, cloud,
+                                               get_graph(), pool, context), role="pool")
+
+        # The first pool's too (for the built-in labelers, the cut costs of the frame's whole
+        # graph): it waits there for the graph, not here.
+        prepared = prepare(pool)
         rejections = 0
         while len(found) < max_planes and pool.size >= min_support:
             t = time.perf_counter()
@@ -374,8 +391,7 @@ class SequentialRansac:
                 continue
             graph = get_graph()
             t = time.perf_counter()
-            if prepared is not None:
-                prepared()  # the labeler's per-pool work, done while the search ran
+            prepared()  # the labeler's per-pool work, done while the search ran
             plane, inliers = self._label(cloud, graph, pool, best[0], best[1], params,
                                          context)
             labelled = inliers.copy()
@@ -395,13 +411,8 @@ class SequentialRansac:
                 found.append(plane)
                 point_labels[pool[inliers]] = len(found)
             pool = pool[~inliers]
-            # The next pool's hypothesis-independent work (its subgraph, ...) runs on the
-            # second core while this thread searches its next plane.
-            prepared = in_background(
-                lambda pool=pool, graph=graph: _call(self.labeler, self.labeler.prepare_pool,
-                                                     cloud, graph, pool, context), role="pool")
-        if prepared is not None:
-            prepared()  # nothing of this frame runs on after it
+            prepared = prepare(pool)
+        prepared()  # nothing of this frame runs on after it
         planes = np.array(found, dtype=np.float64).reshape(-1, 4)
         return CloudPlanes(labels=point_labels, planes=planes, timings=timings)
 
