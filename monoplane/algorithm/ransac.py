@@ -66,7 +66,7 @@ from monoplane.geometry.hypotheses import (
     sample_hypotheses,
     search_batches,
 )
-from monoplane.geometry.normal_bins import bin_points
+from monoplane.geometry.normal_bins import NORMAL_CELLS, bin_points, normal_cells
 from monoplane.geometry.planes import fit_planes_per_label
 from monoplane.geometry.sensor_noise import noise_limited_epsilon, plane_residual_sigma
 from monoplane.jit import in_background
@@ -377,10 +377,12 @@ class SequentialRansac:
         # The first pool's too (for the built-in labelers, the cut costs of the frame's whole
         # graph): it waits there for the graph, not here.
         prepared = prepare(pool)
+        # Each point's normal cell, for the compiled search's grouping of every pool.
+        cells = normal_cells(cloud.normals, NORMAL_CELLS) if self.compiled_search else None
         rejections = 0
         while len(found) < max_planes and pool.size >= min_support:
             t = time.perf_counter()
-            best = self._search(cloud, pool, rng, params)
+            best = self._search(cloud, pool, rng, params, cells)
             timings["ransac.search"] += time.perf_counter() - t
             if best is None:
                 # No sample passed the sampler's test in a whole batch (a pool of scattered
@@ -417,8 +419,10 @@ class SequentialRansac:
         return CloudPlanes(labels=point_labels, planes=planes, timings=timings)
 
     def _search(self, cloud: PlaneCloud, pool: np.ndarray, rng: np.random.Generator,
-                params: RansacParams) -> tuple[np.ndarray, np.ndarray] | None:
-        """Best hypothesis ``(plane (4,), model normal (3,))`` on the pool, or None."""
+                params: RansacParams, cells: np.ndarray | None = None
+                ) -> tuple[np.ndarray, np.ndarray] | None:
+        """Best hypothesis ``(plane (4,), model normal (3,))`` on the pool, or None;
+        ``cells`` are the cloud's :func:`normal_cells`, when the caller keeps them."""
         cfg = self.config
         # Hypotheses are ranked on a fixed random subset of the pool: the ranking of MSAC-type
         # costs is stable under uniform subsampling, and scoring dominates the search time.
@@ -433,7 +437,7 @@ class SequentialRansac:
             # The whole search in one compiled call: what the loop below does batch by batch.
             found, plane, normal = search_batches(
                 rng, cloud.points, cloud.normals, pool, np.ascontiguousarray(scored),
-                bin_points(cloud.points, cloud.normals, scored, params.epsilon_n),
+                bin_points(cloud.points, cloud.normals, scored, params.epsilon_n, cells),
                 self._search_rule(params))
             return (plane, normal) if found else None
         best_cost = math.inf
