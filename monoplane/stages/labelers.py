@@ -155,12 +155,14 @@ class _PoolGraphCut(Labeler):
         """The pool's terms (see :meth:`monoplane.contracts.Labeler.prepare_pool`)."""
         self._terms(cloud, graph, pool, _own(context))
 
-    def _minimize(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray,
-                  f0: np.ndarray, data1: np.ndarray,
-                  context: LabelingContext | None) -> Labeling:
+    def _pool_terms(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray,
+                    context: LabelingContext | None) -> _PoolTerms:
+        """:meth:`_terms` of the driver's context, or of a fresh one without it."""
+        return self._terms(cloud, graph, pool,
+                           GraphCutContext() if context is None else _own(context))
+
+    def _minimize(self, terms: _PoolTerms, f0: np.ndarray, data1: np.ndarray) -> Labeling:
         """Minimise the pool's energy for the data costs of one hypothesis."""
-        terms = self._terms(cloud, graph, pool,
-                            GraphCutContext() if context is None else _own(context))
         inliers, energy = minimize_gc_ransac(f0, data1, terms.edges, terms.cut,
                                              self.config.lambda_,
                                              terms.scale, payback=terms.payback)
@@ -181,8 +183,9 @@ class GraphCutLabeler(_PoolGraphCut):
               plane: np.ndarray, model_normal: np.ndarray, params: RansacParams,
               context: LabelingContext | None = None) -> Labeling:
         """See :meth:`monoplane.contracts.Labeler.label`."""
+        terms = self._pool_terms(cloud, graph, pool, context)
         f0, f1 = data_costs(cloud.points, cloud.normals, pool, plane, None, params.epsilon)
-        return self._minimize(cloud, graph, pool, f0, f1, context)
+        return self._minimize(terms, f0, f1)
 
 
 @dataclass
@@ -216,10 +219,14 @@ class ProximityGraphCutLabeler(_PoolGraphCut):
               plane: np.ndarray, model_normal: np.ndarray, params: RansacParams,
               context: LabelingContext | None = None) -> Labeling:
         """See :meth:`monoplane.contracts.Labeler.label`."""
+        terms = self._pool_terms(cloud, graph, pool, context)
+        # The cut's own payback bound: the normal terms of points it fixes as outliers by
+        # their distance alone are not computed.
         f0, data1 = data_costs(cloud.points, cloud.normals, pool, plane,
                                model_normal if self.config.normal_term else None,
-                               params.epsilon, params.epsilon_n)
-        return self._minimize(cloud, graph, pool, f0, data1, context)
+                               params.epsilon, params.epsilon_n, terms.payback,
+                               1.0 - self.config.lambda_)
+        return self._minimize(terms, f0, data1)
 
 
 @hookimpl
