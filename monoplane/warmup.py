@@ -39,6 +39,7 @@ from monoplane.algorithm.mincut import min_cut
 from monoplane.algorithm.region_moments import refit_planes
 from monoplane.algorithm.regions import region_adjacency
 from monoplane.export.saving import save as save_outputs
+from monoplane.geometry.graph import NeighbourGraph
 from monoplane.geometry.planes import planes_from_triplets
 from monoplane.host import config
 from monoplane.host.detect import detect_planes
@@ -164,6 +165,10 @@ def _workloads(report: bool = True) -> Iterator[tuple[str, Callable[[], Any]]]:
     # energies (and plugins) give it edge lists.
     yield "max-flow of an edge list", lambda: min_cut(
         2, np.array([0]), np.array([1]), np.ones(1), np.zeros(1), np.array([1.0, -1.0]))
+    # The RANSAC's pools shrink, so each subgraph is cut from the last pool's; a pool that is
+    # not within the last one is filtered from the whole graph.
+    yield "subgraph of a fresh pool", lambda: NeighbourGraph.build(np.eye(3), 1).subgraph(
+        np.array([0, 2]))
     yield "scorer batch by batch", lambda: Pipeline.from_preset(
         "monoplane", overrides=["sampler.plugin=napsac", "refiner.plugin=none"]).run(frame)
     depth, normals, rgb, K = frame.depth, frame.normals, frame.rgb, frame.K

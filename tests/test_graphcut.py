@@ -291,6 +291,35 @@ def test_fused_data_costs_match_msac_and_normal_costs():
     np.testing.assert_allclose(data1, f1_ref, rtol=1e-12, atol=1e-15)
 
 
+@pytest.mark.parametrize("seed", range(6))
+def test_data_costs_bounded_by_the_payback_give_the_same_cut(seed):
+    # Points whose distance alone makes them outliers of every minimiser skip the normal
+    # term: their inlier cost is lower than the exact one, the cut and its energy are not.
+    rng = np.random.default_rng(seed)
+    # Half on the plane z = 0.01 (normals along it), half scattered far and wide.
+    pts = rng.uniform(-1.0, 1.0, (500, 3))
+    pts[:250, 2] = 0.01 + rng.normal(0, 0.01, 250)
+    nrm = rng.normal(size=(500, 3))
+    nrm[:250] = [0.0, 0.0, -1.0] + 0.05 * rng.normal(size=(250, 3))
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    graph = NeighbourGraph.build(pts, 6)
+    pool = np.sort(rng.choice(500, 400, replace=False))
+    edges, _ = graph.subgraph(pool)
+    cut = proximity_weights(pts[pool], edges, nrm[pool])
+    lam, eps, eps_n = 0.95, 0.02, np.deg2rad(10.0)
+    plane, mn = np.array([0.0, 0.0, -1.0, 0.01]), np.array([0.0, 0.0, -1.0])
+    payback = pool_payback(pool.size, edges, cut, lam)
+    exact = data_costs(pts, nrm, pool, plane, mn, eps, eps_n)
+    bounded = data_costs(pts, nrm, pool, plane, mn, eps, eps_n, payback, 1 - lam)
+    np.testing.assert_array_equal(bounded[0], exact[0])
+    left_out = bounded[1] != exact[1]
+    assert left_out.any() and np.all(bounded[1][left_out] < exact[1][left_out])
+    labels, energy = minimize_gc_ransac(*exact, edges, cut, lam, payback=payback)
+    again, energy_again = minimize_gc_ransac(*bounded, edges, cut, lam, payback=payback)
+    np.testing.assert_array_equal(again, labels)
+    assert energy_again == energy and labels.any() and not labels[left_out].any()
+
+
 @pytest.mark.parametrize("seed", range(8))
 def test_a_shrunk_pool_subgraph_is_the_graphs_own_subgraph_row_for_row(seed):
     rng = np.random.default_rng(seed)

@@ -118,7 +118,7 @@ def test_meanwhile_runs_once_with_the_graph_under_way():
     np.testing.assert_array_equal(a.labels, b.labels)
 
 
-def test_labeler_pool_preparation_runs_for_every_later_pool(monkeypatch):
+def test_labeler_pool_preparation_runs_for_every_pool(monkeypatch):
     monkeypatch.setenv("OMP_NUM_THREADS", "2")
     frame, _, _ = room()
     driver = make("monoplane-nocrf", max_points=3000)
@@ -128,18 +128,20 @@ def test_labeler_pool_preparation_runs_for_every_later_pool(monkeypatch):
                         lambda cloud, graph, pool, context: (
                             pools.append(pool.size), prepare(cloud, graph, pool, context)))
     rec = driver.run(frame)
-    # Once after each accepted plane, on the shrinking pool; the labels do not change.
-    assert len(pools) == rec.num_planes and pools == sorted(pools, reverse=True)
+    # For the whole cloud, then once after each accepted plane, on the shrinking pool; the
+    # labels do not change.
+    assert len(pools) == rec.num_planes + 1 and pools == sorted(pools, reverse=True)
+    assert pools[0] == driver.config.max_points
     np.testing.assert_array_equal(rec.labels,
                                   make("monoplane-nocrf", max_points=3000).run(frame).labels)
 
 
 def test_pool_subgraphs_taken_from_the_last_pool_change_no_label(monkeypatch):
-    import monoplane.stages.labelers as labelers
+    import monoplane.geometry.graph as graph
 
     frame, _, _ = room()
     shrunk = make("monoplane-nocrf", max_points=3000).run(frame)
-    monkeypatch.setattr(labelers, "shrink_subgraph", lambda *args: None)  # the whole graph
+    monkeypatch.setattr(graph, "shrink_subgraph", lambda *args: None)  # the whole graph
     whole = make("monoplane-nocrf", max_points=3000).run(frame)
     np.testing.assert_array_equal(shrunk.labels, whole.labels)
     np.testing.assert_array_equal(shrunk.planes, whole.planes)
@@ -323,7 +325,9 @@ class _BatchByBatch:
 @pytest.mark.parametrize("sampler", [NormalConsistentSampler, UniformSampler])
 def test_the_compiled_search_equals_the_batch_by_batch_loop(sampler):
     # search_batches runs the whole adaptive search in one call when the sampler and scorer
-    # allow it; it must give the loop's hypothesis and leave the generator where it does.
+    # allow it; it must give the loop's hypothesis and leave the generator where it does
+    # (it gives up hypotheses that cannot beat the best so far; the scorer's costs are all
+    # exact).
     from monoplane.synth import generate
 
     frame = generate(3, "mild", width=128, height=96, n_views=1, objects=6).views[0].frame
@@ -489,6 +493,12 @@ def test_noise_planes_caps_only_the_search_that_measures_the_noise(monkeypatch, 
 
     monkeypatch.setattr(SequentialRansac, "_run", counted)
     driver = make("monoplane-nocrf", split_components=True, noise_factor=3.0, noise_planes=1)
+    weighed = []
+    weights = driver.labeler._cut
+    monkeypatch.setattr(driver.labeler, "_cut", lambda cloud, graph, ids, context: (
+        weighed.append(context.weights is None), weights(cloud, graph, ids, context))[1])
     rec = driver.run(frame)
     assert (driver.params_used.epsilon < driver.config.epsilon) == (noise < 0.005)
     assert found == [1, 8] and rec.num_planes == 8
+    # The two searches share the labeler's memory of the frame: its cut costs once.
+    assert weighed.count(True) == 1

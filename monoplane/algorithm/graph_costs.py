@@ -82,12 +82,20 @@ def normal_costs(angles: np.ndarray, epsilon_n: float) -> np.ndarray:
 
 
 def data_costs(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, plane: np.ndarray,
-               model_normal: np.ndarray | None, epsilon: float, epsilon_n: float = np.pi
+               model_normal: np.ndarray | None, epsilon: float, epsilon_n: float = np.pi,
+               payback: np.ndarray | None = None, keep: float = 1.0
                ) -> tuple[np.ndarray, np.ndarray]:
     """Data costs f(0, p) and f(1, p) + g(1, p) of a pool for one hypothesis, in one pass.
 
     :func:`msac_costs` of the point-to-plane distances, plus :func:`normal_costs` of the
     angles to the model normal when one is given.
+
+    With ``payback`` (a graph cut's :func:`~monoplane.algorithm.graphcut.pool_payback`) and
+    ``keep`` (its 1 - λ), a point whose distance cost alone already makes it an outlier in
+    every minimiser (``keep f(1, p) > payback[p]``, with the margin
+    :func:`~monoplane.algorithm.graphcut.minimize_gc_ransac` tests) gets f(1, p) without g:
+    the cut fixes it as an outlier all the same and never reads its inlier cost, and the
+    arccos and exp of its normal term are saved.
 
     Parameters
     ----------
@@ -101,6 +109,10 @@ def data_costs(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, plane:
         (3,) unit model normal θ_n; ``None`` leaves out E_n.
     epsilon, epsilon_n : float
         Distance threshold ε (points' unit) and normal threshold ε_n (radians).
+    payback : numpy.ndarray, optional
+        (M,) float64 bound of each point's edges (see above); ``None``: every cost exact.
+    keep : float
+        Weight 1 - λ of the data term in the cut's energy, with ``payback``.
 
     Returns
     -------
@@ -109,17 +121,20 @@ def data_costs(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, plane:
     """
     use_normal = model_normal is not None
     mn = np.zeros(3) if model_normal is None else np.asarray(model_normal, dtype=np.float64)
+    bound = np.zeros(0) if payback is None else np.ascontiguousarray(payback, dtype=np.float64)
     return _data_costs(points, normals, np.ascontiguousarray(pool, dtype=np.int64),
                        np.asarray(plane, dtype=np.float64), mn, float(epsilon),
-                       float(epsilon_n), use_normal)
+                       float(epsilon_n), use_normal, bound, float(keep))
 
 
 @kernel
 def _data_costs(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, plane: np.ndarray,
-                model_normal: np.ndarray, epsilon: float, epsilon_n: float, use_normal: bool
-                ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`data_costs` (``use_normal`` False ignores ``model_normal``)."""
+                model_normal: np.ndarray, epsilon: float, epsilon_n: float, use_normal: bool,
+                payback: np.ndarray, keep: float) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`data_costs` (``use_normal`` False ignores ``model_normal``; an empty
+    ``payback`` skips no normal term)."""
     m = pool.shape[0]
+    bounded = payback.shape[0] > 0
     f0 = np.zeros(m)
     data1 = np.empty(m)
     # arccos only where the angle can reach ε_n: above this cosine it is surely smaller (the
@@ -135,6 +150,9 @@ def _data_costs(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, plane
             data1[i] = 0.0
         else:
             data1[i] = r
+            # The test of graphcut._gc_ransac_network, on a lower bound of its data1 - f0.
+            if bounded and keep * r > payback[i] * (1.0 + 1e-9) + 1e-12:
+                continue
         if use_normal:
             cos = (model_normal[0] * normals[p, 0] + model_normal[1] * normals[p, 1]
                    + model_normal[2] * normals[p, 2])

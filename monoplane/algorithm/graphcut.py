@@ -42,6 +42,9 @@ from monoplane.algorithm.graph_costs import (  # noqa: F401
 )
 from monoplane.algorithm.mincut import min_cut, min_cut_arcs
 from monoplane.errors import InvalidInput
+
+# Moved to the graph, whose subgraph cache uses it; re-exported.
+from monoplane.geometry.graph import shrink_subgraph  # noqa: F401
 from monoplane.jit import kernel
 
 
@@ -282,74 +285,6 @@ def pool_payback(num_nodes: int, edges: np.ndarray, cut_cost: np.ndarray | float
     return _payback(int(num_nodes), edges, cut, float(lambda_ * pairwise_scale))
 
 
-def shrink_subgraph(old_pool: np.ndarray, pool: np.ndarray, edges: np.ndarray
-                    ) -> tuple[np.ndarray, np.ndarray] | None:
-    """A pool's subgraph from the subgraph of a larger pool, without the whole graph.
-
-    The RANSAC's pool only shrinks (the inliers of each plane leave it), so the edges among
-    the new pool are those of the last pool's subgraph whose ends both stayed: one pass over
-    that subgraph instead of over every edge of the frame's graph. The result is the
-    :meth:`monoplane.geometry.graph.NeighbourGraph.subgraph` of ``pool``, row for row.
-
-    Parameters
-    ----------
-    old_pool, pool : numpy.ndarray
-        (M,) and (M',) int64 ascending node indices.
-    edges : numpy.ndarray
-        (E, 2) int64 subgraph of ``old_pool``, in ``old_pool`` positions, in graph order.
-
-    Returns
-    -------
-    tuple or None
-        ``(edges', rows)``: the (E', 2) int64 subgraph of ``pool`` in ``pool`` positions and
-        the (E',) int64 rows of ``edges`` it keeps (to carry per-edge arrays along); None when
-        ``pool`` is not a subset of ``old_pool``.
-    """
-    old = np.ascontiguousarray(old_pool, dtype=np.int64)
-    new = np.ascontiguousarray(pool, dtype=np.int64)
-    within, remap = _subset_positions(old, new)
-    if not within:
-        return None
-    return _kept_edges(np.ascontiguousarray(edges, dtype=np.int64), remap)
-
-
-@kernel
-def _subset_positions(old: np.ndarray, new: np.ndarray) -> tuple[bool, np.ndarray]:
-    """Whether the (M',) int64 ``new`` is found in the (M,) int64 ``old`` in order (both
-    ascending: a subset), and the (M,) int64 position in ``new`` of each entry of ``old``
-    (-1: gone)."""
-    remap = np.full(old.shape[0], -1, dtype=np.int64)
-    i = 0
-    for k in range(new.shape[0]):
-        while i < old.shape[0] and old[i] != new[k]:
-            i += 1
-        if i == old.shape[0]:
-            return False, remap
-        remap[i] = k
-        i += 1
-    return True, remap
-
-
-@kernel
-def _kept_edges(edges: np.ndarray, remap: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The (E', 2) edges whose ends both have a position in ``remap``, renumbered, and their
-    (E',) rows."""
-    # One pass into buffers of the input's size, returned as views of their heads: pages of
-    # an empty buffer that are never written to are never touched, so the unused tail costs
-    # nothing (a counting pass first would cost a second read of every edge).
-    out = np.empty((edges.shape[0], 2), dtype=np.int64)
-    rows = np.empty(edges.shape[0], dtype=np.int64)
-    count = 0
-    for e in range(edges.shape[0]):
-        a, b = remap[edges[e, 0]], remap[edges[e, 1]]
-        if a >= 0 and b >= 0:
-            out[count, 0] = a
-            out[count, 1] = b
-            rows[count] = e
-            count += 1
-    return out[:count], rows[:count]
-
-
 def minimize_gc_ransac(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray,
                        cut_cost: np.ndarray | float, lambda_: float,
                        pairwise_scale: float = 1.0, payback: np.ndarray | None = None
@@ -477,7 +412,8 @@ def _gc_ransac_network(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray, cut
     m, n_edges = f0.shape[0], edges.shape[0]
     ei, ej = edges[:, 0], edges[:, 1]
     keep = 1.0 - lam
-    local = np.full(m, -1, dtype=np.int64)
+    # int32 positions: the edge loop's random reads of them stay twice as dense in cache.
+    local = np.full(m, -1, dtype=np.int32)
     count = 0
     for p in range(m):
         # Submodularity makes e(0,1) the most an edge gives back when its end turns inlier,

@@ -68,7 +68,7 @@ from monoplane.geometry.hypotheses import (
     sample_hypotheses,
     search_batches,
 )
-from monoplane.geometry.normal_bins import bin_points
+from monoplane.geometry.normal_bins import NORMAL_CELLS, bin_points, normal_cells
 from monoplane.geometry.planes import fit_planes_per_label
 from monoplane.geometry.sensor_noise import noise_limited_epsilon, plane_residual_sigma
 from monoplane.jit import in_background
@@ -335,7 +335,11 @@ class SequentialRansac:
         configured thresholds (searched again when ``noise_planes`` cut the first search
         short). The search time of both passes is counted."""
         cfg = self.config
-        found = self._run(cloud, get_graph, rng, max_planes=cfg.noise_planes or None)
+        # Both searches label the same frame's graph: what the labeler keeps of it (the cut
+        # costs of every edge, ...) serves the second too, whatever ε.
+        context = self.labeler.new_context()
+        found = self._run(cloud, get_graph, rng, max_planes=cfg.noise_planes or None,
+                          context=context)
         # Depth along the optical axis of the normalised points (the cloud is centred).
         depth = cloud.points[:, 2] * cloud.scale + cloud.center[2]
         # Least-squares planes of the labels: the search's own planes are fitted to its
@@ -348,16 +352,18 @@ class SequentialRansac:
             if not cfg.noise_planes:
                 return found, cfg.params
             params = cfg.params
-        again = self._run(cloud, get_graph, rng, params)
+        again = self._run(cloud, get_graph, rng, params, context=context)
         timings = {k: found.timings[k] + again.timings[k] for k in found.timings}
         return again._replace(timings=timings), params
 
     def _run(self, cloud: PlaneCloud, get_graph: Callable[[], NeighbourGraph],
              rng: np.random.Generator, params: RansacParams | None = None,
-             max_planes: int | None = None) -> CloudPlanes:
+             max_planes: int | None = None, context: LabelingContext | None = None
+             ) -> CloudPlanes:
         """:meth:`run_cloud` with the graph asked for only when the first plane is labelled
         (``get_graph`` may wait for it to be built); ``params`` replace the configured
-        thresholds, ``max_planes`` the configured cap on the planes."""
+        thresholds, ``max_planes`` the configured cap on the planes, and ``context`` is the
+        labeler's memory of this frame when an earlier search of it made one."""
         cfg = self.config
         params = cfg.params if params is None else params
         max_planes = cfg.max_planes if max_planes is None else max_planes
@@ -366,12 +372,25 @@ class SequentialRansac:
         point_labels = np.zeros(cloud.size, dtype=np.int32)
         pool = np.arange(cloud.size, dtype=np.int64)
         found: list[np.ndarray] = []
-        context = self.labeler.new_context()  # the labeler's memory of this frame
-        prepared: Callable[[], None] | None = None
+        if context is None:
+            context = self.labeler.new_context()  # the labeler's memory of this frame
+        labeler = self.labeler
+
+        def prepare(pool: np.ndarray) -> Callable[[], None]:
+            """The pool's hypothesis-independent labelling work (its subgraph, ...), started
+            on the second core while this thread searches the pool's next plane."""
+            return in_background(lambda: _call(labeler, labeler.prepare_pool, cloud,
+                                               get_graph(), pool, context), role="pool")
+
+        # The first pool's too (for the built-in labelers, the cut costs of the frame's whole
+        # graph): it waits there for the graph, not here.
+        prepared = prepare(pool)
+        # Each point's normal cell, for the compiled search's grouping of every pool.
+        cells = normal_cells(cloud.normals, NORMAL_CELLS) if self.compiled_search else None
         rejections = 0
         while len(found) < max_planes and pool.size >= min_support:
             t = time.perf_counter()
-            best = self._search(cloud, pool, rng, params)
+            best = self._search(cloud, pool, rng, params, cells)
             timings["ransac.search"] += time.perf_counter() - t
             if best is None:
                 # No sample passed the sampler's test in a whole batch (a pool of scattered
@@ -382,8 +401,7 @@ class SequentialRansac:
                 continue
             graph = get_graph()
             t = time.perf_counter()
-            if prepared is not None:
-                prepared()  # the labeler's per-pool work, done while the search ran
+            prepared()  # the labeler's per-pool work, done while the search ran
             plane, inliers = self._label(cloud, graph, pool, best[0], best[1], params,
                                          context)
             labelled = inliers.copy()
@@ -403,13 +421,8 @@ class SequentialRansac:
                 found.append(plane)
                 point_labels[pool[inliers]] = len(found)
             pool = pool[~inliers]
-            # The next pool's hypothesis-independent work (its subgraph, ...) runs on the
-            # second core while this thread searches its next plane.
-            prepared = in_background(
-                lambda pool=pool, graph=graph: _call(self.labeler, self.labeler.prepare_pool,
-                                                     cloud, graph, pool, context), role="pool")
-        if prepared is not None:
-            prepared()  # nothing of this frame runs on after it
+            prepared = prepare(pool)
+        prepared()  # nothing of this frame runs on after it
         planes = np.array(found, dtype=np.float64).reshape(-1, 4)
         return CloudPlanes(labels=point_labels, planes=planes, timings=timings)
 
@@ -431,8 +444,10 @@ class SequentialRansac:
                                          cloud.center / cloud.scale, LATTICE_MAX_JUMP, reach)
 
     def _search(self, cloud: PlaneCloud, pool: np.ndarray, rng: np.random.Generator,
-                params: RansacParams) -> tuple[np.ndarray, np.ndarray] | None:
-        """Best hypothesis ``(plane (4,), model normal (3,))`` on the pool, or None."""
+                params: RansacParams, cells: np.ndarray | None = None
+                ) -> tuple[np.ndarray, np.ndarray] | None:
+        """Best hypothesis ``(plane (4,), model normal (3,))`` on the pool, or None;
+        ``cells`` are the cloud's :func:`normal_cells`, when the caller keeps them."""
         cfg = self.config
         # Hypotheses are ranked on a fixed random subset of the pool: the ranking of MSAC-type
         # costs is stable under uniform subsampling, and scoring dominates the search time.
@@ -447,7 +462,7 @@ class SequentialRansac:
             # The whole search in one compiled call: what the loop below does batch by batch.
             found, plane, normal = search_batches(
                 rng, cloud.points, cloud.normals, pool, np.ascontiguousarray(scored),
-                bin_points(cloud.points, cloud.normals, scored, params.epsilon_n),
+                bin_points(cloud.points, cloud.normals, scored, params.epsilon_n, cells),
                 self._search_rule(params))
             return (plane, normal) if found else None
         best_cost = math.inf

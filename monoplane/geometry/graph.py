@@ -246,7 +246,9 @@ class NeighbourGraph:
         """Edges among a subset of nodes, renumbered to positions in ``pool``.
 
         The result for the last pool asked for is kept: the RANSAC driver labels one pool
-        several times (local optimisation, component split) before it shrinks.
+        several times (local optimisation, component split) before it shrinks, and the
+        subgraph of a pool within the last one is taken from the last one's
+        (:func:`shrink_subgraph`).
 
         Parameters
         ----------
@@ -263,10 +265,17 @@ class NeighbourGraph:
             read-only).
         """
         pool = np.asarray(pool, dtype=np.int64)
+        # One snapshot of the cache: the RANSAC asks from its labeler's background thread and
+        # from its own, one after the other; a race would only compute a subgraph twice.
         last = self._last_subgraph
         if last is not None and np.array_equal(last[0], pool):
             return last[1], last[2]
-        if pool.size == self.num_nodes and _ascending(pool):
+        shrunk = None if last is None else shrink_subgraph(last[0], pool, last[1])
+        if shrunk is not None:
+            # The RANSAC's pool only shrinks: one pass over the last pool's subgraph.
+            edges, rows = shrunk
+            edge_ids = last[2][rows]
+        elif pool.size == self.num_nodes and _ascending(pool):
             # Every node, in order (the first plane's pool): the graph itself.
             edges, edge_ids = self.edges.view(), np.arange(self.num_edges, dtype=np.int64)
         else:
@@ -275,6 +284,74 @@ class NeighbourGraph:
             a.flags.writeable = False
         self._last_subgraph = (pool.copy(), edges, edge_ids)
         return edges, edge_ids
+
+
+def shrink_subgraph(old_pool: np.ndarray, pool: np.ndarray, edges: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray] | None:
+    """A pool's subgraph from the subgraph of a larger pool, without the whole graph.
+
+    The RANSAC's pool only shrinks (the inliers of each plane leave it), so the edges among
+    the new pool are those of the last pool's subgraph whose ends both stayed: one pass over
+    that subgraph instead of over every edge of the frame's graph. The result is the
+    :meth:`monoplane.geometry.graph.NeighbourGraph.subgraph` of ``pool``, row for row.
+
+    Parameters
+    ----------
+    old_pool, pool : numpy.ndarray
+        (M,) and (M',) int64 ascending node indices.
+    edges : numpy.ndarray
+        (E, 2) int64 subgraph of ``old_pool``, in ``old_pool`` positions, in graph order.
+
+    Returns
+    -------
+    tuple or None
+        ``(edges', rows)``: the (E', 2) int64 subgraph of ``pool`` in ``pool`` positions and
+        the (E',) int64 rows of ``edges`` it keeps (to carry per-edge arrays along); None when
+        ``pool`` is not a subset of ``old_pool``.
+    """
+    old = np.ascontiguousarray(old_pool, dtype=np.int64)
+    new = np.ascontiguousarray(pool, dtype=np.int64)
+    within, remap = _subset_positions(old, new)
+    if not within:
+        return None
+    return _kept_edges(np.ascontiguousarray(edges, dtype=np.int64), remap)
+
+
+@kernel
+def _subset_positions(old: np.ndarray, new: np.ndarray) -> tuple[bool, np.ndarray]:
+    """Whether the (M',) int64 ``new`` is found in the (M,) int64 ``old`` in order (both
+    ascending: a subset), and the (M,) int64 position in ``new`` of each entry of ``old``
+    (-1: gone)."""
+    remap = np.full(old.shape[0], -1, dtype=np.int64)
+    i = 0
+    for k in range(new.shape[0]):
+        while i < old.shape[0] and old[i] != new[k]:
+            i += 1
+        if i == old.shape[0]:
+            return False, remap
+        remap[i] = k
+        i += 1
+    return True, remap
+
+
+@kernel
+def _kept_edges(edges: np.ndarray, remap: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The (E', 2) edges whose ends both have a position in ``remap``, renumbered, and their
+    (E',) rows."""
+    # One pass into buffers of the input's size, returned as views of their heads: pages of
+    # an empty buffer that are never written to are never touched, so the unused tail costs
+    # nothing (a counting pass first would cost a second read of every edge).
+    out = np.empty((edges.shape[0], 2), dtype=np.int64)
+    rows = np.empty(edges.shape[0], dtype=np.int64)
+    count = 0
+    for e in range(edges.shape[0]):
+        a, b = remap[edges[e, 0]], remap[edges[e, 1]]
+        if a >= 0 and b >= 0:
+            out[count, 0] = a
+            out[count, 1] = b
+            rows[count] = e
+            count += 1
+    return out[:count], rows[:count]
 
 
 @kernel

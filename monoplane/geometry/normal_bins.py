@@ -15,7 +15,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from monoplane.jit import kernel
+from monoplane.jit import inline, kernel
 
 #: Cells per cube-map face side of the normal directions :func:`bin_by_normal` groups by.
 NORMAL_CELLS = 4
@@ -38,35 +38,31 @@ class BinnedPoints(NamedTuple):
     """(C,) float64 cosine of each cell's angular radius plus ε_n (plus a margin)."""
 
 
-@kernel
-def bin_by_normal(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, cells: int
-                   ) -> tuple[np.ndarray, np.ndarray]:
-    """The (M,) ``pool`` points grouped by cube-map cell of their normal.
+@inline
+def _cell_of(normals: np.ndarray, p: int, cells: int) -> int:
+    """Cube-map cell of ``normals[p]`` (see :func:`bin_by_normal`)."""
+    axis = 0
+    for k in range(1, 3):
+        if abs(normals[p, k]) > abs(normals[p, axis]):
+            axis = k
+    top = normals[p, axis]
+    a = 1 if axis == 0 else 0
+    b = 1 if axis == 2 else 2
+    scale = 1.0 / abs(top) if top != 0.0 else 0.0
+    iu = min(max(int((normals[p, a] * scale + 1.0) * 0.5 * cells), 0), cells - 1)
+    iv = min(max(int((normals[p, b] * scale + 1.0) * 0.5 * cells), 0), cells - 1)
+    face = 2 * axis + (1 if top < 0.0 else 0)
+    return (face * cells + iu) * cells + iv
 
-    The cell of a normal n: its face is the axis of its largest component and that
-    component's sign (face ``2 axis + (sign < 0)``), its position on the face the other two
-    components divided by the largest (in [-1, 1]), cut into ``cells`` x ``cells``.
-    Returns (6, M) float64 coordinates ``x, y, z, nx, ny, nz`` ordered by cell (pool order
-    within one) and the (6 cells² + 1,) start of each cell's run.
-    """
+
+@inline
+def _grouped(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, cell: np.ndarray,
+             count: int) -> tuple[np.ndarray, np.ndarray]:
+    """The (6, M) coordinates of the ``pool`` points ordered by their (M,) ``cell`` (pool
+    order within one) and the (count + 1,) start of each cell's run."""
     m = pool.shape[0]
-    count = 6 * cells * cells
-    cell = np.empty(m, dtype=np.int64)
     start = np.zeros(count + 1, dtype=np.int64)
     for i in range(m):
-        p = pool[i]
-        axis = 0
-        for k in range(1, 3):
-            if abs(normals[p, k]) > abs(normals[p, axis]):
-                axis = k
-        top = normals[p, axis]
-        a = 1 if axis == 0 else 0
-        b = 1 if axis == 2 else 2
-        scale = 1.0 / abs(top) if top != 0.0 else 0.0
-        iu = min(max(int((normals[p, a] * scale + 1.0) * 0.5 * cells), 0), cells - 1)
-        iv = min(max(int((normals[p, b] * scale + 1.0) * 0.5 * cells), 0), cells - 1)
-        face = 2 * axis + (1 if top < 0.0 else 0)
-        cell[i] = (face * cells + iu) * cells + iv
         start[cell[i] + 1] += 1
     for c in range(count):
         start[c + 1] += start[c]
@@ -80,6 +76,43 @@ def bin_by_normal(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, cel
             coords[k, j] = points[p, k]
             coords[3 + k, j] = normals[p, k]
     return coords, start
+
+
+@kernel
+def bin_by_normal(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, cells: int
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """The (M,) ``pool`` points grouped by cube-map cell of their normal.
+
+    The cell of a normal n: its face is the axis of its largest component and that
+    component's sign (face ``2 axis + (sign < 0)``), its position on the face the other two
+    components divided by the largest (in [-1, 1]), cut into ``cells`` x ``cells``.
+    Returns (6, M) float64 coordinates ``x, y, z, nx, ny, nz`` ordered by cell (pool order
+    within one) and the (6 cells² + 1,) start of each cell's run.
+    """
+    cell = np.empty(pool.shape[0], dtype=np.int64)
+    for i in range(pool.shape[0]):
+        cell[i] = _cell_of(normals, pool[i], cells)
+    return _grouped(points, normals, pool, cell, 6 * cells * cells)
+
+
+@kernel
+def normal_cells(normals: np.ndarray, cells: int) -> np.ndarray:
+    """(N,) int64 cube-map cell (:func:`bin_by_normal`) of each of the (N, 3) float64 unit
+    ``normals``: computed once, it serves every pool of a cloud (:func:`bin_points`)."""
+    out = np.empty(normals.shape[0], dtype=np.int64)
+    for p in range(normals.shape[0]):
+        out[p] = _cell_of(normals, p, cells)
+    return out
+
+
+@kernel
+def _bin_by_cell(points: np.ndarray, normals: np.ndarray, pool: np.ndarray,
+                 point_cells: np.ndarray, cells: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`bin_by_normal` with each point's cell given ((N,) :func:`normal_cells`)."""
+    cell = np.empty(pool.shape[0], dtype=np.int64)
+    for i in range(pool.shape[0]):
+        cell[i] = point_cells[pool[i]]
+    return _grouped(points, normals, pool, cell, 6 * cells * cells)
 
 
 @functools.cache
@@ -122,8 +155,8 @@ def _face_direction(face: int, u: float, v: float) -> np.ndarray:
     return d / np.linalg.norm(d)
 
 
-def bin_points(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, epsilon_n: float
-               ) -> BinnedPoints:
+def bin_points(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, epsilon_n: float,
+               point_cells: np.ndarray | None = None) -> BinnedPoints:
     """The ``pool`` points grouped by normal direction, with each cell's skipping test.
 
     Parameters
@@ -134,6 +167,10 @@ def bin_points(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, epsilo
         (M,) int64 indices of the points to group.
     epsilon_n : float
         Normal threshold ε_n in radians of the cost the cells are skipped for.
+    point_cells : numpy.ndarray, optional
+        (N,) int64 ``normal_cells(normals, NORMAL_CELLS)``, when the caller groups many pools
+        of one cloud (the RANSAC: one per plane); computed for the pool when omitted. The
+        result is the same.
 
     Returns
     -------
@@ -141,7 +178,10 @@ def bin_points(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, epsilo
         :func:`bin_by_normal` of the pool in :data:`NORMAL_CELLS` cells per face side, and
         :func:`cell_reach` of those cells.
     """
-    coords, start = bin_by_normal(points, normals, np.ascontiguousarray(pool, dtype=np.int64),
-                                  NORMAL_CELLS)
+    pool = np.ascontiguousarray(pool, dtype=np.int64)
+    if point_cells is None:
+        coords, start = bin_by_normal(points, normals, pool, NORMAL_CELLS)
+    else:
+        coords, start = _bin_by_cell(points, normals, pool, point_cells, NORMAL_CELLS)
     centres, cos_reach = cell_reach(NORMAL_CELLS, epsilon_n)
     return BinnedPoints(coords, start, centres, cos_reach)

@@ -26,7 +26,6 @@ from monoplane.algorithm.graphcut import (
     minimize_gc_ransac,
     pool_payback,
     proximity_weights,
-    shrink_subgraph,
 )
 from monoplane.contracts import (
     Labeler,
@@ -135,22 +134,17 @@ class _PoolGraphCut(Labeler):
 
     def _terms(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray,
                context: GraphCutContext) -> _PoolTerms:
-        """The terms of ``pool``, built when it is not the pool of the last call; the
-        subgraph and cut costs of a pool within the last one are taken from the last one's
-        (:func:`~monoplane.algorithm.graphcut.shrink_subgraph`)."""
+        """The terms of ``pool``, built when it is not the pool of the last call. The
+        subgraph comes from the graph's cache (a pool within the last one from the last
+        one's subgraph, :meth:`~monoplane.geometry.graph.NeighbourGraph.subgraph`), which
+        the driver's component split then finds filled."""
         scale = degree_normalisation(graph.mean_degree) if self.config.normalise else 1.0
         last = context.pool
-        same_graph = last is not None and last.graph is graph and last.scale == scale
-        if same_graph and np.array_equal(last.pool, pool):
+        if (last is not None and last.graph is graph and last.scale == scale
+                and np.array_equal(last.pool, pool)):
             return last
-        shrunk = shrink_subgraph(last.pool, pool, last.edges) if same_graph else None
-        if shrunk is None:
-            edges, edge_ids = graph.subgraph(pool)
-            cut = self._cut(cloud, graph, edge_ids, context)
-        else:
-            edges, rows = shrunk
-            edge_ids = last.edge_ids[rows]
-            cut = last.cut[rows] if isinstance(last.cut, np.ndarray) else last.cut
+        edges, edge_ids = graph.subgraph(pool)
+        cut = self._cut(cloud, graph, edge_ids, context)
         payback = pool_payback(pool.size, edges, cut, self.config.lambda_, scale)
         last = context.pool = _PoolTerms(graph, np.array(pool, dtype=np.int64), edges, edge_ids,
                                          cut, scale, payback)
@@ -161,12 +155,14 @@ class _PoolGraphCut(Labeler):
         """The pool's terms (see :meth:`monoplane.contracts.Labeler.prepare_pool`)."""
         self._terms(cloud, graph, pool, _own(context))
 
-    def _minimize(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray,
-                  f0: np.ndarray, data1: np.ndarray,
-                  context: LabelingContext | None) -> Labeling:
+    def _pool_terms(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray,
+                    context: LabelingContext | None) -> _PoolTerms:
+        """:meth:`_terms` of the driver's context, or of a fresh one without it."""
+        return self._terms(cloud, graph, pool,
+                           GraphCutContext() if context is None else _own(context))
+
+    def _minimize(self, terms: _PoolTerms, f0: np.ndarray, data1: np.ndarray) -> Labeling:
         """Minimise the pool's energy for the data costs of one hypothesis."""
-        terms = self._terms(cloud, graph, pool,
-                            GraphCutContext() if context is None else _own(context))
         inliers, energy = minimize_gc_ransac(f0, data1, terms.edges, terms.cut,
                                              self.config.lambda_,
                                              terms.scale, payback=terms.payback)
@@ -187,8 +183,9 @@ class GraphCutLabeler(_PoolGraphCut):
               plane: np.ndarray, model_normal: np.ndarray, params: RansacParams,
               context: LabelingContext | None = None) -> Labeling:
         """See :meth:`monoplane.contracts.Labeler.label`."""
+        terms = self._pool_terms(cloud, graph, pool, context)
         f0, f1 = data_costs(cloud.points, cloud.normals, pool, plane, None, params.epsilon)
-        return self._minimize(cloud, graph, pool, f0, f1, context)
+        return self._minimize(terms, f0, f1)
 
 
 @dataclass
@@ -222,10 +219,14 @@ class ProximityGraphCutLabeler(_PoolGraphCut):
               plane: np.ndarray, model_normal: np.ndarray, params: RansacParams,
               context: LabelingContext | None = None) -> Labeling:
         """See :meth:`monoplane.contracts.Labeler.label`."""
+        terms = self._pool_terms(cloud, graph, pool, context)
+        # The cut's own payback bound: the normal terms of points it fixes as outliers by
+        # their distance alone are not computed.
         f0, data1 = data_costs(cloud.points, cloud.normals, pool, plane,
                                model_normal if self.config.normal_term else None,
-                               params.epsilon, params.epsilon_n)
-        return self._minimize(cloud, graph, pool, f0, data1, context)
+                               params.epsilon, params.epsilon_n, terms.payback,
+                               1.0 - self.config.lambda_)
+        return self._minimize(terms, f0, data1)
 
 
 @hookimpl

@@ -130,6 +130,21 @@ def test_subgraph_of_the_same_pool_is_reused_and_read_only():
     np.testing.assert_array_equal(other[c], g.edges[np.isin(g.edges, other).all(axis=1)])
 
 
+def test_subgraphs_of_shrinking_pools_are_those_of_the_whole_graph():
+    # Each pool within the last one is cut from the last one's subgraph (and the pool of
+    # another run starts from the whole graph again): row for row the whole graph's.
+    rng = np.random.default_rng(5)
+    g = NeighbourGraph.build(rng.uniform(size=(300, 3)), k=6)
+    for _ in range(2):
+        pool = np.arange(300)
+        while pool.size > 10:
+            pool = np.sort(rng.choice(pool, size=pool.size * 2 // 3, replace=False))
+            local, ids = g.subgraph(pool)
+            ref_local, ref_ids = _pool_edges(300, g.edges, pool)
+            np.testing.assert_array_equal(local, ref_local)
+            np.testing.assert_array_equal(ids, ref_ids)
+
+
 def test_largest_component_within_a_pool_matches_the_subset_one():
     # Two clusters along x, far apart; the larger one wins, computed from the pool's subgraph.
     rng = np.random.default_rng(5)

@@ -67,7 +67,13 @@ def test_normal_term_penalises_a_wrong_model_normal(setup):
 
 def test_normal_cells_bound_their_normals_and_skipping_changes_nothing():
     from monoplane.geometry.hypotheses import MSAC_NORMAL, hypothesis_costs
-    from monoplane.geometry.normal_bins import NORMAL_CELLS, bin_by_normal, cell_cones
+    from monoplane.geometry.normal_bins import (
+        NORMAL_CELLS,
+        bin_by_normal,
+        bin_points,
+        cell_cones,
+        normal_cells,
+    )
 
     rng = np.random.default_rng(3)
     n = 4000
@@ -95,3 +101,10 @@ def test_normal_cells_bound_their_normals_and_skipping_changes_nothing():
                             params.epsilon_n, MSAC_NORMAL)
     np.testing.assert_allclose(MsacNormalScorer().score(cloud, pool, planes, mn, params), full,
                                rtol=1e-13)
+    # Cells computed once for the whole cloud group any pool as its own computation does.
+    cells = normal_cells(cloud.normals, NORMAL_CELLS)
+    for a, b in zip(bin_points(cloud.points, cloud.normals, pool, 0.3, cells),
+                    bin_points(cloud.points, cloud.normals, pool, 0.3)):
+        np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(cells[pool][np.argsort(cells[pool], kind="stable")],
+                                  cell)
