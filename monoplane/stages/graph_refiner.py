@@ -357,18 +357,15 @@ class GraphCrfRefiner(Refiner):
     def refine_cloud(self, cloud: PlaneCloud, graph: NeighbourGraph, labels: np.ndarray,
                      planes: np.ndarray, params: RansacParams) -> tuple[np.ndarray, np.ndarray]:
         """See :meth:`monoplane.contracts.Refiner.refine_cloud`."""
+        c = self.config
         labels = np.asarray(labels, dtype=np.int32)
         planes = np.asarray(planes, dtype=np.float64).reshape(-1, 4)
+        known, self._known = self._known, None
         if planes.shape[0] == 0:
             return labels, planes
-        return self._refine_on(cloud, graph, self._adjacency(cloud, graph), labels, planes,
-                               params)
-
-    def _refine_on(self, cloud: PlaneCloud, graph: NeighbourGraph, adj: _Adjacency,
-                   labels: np.ndarray, planes: np.ndarray, params: RansacParams
-                   ) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`refine_cloud` on at least one plane, with the graph's weighted adjacency."""
-        c = self.config
+        # refine() hands over the adjacency it prepared for this very graph.
+        adj = (known[1] if known is not None and known[0] is graph
+               else self._adjacency(cloud, graph))
         epsilon = self.distance_scale(cloud, labels, planes, params)
         labels = self._mean_field(self.unary(cloud, planes, params, epsilon), adj, labels,
                                   graph.mean_degree)
@@ -387,6 +384,9 @@ class GraphCrfRefiner(Refiner):
         return labels, planes
 
     _pending: tuple[Frame, Callable[[], _FrameGraph]] | None = None
+    #: The graph :meth:`refine` built (or picked up) and its weighted adjacency, for the
+    #: :meth:`refine_cloud` call it makes next.
+    _known: tuple[NeighbourGraph, _Adjacency] | None = None
 
     def prepare(self, frame: Frame) -> None:
         """Build the frame's lattice cloud, pixel graph and weighted adjacency on the
@@ -433,10 +433,10 @@ class GraphCrfRefiner(Refiner):
         else:
             cloud, graph, adj = self._frame_graph(frame)
         pixels = cloud.pixel_grid()[0]
-        labels = rec.labels.ravel()[pixels].astype(np.int32)
+        start = rec.labels.ravel()[pixels]
         planes = cloud.plane_to_normalised(rec.planes) if rec.num_planes else np.zeros((0, 4))
-        if rec.num_planes:
-            labels, planes = self._refine_on(cloud, graph, adj, labels, planes, params)
+        self._known = (graph, adj)
+        labels, planes = self.refine_cloud(cloud, graph, start, planes, params)
         # Off the lattice, a pixel takes the plane it lies closest to among its nearest
         # lattice nodes' labels (non-planar when the nearest node is): creases stay where the
         # planes meet, not on the lattice's steps.
