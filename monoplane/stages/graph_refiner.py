@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -43,7 +44,7 @@ from monoplane.geometry.components import graph_components, same_label_component
 from monoplane.geometry.graph import NeighbourGraph, pixel_grid_edges
 from monoplane.geometry.planes import fit_planes_per_label
 from monoplane.hookspecs import hookimpl
-from monoplane.jit import chunks, kernel, run_threaded
+from monoplane.jit import chunks, in_background, kernel, run_threaded, thread_budget
 
 #: Points per thread below which the data costs are computed on one thread.
 _THREADED_NODES = 4096
@@ -51,6 +52,10 @@ _THREADED_NODES = 4096
 #: Distance between diagonal neighbours ``stride`` pixels apart on a face at 70 deg incidence,
 #: in units of ``stride / f`` times their depth: 3 √2 (1 / cos 70° ≈ 3).
 _INCIDENCE_SPREAD = 3.0 * math.sqrt(2.0)
+
+#: A frame's label-independent part of the refiner: its cloud, graph and weighted adjacency.
+_Adjacency = tuple[np.ndarray, np.ndarray, np.ndarray]
+_FrameGraph = tuple[PlaneCloud, NeighbourGraph, _Adjacency]
 
 @dataclass
 class GraphCrfConfig(ProximityAffinities):
@@ -343,17 +348,24 @@ class GraphCrfRefiner(Refiner):
                                   graph.mean_degree)
         return labels, planes
 
+    def _adjacency(self, cloud: PlaneCloud, graph: NeighbourGraph) -> _Adjacency:
+        """The graph's adjacency weighted by the proximity labeler's cut costs."""
+        weights = proximity_weights(cloud.points, graph.edges, cloud.normals, cloud.colors,
+                                    *self.config.affinities())
+        return graph.weighted_adjacency(weights)
+
     def refine_cloud(self, cloud: PlaneCloud, graph: NeighbourGraph, labels: np.ndarray,
                      planes: np.ndarray, params: RansacParams) -> tuple[np.ndarray, np.ndarray]:
         """See :meth:`monoplane.contracts.Refiner.refine_cloud`."""
         c = self.config
         labels = np.asarray(labels, dtype=np.int32)
         planes = np.asarray(planes, dtype=np.float64).reshape(-1, 4)
+        known, self._known = self._known, None
         if planes.shape[0] == 0:
             return labels, planes
-        weights = proximity_weights(cloud.points, graph.edges, cloud.normals, cloud.colors,
-                                    *c.affinities())
-        adj = graph.weighted_adjacency(weights)
+        # refine() hands over the adjacency it prepared for this very graph.
+        adj = (known[1] if known is not None and known[0] is graph
+               else self._adjacency(cloud, graph))
         epsilon = self.distance_scale(cloud, labels, planes, params)
         labels = self._mean_field(self.unary(cloud, planes, params, epsilon), adj, labels,
                                   graph.mean_degree)
@@ -371,6 +383,35 @@ class GraphCrfRefiner(Refiner):
             labels = merged
         return labels, planes
 
+    _pending: tuple[Frame, Callable[[], _FrameGraph]] | None = None
+    #: The graph :meth:`refine` built (or picked up) and its weighted adjacency, for the
+    #: :meth:`refine_cloud` call it makes next.
+    _known: tuple[NeighbourGraph, _Adjacency] | None = None
+
+    def prepare(self, frame: Frame) -> None:
+        """Build the frame's lattice cloud, pixel graph and weighted adjacency on the
+        background thread while the RANSAC runs (they do not depend on the labels);
+        :meth:`refine` picks them up. With a budget of one thread :meth:`refine` builds
+        them itself."""
+        if frame.depth is not None and frame.normals is not None and thread_budget() > 1:
+            self._pending = (frame, in_background(lambda: self._frame_graph(frame)))
+
+    def _frame_graph(self, frame: Frame) -> _FrameGraph:
+        """The label-independent part of :meth:`refine`: the cloud of the frame's valid
+        pixels (on a lattice when there are more than ``max_points``), its pixel graph and
+        the graph's weighted adjacency."""
+        cloud = lattice_cloud(frame, self.config.max_points)
+        jump = self.config.max_jump
+        if cloud.stride is not None and cloud.stride > 1:
+            # Diagonal lattice neighbours on a face seen at 70 deg incidence lie
+            # 3 √2 stride / f of their depth apart: a coarse lattice on a low-resolution image
+            # would cut such faces apart at max_jump. Only the cut is loosened, to that: ABW's
+            # objects stand 5-10 % of the depth in front of their background.
+            focal = float(min(frame.K[0, 0], frame.K[1, 1]))
+            jump = max(jump, _INCIDENCE_SPREAD * cloud.stride / max(focal, 1e-9))
+        graph = pixel_graph(cloud, jump)
+        return cloud, graph, self._adjacency(cloud, graph)
+
     def refine(self, rec: Reconstruction, params: RansacParams) -> Reconstruction:
         """Refine an image reconstruction on the kNN graph of all its valid pixels.
 
@@ -386,19 +427,15 @@ class GraphCrfRefiner(Refiner):
             the camera frame and depth units, facing the camera.
         """
         frame = rec.frame
-        cloud = lattice_cloud(frame, self.config.max_points)
-        jump = self.config.max_jump
-        if cloud.stride is not None and cloud.stride > 1:
-            # Diagonal lattice neighbours on a face seen at 70 deg incidence lie
-            # 3 √2 stride / f of their depth apart: a coarse lattice on a low-resolution image
-            # would cut such faces apart at max_jump. Only the cut is loosened, to that: ABW's
-            # objects stand 5-10 % of the depth in front of their background.
-            focal = float(min(frame.K[0, 0], frame.K[1, 1]))
-            jump = max(jump, _INCIDENCE_SPREAD * cloud.stride / max(focal, 1e-9))
-        graph = pixel_graph(cloud, jump)
+        pending, self._pending = self._pending, None
+        if pending is not None and pending[0] is frame:
+            cloud, graph, adj = pending[1]()
+        else:
+            cloud, graph, adj = self._frame_graph(frame)
         pixels = cloud.pixel_grid()[0]
         start = rec.labels.ravel()[pixels]
         planes = cloud.plane_to_normalised(rec.planes) if rec.num_planes else np.zeros((0, 4))
+        self._known = (graph, adj)
         labels, planes = self.refine_cloud(cloud, graph, start, planes, params)
         # Off the lattice, a pixel takes the plane it lies closest to among its nearest
         # lattice nodes' labels (non-planar when the nearest node is): creases stay where the

@@ -225,6 +225,29 @@ def test_the_threaded_mean_field_does_not_depend_on_the_threads(monkeypatch):
     np.testing.assert_array_equal(one.planes, two.planes)
 
 
+def test_graph_prepared_in_the_background_changes_nothing(monkeypatch):
+    monkeypatch.setenv("OMP_NUM_THREADS", "2")
+    frame, _ = box_frame(width=160, height=120)
+    rec = Pipeline.from_preset("range", overrides=["refiner.plugin=none"]).run(frame)
+    config = GraphCrfConfig(max_points=10000)  # on a lattice of step 2
+    expected = GraphCrfRefiner(config).refine(rec, PARAMS)
+    refiner = GraphCrfRefiner(config)
+    refiner.prepare(frame)
+    assert refiner._pending is not None and refiner._pending[0] is frame
+    out = refiner.refine(rec, PARAMS)
+    assert refiner._pending is None  # picked up
+    np.testing.assert_array_equal(out.labels, expected.labels)
+    np.testing.assert_array_equal(out.planes, expected.planes)
+    # A graph prepared for another frame is not used (and not kept).
+    refiner.prepare(box_frame(width=128, height=96)[0])
+    np.testing.assert_array_equal(refiner.refine(rec, PARAMS).labels, expected.labels)
+    assert refiner._pending is None
+    # With one thread the refiner builds its graph itself, inside refine.
+    monkeypatch.setenv("OMP_NUM_THREADS", "1")
+    refiner.prepare(frame)
+    assert refiner._pending is None
+
+
 def test_touching_pairs_and_label_order_match_numpy():
     rng = np.random.default_rng(3)
     labels = rng.integers(0, 9, 2000)
