@@ -42,7 +42,12 @@ from monoplane.geometry.distance_transform import nearest_true_pixel
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.geometry.lattice import lattice_lines, lattice_step, lattice_stride
 from monoplane.geometry.neighbours import PointIndex
-from monoplane.geometry.propagation import closest_plane, propagate_labels
+from monoplane.geometry.propagation import (
+    closest_plane,
+    mixed_samples,
+    propagate_pixels,
+    sample_blocks,
+)
 from monoplane.jit import chunks, kernel, run_threaded
 
 #: A non-sampled pixel inherits its nearest sample's label only within this many times the
@@ -102,6 +107,10 @@ class PlaneCloud:
         (R, C) int64 point of each node of the regular lattice a frame's points were sampled
         on (:meth:`from_frame` with ``grid``), -1 where the lattice pixel is not valid; None
         for a random sample or a cloud without an image.
+    intrinsics : numpy.ndarray or None
+        (3, 3) float64 intrinsics the frame's points were unprojected with
+        (:meth:`from_frame`); :meth:`propagate` then finds the samples near a pixel in 3D
+        through the image. None otherwise (a point index serves instead).
     """
 
     points: np.ndarray
@@ -116,6 +125,7 @@ class PlaneCloud:
     sampled: np.ndarray | None = None
     stride: int | None = None
     lattice: np.ndarray | None = None
+    intrinsics: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         n = self.points.shape[0]
@@ -266,7 +276,7 @@ class PlaneCloud:
         return cls(points=np.ascontiguousarray(points), normals=normals, colors=colors,
                    pixels=keep, center=center, scale=scale, shape=frame.shape,
                    all_points=all_points, all_pixels=all_pixels, stride=stride,
-                   lattice=lattice)
+                   lattice=lattice, intrinsics=np.asarray(frame.K, dtype=np.float64))
 
     @classmethod
     def from_points(cls, points: np.ndarray, normals: np.ndarray, colors: np.ndarray | None,
@@ -376,11 +386,31 @@ class PlaneCloud:
         labels = np.ascontiguousarray(labels, dtype=np.int32)
         if self.pixels is None:
             return self._propagate_points(labels, planes, spacing, graph)
+        return self.propagate_pixels(labels, planes, spacing, tolerance, graph)[0]
+
+    def propagate_pixels(self, labels: np.ndarray, planes: np.ndarray | None = None,
+                         spacing: float | None = None, tolerance: float = 0.0,
+                         graph: NeighbourGraph | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`propagate` on a frame's cloud, with the labels of every valid pixel too.
+
+        Parameters
+        ----------
+        labels, planes, spacing, tolerance, graph
+            As for :meth:`propagate`.
+
+        Returns
+        -------
+        image : numpy.ndarray
+            (H, W) int32 label image, as :meth:`propagate` returns it.
+        valid : numpy.ndarray
+            (V,) int32 label of each of ``all_pixels`` (``image.ravel()[all_pixels]``).
+        """
+        labels = np.ascontiguousarray(labels, dtype=np.int32)
         pixels, (h, w), all_pixels = self.pixel_grid()
         out = np.zeros(h * w, dtype=np.int32)
         if not self.subsampled:
             out[pixels] = labels
-            return out.reshape(h, w)
+            return out.reshape(h, w), labels.copy()
         if graph is None:
             graph = NeighbourGraph.build(self.points, PROPAGATION_GRAPH_K, tree=self.tree)
         radius = PROPAGATION_RADIUS_FACTOR * (graph.spacing if spacing is None else spacing)
@@ -390,24 +420,30 @@ class PlaneCloud:
         p = np.zeros((0, 4)) if planes is None else np.asarray(planes, dtype=np.float64)
         k = min(PROPAGATION_NEIGHBOURS, self.size) if len(p) else 1
         indptr, indices = graph.indptr, graph.indices
+        mixed = mixed_samples(labels, indptr, indices)
+        valid = np.empty(all_pixels.shape[0], dtype=np.int32)
+        # Pixels farther than the radius from their image-nearest sample lie across a depth
+        # jump from it: their nearest samples in 3D are looked up in the image around them
+        # when the intrinsics say where a point projects, else in the point index.
+        cam = np.zeros((0, 3))
+        if self.intrinsics is not None and np.array_equal(self.intrinsics[2], [0.0, 0.0, 1.0]):
+            cam = np.asarray(self.intrinsics, dtype=np.float64)
+        blocks = sample_blocks(pixels, w, h)
 
-        def label_chunk(a: int, b: int) -> np.ndarray:
-            part, gap = propagate_labels(self.all_points[a:b], near[a:b], self.points, labels,
-                                         p, indptr, indices, radius**2, float(tolerance), k)
-            # Pixels farther than the radius from their image-nearest sample lie across a
-            # depth jump from it: their nearest samples in 3D come from the point index.
-            gap = np.flatnonzero(gap)
+        def label_chunk(a: int, b: int) -> None:
+            gap = propagate_pixels(out, valid, all_pixels, self.all_points, near, self.points,
+                                   pixels, labels, p, indptr, indices, mixed, radius**2,
+                                   float(tolerance), k, blocks, (h, w), cam,
+                                   float(self.scale), self.center, a, b)
             if gap.size:
-                part[gap] = self.label_points(self.all_points[a:b][gap], labels, p, radius)
-            return part
+                valid[gap] = self.label_points(self.all_points[gap], labels, p, radius)
+                out[all_pixels[gap]] = valid[gap]
 
-        # Pixels are labelled independently: contiguous chunks run on parallel threads.
-        parts = run_threaded([partial(label_chunk, a, b)
-                              for a, b in chunks(near.shape[0], THREADED_PIXELS)])
-        out[all_pixels] = np.concatenate(parts) if len(parts) > 1 else parts[0]
-        # Sampled pixels keep their own label even if a closer duplicate point exists.
-        out[pixels] = labels
-        return out.reshape(h, w)
+        # Pixels are labelled independently: contiguous chunks run on parallel threads, each
+        # writing its own pixels.
+        run_threaded([partial(label_chunk, a, b)
+                      for a, b in chunks(near.shape[0], THREADED_PIXELS)])
+        return out.reshape(h, w), valid
 
     def _propagate_points(self, labels: np.ndarray, planes: np.ndarray | None,
                           spacing: float | None, graph: NeighbourGraph | None) -> np.ndarray:
