@@ -48,7 +48,13 @@ from monoplane.geometry.propagation import (
     propagate_pixels,
     sample_blocks,
 )
-from monoplane.jit import chunks, kernel, run_threaded
+from monoplane.geometry.unprojection import (
+    drawn_rows,
+    gather_samples,
+    lattice_rows,
+    valid_points,
+)
+from monoplane.jit import chunks, run_threaded
 
 #: A non-sampled pixel inherits its nearest sample's label only within this many times the
 #: median sample-to-nearest-sample spacing.
@@ -226,18 +232,16 @@ class PlaneCloud:
             raise InvalidInput(
                 f"{frame.name}: plane fitting needs depth and normals; run a cue provider first"
             )
-        valid_image = frame.valid
-        all_pixels = np.flatnonzero(valid_image.ravel()).astype(np.int64)
+        valid_image, all_pixels, all_points, center, scale = valid_points(
+            np.ascontiguousarray(frame.depth, dtype=np.float32),
+            np.ascontiguousarray(frame.normals, dtype=np.float32),
+            np.linalg.inv(np.asarray(frame.K, dtype=np.float64)))
         if all_pixels.size < 3:
             raise InvalidInput(f"{frame.name}: fewer than 3 valid pixels")
-        all_points, center, scale = _normalised_points(
-            np.ascontiguousarray(frame.depth, dtype=np.float32),
-            np.linalg.inv(np.asarray(frame.K, dtype=np.float64)), all_pixels)
         if scale <= 0:
             raise InvalidInput(f"{frame.name}: all valid pixels unproject to the same point")
 
-        keep = all_pixels
-        points = all_points
+        chosen = None  # rows of the valid pixels kept (None: all)
         stride = lattice = None
         if grid:
             step, stride = 1.0, 1
@@ -247,33 +251,24 @@ class PlaneCloud:
                 else:
                     stride = lattice_stride(valid_image, max_points)
                     step = float(stride)
-            rows, cols = lattice_lines(frame.shape[0], step), lattice_lines(frame.shape[1], step)
-            on_lattice = np.zeros(frame.shape, dtype=bool)
-            on_lattice[np.ix_(rows, cols)] = True
-            chosen = np.flatnonzero(on_lattice.ravel()[all_pixels])
-            keep = all_pixels[chosen]
-            points = all_points[chosen]
-            node = np.full(on_lattice.size, -1, dtype=np.int64)
-            node[keep] = np.arange(keep.size)
-            lattice = np.ascontiguousarray(node.reshape(frame.shape)[np.ix_(rows, cols)])
+            chosen, lattice = lattice_rows(valid_image, lattice_lines(frame.shape[0], step),
+                                           lattice_lines(frame.shape[1], step))
         elif max_points is not None and all_pixels.size > max_points:
             if max_points < 3:
                 raise InvalidInput(f"max_points must be at least 3, got {max_points}")
             if rng is None:
                 raise InvalidInput("subsampling a cloud needs a random generator")
-            # Ascending order through a mask: linear, where sorting the draw is not.
-            drawn = np.zeros(all_pixels.size, dtype=bool)
-            drawn[rng.choice(all_pixels.size, size=max_points, replace=False)] = True
-            chosen = np.flatnonzero(drawn)
-            keep = all_pixels[chosen]
-            points = all_points[chosen]
-
-        normals = frame.normals.reshape(-1, 3)[keep].astype(np.float64)
-        normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+            chosen = drawn_rows(all_pixels.size,
+                                rng.choice(all_pixels.size, size=max_points, replace=False))
+        keep, points, normals = gather_samples(
+            np.arange(all_pixels.size) if chosen is None else chosen, all_pixels, all_points,
+            np.ascontiguousarray(frame.normals, dtype=np.float32).reshape(-1, 3))
+        if chosen is None:  # every valid pixel: the points are the same array
+            keep, points = all_pixels, all_points
         colors = None
         if frame.has_color and frame.rgb is not None:
             colors = frame.rgb.reshape(-1, 3)[keep].astype(np.float64) / 255.0
-        return cls(points=np.ascontiguousarray(points), normals=normals, colors=colors,
+        return cls(points=points, normals=normals, colors=colors,
                    pixels=keep, center=center, scale=scale, shape=frame.shape,
                    all_points=all_points, all_pixels=all_pixels, stride=stride,
                    lattice=lattice, intrinsics=np.asarray(frame.K, dtype=np.float64))
@@ -532,38 +527,3 @@ def normalised_cloud(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]
                            "planes to")
     scale = float(np.sqrt(((points - center) ** 2).sum(axis=1).max()))
     return (points - center) / scale, center, scale
-
-
-@kernel
-def _normalised_points(depth: np.ndarray, k_inv: np.ndarray, pixels: np.ndarray
-                       ) -> tuple[np.ndarray, np.ndarray, float]:
-    """Unproject pixels and normalise them into the unit ball, in three passes.
-
-    ``depth`` (H, W) float32 z-depth, ``k_inv`` (3, 3) inverse intrinsics, ``pixels`` (V,)
-    int64 flat indices. Returns the (V, 3) normalised points ``(X - center) / scale``, the
-    (3,) centroid ``center`` of the camera-frame points ``X = z K^-1 [u, v, 1]`` and
-    ``scale``, the largest distance of a point from it.
-    """
-    w = depth.shape[1]
-    n = pixels.shape[0]
-    out = np.empty((n, 3))
-    center = np.zeros(3)
-    for i in range(n):
-        v, u = divmod(pixels[i], w)
-        z = np.float64(depth[v, u])
-        for c in range(3):
-            x = z * (k_inv[c, 0] * u + k_inv[c, 1] * v + k_inv[c, 2])
-            out[i, c] = x
-            center[c] += x
-    center /= max(n, 1)
-    far = 0.0
-    for i in range(n):
-        d2 = 0.0
-        for c in range(3):
-            out[i, c] -= center[c]
-            d2 += out[i, c] ** 2
-        far = max(far, d2)
-    scale = np.sqrt(far)
-    if scale > 0:
-        out /= scale
-    return out, center, scale

@@ -104,3 +104,20 @@ def test_triplet_planes_match_the_vectorised_reference():
     np.testing.assert_array_equal(valid, ref_valid)
     assert not valid[:60].any() and valid[70:].all()
     np.testing.assert_allclose(planes, ref, rtol=1e-12, atol=1e-15)
+
+
+def test_per_label_fits_in_threads_give_the_bits_of_one_thread(monkeypatch):
+    # Each label's sums stay on one thread in point order, and runs of one label add in
+    # registers: any split over threads gives the one-thread fit to the bit. Labels in runs
+    # (as along image rows) and scattered, int32 and int64, some out of range.
+    rng = np.random.default_rng(3)
+    pts = rng.normal(size=(200_000, 3)) * [3.0, 2.0, 0.01] + [5.0, -2.0, 40.0]
+    runs = np.repeat(rng.integers(-1, 9, 20_000), 10)
+    for labels in (runs, rng.integers(0, 8, 200_000), runs.astype(np.int32)):
+        monkeypatch.setenv("OMP_NUM_THREADS", "1")
+        one = fit_planes_per_label(pts, labels, 7)
+        monkeypatch.setenv("OMP_NUM_THREADS", "3")
+        monkeypatch.setattr("monoplane.geometry.planes.THREADED_POINTS", 1000)
+        for got, want in zip(fit_planes_per_label(pts, labels, 7), one, strict=True):
+            np.testing.assert_array_equal(got, want)
+        monkeypatch.undo()
