@@ -46,7 +46,7 @@ from monoplane.geometry.propagation import (
     closest_plane,
     mixed_samples,
     propagate_pixels,
-    sample_blocks,
+    sample_tiles,
 )
 from monoplane.geometry.unprojection import (
     drawn_rows,
@@ -423,12 +423,12 @@ class PlaneCloud:
         cam = np.zeros((0, 3))
         if self.intrinsics is not None and np.array_equal(self.intrinsics[2], [0.0, 0.0, 1.0]):
             cam = np.asarray(self.intrinsics, dtype=np.float64)
-        blocks = sample_blocks(pixels, w, h)
+        tiles = sample_tiles(pixels, self.points, w, h)
 
         def label_chunk(a: int, b: int) -> None:
             gap = propagate_pixels(out, valid, all_pixels, self.all_points, near, self.points,
                                    pixels, labels, p, indptr, indices, mixed, radius**2,
-                                   float(tolerance), k, blocks, (h, w), cam,
+                                   float(tolerance), k, tiles, (h, w), cam,
                                    float(self.scale), self.center, a, b)
             if gap.size:
                 valid[gap] = self.label_points(self.all_points[gap], labels, p, radius)

@@ -47,26 +47,40 @@ def mixed_samples(labels: np.ndarray, indptr: np.ndarray, indices: np.ndarray) -
     return out
 
 
-#: Image columns per block of :func:`sample_blocks`.
-BLOCK = 16
+#: Side in pixels of the image tiles :func:`sample_tiles` buckets the samples into.
+TILE = 8
 
 
 @kernel
-def sample_blocks(pixels: np.ndarray, w: int, h: int) -> np.ndarray:
-    """Where the samples of each block of :data:`BLOCK` columns of each image row begin.
+def sample_tiles(pixels: np.ndarray, points: np.ndarray, w: int, h: int
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The samples bucketed by image tile (a counting sort), for :func:`propagate_pixels`.
 
-    ``pixels`` (N,) int64 ascending flat pixels ``v * w + u`` of the samples. Returns the
-    (H * B + 1,) int64 index of the first sample at or after column ``b * BLOCK`` of row
-    ``v``, at ``v * B + b`` (``B = ceil(w / BLOCK)``); the last entry is N.
+    ``pixels`` (N,) int64 flat pixels ``v * w + u`` and ``points`` (N, 3) float64 of the
+    samples. Returns the (T + 1,) int64 start of each tile's samples (tiles of
+    :data:`TILE` x :data:`TILE` pixels, row by row), and the (N, 3) points and (N,) int64
+    sample indices in that order.
     """
-    nb = (w + BLOCK - 1) // BLOCK
-    out = np.zeros(h * nb + 1, dtype=np.int64)
-    for t in range(pixels.shape[0]):
+    across = (w + TILE - 1) // TILE
+    tiles = across * ((h + TILE - 1) // TILE)
+    n = pixels.shape[0]
+    tile = np.empty(n, dtype=np.int64)
+    start = np.zeros(tiles + 1, dtype=np.int64)
+    for t in range(n):
         v, u = divmod(pixels[t], w)
-        out[v * nb + u // BLOCK + 1] += 1
-    for i in range(h * nb):
-        out[i + 1] += out[i]
-    return out
+        tile[t] = (v // TILE) * across + u // TILE
+        start[tile[t] + 1] += 1
+    for i in range(tiles):
+        start[i + 1] += start[i]
+    fill = start[:-1].copy()
+    xyz = np.empty((n, 3))
+    ids = np.empty(n, dtype=np.int64)
+    for t in range(n):
+        p = fill[tile[t]]
+        fill[tile[t]] += 1
+        xyz[p, 0], xyz[p, 1], xyz[p, 2] = points[t, 0], points[t, 1], points[t, 2]
+        ids[p] = t
+    return start, xyz, ids
 
 
 @inline
@@ -91,23 +105,22 @@ def _reach(rho: float, z: float, ra: float, rb: float, cam: np.ndarray, w: int, 
 
 
 @inline
-def _nearest_in_image(pix: int, x0: float, x1: float, x2: float, points: np.ndarray,
-                      pixels: np.ndarray, blocks: np.ndarray, w: int, h: int,
-                      cam: np.ndarray, scale: float, center: np.ndarray, bound2: float,
-                      best_d: np.ndarray, best_i: np.ndarray) -> int:
+def _nearest_in_image(pix: int, x0: float, x1: float, x2: float, start: np.ndarray,
+                      xyz: np.ndarray, ids: np.ndarray, w: int, h: int, cam: np.ndarray,
+                      scale: float, center: np.ndarray, bound2: float, best_d: np.ndarray,
+                      best_i: np.ndarray) -> int:
     """The ``k = len(best_d)`` samples nearest to the normalised point ``(x0, x1, x2)`` of
     pixel ``pix`` with squared distance below ``bound2``, ordered by (squared distance,
     index) as :meth:`~monoplane.geometry.neighbours.PointIndex.query` orders them, into
     ``best_d`` / ``best_i``; returns how many were found.
 
-    The samples are looked up in the image, row by row outwards from the pixel, within the
-    window :func:`_reach` gives for the radius, and from the next row on for the k-th best
-    distance so far: a sample outside it lies farther in 3D. ``pixels`` (N,) int64 are the
-    samples' pixels, ascending, and ``blocks`` where the samples of each block of
-    :data:`BLOCK` columns of a row begin (:func:`sample_blocks`).
+    The samples are looked up in the image tiles (:func:`sample_tiles`: ``start``, ``xyz``,
+    ``ids``), by rows of tiles outwards from the pixel's, within the window :func:`_reach`
+    gives for the radius, and from the next row of tiles on for the k-th best distance so
+    far: a sample outside it lies farther in 3D.
     """
     k = best_d.shape[0]
-    nb = (w + BLOCK - 1) // BLOCK
+    across = (w + TILE - 1) // TILE
     v, u = divmod(pix, w)
     z = x2 * scale + center[2]
     ra = np.sqrt(z * z + (x0 * scale + center[0]) ** 2)
@@ -117,37 +130,38 @@ def _nearest_in_image(pix: int, x0: float, x1: float, x2: float, points: np.ndar
     worst = bound2  # candidates must come before (worst, worst_i)
     worst_i = -1
     reach = bound2  # the distance the window was sized for
-    dy = 0
-    while dy <= dv:
-        for side in range(2 if dy else 1):
-            row = v - dy if side else v + dy
-            if row < 0 or row >= h:
+    home = v // TILE
+    d = 0
+    while True:
+        top, bottom = max(v - dv, 0) // TILE, min(v + dv, h - 1) // TILE
+        if home - d < top and home + d > bottom:
+            break
+        for side in range(2 if d else 1):
+            ty = home - d if side else home + d
+            if ty < top or ty > bottom:
                 continue
-            left = max(u - du, 0)
-            first, last = row * w + left, row * w + u + du
-            for t in range(blocks[row * nb + left // BLOCK], blocks[(row + 1) * nb]):
-                if pixels[t] > last:
-                    break
-                if pixels[t] < first:
-                    continue
-                e0 = points[t, 0] - x0
-                e1 = points[t, 1] - x1
-                e2 = points[t, 2] - x2
-                d2 = e0 * e0 + e1 * e1 + e2 * e2
-                if d2 > worst or (d2 == worst and (found < k or t >= worst_i)):
-                    continue
-                y = min(found, k - 1)
-                while y > 0 and (best_d[y - 1] > d2 or (best_d[y - 1] == d2
-                                                          and best_i[y - 1] > t)):
-                    best_d[y] = best_d[y - 1]
-                    best_i[y] = best_i[y - 1]
-                    y -= 1
-                best_d[y] = d2
-                best_i[y] = t
-                found = min(found + 1, k)
-                if found == k:
-                    worst, worst_i = best_d[k - 1], best_i[k - 1]
-        dy += 1
+            for tx in range(max(u - du, 0) // TILE, min(u + du, w - 1) // TILE + 1):
+                c = ty * across + tx
+                for p in range(start[c], start[c + 1]):
+                    e0 = xyz[p, 0] - x0
+                    e1 = xyz[p, 1] - x1
+                    e2 = xyz[p, 2] - x2
+                    d2 = e0 * e0 + e1 * e1 + e2 * e2
+                    t = ids[p]
+                    if d2 > worst or (d2 == worst and (found < k or t >= worst_i)):
+                        continue
+                    y = min(found, k - 1)
+                    while y > 0 and (best_d[y - 1] > d2 or (best_d[y - 1] == d2
+                                                              and best_i[y - 1] > t)):
+                        best_d[y] = best_d[y - 1]
+                        best_i[y] = best_i[y - 1]
+                        y -= 1
+                    best_d[y] = d2
+                    best_i[y] = t
+                    found = min(found + 1, k)
+                    if found == k:
+                        worst, worst_i = best_d[k - 1], best_i[k - 1]
+        d += 1
         if worst < reach:  # the window shrinks to the k-th best distance
             reach = worst
             du, dv = _reach(np.sqrt(worst) * scale, z, ra, rb, cam, w, h)
@@ -182,7 +196,8 @@ def propagate_pixels(out: np.ndarray, point_labels: np.ndarray, all_pixels: np.n
                      all_points: np.ndarray, near: np.ndarray, points: np.ndarray,
                      pixels: np.ndarray, labels: np.ndarray, planes: np.ndarray,
                      indptr: np.ndarray, indices: np.ndarray, mixed: np.ndarray,
-                     radius2: float, tolerance: float, k: int, blocks: np.ndarray,
+                     radius2: float, tolerance: float, k: int,
+                     tiles: tuple[np.ndarray, np.ndarray, np.ndarray],
                      shape: tuple[int, int], cam: np.ndarray, scale: float, center: np.ndarray,
                      start: int, stop: int) -> np.ndarray:
     """Label the valid pixels ``start:stop`` from their image-nearest samples ``near`` (see
@@ -203,12 +218,12 @@ def propagate_pixels(out: np.ndarray, point_labels: np.ndarray, all_pixels: np.n
     ``all_points`` (V, 3) float64 the valid pixels and their normalised points, ``near``
     (V,) int64 the image-nearest sample, ``points`` (N, 3) float64, ``pixels`` (N,) int64 and
     ``labels`` (N,) int32 the samples, ``planes`` (P, 4) float64, ``indptr`` / ``indices``
-    int64 the graph's adjacency, ``blocks`` where the samples of each block of image columns
-    begin (:func:`sample_blocks`), ``shape`` (H, W), ``cam`` (3, 3) float64 intrinsics (or
-    (0, 3)), ``scale`` and ``center`` the normalisation. Returns the (G,) int64 rows ``v``
-    left for a point index.
+    int64 the graph's adjacency, ``tiles`` the samples by image tile (:func:`sample_tiles`),
+    ``shape`` (H, W), ``cam`` (3, 3) float64 intrinsics (or (0, 3)), ``scale`` and
+    ``center`` the normalisation. Returns the (G,) int64 rows ``v`` left for a point index.
     """
     h, w = shape
+    tile_start, tile_xyz, tile_ids = tiles
     in_image = cam.shape[0] == 3
     gap = np.empty(0 if in_image else stop - start, dtype=np.int64)
     n_gap = 0
@@ -228,8 +243,8 @@ def propagate_pixels(out: np.ndarray, point_labels: np.ndarray, all_pixels: np.n
         if d2 > radius2:
             lab = 0
             if in_image:
-                found = _nearest_in_image(pix, x0, x1, x2, points, pixels, blocks, w, h, cam,
-                                          scale, center, radius2, best_d, best_i)
+                found = _nearest_in_image(pix, x0, x1, x2, tile_start, tile_xyz, tile_ids, w,
+                                          h, cam, scale, center, radius2, best_d, best_i)
                 lab = _closest_of(best_i, found, labels, planes, x0, x1, x2)
             else:
                 gap[n_gap] = v
