@@ -7,13 +7,11 @@ agnostic (they work in the camera frame or the normalised RANSAC frame alike); o
 
 from __future__ import annotations
 
-from functools import partial
-
 import numpy as np
 
 from monoplane.errors import InvalidInput
 from monoplane.geometry.hypotheses import triplet_planes
-from monoplane.jit import kernel, run_threaded, thread_budget
+from monoplane.jit import kernel
 
 
 def fit_plane(points: np.ndarray, weights: np.ndarray | None = None) -> tuple[np.ndarray, float]:
@@ -127,14 +125,7 @@ def fit_planes_per_label(points: np.ndarray, labels: np.ndarray, num_labels: int
     pts = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
     if labels.shape[0] != pts.shape[0]:
         raise InvalidInput(f"{pts.shape[0]} points but {labels.shape[0]} labels")
-    num_labels = int(num_labels)
-    owner = _label_owners(labels, num_labels)
-    count = np.zeros(num_labels, dtype=np.int64)
-    centroid = np.zeros((num_labels, 3))
-    scatter = np.zeros((num_labels, 3, 3))
-    parts = int(owner.max(initial=0)) + 1
-    run_threaded([partial(_label_moments, pts, labels, owner, part, count, centroid, scatter)
-                  for part in range(parts)])
+    count, centroid, scatter = _label_moments(pts, labels, int(num_labels))
     params = np.full((num_labels, 4), np.nan)
     rmse = np.full(num_labels, np.nan)
     fit = np.flatnonzero(count >= 3)
@@ -147,49 +138,20 @@ def fit_planes_per_label(points: np.ndarray, labels: np.ndarray, num_labels: int
         d[flip] *= -1.0
         params[fit, :3] = normal
         params[fit, 3] = d
-        squares = np.zeros(num_labels)
-        run_threaded([partial(_label_sq_distances, pts, labels, params, centroid, owner, part,
-                              squares) for part in range(parts)])
-        rmse[fit] = np.sqrt(squares[fit] / count[fit])
+        rmse[fit] = np.sqrt(_label_sq_distances(pts, labels, params, centroid)[fit] / count[fit])
     return params, rmse, count
 
 
-#: Points per thread below which the per-label sums run on one thread.
-THREADED_POINTS = 65_536
-
-
-def _label_owners(labels: np.ndarray, num_labels: int) -> np.ndarray:
-    """(P,) int64 thread of each label for the per-label sums: labels are dealt, largest
-    first, to the thread with the fewest points so far (sizes estimated from every 16th
-    point). Each label's sums stay on one thread, in point order, so the result does not
-    depend on the threads."""
-    parts = min(thread_budget(), num_labels, labels.shape[0] // THREADED_POINTS)
-    owner = np.zeros(num_labels, dtype=np.int64)
-    if parts < 2:
-        return owner
-    sizes = np.bincount(labels[::16].clip(0, num_labels + 1),
-                        minlength=num_labels + 2)[1:num_labels + 1]
-    load = np.zeros(parts)
-    for k in np.argsort(-sizes, kind="stable"):
-        owner[k] = int(np.argmin(load))
-        load[owner[k]] += sizes[k]
-    return owner
-
-
 @kernel
-def _label_moments(points: np.ndarray, labels: np.ndarray, owner: np.ndarray, part: int,
-                   count: np.ndarray, centroid: np.ndarray, scatter: np.ndarray) -> None:
-    """(P,) int64 counts, (P, 3) centroids and (P, 3, 3) centred scatter matrices of the
-    labels whose ``owner`` is ``part``, written into those rows of ``count``, ``centroid``
-    and ``scatter``.
+def _label_moments(points: np.ndarray, labels: np.ndarray, num_labels: int
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(P,) int64 counts, (P, 3) centroids and (P, 3, 3) centred scatter matrices per label.
 
     ``points`` (N, 3) float64, ``labels`` (N,) int32; labels outside 1..P are ignored. Two
     passes (centroid, then centred products) keep the scatter as accurate as a direct fit.
     Each label's sums add its points in order; a run of points of one label adds into
     registers, which leaves every sum as it was and spares a store and a load per point.
     """
-    num_labels = owner.shape[0]
-    mine = owner == part
     n = np.zeros(num_labels, dtype=np.int64)
     c = np.zeros((num_labels, 3))
     run = -1
@@ -199,7 +161,7 @@ def _label_moments(points: np.ndarray, labels: np.ndarray, owner: np.ndarray, pa
         if k != run:
             if run >= 0:
                 c[run, 0], c[run, 1], c[run, 2] = s0, s1, s2
-            run = k if 0 <= k < num_labels and mine[k] else -1
+            run = k if 0 <= k < num_labels else -1
             if run < 0:
                 continue
             s0, s1, s2 = c[run, 0], c[run, 1], c[run, 2]
@@ -224,7 +186,7 @@ def _label_moments(points: np.ndarray, labels: np.ndarray, owner: np.ndarray, pa
             if run >= 0:
                 m[run, 0], m[run, 1], m[run, 2] = m0, m1, m2
                 m[run, 3], m[run, 4], m[run, 5] = m3, m4, m5
-            run = k if 0 <= k < num_labels and mine[k] else -1
+            run = k if 0 <= k < num_labels else -1
             if run < 0:
                 continue
             m0, m1, m2 = m[run, 0], m[run, 1], m[run, 2]
@@ -244,27 +206,23 @@ def _label_moments(points: np.ndarray, labels: np.ndarray, owner: np.ndarray, pa
     if run >= 0:
         m[run, 0], m[run, 1], m[run, 2] = m0, m1, m2
         m[run, 3], m[run, 4], m[run, 5] = m3, m4, m5
+    scatter = np.empty((num_labels, 3, 3))
     for k in range(num_labels):
-        if mine[k]:
-            count[k] = n[k]
-            centroid[k] = c[k]
-            scatter[k, 0, 0] = m[k, 0]
-            scatter[k, 0, 1] = scatter[k, 1, 0] = m[k, 1]
-            scatter[k, 0, 2] = scatter[k, 2, 0] = m[k, 2]
-            scatter[k, 1, 1] = m[k, 3]
-            scatter[k, 1, 2] = scatter[k, 2, 1] = m[k, 4]
-            scatter[k, 2, 2] = m[k, 5]
+        scatter[k, 0, 0] = m[k, 0]
+        scatter[k, 0, 1] = scatter[k, 1, 0] = m[k, 1]
+        scatter[k, 0, 2] = scatter[k, 2, 0] = m[k, 2]
+        scatter[k, 1, 1] = m[k, 3]
+        scatter[k, 1, 2] = scatter[k, 2, 1] = m[k, 4]
+        scatter[k, 2, 2] = m[k, 5]
+    return n, c, scatter
 
 
 @kernel
 def _label_sq_distances(points: np.ndarray, labels: np.ndarray, planes: np.ndarray,
-                        centroid: np.ndarray, owner: np.ndarray, part: int,
-                        out: np.ndarray) -> None:
-    """Sums of squared distances of each label's points to its (P, 4) plane, for the labels
-    whose ``owner`` is ``part``, written into those rows of the (P,) ``out``; a run of points
-    of one label adds into a register, as in :func:`_label_moments`."""
+                        centroid: np.ndarray) -> np.ndarray:
+    """(P,) sums of squared distances of each label's points to its (P, 4) plane; a run of
+    points of one label adds into a register, as in :func:`_label_moments`."""
     num_labels = planes.shape[0]
-    mine = owner == part
     sums = np.zeros(num_labels)
     run = -1
     total = n0 = n1 = n2 = c0 = c1 = c2 = 0.0
@@ -273,7 +231,7 @@ def _label_sq_distances(points: np.ndarray, labels: np.ndarray, planes: np.ndarr
         if k != run:
             if run >= 0:
                 sums[run] = total
-            run = k if 0 <= k < num_labels and mine[k] else -1
+            run = k if 0 <= k < num_labels else -1
             if run < 0:
                 continue
             total = sums[run]
@@ -289,6 +247,4 @@ def _label_sq_distances(points: np.ndarray, labels: np.ndarray, planes: np.ndarr
         total += r * r
     if run >= 0:
         sums[run] = total
-    for k in range(num_labels):
-        if mine[k]:
-            out[k] = sums[k]
+    return sums
