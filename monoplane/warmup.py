@@ -171,6 +171,9 @@ def _workloads(report: bool = True) -> Iterator[tuple[str, Callable[[], Any]]]:
         np.array([0, 2]))
     yield "scorer batch by batch", lambda: Pipeline.from_preset(
         "monoplane", overrides=["sampler.plugin=napsac", "refiner.plugin=none"]).run(frame)
+    # The cloud finds its valid pixels in its own unprojection pass; the evaluation of
+    # labelled frames asks the frame's mask.
+    yield "valid mask", lambda: frame.valid
     depth, normals, rgb, K = frame.depth, frame.normals, frame.rgb, frame.K
     assert depth is not None and normals is not None and rgb is not None
     valid = depth > 0

@@ -285,9 +285,9 @@ class SequentialRansac:
 
         t = time.perf_counter()
         # Pixels within ε/4 of their nearest sample's plane keep its label outright.
-        labels = cloud.propagate(result.labels, result.planes, tolerance=0.25 * params.epsilon,
-                                 graph=graph())
-        rec = self._finalize(frame, cloud, labels)
+        labels, valid = cloud.propagate_pixels(result.labels, result.planes,
+                                               tolerance=0.25 * params.epsilon, graph=graph())
+        rec = self._finalize(frame, cloud, labels, valid, len(result.planes))
         t_final = time.perf_counter() - t
         rec.timings.update({"ransac.cloud": t_cloud, "ransac.graph": t_graph,
                             **result.timings, "ransac.finalize": t_final})
@@ -532,17 +532,23 @@ class SequentialRansac:
         return plane, np.asarray(lab.inliers, dtype=bool)
 
     @staticmethod
-    def _finalize(frame: Frame, cloud: PlaneCloud, labels: np.ndarray) -> Reconstruction:
+    def _finalize(frame: Frame, cloud: PlaneCloud, labels: np.ndarray, valid: np.ndarray,
+                  count: int) -> Reconstruction:
         """Least-squares plane per label on all its pixels, camera frame and depth units.
+
+        ``labels`` is the (H, W) label image, ``valid`` the (V,) labels of the cloud's
+        ``all_pixels`` (:meth:`PlaneCloud.propagate_pixels`) and ``count`` the number of
+        labels (at least the largest).
 
         The fit runs on the normalised points of all valid pixels, which the cloud holds
         already; a total-least-squares fit commutes with the similarity that maps them back
         to the camera frame, where planes and RMSE are then expressed.
         """
-        renumber, params, rmse, support = refit_and_renumber(
-            cloud.all_points, labels.ravel()[cloud.pixel_grid()[2]], int(labels.max(initial=0)))
+        renumber, params, rmse, support = refit_and_renumber(cloud.all_points, valid, count)
         params = cloud.plane_to_camera(params)
-        return Reconstruction(frame=frame, labels=renumber[labels],
+        if len(params) < count:  # labels too small to fit a plane are gone
+            labels = renumber[labels]
+        return Reconstruction(frame=frame, labels=labels,
                               planes=orient_towards_camera(params) if len(params)
                               else np.zeros((0, 4)),
                               rmse=rmse * cloud.scale, support=support)

@@ -42,8 +42,19 @@ from monoplane.geometry.distance_transform import nearest_true_pixel
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.geometry.lattice import lattice_lines, lattice_step, lattice_stride
 from monoplane.geometry.neighbours import PointIndex
-from monoplane.geometry.propagation import closest_plane, propagate_labels
-from monoplane.jit import chunks, kernel, run_threaded
+from monoplane.geometry.propagation import (
+    closest_plane,
+    mixed_samples,
+    propagate_pixels,
+    sample_tiles,
+)
+from monoplane.geometry.unprojection import (
+    drawn_rows,
+    gather_samples,
+    lattice_rows,
+    valid_points,
+)
+from monoplane.jit import chunks, run_threaded
 
 #: A non-sampled pixel inherits its nearest sample's label only within this many times the
 #: median sample-to-nearest-sample spacing.
@@ -102,6 +113,10 @@ class PlaneCloud:
         (R, C) int64 point of each node of the regular lattice a frame's points were sampled
         on (:meth:`from_frame` with ``grid``), -1 where the lattice pixel is not valid; None
         for a random sample or a cloud without an image.
+    intrinsics : numpy.ndarray or None
+        (3, 3) float64 intrinsics the frame's points were unprojected with
+        (:meth:`from_frame`); :meth:`propagate` then finds the samples near a pixel in 3D
+        through the image. None otherwise (a point index serves instead).
     """
 
     points: np.ndarray
@@ -116,6 +131,7 @@ class PlaneCloud:
     sampled: np.ndarray | None = None
     stride: int | None = None
     lattice: np.ndarray | None = None
+    intrinsics: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         n = self.points.shape[0]
@@ -216,18 +232,16 @@ class PlaneCloud:
             raise InvalidInput(
                 f"{frame.name}: plane fitting needs depth and normals; run a cue provider first"
             )
-        valid_image = frame.valid
-        all_pixels = np.flatnonzero(valid_image.ravel()).astype(np.int64)
+        valid_image, all_pixels, all_points, center, scale = valid_points(
+            np.ascontiguousarray(frame.depth, dtype=np.float32),
+            np.ascontiguousarray(frame.normals, dtype=np.float32),
+            np.linalg.inv(np.asarray(frame.K, dtype=np.float64)))
         if all_pixels.size < 3:
             raise InvalidInput(f"{frame.name}: fewer than 3 valid pixels")
-        all_points, center, scale = _normalised_points(
-            np.ascontiguousarray(frame.depth, dtype=np.float32),
-            np.linalg.inv(np.asarray(frame.K, dtype=np.float64)), all_pixels)
         if scale <= 0:
             raise InvalidInput(f"{frame.name}: all valid pixels unproject to the same point")
 
-        keep = all_pixels
-        points = all_points
+        chosen = None  # rows of the valid pixels kept (None: all)
         stride = lattice = None
         if grid:
             step, stride = 1.0, 1
@@ -237,36 +251,27 @@ class PlaneCloud:
                 else:
                     stride = lattice_stride(valid_image, max_points)
                     step = float(stride)
-            rows, cols = lattice_lines(frame.shape[0], step), lattice_lines(frame.shape[1], step)
-            on_lattice = np.zeros(frame.shape, dtype=bool)
-            on_lattice[np.ix_(rows, cols)] = True
-            chosen = np.flatnonzero(on_lattice.ravel()[all_pixels])
-            keep = all_pixels[chosen]
-            points = all_points[chosen]
-            node = np.full(on_lattice.size, -1, dtype=np.int64)
-            node[keep] = np.arange(keep.size)
-            lattice = np.ascontiguousarray(node.reshape(frame.shape)[np.ix_(rows, cols)])
+            chosen, lattice = lattice_rows(valid_image, lattice_lines(frame.shape[0], step),
+                                           lattice_lines(frame.shape[1], step))
         elif max_points is not None and all_pixels.size > max_points:
             if max_points < 3:
                 raise InvalidInput(f"max_points must be at least 3, got {max_points}")
             if rng is None:
                 raise InvalidInput("subsampling a cloud needs a random generator")
-            # Ascending order through a mask: linear, where sorting the draw is not.
-            drawn = np.zeros(all_pixels.size, dtype=bool)
-            drawn[rng.choice(all_pixels.size, size=max_points, replace=False)] = True
-            chosen = np.flatnonzero(drawn)
-            keep = all_pixels[chosen]
-            points = all_points[chosen]
-
-        normals = frame.normals.reshape(-1, 3)[keep].astype(np.float64)
-        normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+            chosen = drawn_rows(all_pixels.size,
+                                rng.choice(all_pixels.size, size=max_points, replace=False))
+        keep, points, normals = gather_samples(
+            np.arange(all_pixels.size) if chosen is None else chosen, all_pixels, all_points,
+            np.ascontiguousarray(frame.normals, dtype=np.float32).reshape(-1, 3))
+        if chosen is None:  # every valid pixel: the points are the same array
+            keep, points = all_pixels, all_points
         colors = None
         if frame.has_color and frame.rgb is not None:
             colors = frame.rgb.reshape(-1, 3)[keep].astype(np.float64) / 255.0
-        return cls(points=np.ascontiguousarray(points), normals=normals, colors=colors,
+        return cls(points=points, normals=normals, colors=colors,
                    pixels=keep, center=center, scale=scale, shape=frame.shape,
                    all_points=all_points, all_pixels=all_pixels, stride=stride,
-                   lattice=lattice)
+                   lattice=lattice, intrinsics=np.asarray(frame.K, dtype=np.float64))
 
     @classmethod
     def from_points(cls, points: np.ndarray, normals: np.ndarray, colors: np.ndarray | None,
@@ -376,11 +381,31 @@ class PlaneCloud:
         labels = np.ascontiguousarray(labels, dtype=np.int32)
         if self.pixels is None:
             return self._propagate_points(labels, planes, spacing, graph)
+        return self.propagate_pixels(labels, planes, spacing, tolerance, graph)[0]
+
+    def propagate_pixels(self, labels: np.ndarray, planes: np.ndarray | None = None,
+                         spacing: float | None = None, tolerance: float = 0.0,
+                         graph: NeighbourGraph | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`propagate` on a frame's cloud, with the labels of every valid pixel too.
+
+        Parameters
+        ----------
+        labels, planes, spacing, tolerance, graph
+            As for :meth:`propagate`.
+
+        Returns
+        -------
+        image : numpy.ndarray
+            (H, W) int32 label image, as :meth:`propagate` returns it.
+        valid : numpy.ndarray
+            (V,) int32 label of each of ``all_pixels`` (``image.ravel()[all_pixels]``).
+        """
+        labels = np.ascontiguousarray(labels, dtype=np.int32)
         pixels, (h, w), all_pixels = self.pixel_grid()
         out = np.zeros(h * w, dtype=np.int32)
         if not self.subsampled:
             out[pixels] = labels
-            return out.reshape(h, w)
+            return out.reshape(h, w), labels.copy()
         if graph is None:
             graph = NeighbourGraph.build(self.points, PROPAGATION_GRAPH_K, tree=self.tree)
         radius = PROPAGATION_RADIUS_FACTOR * (graph.spacing if spacing is None else spacing)
@@ -390,24 +415,30 @@ class PlaneCloud:
         p = np.zeros((0, 4)) if planes is None else np.asarray(planes, dtype=np.float64)
         k = min(PROPAGATION_NEIGHBOURS, self.size) if len(p) else 1
         indptr, indices = graph.indptr, graph.indices
+        mixed = mixed_samples(labels, indptr, indices)
+        valid = np.empty(all_pixels.shape[0], dtype=np.int32)
+        # Pixels farther than the radius from their image-nearest sample lie across a depth
+        # jump from it: their nearest samples in 3D are looked up in the image around them
+        # when the intrinsics say where a point projects, else in the point index.
+        cam = np.zeros((0, 3))
+        if self.intrinsics is not None and np.array_equal(self.intrinsics[2], [0.0, 0.0, 1.0]):
+            cam = np.asarray(self.intrinsics, dtype=np.float64)
+        tiles = sample_tiles(pixels, self.points, w, h)
 
-        def label_chunk(a: int, b: int) -> np.ndarray:
-            part, gap = propagate_labels(self.all_points[a:b], near[a:b], self.points, labels,
-                                         p, indptr, indices, radius**2, float(tolerance), k)
-            # Pixels farther than the radius from their image-nearest sample lie across a
-            # depth jump from it: their nearest samples in 3D come from the point index.
-            gap = np.flatnonzero(gap)
+        def label_chunk(a: int, b: int) -> None:
+            gap = propagate_pixels(out, valid, all_pixels, self.all_points, near, self.points,
+                                   pixels, labels, p, indptr, indices, mixed, radius**2,
+                                   float(tolerance), k, tiles, (h, w), cam,
+                                   float(self.scale), self.center, a, b)
             if gap.size:
-                part[gap] = self.label_points(self.all_points[a:b][gap], labels, p, radius)
-            return part
+                valid[gap] = self.label_points(self.all_points[gap], labels, p, radius)
+                out[all_pixels[gap]] = valid[gap]
 
-        # Pixels are labelled independently: contiguous chunks run on parallel threads.
-        parts = run_threaded([partial(label_chunk, a, b)
-                              for a, b in chunks(near.shape[0], THREADED_PIXELS)])
-        out[all_pixels] = np.concatenate(parts) if len(parts) > 1 else parts[0]
-        # Sampled pixels keep their own label even if a closer duplicate point exists.
-        out[pixels] = labels
-        return out.reshape(h, w)
+        # Pixels are labelled independently: contiguous chunks run on parallel threads, each
+        # writing its own pixels.
+        run_threaded([partial(label_chunk, a, b)
+                      for a, b in chunks(near.shape[0], THREADED_PIXELS)])
+        return out.reshape(h, w), valid
 
     def _propagate_points(self, labels: np.ndarray, planes: np.ndarray | None,
                           spacing: float | None, graph: NeighbourGraph | None) -> np.ndarray:
@@ -496,38 +527,3 @@ def normalised_cloud(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]
                            "planes to")
     scale = float(np.sqrt(((points - center) ** 2).sum(axis=1).max()))
     return (points - center) / scale, center, scale
-
-
-@kernel
-def _normalised_points(depth: np.ndarray, k_inv: np.ndarray, pixels: np.ndarray
-                       ) -> tuple[np.ndarray, np.ndarray, float]:
-    """Unproject pixels and normalise them into the unit ball, in three passes.
-
-    ``depth`` (H, W) float32 z-depth, ``k_inv`` (3, 3) inverse intrinsics, ``pixels`` (V,)
-    int64 flat indices. Returns the (V, 3) normalised points ``(X - center) / scale``, the
-    (3,) centroid ``center`` of the camera-frame points ``X = z K^-1 [u, v, 1]`` and
-    ``scale``, the largest distance of a point from it.
-    """
-    w = depth.shape[1]
-    n = pixels.shape[0]
-    out = np.empty((n, 3))
-    center = np.zeros(3)
-    for i in range(n):
-        v, u = divmod(pixels[i], w)
-        z = np.float64(depth[v, u])
-        for c in range(3):
-            x = z * (k_inv[c, 0] * u + k_inv[c, 1] * v + k_inv[c, 2])
-            out[i, c] = x
-            center[c] += x
-    center /= max(n, 1)
-    far = 0.0
-    for i in range(n):
-        d2 = 0.0
-        for c in range(3):
-            out[i, c] -= center[c]
-            d2 += out[i, c] ** 2
-        far = max(far, d2)
-    scale = np.sqrt(far)
-    if scale > 0:
-        out /= scale
-    return out, center, scale

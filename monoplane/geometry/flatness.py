@@ -24,6 +24,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from monoplane.jit import kernel
+
 #: Fewest sampled interior pixels a plane needs for its spread to be measured.
 MIN_SAMPLES = 30
 #: Smallest quadric residual :func:`quadric_ratio` divides by, as a fraction of the extent.
@@ -57,6 +59,74 @@ def interior_labels(labels: np.ndarray, radius: int) -> np.ndarray:
     same = cv2.erode(lab16, kernel, borderType=cv2.BORDER_REPLICATE) == cv2.dilate(
         lab16, kernel, borderType=cv2.BORDER_REPLICATE)
     return np.where(same, labels, 0).astype(np.int32)
+
+
+def interior_samples(labels: np.ndarray, depth: np.ndarray, radius: int, step: int
+                     ) -> np.ndarray:
+    """:func:`interior_labels` at every ``step``-th row and column, 0 where the depth is not
+    positive: ``(interior_labels(labels, radius) * (depth > 0))[::step, ::step].ravel()``
+    without the full-resolution passes.
+
+    Parameters
+    ----------
+    labels : numpy.ndarray
+        (H, W) int label map, 0 = non-planar, values below 65536.
+    depth : numpy.ndarray
+        (H, W) depth, positive where valid.
+    radius : int
+        Erosion radius in pixels (0 keeps every pixel).
+    step : int
+        Sampling step, >= 1.
+
+    Returns
+    -------
+    numpy.ndarray
+        (ceil(H / step) * ceil(W / step),) int32 labels of the sampled pixels, row by row.
+    """
+    return _interior_samples(np.ascontiguousarray(labels, dtype=np.int32),
+                             np.ascontiguousarray(depth, dtype=np.float32), max(int(radius), 0),
+                             int(step))
+
+
+@kernel
+def _interior_samples(labels: np.ndarray, depth: np.ndarray, radius: int, step: int
+                      ) -> np.ndarray:
+    """:func:`interior_samples` of (H, W) int32 labels and float32 depth. A window (clipped
+    to the image, as the erosion's replicated border) holds one label when each of its rows
+    does and its centre column does: runs of equal labels along each row, then along each
+    sampled column, tell both without visiting the window's pixels. Labels compare modulo
+    65536, as the erosion's uint16 image does."""
+    h, w = labels.shape
+    rows, cols = (h + step - 1) // step, (w + step - 1) // step
+    # flat[y, j]: row y holds one label across the window of sampled column j.
+    flat = np.empty((h, cols), dtype=np.bool_)
+    start = np.empty(w, dtype=np.int64)  # first column of the run of equal labels at x
+    for y in range(h):
+        s = 0
+        for x in range(1, w):
+            if (labels[y, x] - labels[y, x - 1]) % 65536 != 0:
+                s = x
+            start[x] = s
+        start[0] = 0
+        for j in range(cols):
+            x = j * step
+            flat[y, j] = start[min(x + radius, w - 1)] <= max(x - radius, 0)
+    out = np.zeros(rows * cols, dtype=np.int32)
+    first = np.empty(h, dtype=np.int64)  # first row of the run of flat, equal rows at y
+    for j in range(cols):
+        x = j * step
+        s = 0
+        for y in range(h):
+            if not flat[y, j]:
+                s = y + 1
+            elif y > s and (labels[y, x] - labels[y - 1, x]) % 65536 != 0:
+                s = y
+            first[y] = s
+        for i in range(rows):
+            y = i * step
+            if depth[y, x] > 0 and first[min(y + radius, h - 1)] <= max(y - radius, 0):
+                out[i * cols + j] = labels[y, x]
+    return out
 
 
 def normal_spread_deg(normals: np.ndarray, labels: np.ndarray, num_planes: int,
@@ -110,24 +180,44 @@ def _padded(values: np.ndarray, labels: np.ndarray, num_planes: int,
     plane : numpy.ndarray
         (G,) int64 plane index (label - 1) of each row.
     """
-    lab = np.asarray(labels).ravel()
-    on = np.flatnonzero((lab > 0) & (lab <= num_planes))
-    order = on[np.argsort(lab[on], kind="stable")]
-    ids, starts, sizes = np.unique(lab[order], return_index=True, return_counts=True)
+    order, starts = _grouped(np.ascontiguousarray(np.asarray(labels).ravel(), dtype=np.int64),
+                             int(num_planes))
     counts = np.zeros(num_planes, dtype=np.int64)
     members = []
-    for p, start, size in zip(ids, starts, sizes, strict=True):
-        idx = order[start:start + size]
+    for p in np.flatnonzero(np.diff(starts)):
+        idx = order[starts[p]:starts[p + 1]]
+        size = len(idx)
         if max_samples is not None and size > max_samples:
             idx = idx[np.linspace(0, size - 1, max_samples).astype(np.int64)]
-        counts[p - 1] = len(idx)
+        counts[p] = len(idx)
         if len(idx) >= MIN_SAMPLES:
-            members.append((int(p) - 1, idx))
+            members.append((int(p), idx))
     length = max((len(idx) for _, idx in members), default=0)
     rows = np.full((len(members), length, 3), np.nan)
     for g, (_, idx) in enumerate(members):
         rows[g, :len(idx)] = values[idx]
     return rows, counts, np.array([p for p, _ in members], dtype=np.int64)
+
+
+@kernel
+def _grouped(labels: np.ndarray, num_planes: int) -> tuple[np.ndarray, np.ndarray]:
+    """The members of labels 1..P grouped by label, each group in index order (a counting
+    sort: what a stable argsort of the labels gives). ``labels`` (M,) int64. Returns the
+    (K,) int64 member indices and the (P + 1,) int64 start of each label's group (label
+    ``p + 1`` at ``order[starts[p]:starts[p + 1]]``)."""
+    starts = np.zeros(num_planes + 1, dtype=np.int64)
+    for v in range(labels.shape[0]):
+        if 0 < labels[v] <= num_planes:
+            starts[labels[v]] += 1
+    for p in range(num_planes):
+        starts[p + 1] += starts[p]
+    fill = starts[:-1].copy()
+    order = np.empty(starts[num_planes], dtype=np.int64)
+    for v in range(labels.shape[0]):
+        if 0 < labels[v] <= num_planes:
+            order[fill[labels[v] - 1]] = v
+            fill[labels[v] - 1] += 1
+    return order, starts
 
 
 def _row_median(a: np.ndarray, count: np.ndarray) -> np.ndarray:

@@ -117,7 +117,11 @@ def fit_planes_per_label(points: np.ndarray, labels: np.ndarray, num_labels: int
     count : numpy.ndarray
         (P,) int64 number of points of each label.
     """
-    labels = np.ascontiguousarray(np.asarray(labels).ravel(), dtype=np.int64)
+    labels = np.asarray(labels).ravel()
+    if labels.dtype != np.int32:
+        # Labels are small: int32 halves the passes' memory traffic against int64.
+        labels = labels.astype(np.int64).clip(-1, num_labels + 1).astype(np.int32)
+    labels = np.ascontiguousarray(labels)
     pts = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
     if labels.shape[0] != pts.shape[0]:
         raise InvalidInput(f"{pts.shape[0]} points but {labels.shape[0]} labels")
@@ -143,53 +147,104 @@ def _label_moments(points: np.ndarray, labels: np.ndarray, num_labels: int
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(P,) int64 counts, (P, 3) centroids and (P, 3, 3) centred scatter matrices per label.
 
-    ``points`` (N, 3) float64, ``labels`` (N,) int64; labels outside 1..P are ignored. Two
+    ``points`` (N, 3) float64, ``labels`` (N,) int32; labels outside 1..P are ignored. Two
     passes (centroid, then centred products) keep the scatter as accurate as a direct fit.
+    Each label's sums add its points in order; a run of points of one label adds into
+    registers, which leaves every sum as it was and spares a store and a load per point.
     """
-    count = np.zeros(num_labels, dtype=np.int64)
-    centroid = np.zeros((num_labels, 3))
+    n = np.zeros(num_labels, dtype=np.int64)
+    c = np.zeros((num_labels, 3))
+    run = -1
+    s0 = s1 = s2 = 0.0
     for v in range(points.shape[0]):
         k = labels[v] - 1
-        if 0 <= k < num_labels:
-            count[k] += 1
-            for c in range(3):
-                centroid[k, c] += points[v, c]
+        if k != run:
+            if run >= 0:
+                c[run, 0], c[run, 1], c[run, 2] = s0, s1, s2
+            run = k if 0 <= k < num_labels else -1
+            if run < 0:
+                continue
+            s0, s1, s2 = c[run, 0], c[run, 1], c[run, 2]
+        elif run < 0:
+            continue
+        n[run] += 1
+        s0 += points[v, 0]
+        s1 += points[v, 1]
+        s2 += points[v, 2]
+    if run >= 0:
+        c[run, 0], c[run, 1], c[run, 2] = s0, s1, s2
     for k in range(num_labels):
-        if count[k]:
-            for c in range(3):
-                centroid[k, c] /= count[k]
-    scatter = np.zeros((num_labels, 3, 3))
+        if n[k]:
+            for j in range(3):
+                c[k, j] /= n[k]
+    m = np.zeros((num_labels, 6))
+    run = -1
+    m0 = m1 = m2 = m3 = m4 = m5 = c0 = c1 = c2 = 0.0
     for v in range(points.shape[0]):
         k = labels[v] - 1
-        if 0 <= k < num_labels:
-            x0 = points[v, 0] - centroid[k, 0]
-            x1 = points[v, 1] - centroid[k, 1]
-            x2 = points[v, 2] - centroid[k, 2]
-            scatter[k, 0, 0] += x0 * x0
-            scatter[k, 0, 1] += x0 * x1
-            scatter[k, 0, 2] += x0 * x2
-            scatter[k, 1, 1] += x1 * x1
-            scatter[k, 1, 2] += x1 * x2
-            scatter[k, 2, 2] += x2 * x2
+        if k != run:
+            if run >= 0:
+                m[run, 0], m[run, 1], m[run, 2] = m0, m1, m2
+                m[run, 3], m[run, 4], m[run, 5] = m3, m4, m5
+            run = k if 0 <= k < num_labels else -1
+            if run < 0:
+                continue
+            m0, m1, m2 = m[run, 0], m[run, 1], m[run, 2]
+            m3, m4, m5 = m[run, 3], m[run, 4], m[run, 5]
+            c0, c1, c2 = c[run, 0], c[run, 1], c[run, 2]
+        elif run < 0:
+            continue
+        x0 = points[v, 0] - c0
+        x1 = points[v, 1] - c1
+        x2 = points[v, 2] - c2
+        m0 += x0 * x0
+        m1 += x0 * x1
+        m2 += x0 * x2
+        m3 += x1 * x1
+        m4 += x1 * x2
+        m5 += x2 * x2
+    if run >= 0:
+        m[run, 0], m[run, 1], m[run, 2] = m0, m1, m2
+        m[run, 3], m[run, 4], m[run, 5] = m3, m4, m5
+    scatter = np.empty((num_labels, 3, 3))
     for k in range(num_labels):
-        scatter[k, 1, 0] = scatter[k, 0, 1]
-        scatter[k, 2, 0] = scatter[k, 0, 2]
-        scatter[k, 2, 1] = scatter[k, 1, 2]
-    return count, centroid, scatter
+        scatter[k, 0, 0] = m[k, 0]
+        scatter[k, 0, 1] = scatter[k, 1, 0] = m[k, 1]
+        scatter[k, 0, 2] = scatter[k, 2, 0] = m[k, 2]
+        scatter[k, 1, 1] = m[k, 3]
+        scatter[k, 1, 2] = scatter[k, 2, 1] = m[k, 4]
+        scatter[k, 2, 2] = m[k, 5]
+    return n, c, scatter
 
 
 @kernel
 def _label_sq_distances(points: np.ndarray, labels: np.ndarray, planes: np.ndarray,
                         centroid: np.ndarray) -> np.ndarray:
-    """(P,) sums of squared distances of each label's points to its (P, 4) plane."""
+    """(P,) sums of squared distances of each label's points to its (P, 4) plane; a run of
+    points of one label adds into a register, as in :func:`_label_moments`."""
     num_labels = planes.shape[0]
-    out = np.zeros(num_labels)
+    sums = np.zeros(num_labels)
+    run = -1
+    total = n0 = n1 = n2 = c0 = c1 = c2 = 0.0
     for v in range(points.shape[0]):
         k = labels[v] - 1
-        if 0 <= k < num_labels:
-            # Through the centroid, as the fit does: the offset d is rounded, the centroid not.
-            r = 0.0
-            for c in range(3):
-                r += planes[k, c] * (points[v, c] - centroid[k, c])
-            out[k] += r * r
-    return out
+        if k != run:
+            if run >= 0:
+                sums[run] = total
+            run = k if 0 <= k < num_labels else -1
+            if run < 0:
+                continue
+            total = sums[run]
+            n0, n1, n2 = planes[run, 0], planes[run, 1], planes[run, 2]
+            c0, c1, c2 = centroid[run, 0], centroid[run, 1], centroid[run, 2]
+        elif run < 0:
+            continue
+        # Through the centroid, as the fit does: the offset d is rounded, the centroid not.
+        r = 0.0
+        r += n0 * (points[v, 0] - c0)
+        r += n1 * (points[v, 1] - c1)
+        r += n2 * (points[v, 2] - c2)
+        total += r * r
+    if run >= 0:
+        sums[run] = total
+    return sums

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from monoplane.jit import kernel
+from monoplane.jit import inline, kernel
 
 
 def closest_plane(x: np.ndarray, d_k: np.ndarray, n_k: np.ndarray, labels: np.ndarray,
@@ -30,38 +30,236 @@ def closest_plane(x: np.ndarray, d_k: np.ndarray, n_k: np.ndarray, labels: np.nd
 
 
 @kernel
-def propagate_labels(all_points: np.ndarray, near: np.ndarray, points: np.ndarray,
-                     labels: np.ndarray, planes: np.ndarray, indptr: np.ndarray,
-                     indices: np.ndarray, radius2: float, tolerance: float,
-                     k: int) -> tuple[np.ndarray, np.ndarray]:
-    """Label every valid pixel from its image-nearest sample ``near`` (see
-    :meth:`~monoplane.geometry.cloud.PlaneCloud.propagate`).
+def mixed_samples(labels: np.ndarray, indptr: np.ndarray, indices: np.ndarray) -> np.ndarray:
+    """(N,) bool: True where a sample has a graph neighbour of another label.
 
-    A pixel takes its sample's label when the sample is within the radius and non-planar or
-    within ``tolerance`` of its plane. Otherwise its candidates are the sample and the
-    sample's graph neighbours within the radius: non-planar if the nearest of them is, else
-    the closest plane among the planar labels of the ``k`` nearest. Returns the (V,) int32
-    labels and a (V,) bool mask of pixels whose sample is beyond the radius (left at 0).
+    ``labels`` (N,) int32, ``indptr`` (N + 1,) and ``indices`` int64 the graph's adjacency.
+    A pixel whose image-nearest sample is not mixed takes that sample's label whenever it lies
+    within the radius (:func:`propagate_pixels`): its candidates all carry that label.
     """
-    n_pix = all_points.shape[0]
-    full = np.zeros(n_pix, dtype=np.int32)
-    gap = np.zeros(n_pix, dtype=np.bool_)
+    n = labels.shape[0]
+    out = np.zeros(n, dtype=np.bool_)
+    for s in range(n):
+        for c in range(indptr[s], indptr[s + 1]):
+            if labels[indices[c]] != labels[s]:
+                out[s] = True
+                break
+    return out
+
+
+#: Side in pixels of the image tiles :func:`sample_tiles` buckets the samples into.
+TILE = 8
+
+
+@kernel
+def sample_tiles(pixels: np.ndarray, points: np.ndarray, w: int, h: int
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The samples bucketed by image tile (a counting sort), for :func:`propagate_pixels`.
+
+    ``pixels`` (N,) int64 flat pixels ``v * w + u`` and ``points`` (N, 3) float64 of the
+    samples. Returns the (T + 1,) int64 start of each tile's samples (tiles of
+    :data:`TILE` x :data:`TILE` pixels, row by row), and the (N, 3) points and (N,) int64
+    sample indices in that order.
+    """
+    across = (w + TILE - 1) // TILE
+    tiles = across * ((h + TILE - 1) // TILE)
+    n = pixels.shape[0]
+    tile = np.empty(n, dtype=np.int64)
+    start = np.zeros(tiles + 1, dtype=np.int64)
+    for t in range(n):
+        v, u = divmod(pixels[t], w)
+        tile[t] = (v // TILE) * across + u // TILE
+        start[tile[t] + 1] += 1
+    for i in range(tiles):
+        start[i + 1] += start[i]
+    fill = start[:-1].copy()
+    xyz = np.empty((n, 3))
+    ids = np.empty(n, dtype=np.int64)
+    for t in range(n):
+        p = fill[tile[t]]
+        fill[tile[t]] += 1
+        xyz[p, 0], xyz[p, 1], xyz[p, 2] = points[t, 0], points[t, 1], points[t, 2]
+        ids[p] = t
+    return start, xyz, ids
+
+
+@inline
+def _reach(rho: float, z: float, ra: float, rb: float, cam: np.ndarray, w: int, h: int
+           ) -> tuple[int, int]:
+    """Column and row half-widths of the image window that holds the projection of every
+    point within ``rho`` of the camera-frame point ``X = (x, y, z)``, given ``ra = √(z² +
+    x²)`` and ``rb = √(z² + y²)``, for the intrinsics ``cam`` (3, 3) with last row ``[0, 0,
+    1]``; the whole image when ``z <= rho``.
+
+    With ``a = x / z`` and ``Y = X + δ``, ``|δ| <= rho``: ``|Δa| = |z δx - x δz| / (z (z +
+    δz)) <= rho ra / (z (z - rho))``, likewise ``|Δb| <= rho rb / (z (z - rho))`` for ``b =
+    y / z``; a pixel moves by ``K[0, 0] Δa + K[0, 1] Δb`` across and ``K[1, 0] Δa + K[1, 1]
+    Δb`` down. One pixel more covers rounding.
+    """
+    if not z > rho:
+        return w, h
+    t = rho / (z * (z - rho))
+    du = (abs(cam[0, 0]) * ra + abs(cam[0, 1]) * rb) * t
+    dv = (abs(cam[1, 0]) * ra + abs(cam[1, 1]) * rb) * t
+    return int(min(du * (1.0 + 1e-9), w)) + 1, int(min(dv * (1.0 + 1e-9), h)) + 1
+
+
+@inline
+def _nearest_in_image(pix: int, x0: float, x1: float, x2: float, start: np.ndarray,
+                      xyz: np.ndarray, ids: np.ndarray, w: int, h: int, cam: np.ndarray,
+                      scale: float, center: np.ndarray, bound2: float, best_d: np.ndarray,
+                      best_i: np.ndarray) -> int:
+    """The ``k = len(best_d)`` samples nearest to the normalised point ``(x0, x1, x2)`` of
+    pixel ``pix`` with squared distance below ``bound2``, ordered by (squared distance,
+    index) as :meth:`~monoplane.geometry.neighbours.PointIndex.query` orders them, into
+    ``best_d`` / ``best_i``; returns how many were found.
+
+    The samples are looked up in the image tiles (:func:`sample_tiles`: ``start``, ``xyz``,
+    ``ids``), by rows of tiles outwards from the pixel's, within the window :func:`_reach`
+    gives for the radius, and from the next row of tiles on for the k-th best distance so
+    far: a sample outside it lies farther in 3D.
+    """
+    k = best_d.shape[0]
+    across = (w + TILE - 1) // TILE
+    v, u = divmod(pix, w)
+    z = x2 * scale + center[2]
+    ra = np.sqrt(z * z + (x0 * scale + center[0]) ** 2)
+    rb = np.sqrt(z * z + (x1 * scale + center[1]) ** 2)
+    du, dv = _reach(np.sqrt(bound2) * scale, z, ra, rb, cam, w, h)
+    found = 0
+    worst = bound2  # candidates must come before (worst, worst_i)
+    worst_i = -1
+    reach = bound2  # the distance the window was sized for
+    home = v // TILE
+    d = 0
+    while True:
+        top, bottom = max(v - dv, 0) // TILE, min(v + dv, h - 1) // TILE
+        if home - d < top and home + d > bottom:
+            break
+        for side in range(2 if d else 1):
+            ty = home - d if side else home + d
+            if ty < top or ty > bottom:
+                continue
+            for tx in range(max(u - du, 0) // TILE, min(u + du, w - 1) // TILE + 1):
+                c = ty * across + tx
+                for p in range(start[c], start[c + 1]):
+                    e0 = xyz[p, 0] - x0
+                    e1 = xyz[p, 1] - x1
+                    e2 = xyz[p, 2] - x2
+                    d2 = e0 * e0 + e1 * e1 + e2 * e2
+                    t = ids[p]
+                    if d2 > worst or (d2 == worst and (found < k or t >= worst_i)):
+                        continue
+                    y = min(found, k - 1)
+                    while y > 0 and (best_d[y - 1] > d2 or (best_d[y - 1] == d2
+                                                              and best_i[y - 1] > t)):
+                        best_d[y] = best_d[y - 1]
+                        best_i[y] = best_i[y - 1]
+                        y -= 1
+                    best_d[y] = d2
+                    best_i[y] = t
+                    found = min(found + 1, k)
+                    if found == k:
+                        worst, worst_i = best_d[k - 1], best_i[k - 1]
+        d += 1
+        if worst < reach:  # the window shrinks to the k-th best distance
+            reach = worst
+            du, dv = _reach(np.sqrt(worst) * scale, z, ra, rb, cam, w, h)
+    return found
+
+
+@inline
+def _closest_of(best_i: np.ndarray, found: int, labels: np.ndarray, planes: np.ndarray,
+                x0: float, x1: float, x2: float) -> int:
+    """Non-planar (0) when the nearest of the ``found`` candidates ``best_i`` is non-planar
+    or there is none, else the candidates' planar label whose plane lies closest to
+    ``(x0, x1, x2)`` (the first of equals; the nearest's label when there are no planes)."""
+    if found == 0 or labels[best_i[0]] == 0:
+        return 0
+    if planes.shape[0] == 0:
+        return labels[best_i[0]]
+    best = 0
+    best_r = np.inf
+    for y in range(found):
+        lab = labels[best_i[y]]
+        if lab > 0:
+            q = planes[lab - 1]
+            r = abs(q[0] * x0 + q[1] * x1 + q[2] * x2 + q[3])
+            if r < best_r:
+                best_r = r
+                best = lab
+    return best
+
+
+@kernel
+def propagate_pixels(out: np.ndarray, point_labels: np.ndarray, all_pixels: np.ndarray,
+                     all_points: np.ndarray, near: np.ndarray, points: np.ndarray,
+                     pixels: np.ndarray, labels: np.ndarray, planes: np.ndarray,
+                     indptr: np.ndarray, indices: np.ndarray, mixed: np.ndarray,
+                     radius2: float, tolerance: float, k: int,
+                     tiles: tuple[np.ndarray, np.ndarray, np.ndarray],
+                     shape: tuple[int, int], cam: np.ndarray, scale: float, center: np.ndarray,
+                     start: int, stop: int) -> np.ndarray:
+    """Label the valid pixels ``start:stop`` from their image-nearest samples ``near`` (see
+    :meth:`~monoplane.geometry.cloud.PlaneCloud.propagate`), in place.
+
+    A sampled pixel keeps its sample's label. Any other pixel takes its sample's label when
+    the sample is within the radius and non-planar, or within ``tolerance`` of its plane, or
+    has no graph neighbour of another label (``mixed``, :func:`mixed_samples`: then every
+    candidate below carries that label). Otherwise its candidates are the sample and the
+    sample's graph neighbours within the radius: non-planar if the nearest of them is, else
+    the closest plane among the planar labels of the ``k`` nearest. A pixel whose sample lies
+    beyond the radius (across a depth jump) takes the same rule on its ``k`` nearest samples
+    in 3D within the radius, found in the image (:func:`_nearest_in_image`), when ``cam``
+    holds the intrinsics; with an empty ``cam`` it is left at 0 and returned.
+
+    ``out`` (H * W,) int32 label image and ``point_labels`` (V,) int32 labels of the valid
+    pixels are written at ``all_pixels[v]`` and ``v``; ``all_pixels`` (V,) int64 and
+    ``all_points`` (V, 3) float64 the valid pixels and their normalised points, ``near``
+    (V,) int64 the image-nearest sample, ``points`` (N, 3) float64, ``pixels`` (N,) int64 and
+    ``labels`` (N,) int32 the samples, ``planes`` (P, 4) float64, ``indptr`` / ``indices``
+    int64 the graph's adjacency, ``tiles`` the samples by image tile (:func:`sample_tiles`),
+    ``shape`` (H, W), ``cam`` (3, 3) float64 intrinsics (or (0, 3)), ``scale`` and
+    ``center`` the normalisation. Returns the (G,) int64 rows ``v`` left for a point index.
+    """
+    h, w = shape
+    tile_start, tile_xyz, tile_ids = tiles
+    in_image = cam.shape[0] == 3
+    gap = np.empty(0 if in_image else stop - start, dtype=np.int64)
+    n_gap = 0
     best_d = np.empty(k)
     best_i = np.empty(k, dtype=np.int64)
-    for v in range(n_pix):
+    no_planes = planes.shape[0] == 0
+    for v in range(start, stop):
         s = near[v]
+        pix = all_pixels[v]
+        lab = labels[s]
+        if pixels[s] == pix:  # a sampled pixel keeps its own label
+            out[pix] = lab
+            point_labels[v] = lab
+            continue
         x0, x1, x2 = all_points[v, 0], all_points[v, 1], all_points[v, 2]
         d2 = (x0 - points[s, 0]) ** 2 + (x1 - points[s, 1]) ** 2 + (x2 - points[s, 2]) ** 2
         if d2 > radius2:
-            gap[v] = True
+            lab = 0
+            if in_image:
+                found = _nearest_in_image(pix, x0, x1, x2, tile_start, tile_xyz, tile_ids, w,
+                                          h, cam, scale, center, radius2, best_d, best_i)
+                lab = _closest_of(best_i, found, labels, planes, x0, x1, x2)
+            else:
+                gap[n_gap] = v
+                n_gap += 1
+            out[pix] = lab
+            point_labels[v] = lab
             continue
-        lab = labels[s]
-        if lab == 0 or planes.shape[0] == 0:
-            full[v] = lab
+        if lab == 0 or no_planes or not mixed[s]:
+            out[pix] = lab
+            point_labels[v] = lab
             continue
         q = planes[lab - 1]
         if abs(q[0] * x0 + q[1] * x1 + q[2] * x2 + q[3]) <= tolerance:
-            full[v] = lab
+            out[pix] = lab
+            point_labels[v] = lab
             continue
         # The k nearest candidates within the radius, by insertion into a sorted list.
         found = 0
@@ -78,15 +276,7 @@ def propagate_labels(all_points: np.ndarray, near: np.ndarray, points: np.ndarra
             best_d[y] = dt
             best_i[y] = t
             found = min(found + 1, k)
-        if labels[best_i[0]] == 0:
-            continue
-        best_r = np.inf
-        for y in range(found):
-            lab = labels[best_i[y]]
-            if lab > 0:
-                q = planes[lab - 1]
-                r = abs(q[0] * x0 + q[1] * x1 + q[2] * x2 + q[3])
-                if r < best_r:
-                    best_r = r
-                    full[v] = lab
-    return full, gap
+        lab = _closest_of(best_i, found, labels, planes, x0, x1, x2)
+        out[pix] = lab
+        point_labels[v] = lab
+    return gap[:n_gap]

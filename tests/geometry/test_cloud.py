@@ -185,6 +185,35 @@ def test_propagation_kernel_follows_its_rule_and_nearly_matches_exact_3d_neighbo
     assert np.mean(got.ravel()[valid] != exact.ravel()[valid]) < 0.005
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_pixels_across_a_depth_jump_find_their_samples_in_the_image_as_in_the_point_index(
+        seed):
+    # The room with a box in front of the back wall: the pixels along its outline whose
+    # image-nearest sample lies on the other side of the jump look up their nearest samples
+    # in 3D around them in the image (the intrinsics bound the window), which must give what
+    # the point index gives; skewed intrinsics too.
+    import dataclasses
+
+    rgb, depth, normals, _, K = room_cues(96, 128, seed=seed)
+    rng = np.random.default_rng(seed)
+    depth = (depth * (1 + 0.01 * rng.normal(size=depth.shape))).astype(np.float32)
+    depth[30:60, 40:90] *= 0.5
+    K[0, 1] = (0.0, 3.0, -2.0)[seed]
+    frame = Frame(rgb=rgb, K=K, depth=depth, normals=normals)
+    cloud = PlaneCloud.from_frame(frame, max_points=2000, rng=rng)
+    labels = rng.integers(0, 4, cloud.size).astype(np.int32)
+    planes = cloud.plane_to_normalised(ROOM[:3])
+    graph = NeighbourGraph.build(cloud.points, 8)
+    radius = PROPAGATION_RADIUS_FACTOR * graph.spacing
+    near = cloud.image_nearest_sample
+    across = np.linalg.norm(cloud.all_points - cloud.points[near], axis=1) > radius
+    assert across.sum() > 50
+    got = cloud.propagate(labels, planes, tolerance=0.005, graph=graph)
+    indexed = dataclasses.replace(cloud, intrinsics=None)
+    np.testing.assert_array_equal(got, indexed.propagate(labels, planes, tolerance=0.005,
+                                                         graph=graph))
+
+
 def test_propagation_in_threaded_chunks_gives_the_single_thread_labels(monkeypatch):
     cloud, labels, planes = noisy_room_cloud(1)
     graph = NeighbourGraph.build(cloud.points, 8)

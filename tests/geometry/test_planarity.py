@@ -5,7 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from monoplane.geometry.flatness import interior_labels, noise_floor_deg, normal_spread_deg
+from monoplane.geometry.flatness import (
+    interior_labels,
+    interior_samples,
+    noise_floor_deg,
+    normal_spread_deg,
+)
 
 
 def _unit(x: np.ndarray) -> np.ndarray:
@@ -19,6 +24,24 @@ def test_interior_labels_drop_a_band_along_every_border() -> None:
     # Columns 4..7 are within 2 px of the other label; the image border does not count.
     assert (inner[:, :4] == 1).all() and (inner[:, 4:8] == 0).all() and (inner[:, 8:] == 2).all()
     np.testing.assert_array_equal(interior_labels(labels, 0), labels)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_interior_samples_are_the_sampled_interior_labels(seed: int) -> None:
+    # Reference: the full-resolution erosion, masked by the depth, then sampled. Blocky label
+    # maps with holes, odd sizes, radii 0-6 and steps 1-5; labels up to 70 000 compare
+    # modulo 65536 as the erosion's uint16 image does.
+    rng = np.random.default_rng(seed)
+    h, w = rng.integers(5, 90, size=2)
+    coarse = rng.integers(0, 4, size=(h // 4 + 1, w // 4 + 1))
+    labels = np.kron(coarse, np.ones((4, 4), int))[:h, :w].astype(np.int32)
+    labels[rng.random((h, w)) < 0.02] = rng.integers(0, 70_000)
+    depth = rng.uniform(0.5, 3.0, (h, w)).astype(np.float32)
+    depth[rng.random((h, w)) < 0.1] = 0.0
+    for radius in range(7):
+        step = int(rng.integers(1, 6))
+        want = (interior_labels(labels, radius) * (depth > 0))[::step, ::step].ravel()
+        np.testing.assert_array_equal(interior_samples(labels, depth, radius, step), want)
 
 
 def test_flat_noisy_patch_spreads_by_its_noise_and_a_sphere_by_its_curvature() -> None:

@@ -104,3 +104,43 @@ def test_triplet_planes_match_the_vectorised_reference():
     np.testing.assert_array_equal(valid, ref_valid)
     assert not valid[:60].any() and valid[70:].all()
     np.testing.assert_allclose(planes, ref, rtol=1e-12, atol=1e-15)
+
+
+def test_per_label_sums_add_each_labels_points_in_order_to_the_bit():
+    # Reference: per label, in point order, centroid sums, then centred products, then the
+    # squared distances through the centroid, in plain Python floats. Runs of one label (as
+    # along image rows, summed in registers) and scattered labels, int32 and int64, some out
+    # of range, all give these bits.
+    rng = np.random.default_rng(3)
+    pts = rng.normal(size=(3000, 3)) * [3.0, 2.0, 0.01] + [5.0, -2.0, 40.0]
+    runs = np.repeat(rng.integers(-1, 9, 300), 10)
+    for labels in (runs, rng.integers(0, 8, 3000), runs.astype(np.int32)):
+        params, rmse, count = fit_planes_per_label(pts, labels, 7)
+        for k in range(1, 8):
+            members = [tuple(map(float, p)) for p, lab in zip(pts, labels, strict=True)
+                       if lab == k]
+            assert count[k - 1] == len(members)
+            if len(members) < 3:
+                continue
+            c = [0.0, 0.0, 0.0]
+            for p in members:
+                c = [c[j] + p[j] for j in range(3)]
+            c = [x / len(members) for x in c]
+            m = [0.0] * 6
+            for p in members:
+                x = [p[j] - c[j] for j in range(3)]
+                m = [m[0] + x[0] * x[0], m[1] + x[0] * x[1], m[2] + x[0] * x[2],
+                     m[3] + x[1] * x[1], m[4] + x[1] * x[2], m[5] + x[2] * x[2]]
+            scatter = np.array([[m[0], m[1], m[2]], [m[1], m[3], m[4]], [m[2], m[4], m[5]]])
+            normal = np.linalg.eigh(scatter[None])[1][0, :, 0]
+            d = -float(np.einsum("pc,pc->p", normal[None], np.array([c]))[0])
+            if d < 0:
+                normal, d = -normal, -d
+            np.testing.assert_array_equal(params[k - 1], [*normal, d])
+            total = 0.0
+            for p in members:
+                r = 0.0
+                for j in range(3):
+                    r += normal[j] * (p[j] - c[j])
+                total += r * r
+            assert rmse[k - 1] == np.sqrt(total / len(members))
