@@ -461,30 +461,12 @@ def _ascending(values: np.ndarray) -> bool:
     return True
 
 
-@kernel
 def _pool_edges(num_nodes: int, edges: np.ndarray, pool: np.ndarray
                 ) -> tuple[np.ndarray, np.ndarray]:
     """(E', 2) edges among the (M,) ``pool`` in pool positions and their (E',) rows."""
     local = np.full(num_nodes, -1, dtype=np.int64)
-    for i in range(pool.shape[0]):
-        local[pool[i]] = i
-    # Counted first, so that the outputs are allocated at their size: untouched tails of
-    # oversized buffers and the copies that trim them cost page faults on every call.
-    count = 0
-    for e in range(edges.shape[0]):
-        if local[edges[e, 0]] >= 0 and local[edges[e, 1]] >= 0:
-            count += 1
-    out = np.empty((count, 2), dtype=np.int64)
-    ids = np.empty(count, dtype=np.int64)
-    count = 0
-    for e in range(edges.shape[0]):
-        a, b = local[edges[e, 0]], local[edges[e, 1]]
-        if a >= 0 and b >= 0:
-            out[count, 0] = a
-            out[count, 1] = b
-            ids[count] = e
-            count += 1
-    return out, ids
+    local[pool] = np.arange(pool.shape[0], dtype=np.int64)
+    return _kept_edges(edges, local)
 
 
 @kernel
