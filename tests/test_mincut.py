@@ -161,7 +161,7 @@ def arc_network(n, tails, heads, caps, rev):
     head = np.empty(2 * tails.size, dtype=np.int32)
     sister = np.empty(2 * tails.size, dtype=np.int32)
     rcap = np.empty(2 * tails.size)
-    for u, v, c, r in zip(tails, heads, caps, rev):
+    for u, v, c, r in zip(tails, heads, caps, rev, strict=True):
         fill[u] -= 1
         a = fill[u]
         fill[v] -= 1  # after the tail's: a self-loop's two arcs take two slots

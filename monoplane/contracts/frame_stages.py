@@ -385,9 +385,9 @@ class Labeler(Stage):
 
         The RANSAC driver calls this on a background thread for the first pool and as soon
         as a plane's inliers leave the pool, while the next plane's hypotheses are searched,
-        and waits for it before the first :meth:`label` call on that pool; per-pool results should be kept in
-        ``context``, where :meth:`label` finds them again (the default builds the pool's
-        subgraph, which :meth:`NeighbourGraph.subgraph
+        and waits for it before the first :meth:`label` call on that pool; per-pool results
+        should be kept in ``context``, where :meth:`label` finds them again (the default
+        builds the pool's subgraph, which :meth:`NeighbourGraph.subgraph
         <monoplane.geometry.graph.NeighbourGraph.subgraph>` keeps). It must not change what
         :meth:`label` returns.
         """

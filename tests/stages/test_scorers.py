@@ -104,7 +104,7 @@ def test_normal_cells_bound_their_normals_and_skipping_changes_nothing():
     # Cells computed once for the whole cloud group any pool as its own computation does.
     cells = normal_cells(cloud.normals, NORMAL_CELLS)
     for a, b in zip(bin_points(cloud.points, cloud.normals, pool, 0.3, cells),
-                    bin_points(cloud.points, cloud.normals, pool, 0.3)):
+                    bin_points(cloud.points, cloud.normals, pool, 0.3), strict=True):
         np.testing.assert_array_equal(a, b)
     np.testing.assert_array_equal(cells[pool][np.argsort(cells[pool], kind="stable")],
                                   cell)
