@@ -1,4 +1,5 @@
-"""Time ``monoplane.algorithm.mincut`` against PyMaxflow's vectorised API on the pipeline's own graphs.
+"""Time ``monoplane.algorithm.mincut`` against PyMaxflow's vectorised API on the pipeline's own
+graphs.
 
 Runs the ``monoplane`` preset on synthetic frames (``monoplane.synth.generate(seed, "mild")``)
 at 256x192 and 640x480, records every graph the graph-cut labeler solves (by wrapping the
