@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from monoplane import Pipeline, load_frame, save_reconstruction
+from monoplane import Pipeline, load_frame, save
 from monoplane.contracts import Refiner
 from monoplane.errors import StageError
 from monoplane.evaluation.segmentation import segmentation_scores
@@ -50,7 +50,7 @@ def test_run_is_deterministic_for_a_seed(clean_view):
 
 def test_outputs_follow_the_on_disk_contract(clean_view, tmp_path):
     rec = Pipeline.from_preset("monoplane").run(clean_view.frame)
-    save_reconstruction(rec, tmp_path / "out")
+    save(rec, tmp_path / "out")
     out = tmp_path / "out"
     assert sorted(p.name for p in out.iterdir()) == [
         "config.toml", "depth_planar.npy", "labels.png", "planes.glb", "planes.json",
