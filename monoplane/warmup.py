@@ -138,11 +138,10 @@ def _workloads(report: bool = True) -> Iterator[tuple[str, Callable[[], Any]]]:
     for preset in config.list_presets():
         yield f"preset {preset}", functools.partial(_run_preset, preset, frame)
     yield "depth only", lambda: Pipeline.from_preset("monoplane").run(frame.with_(normals=None))
+    # range estimates its normals by the box method and samples on the pixel lattice, as
+    # rgbd-fast does on the frame's own normals.
     yield "range image", lambda: Pipeline.from_preset("range").run(
         frame.with_(rgb=None, normals=None))
-    # The box method of normals from depth is an option no preset sets.
-    yield "depth only, box normals", lambda: Pipeline.from_preset(
-        "monoplane", ["cues.normals_method=box"]).run(frame.with_(normals=None))
 
     def save() -> None:
         rec = Pipeline.from_preset("monoplane").run(frame)
@@ -158,9 +157,6 @@ def _workloads(report: bool = True) -> Iterator[tuple[str, Callable[[], Any]]]:
     # planes_from_triplets takes; and the presets' samplers let it search in one compiled
     # call, so a sampler that does not (napsac) makes it call the scorer batch by batch.
     yield "triplet planes", lambda: planes_from_triplets(np.eye(3)[None])
-    # No preset samples on the pixel lattice: its graph's turn weights get a run of their own.
-    yield "pixel lattice", lambda: Pipeline.from_preset(
-        "monoplane-nocrf", overrides=["ransac.sampling=grid"]).run(frame)
     # The labelers hand the max-flow a network in its own arc layout; the general binary
     # energies (and plugins) give it edge lists.
     yield "max-flow of an edge list", lambda: min_cut(

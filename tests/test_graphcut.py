@@ -19,10 +19,9 @@ from monoplane.algorithm.graphcut import (
     normal_costs,
     pool_payback,
     proximity_weights,
-    shrink_subgraph,
 )
 from monoplane.errors import InvalidInput
-from monoplane.geometry.graph import NeighbourGraph
+from monoplane.geometry.graph import NeighbourGraph, shrink_subgraph
 
 
 def brute_force(e: BinaryEnergy) -> tuple[np.ndarray, float]:

@@ -42,9 +42,6 @@ from monoplane.algorithm.graph_costs import (  # noqa: F401
 )
 from monoplane.algorithm.mincut import min_cut, min_cut_arcs
 from monoplane.errors import InvalidInput
-
-# Moved to the graph, whose subgraph cache uses it; re-exported.
-from monoplane.geometry.graph import shrink_subgraph  # noqa: F401
 from monoplane.jit import kernel
 
 

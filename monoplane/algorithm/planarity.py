@@ -57,7 +57,6 @@ from monoplane.geometry.flatness import (
     quadric_ratio,
     spread_of_groups,
 )
-from monoplane.jit import kernel
 
 
 @dataclass
@@ -174,26 +173,10 @@ def drop_planes(rec: Reconstruction, drop: np.ndarray) -> Reconstruction:
     remap = np.zeros(rec.num_planes + 1, dtype=np.int32)
     remap[1:][keep] = np.arange(1, int(keep.sum()) + 1, dtype=np.int32)
     assert rec.rmse is not None and rec.support is not None
-    return Reconstruction(frame=rec.frame, labels=_relabel(rec.labels, remap),
+    return Reconstruction(frame=rec.frame, labels=remap[rec.labels],
                           planes=rec.planes[keep],
                           rmse=rec.rmse[keep], support=rec.support[keep], config=rec.config,
                           timings=rec.timings)
-
-
-def _relabel(labels: np.ndarray, remap: np.ndarray) -> np.ndarray:
-    """``remap[labels]`` of an (H, W) label map in one compiled pass (NumPy first widens the
-    300 000 indices of a 640x480 map to int64)."""
-    return _remapped(np.ascontiguousarray(labels, dtype=np.int32), remap)
-
-
-@kernel
-def _remapped(labels: np.ndarray, remap: np.ndarray) -> np.ndarray:
-    """(H, W) int32 ``remap[labels]`` of (H, W) int32 labels and (P + 1,) int32 ``remap``."""
-    src = labels.reshape(-1)
-    out = np.empty(src.shape[0], dtype=np.int32)
-    for i in range(src.shape[0]):
-        out[i] = remap[src[i]]
-    return out.reshape(labels.shape)
 
 
 def check_image(rec: Reconstruction, cfg: PlanarityConfig,

@@ -45,6 +45,7 @@ from monoplane.contracts.frame_stages import (  # noqa: F401
     Scorer,
     TripletDraws,
 )
+from monoplane.contracts.frame_work import WorkAhead  # noqa: F401
 from monoplane.contracts.scene_stages import (  # noqa: F401
     Adjuster,
     FeatureMatcher,

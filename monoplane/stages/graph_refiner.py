@@ -29,14 +29,13 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
 from monoplane.algorithm.graphcut import proximity_weights
 from monoplane.algorithm.label_mean_field import candidate_labels, potts_mean_field
-from monoplane.contracts import ProximityAffinities, RansacParams, Refiner, Stage, param
+from monoplane.contracts import ProximityAffinities, RansacParams, Refiner, Stage, WorkAhead, param
 from monoplane.datamodel import Frame, Reconstruction, orient_towards_camera
 from monoplane.errors import check_config
 from monoplane.geometry.cloud import PlaneCloud
@@ -44,7 +43,7 @@ from monoplane.geometry.components import graph_components, same_label_component
 from monoplane.geometry.graph import NeighbourGraph, pixel_grid_edges
 from monoplane.geometry.planes import fit_planes_per_label
 from monoplane.hookspecs import hookimpl
-from monoplane.jit import chunks, in_background, kernel, run_threaded, thread_budget
+from monoplane.jit import chunks, kernel, run_threaded
 
 #: Points per thread below which the data costs are computed on one thread.
 _THREADED_NODES = 4096
@@ -128,12 +127,14 @@ def pixel_graph(cloud: PlaneCloud, max_jump: float) -> NeighbourGraph:
     max_jump : float
         Relative jump threshold, between neighbouring pixels and lattice nodes alike.
     """
-    pixels, (h, w), _ = cloud.pixel_grid()
-    index = np.full(h * w, -1, dtype=np.int64)
-    index[pixels] = np.arange(cloud.size)
-    # A lattice cloud's neighbours are the lattice's: its rows and columns form the grid.
-    step = cloud.stride or 1
-    lattice = index.reshape(h, w)[step // 2::step, step // 2::step]
+    # A lattice cloud's neighbours are the lattice's: its rows and columns form the grid;
+    # a cloud of every valid pixel is its own lattice.
+    lattice = cloud.lattice
+    if lattice is None:
+        pixels, (h, w), _ = cloud.pixel_grid()
+        lattice = np.full(h * w, -1, dtype=np.int64)
+        lattice[pixels] = np.arange(cloud.size)
+        lattice = lattice.reshape(h, w)
     # The cloud is centred on the scene; points are compared at their own depth scale.
     edges, gap, indptr, indices = pixel_grid_edges(np.ascontiguousarray(lattice), cloud.points,
                                                cloud.center / cloud.scale, float(max_jump),
@@ -228,7 +229,7 @@ def _stable_order(labels: np.ndarray, counts: np.ndarray) -> np.ndarray:
     return order
 
 
-class GraphCrfRefiner(Refiner):
+class GraphCrfRefiner(WorkAhead, Refiner):
     """Mean-field multi-plane CRF on the kNN graph, component split, refit, coplanar merge."""
 
     name = "graph-crf"
@@ -383,7 +384,6 @@ class GraphCrfRefiner(Refiner):
             labels = merged
         return labels, planes
 
-    _pending: tuple[Frame, Callable[[], _FrameGraph]] | None = None
     #: The graph :meth:`refine` built (or picked up) and its weighted adjacency, for the
     #: :meth:`refine_cloud` call it makes next.
     _known: tuple[NeighbourGraph, _Adjacency] | None = None
@@ -393,8 +393,8 @@ class GraphCrfRefiner(Refiner):
         background thread while the RANSAC runs (they do not depend on the labels);
         :meth:`refine` picks them up. With a budget of one thread :meth:`refine` builds
         them itself."""
-        if frame.depth is not None and frame.normals is not None and thread_budget() > 1:
-            self._pending = (frame, in_background(lambda: self._frame_graph(frame)))
+        if frame.depth is not None and frame.normals is not None:
+            self._start_ahead(frame, self._frame_graph)
 
     def _frame_graph(self, frame: Frame) -> _FrameGraph:
         """The label-independent part of :meth:`refine`: the cloud of the frame's valid
@@ -427,11 +427,7 @@ class GraphCrfRefiner(Refiner):
             the camera frame and depth units, facing the camera.
         """
         frame = rec.frame
-        pending, self._pending = self._pending, None
-        if pending is not None and pending[0] is frame:
-            cloud, graph, adj = pending[1]()
-        else:
-            cloud, graph, adj = self._frame_graph(frame)
+        cloud, graph, adj = self._take_ahead(frame, self._frame_graph)
         pixels = cloud.pixel_grid()[0]
         start = rec.labels.ravel()[pixels]
         planes = cloud.plane_to_normalised(rec.planes) if rec.num_planes else np.zeros((0, 4))
@@ -440,12 +436,12 @@ class GraphCrfRefiner(Refiner):
         # Off the lattice, a pixel takes the plane it lies closest to among its nearest
         # lattice nodes' labels (non-planar when the nearest node is): creases stay where the
         # planes meet, not on the lattice's steps.
-        image = cloud.propagate(labels, planes, graph=graph).ravel()
+        image, on_valid = cloud.propagate_pixels(labels, planes, graph=graph)
         # The fit runs on the normalised points of every valid pixel, which the cloud holds
         # already: a least-squares plane commutes with the similarity back to the camera.
-        fitted, rmse, support = fit_planes_per_label(cloud.all_points, image[cloud.all_pixels],
+        fitted, rmse, support = fit_planes_per_label(cloud.all_points, on_valid,
                                                      int(labels.max(initial=0)))
-        return Reconstruction(frame=frame, labels=image.reshape(frame.shape),
+        return Reconstruction(frame=frame, labels=image,
                               planes=orient_towards_camera(cloud.plane_to_camera(fitted))
                               if len(fitted) else np.zeros((0, 4)),
                               rmse=rmse * cloud.scale, support=support,

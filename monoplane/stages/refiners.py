@@ -9,7 +9,6 @@
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -22,14 +21,13 @@ from monoplane.algorithm.regions import (
     gate_filled_pixels,
     scaled_min_area,
 )
-from monoplane.contracts import RansacParams, Refiner, Stage, param
+from monoplane.contracts import RansacParams, Refiner, Stage, WorkAhead, param
 from monoplane.datamodel import Frame, Reconstruction
 from monoplane.datamodel.pinhole import pixel_rays
 from monoplane.errors import ConfigError, InvalidInput, check_config
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.hookspecs import hookimpl
-from monoplane.jit import in_background, thread_budget
 
 
 @dataclass
@@ -68,7 +66,7 @@ class NoRefiner(Refiner):
         return labels, planes
 
 
-class DenseCrfRefiner(Refiner):
+class DenseCrfRefiner(WorkAhead, Refiner):
     """Dense CRF over the label map, then connected components, small-region removal, refit.
 
     The unary term gives each pixel's RANSAC label probability ``confidence`` and spreads the
@@ -177,7 +175,6 @@ class DenseCrfRefiner(Refiner):
         except InvalidInput as exc:
             raise ConfigError(f"refiner: {exc}") from exc
 
-    _pending: tuple[Frame, Callable[[], _FrameWork]] | None = None
     #: The pixel rays of the last camera seen, keyed by its intrinsics and image size: the
     #: frames of a sequence share them, and building them costs more than the points do.
     _rays: tuple[bytes, tuple[int, int], np.ndarray] | None = None
@@ -187,9 +184,8 @@ class DenseCrfRefiner(Refiner):
         background thread (they do not depend on the labels); :meth:`refine` picks them up.
         With a budget of one thread (batch workers) :meth:`refine` builds them itself, so
         that the time stays in the refiner's."""
-        if frame.depth is not None and thread_budget() > 1:
-            # One thread: the other core runs the RANSAC's plane loop meanwhile.
-            self._pending = (frame, in_background(lambda: self._frame_work(frame, False)))
+        if frame.depth is not None:
+            self._start_ahead(frame, lambda f: self._frame_work(f, False))
 
     def _frame_work(self, frame: Frame, threaded: bool = True) -> _FrameWork:
         """The label-independent part of :meth:`refine` for ``frame`` (which has depth); with
@@ -236,9 +232,7 @@ class DenseCrfRefiner(Refiner):
         if frame.depth is None:
             raise InvalidInput(f"{frame.name}: the dense-crf refiner needs a depth map")
         start = time.perf_counter()
-        pending, self._pending = self._pending, None
-        work = (pending[1]() if pending is not None and pending[0] is frame
-                else self._frame_work(frame))
+        work = self._take_ahead(frame, self._frame_work)
         labels = dense_crf(rec.labels, rec.num_planes + 1, self.crf, rgb=frame.rgb,
                            depth=frame.depth, normals=frame.normals, grid=work.grid)
         c = self.config
