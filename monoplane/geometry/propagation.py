@@ -150,15 +150,7 @@ def _nearest_in_image(pix: int, x0: float, x1: float, x2: float, start: np.ndarr
                     t = ids[p]
                     if d2 > worst or (d2 == worst and (found < k or t >= worst_i)):
                         continue
-                    y = min(found, k - 1)
-                    while y > 0 and (best_d[y - 1] > d2 or (best_d[y - 1] == d2
-                                                              and best_i[y - 1] > t)):
-                        best_d[y] = best_d[y - 1]
-                        best_i[y] = best_i[y - 1]
-                        y -= 1
-                    best_d[y] = d2
-                    best_i[y] = t
-                    found = min(found + 1, k)
+                    found = _insert(best_d, best_i, found, d2, t, True)
                     if found == k:
                         worst, worst_i = best_d[k - 1], best_i[k - 1]
         d += 1
@@ -166,6 +158,25 @@ def _nearest_in_image(pix: int, x0: float, x1: float, x2: float, start: np.ndarr
             reach = worst
             du, dv = _reach(np.sqrt(worst) * scale, z, ra, rb, cam, w, h)
     return found
+
+
+@inline
+def _insert(best_d: np.ndarray, best_i: np.ndarray, found: int, d2: float, t: int,
+            by_index: bool) -> int:
+    """Insert candidate ``t`` at squared distance ``d2`` into the ascending (k,) lists
+    ``best_d`` / ``best_i`` that hold ``found`` of at most k candidates (the k-th drops out
+    when they are full); returns the new count. Among equal distances ``by_index`` puts the
+    lower index first (the point index's order), else the candidate inserted first."""
+    k = best_d.shape[0]
+    y = min(found, k - 1)
+    while y > 0 and (best_d[y - 1] > d2
+                     or (by_index and best_d[y - 1] == d2 and best_i[y - 1] > t)):
+        best_d[y] = best_d[y - 1]
+        best_i[y] = best_i[y - 1]
+        y -= 1
+    best_d[y] = d2
+    best_i[y] = t
+    return min(found + 1, k)
 
 
 @inline
@@ -268,14 +279,7 @@ def propagate_pixels(out: np.ndarray, point_labels: np.ndarray, all_pixels: np.n
             dt = (x0 - points[t, 0]) ** 2 + (x1 - points[t, 1]) ** 2 + (x2 - points[t, 2]) ** 2
             if dt > radius2 or (found == k and dt >= best_d[k - 1]):
                 continue
-            y = min(found, k - 1)
-            while y > 0 and best_d[y - 1] > dt:
-                best_d[y] = best_d[y - 1]
-                best_i[y] = best_i[y - 1]
-                y -= 1
-            best_d[y] = dt
-            best_i[y] = t
-            found = min(found + 1, k)
+            found = _insert(best_d, best_i, found, dt, t, False)
         lab = _closest_of(best_i, found, labels, planes, x0, x1, x2)
         out[pix] = lab
         point_labels[v] = lab
