@@ -306,22 +306,26 @@ def lattice_largest_component(members: np.ndarray, lattice: np.ndarray, points: 
 @kernel
 def _lattice_largest_component(members: np.ndarray, lattice: np.ndarray, points: np.ndarray,
                                shift: np.ndarray, max_jump: float, reach: int) -> np.ndarray:
-    """:func:`lattice_largest_component`."""
+    """:func:`lattice_largest_component`.
+
+    It runs once per plane the search finds, on a cloud of 40 000 points of which a plane
+    holds a few per cent: every pass is over the members or the nodes a line visits, never
+    over all points (distances from the camera as they are needed, the union-find forest
+    and the set sizes only at the members).
+    """
     n = members.shape[0]
-    parent = np.arange(n)
-    distance = np.zeros(n)  # from the camera, of the members and the nodes between them
-    for p in range(n):
-        x = points[p, 0] + shift[0]
-        y = points[p, 1] + shift[1]
-        z = points[p, 2] + shift[2]
-        distance[p] = np.sqrt(x * x + y * y + z * z)
+    ids = np.flatnonzero(members)  # ascending: the order of the result
+    parent = np.empty(n, dtype=np.int64)  # read and written at members only
+    for p in ids:
+        parent[p] = p
     rows, cols = lattice.shape
     for v in range(rows):
         for u in range(cols):
             a = lattice[v, u]
             if a < 0 or not members[a]:
                 continue
-            limit = max_jump * distance[a]
+            distance = _camera_distance(points, shift, a)
+            limit = max_jump * distance
             for dv, du in ((0, 1), (1, -1), (1, 0), (1, 1)):
                 vv, uu = v, u
                 for _ in range(reach):
@@ -339,9 +343,34 @@ def _lattice_largest_component(members: np.ndarray, lattice: np.ndarray, points:
                         if dx * dx + dy * dy + dz * dz <= limit * limit:
                             _union(parent, a, b)
                         break
-                    if distance[b] > distance[a] - limit:
+                    if _camera_distance(points, shift, b) > distance - limit:
                         break  # not an occluder in front of the plane: its part ends here
-    return _largest_root_members(members, parent)
+    # The largest set (the lowest member's on ties), as _largest_root_members finds it.
+    size = np.empty(n, dtype=np.int64)  # at the roots, which are members
+    for p in ids:
+        size[p] = 0
+    root = np.empty(ids.shape[0], dtype=np.int64)
+    for k in range(ids.shape[0]):
+        r = ids[k]
+        while parent[r] != r:
+            r = parent[r]
+        root[k] = r
+        size[r] += 1
+    best = -1
+    for k in range(ids.shape[0]):  # ascending, so ties go to the lowest member's set
+        if best < 0 or size[root[k]] > size[best]:
+            best = root[k]
+    return root == best
+
+
+@inline
+def _camera_distance(points: np.ndarray, shift: np.ndarray, p: int) -> float:
+    """Distance from the camera of normalised point ``p`` of (N, 3) ``points``, whose frame
+    has the camera at ``-shift``."""
+    x = points[p, 0] + shift[0]
+    y = points[p, 1] + shift[1]
+    z = points[p, 2] + shift[2]
+    return np.sqrt(x * x + y * y + z * z)
 
 
 @inline
