@@ -398,8 +398,8 @@ class GraphCrfRefiner(WorkAhead, Refiner):
 
     def _frame_graph(self, frame: Frame) -> _FrameGraph:
         """The label-independent part of :meth:`refine`: the cloud of the frame's valid
-        pixels (on a lattice when there are more than ``max_points``), its pixel graph and
-        the graph's weighted adjacency."""
+        pixels (on a lattice when there are more than ``max_points``, then with its
+        image-nearest nodes cached), its pixel graph and the graph's weighted adjacency."""
         cloud = lattice_cloud(frame, self.config.max_points)
         jump = self.config.max_jump
         if cloud.stride is not None and cloud.stride > 1:
@@ -410,6 +410,11 @@ class GraphCrfRefiner(WorkAhead, Refiner):
             focal = float(min(frame.K[0, 0], frame.K[1, 1]))
             jump = max(jump, _INCIDENCE_SPREAD * cloud.stride / max(focal, 1e-9))
         graph = pixel_graph(cloud, jump)
+        if cloud.subsampled:
+            # The image-nearest lattice node of every pixel (a distance transform, 2-5 ms of
+            # CPU), which refine's carry to every pixel starts from: it depends on the lattice
+            # only, so it is cached on the cloud here rather than on refine's path.
+            _ = cloud.image_nearest_sample
         return cloud, graph, self._adjacency(cloud, graph)
 
     def refine(self, rec: Reconstruction, params: RansacParams) -> Reconstruction:
