@@ -11,6 +11,7 @@ from monoplane.algorithm.graphcut import (
     data_costs,
     degree_normalisation,
     energy,
+    gc_ransac_cut_energy,
     gc_ransac_energy,
     minimize,
     minimize_gc_ransac,
@@ -183,6 +184,19 @@ def test_payback_kept_per_pool_gives_the_same_result(seed):
     assert with_it[1] == without[1]
     with pytest.raises(InvalidInput, match="one entry per point"):
         minimize_gc_ransac(f0, f1, edges, cut, lam, scale, payback=payback[:-1])
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_energy_left_out_is_the_same_float_when_summed_later(seed):
+    # The graph-cut labelers sum the energy only when the driver reads it: the same cut,
+    # and the same float as the one the minimiser returns with it.
+    f0, f1, g1, edges, cut, lam, scale = random_gc_problem(seed)
+    labels, value = minimize_gc_ransac(f0, f1 + g1, edges, cut, lam, scale)
+    alone, none = minimize_gc_ransac(f0, f1 + g1, edges, cut, lam, scale, with_energy=False)
+    assert none is None
+    np.testing.assert_array_equal(alone, labels)
+    assert gc_ransac_cut_energy(f0, f1 + g1, edges, cut, lam, alone, scale) == value
+    assert gc_ransac_cut_energy(f0, f1 + g1, edges, cut, lam, ~alone, scale) >= value
 
 
 def test_submodularity_is_checked_whenever_a_cut_can_be_too_cheap():

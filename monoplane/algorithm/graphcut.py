@@ -284,8 +284,8 @@ def pool_payback(num_nodes: int, edges: np.ndarray, cut_cost: np.ndarray | float
 
 def minimize_gc_ransac(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray,
                        cut_cost: np.ndarray | float, lambda_: float,
-                       pairwise_scale: float = 1.0, payback: np.ndarray | None = None
-                       ) -> tuple[np.ndarray, float]:
+                       pairwise_scale: float = 1.0, payback: np.ndarray | None = None,
+                       with_energy: bool = True) -> tuple[np.ndarray, float | None]:
     """Exact minimiser and minimum of the (proximity) GC-RANSAC energy, without edge tables.
 
     The same energy as ``gc_ransac_energy(f0, f1, edges, cut_cost, lambda_, g1,
@@ -322,13 +322,16 @@ def minimize_gc_ransac(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray,
     payback : numpy.ndarray, optional
         (M,) :func:`pool_payback` of these edges, cut costs, λ and s, when the caller keeps
         it; computed here when omitted.
+    with_energy : bool
+        False: the energy is not summed (a pass over every point and edge) and None is
+        returned in its place; :func:`gc_ransac_cut_energy` gives it later.
 
     Returns
     -------
     labels : numpy.ndarray
         (M,) bool minimiser (True = inlier).
-    energy : float
-        Its energy.
+    energy : float or None
+        Its energy (None without ``with_energy``).
 
     Raises
     ------
@@ -364,7 +367,35 @@ def minimize_gc_ransac(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray,
     labels = np.zeros(f0.shape[0], dtype=bool)
     if nodes.size:
         labels[nodes] = min_cut_arcs(first, head, sister, rcap, terminal)
+    if not with_energy:
+        return labels, None
     return labels, float(_gc_ransac_energy(f0, data1, edges, cut, lam, ls, labels))
+
+
+def gc_ransac_cut_energy(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray,
+                         cut_cost: np.ndarray | float, lambda_: float, labels: np.ndarray,
+                         pairwise_scale: float = 1.0) -> float:
+    """The energy :func:`minimize_gc_ransac` returns with its minimiser, of any labelling.
+
+    Parameters
+    ----------
+    f0, data1, edges, cut_cost, lambda_, pairwise_scale
+        As for :func:`minimize_gc_ransac` (unvalidated).
+    labels : numpy.ndarray
+        (M,) bool labelling (True = inlier).
+
+    Returns
+    -------
+    float
+        Its energy, summed as :func:`minimize_gc_ransac` sums it (the same float).
+    """
+    edges = np.ascontiguousarray(np.asarray(edges, dtype=np.int64).reshape(-1, 2))
+    cut = np.ascontiguousarray(np.broadcast_to(np.asarray(cut_cost, dtype=np.float64),
+                                               edges.shape[:1]))
+    return float(_gc_ransac_energy(np.ascontiguousarray(f0, dtype=np.float64),
+                                   np.ascontiguousarray(data1, dtype=np.float64), edges, cut,
+                                   float(lambda_), float(lambda_ * pairwise_scale),
+                                   np.ascontiguousarray(labels, dtype=np.bool_)))
 
 
 @kernel
