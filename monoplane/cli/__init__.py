@@ -14,6 +14,7 @@ import sys
 import traceback
 
 from monoplane.errors import MonoplaneError
+from monoplane.host.allocator import keep_freed_memory
 from monoplane.version import __version__
 
 #: Subcommand modules, in the order ``monoplane --help`` lists them.
@@ -59,6 +60,7 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return EXIT_USER_ERROR
+    keep_freed_memory()  # this process runs frame after frame: see monoplane.host.allocator
     debug = bool(os.environ.get("MONOPLANE_DEBUG"))
     try:
         return int(args.func(args) or 0)

@@ -74,6 +74,7 @@ from monoplane.evaluation.baselines import CALL_TIMING, baseline_names, get_base
 from monoplane.evaluation.bench_frames import DataSource, load_data_frames
 from monoplane.evaluation.runner import parse_size
 from monoplane.hookspecs import hookimpl
+from monoplane.host.allocator import keep_freed_memory
 from monoplane.host.registry import get_plugin_manager
 
 if TYPE_CHECKING:
@@ -387,6 +388,9 @@ def _bench_size(preset: str, overrides: list[str], size: tuple[int, int], seed: 
     from monoplane.host.pipeline import Pipeline
     from monoplane.synth import generate
 
+    # The allocator policy of the command line's processes (an isolated child starts with
+    # the C library's default).
+    keep_freed_memory()
     tracker = StagePeakTracker()
     pm = _plugin_manager(plugins, tracker)
     pipe = Pipeline.from_preset(preset, overrides=overrides, pm=pm)

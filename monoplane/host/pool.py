@@ -43,6 +43,8 @@ from dataclasses import dataclass
 from multiprocessing.connection import Connection, wait
 from typing import Any
 
+from monoplane.host.allocator import keep_freed_memory
+
 #: Thread-count variables set in each worker (unless the user set them), so that N workers on
 #: N cores do not each start N BLAS/OpenMP/numba threads and fight over the cores.
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
@@ -147,6 +149,7 @@ def _worker_main(conn: Connection, initializer: Callable[..., Any] | None,
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, _on_sigterm)
     _die_with_parent()
+    keep_freed_memory()  # a worker runs frame after frame, as the command line does
     if forked_threads is not None:
         _limit_native_threads(forked_threads)
     try:
