@@ -8,6 +8,9 @@ from scipy.sparse import coo_matrix
 
 from monoplane.algorithm.label_mean_field import (
     MARGIN_TEMPERATURES,
+    _argmax,
+    _initial,
+    _update,
     candidate_labels,
     potts_mean_field,
 )
@@ -110,3 +113,25 @@ def test_settled_nodes_skip_updates_and_keep_the_clear_winners(seed):
     one = potts_mean_field(ptr, cand, costs, *graph, start, beta, temperature, 1)
     np.testing.assert_array_equal(
         potts_mean_field(ptr, cand, costs, *graph, start, beta, temperature, 8, 1.0), one)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_updating_only_the_neighbours_of_moved_nodes_is_updating_every_node(seed):
+    # After the first update only the nodes next to one that moved are updated: with
+    # settle = 0 (moved at all) that is, bit for bit, the update of every node every time.
+    unary, adj, start = random_problem(seed)
+    beta, temperature = 0.3, 0.2
+    ptr, cand, costs = candidate_labels(unary, start, adj.indptr, adj.data, beta, temperature)
+    graph = (adj.indptr.astype(np.int64), adj.indices.astype(np.int64),
+             adj.data.astype(np.float32))
+    q = _initial(ptr, cand, costs, start.astype(np.int64), np.float32(-1.0 / temperature))
+    moved = np.empty(start.size, dtype=np.bool_)
+    for _ in range(8):
+        out = np.empty_like(q)
+        _update(ptr, cand, costs, *graph, q, np.float32(-beta), np.float32(-1.0 / temperature),
+                0, start.size, out, moved, np.float32(0.0))
+        q = out
+    every = _argmax(ptr, cand, q)
+    got = potts_mean_field(ptr, cand, costs, *graph, start, beta, temperature, 8, 0.0)
+    np.testing.assert_array_equal(got, every)
+    assert moved.sum() < start.size  # some nodes had settled: the skip was exercised
