@@ -107,15 +107,18 @@ def potts_mean_field(ptr: np.ndarray, labels: np.ndarray, costs: np.ndarray,
                   for a, b in chunks(start.size, _THREADED_NODES)])
     # A node's update reads only its neighbours' probabilities: when none of them changed in
     # the last iteration, its result would be the same to the bit, so only the neighbours of
-    # the nodes that moved are updated, one thread being enough for them: on the lattice of a
-    # 640x480 range frame with ``settle`` 1e-4, 5-20 % of the nodes move in the first
-    # iteration and 1-3 % in the last. With ``settle`` > 0, nodes still moving in their last
-    # float32 bits count as unchanged.
+    # the nodes that moved are updated: on the lattice of a 640x480 range frame with
+    # ``settle`` 1e-4, 5-20 % of the nodes move in the first iteration and 1-3 % in the last.
+    # With ``settle`` > 0, nodes still moving in their last float32 bits count as unchanged.
     moved_nodes = np.flatnonzero(moved)
     seen = np.full(start.size, -1, dtype=np.int64)
     for it in range(1, iterations):
-        moved_nodes = _update_near(ptr, labels, costs, indptr, indices, weights, out, weight,
-                                   scale, moved_nodes, seen, it, np.float32(settle))
+        due, slots = _due_nodes(ptr, indptr, indices, moved_nodes, seen, it)
+        new = np.empty(slots[-1], dtype=np.float32)
+        run_threaded([functools.partial(_update_due, ptr, labels, costs, indptr, indices,
+                                        weights, out, weight, scale, due, slots, a, b, new)
+                      for a, b in chunks(due.size, _THREADED_NODES)])
+        moved_nodes = _write_back(ptr, out, due, slots, new, np.float32(settle))
     return _argmax(ptr, labels, out)
 
 
@@ -219,24 +222,18 @@ def _update(ptr: np.ndarray, labels: np.ndarray, costs: np.ndarray, indptr: np.n
 
 
 @kernel
-def _update_near(ptr: np.ndarray, labels: np.ndarray, costs: np.ndarray, indptr: np.ndarray,
-                 indices: np.ndarray, weights: np.ndarray, q: np.ndarray, weight: np.float32,
-                 scale: np.float32, moved: np.ndarray, seen: np.ndarray, mark: int,
-                 settle: np.float32) -> np.ndarray:
-    """One update of the neighbours of the (K,) int64 ``moved`` nodes, in place in ``q``
-    (M,) float32; every other node keeps its probabilities. Each updated node's new
-    probabilities are computed from the old ``q`` of its neighbours with the float32
-    operations of :func:`_update`, in the same order, and written back once all are computed,
-    so the result is that of :func:`_update` on every node whose neighbours moved. ``seen``
-    (N,) int64 holds no ``mark`` before the call (it is left holding it at the updated
-    nodes). Returns the int64 updated nodes whose probabilities moved by more than
-    ``settle``."""
+def _due_nodes(ptr: np.ndarray, indptr: np.ndarray, indices: np.ndarray, moved: np.ndarray,
+               seen: np.ndarray, mark: int) -> tuple[np.ndarray, np.ndarray]:
+    """The (K,) int64 nodes next to some of the ``moved`` nodes, each once, and (K + 1,)
+    int64 ``slots``: node k's new probabilities go to ``slots[k]:slots[k + 1]`` of a buffer.
+    ``seen`` (N,) int64 holds no ``mark`` before the call (it is left holding it at those
+    nodes)."""
     reach = 0
     for c in moved:
         reach += indptr[c + 1] - indptr[c]
     due = np.empty(reach, dtype=np.int64)
-    start = np.empty(reach + 1, dtype=np.int64)  # node k's new values: start[k]:start[k + 1]
-    start[0] = 0
+    slots = np.empty(reach + 1, dtype=np.int64)
+    slots[0] = 0
     count = 0
     for c in moved:
         for jj in range(indptr[c], indptr[c + 1]):
@@ -244,12 +241,22 @@ def _update_near(ptr: np.ndarray, labels: np.ndarray, costs: np.ndarray, indptr:
             if seen[i] != mark:
                 seen[i] = mark
                 due[count] = i
-                start[count + 1] = start[count] + ptr[i + 1] - ptr[i]
+                slots[count + 1] = slots[count] + ptr[i + 1] - ptr[i]
                 count += 1
-    new = np.empty(start[count], dtype=np.float32)
-    for k in range(count):
+    return due[:count], slots[:count + 1]
+
+
+@kernel
+def _update_due(ptr: np.ndarray, labels: np.ndarray, costs: np.ndarray, indptr: np.ndarray,
+                indices: np.ndarray, weights: np.ndarray, q: np.ndarray, weight: np.float32,
+                scale: np.float32, due: np.ndarray, slots: np.ndarray, k0: int, k1: int,
+                new: np.ndarray) -> None:
+    """The update of :func:`_update` of the nodes ``due[k0:k1]`` (:func:`_due_nodes`), from
+    ``q`` (M,) float32 into their ``slots`` of ``new`` (float32), with the same float32
+    operations in the same order."""
+    for k in range(k0, k1):
         i = due[k]
-        a, b, o = ptr[i], ptr[i + 1], start[k] - ptr[i]  # slot s of node i is new[o + s]
+        a, b, o = ptr[i], ptr[i + 1], slots[k] - ptr[i]  # slot s of node i is new[o + s]
         for s in range(a, b):
             new[o + s] = 0.0
         for jj in range(indptr[i], indptr[i + 1]):
@@ -275,19 +282,26 @@ def _update_near(ptr: np.ndarray, labels: np.ndarray, costs: np.ndarray, indptr:
             total += new[o + s]
         for s in range(a, b):
             new[o + s] /= total
-    changed = np.empty(count, dtype=np.int64)
-    n_changed = 0
-    for k in range(count):
+
+
+@kernel
+def _write_back(ptr: np.ndarray, q: np.ndarray, due: np.ndarray, slots: np.ndarray,
+                new: np.ndarray, settle: np.float32) -> np.ndarray:
+    """Write the ``due`` nodes' ``new`` probabilities (:func:`_update_due`) into ``q``; the
+    int64 nodes among them whose probabilities moved by more than ``settle``."""
+    changed = np.empty(due.shape[0], dtype=np.int64)
+    count = 0
+    for k in range(due.shape[0]):
         i = due[k]
-        o = start[k] - ptr[i]
+        o = slots[k] - ptr[i]
         shifted = False
         for s in range(ptr[i], ptr[i + 1]):
             shifted = shifted or abs(new[o + s] - q[s]) > settle
             q[s] = new[o + s]
         if shifted:
-            changed[n_changed] = i
-            n_changed += 1
-    return changed[:n_changed]
+            changed[count] = i
+            count += 1
+    return changed[:count]
 
 
 @kernel
