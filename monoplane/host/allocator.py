@@ -4,7 +4,7 @@ Each frame allocates and frees tens of megabytes of arrays of about the same siz
 networks, label images, mean-field buffers, the cloud). By default glibc's ``malloc`` hands
 large freed blocks back to the system: a block above its mmap threshold is unmapped when it is
 freed, and the top of the heap is trimmed once more than its trim threshold lies free there.
-The next frame's arrays then fault their pages in afresh: about 9 600 page faults and 20-25 ms
+The next frame's arrays then fault their pages in afresh: about 9 600 page faults and 20-30 ms
 of system time a 640x480 frame under the ``range`` preset, an eighth of its CPU time
 (docs/evaluation.md, "The `range` preset, eighth round").
 
