@@ -234,6 +234,8 @@ def test_sampling_must_be_named():
         RansacConfig(lattice_turn_deg=-1.0)
     with pytest.raises(ConfigError, match="lattice_split_reach must be at least 1"):
         RansacConfig(lattice_split_reach=0)
+    with pytest.raises(ConfigError, match="lattice_fragments must be non-negative"):
+        RansacConfig(lattice_fragments=-1)
 
 
 def test_max_planes_and_min_support_stop_the_search():
@@ -446,6 +448,29 @@ def test_max_rejections_passes_over_a_plane_that_falls_apart(rejections):
                max_rejections=rejections).run(frame)
     assert rec.num_planes == rejections
     if rejections:
+        assert np.all(rec.labels[:24, 80:] == 1) and np.all(rec.labels[:, :64] == 0)
+        np.testing.assert_allclose(rec.planes[0, 3], 2.0, rtol=1e-6)
+
+
+@pytest.mark.parametrize(("sampling", "fragments", "found"),
+                         [("grid", 0, 0), ("grid", 1, 1), ("random", 1, 0)])
+def test_lattice_fragments_pass_over_a_plane_that_falls_apart_on_the_lattice(
+        sampling, fragments, found):
+    # The tiled plane of the test above on the pixel lattice (every pixel a sample): its
+    # labelled inliers reach the minimum support, its parts do not. With lattice_fragments it
+    # is passed over without max_rejections, and the patch is found; random samples ignore it.
+    h, w = 48, 96
+    depth = np.zeros((h, w), dtype=np.float32)
+    for r in range(0, h, 8):
+        for c in range(0, 64, 8):
+            depth[r:r + 4, c:c + 4] = 3.0
+    depth[:24, 80:] = 2.0
+    normals = np.tile(np.array([0, 0, -1], dtype=np.float32), (h, w, 1))
+    frame = Frame(rgb=None, K=default_intrinsics(w, h, 60.0), depth=depth, normals=normals)
+    rec = make("monoplane-nocrf", split_components=True, min_support=0.1, sampling=sampling,
+               lattice_fragments=fragments).run(frame)
+    assert rec.num_planes == found
+    if found:
         assert np.all(rec.labels[:24, 80:] == 1) and np.all(rec.labels[:, :64] == 0)
         np.testing.assert_allclose(rec.planes[0, 3], 2.0, rtol=1e-6)
 

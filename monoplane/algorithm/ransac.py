@@ -19,7 +19,8 @@ One plane at a time, on the points not yet assigned (the *pool*):
 5. the plane is accepted if its support reaches ``min_support``, otherwise the search stops;
    its inliers leave the pool. With ``max_rejections`` > 0 a too-small plane (its labelled
    points leave the pool as non-planar), or a search that found no hypothesis, is passed over
-   that many times before the search stops.
+   that many times before the search stops (on a lattice, ``lattice_fragments`` more times
+   for a plane whose parts each fall below ``min_support``).
 
 Steps 1-5 form the cloud-level core, :meth:`SequentialRansac.run_cloud`, which needs no pixel
 grid (a cloud and its kNN graph). :meth:`SequentialRansac.run` wraps it for a frame: the cloud
@@ -135,6 +136,11 @@ class RansacConfig:
         "up to this many lattice steps along a lattice line when every sample between them lies "
         "in front of them or has no depth (a thin occluder such as a table leg); 1: the lattice "
         "graph's links only")
+    lattice_fragments: int = param(
+        0, "with sampling 'grid' and split_components, a plane whose labelled inliers reach "
+        "min_support but fall apart into parts each below it is set aside (its points leave "
+        "the pool as non-planar) without stopping the search, up to this many times a search "
+        "(a surface seen edge-on: the lattice's jump test parts what the kNN graph links)")
     lo_iterations: int = param(1, "local optimisation rounds (refit + relabel) per plane")
     split_components: bool = param(
         False, "keep only the largest graph-connected component of each plane's inliers")
@@ -172,6 +178,7 @@ class RansacConfig:
             (0 < self.lattice_max_turn_deg <= 180, "lattice_max_turn_deg must lie in (0, 180]"),
             (self.lattice_turn_deg >= 0, "lattice_turn_deg must be non-negative"),
             (self.lattice_split_reach >= 1, "lattice_split_reach must be at least 1"),
+            (self.lattice_fragments >= 0, "lattice_fragments must be non-negative"),
             (self.lo_iterations >= 0, "lo_iterations must be non-negative"),
             (self.noise_factor >= 0, "noise_factor must be non-negative"),
             (self.noise_planes >= 0, "noise_planes must be non-negative"),
@@ -388,6 +395,7 @@ class SequentialRansac:
         # Each point's normal cell, for the compiled search's grouping of every pool.
         cells = normal_cells(cloud.normals, NORMAL_CELLS) if self.compiled_search else None
         rejections = 0
+        fragments = 0 if cloud.lattice is not None and cfg.split_components else None
         while len(found) < max_planes and pool.size >= min_support:
             t = time.perf_counter()
             best = self._search(cloud, pool, rng, params, cells)
@@ -413,9 +421,13 @@ class SequentialRansac:
                 # The best plane left is too small, or falls apart into pieces that each are:
                 # its points leave the pool (non-planar), and the smaller faces elsewhere in
                 # the pool, which a hypothesis through these points outscored, get their turn.
-                if rejections >= cfg.max_rejections or not labelled.any():
+                if (fragments is not None and fragments < cfg.lattice_fragments
+                        and labelled.sum() >= min_support):
+                    fragments += 1  # a slab seen edge-on, parted by the lattice's jump test
+                elif rejections >= cfg.max_rejections or not labelled.any():
                     break
-                rejections += 1
+                else:
+                    rejections += 1
                 inliers = labelled
             else:
                 found.append(plane)
