@@ -16,6 +16,7 @@ import numpy as np
 from monoplane.errors import InvalidInput
 from monoplane.geometry.components import largest_component
 from monoplane.geometry.neighbours import PointIndex
+from monoplane.geometry.propagation import SampleImage, image_knn
 from monoplane.jit import chunks, inline, kernel, run_threaded
 
 #: Nodes per thread below which the edge list is built on one thread.
@@ -78,8 +79,8 @@ class NeighbourGraph:
             return self._indptr, self._indices
 
     @classmethod
-    def build(cls, points: np.ndarray, k: int, tree: PointIndex | None = None
-              ) -> NeighbourGraph:
+    def build(cls, points: np.ndarray, k: int, tree: PointIndex | None = None,
+              image: SampleImage | None = None) -> NeighbourGraph:
         """Connect every point to its ``k`` nearest neighbours (symmetrised, deduplicated).
 
         Parameters
@@ -90,10 +91,17 @@ class NeighbourGraph:
             Neighbours per point, >= 1; capped at N - 1.
         tree : PointIndex, optional
             An existing index over exactly these points, to avoid building another.
+        image : SampleImage, optional
+            Where the points lie in their frame's image: their neighbours are then found
+            through the image (:func:`~monoplane.geometry.propagation.image_knn`), and only
+            the few it leaves in the point index (built for them when ``tree`` is None). The
+            same graph either way.
 
         Returns
         -------
         NeighbourGraph
+            Its ``tree`` is None when the image found every point's neighbours and none
+            was given.
         """
         pts = np.asarray(points, dtype=np.float64)
         if pts.ndim != 2 or pts.shape[1] != 3:
@@ -101,17 +109,27 @@ class NeighbourGraph:
         if k < 1:
             raise InvalidInput(f"k must be at least 1, got {k}")
         n = pts.shape[0]
-        if tree is None:
-            tree = PointIndex(pts)
-        elif tree.n != n:
+        if tree is not None and tree.n != n:
             raise InvalidInput(f"the index holds {tree.n} points, not the graph's {n}")
+        if image is not None and image.pixels.shape != (n,):
+            raise InvalidInput(f"the image holds {image.pixels.shape[0]} samples, not the "
+                               f"graph's {n} points")
+        if tree is None and image is None:
+            tree = PointIndex(pts)
         kk = min(k, n - 1)
         if kk < 1:
             empty = np.zeros((0, 2), dtype=np.int64)
             return cls(n, empty, np.zeros(n + 1, dtype=np.int64), np.zeros(0, dtype=np.int64),
                        tree, 0.0)
-        dist, nbr = tree.query_indexed(kk + 1)
-        nbr = np.ascontiguousarray(nbr, dtype=np.int64)
+        if image is None:
+            dist, nbr = tree.query_indexed(kk + 1)
+        else:
+            dist, nbr, missed = image_knn(np.ascontiguousarray(pts), image, kk + 1)
+            dist[missed] = 0.0  # rows the point index fills in below
+            np.sqrt(dist, out=dist)
+            if missed.size:
+                tree = PointIndex(pts) if tree is None else tree
+                dist[missed], nbr[missed] = tree.query(pts[missed], kk + 1)
         # Each thread lists the edges whose smaller end lies in its range of nodes; in range
         # order they are the sorted edge list.
         parts = run_threaded([lambda a=a, b=b: _knn_edges(nbr, a, b)
