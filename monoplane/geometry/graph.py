@@ -379,12 +379,13 @@ def _knn_edges(nbr: np.ndarray, lo_start: int, lo_stop: int) -> np.ndarray:
     ``nbr`` is the (N, K) int64 neighbour table of a kNN query (a row may contain the point
     itself, anywhere among exact duplicates). Returns the (E, 2) edges ``i < j`` sorted by
     ``(i, j)`` without self-loops or repeats. A bucket per smaller end, sorted in place,
-    replaces a global sort of all pairs; every row is read, only the range's buckets filled.
+    replaces a global sort of all pairs; the rows from ``lo_start`` on are read (a row before
+    it has a smaller end before it too), only the range's buckets filled.
     """
     n, k = nbr.shape
     width = lo_stop - lo_start
     start = np.zeros(width + 1, dtype=np.int64)
-    for i in range(n):
+    for i in range(lo_start, n):
         for c in range(k):
             j = nbr[i, c]
             lo = min(i, j)
@@ -394,7 +395,7 @@ def _knn_edges(nbr: np.ndarray, lo_start: int, lo_stop: int) -> np.ndarray:
         start[i + 1] += start[i]
     bucket = np.empty(start[width], dtype=np.int64)
     fill = start[:width].copy()
-    for i in range(n):
+    for i in range(lo_start, n):
         for c in range(k):
             j = nbr[i, c]
             lo = min(i, j)
