@@ -376,7 +376,7 @@ def image_knn(points: np.ndarray, image: SampleImage, k: int
     # Contiguous runs of tiles on parallel threads: each writes the rows of its own samples.
     parts = chunks(n, KNN_THREADED)
     counts = run_threaded([
-        lambda a=a, b=b: _image_knn(start, xyz, ids, image.pixels, w, h, KNN_TILE, cam,
+        lambda a=a, b=b: _image_knn(start, xyz, ids, image.pixels, w, h, cam,
                                     float(image.scale), center, int(k), a, b, d2, idx,
                                     missed[a:b])
         for a, b in parts])
@@ -401,15 +401,42 @@ def _kth_smallest(values: np.ndarray, m: int, best: np.ndarray) -> float:
     return best[k - 1]
 
 
+@inline
+def _window_scan(start: np.ndarray, xyz: np.ndarray, ids: np.ndarray, w: int, h: int,
+                 u: int, v: int, du: int, dv: int, qx: float, qy: float, qz: float,
+                 limit: float, kept_d2: np.ndarray, kept_i: np.ndarray) -> tuple[int, int]:
+    """The samples of the tiles that cover the pixels ``u ± du``, ``v ± dv`` within squared
+    distance ``limit`` of ``(qx, qy, qz)``, into ``kept_d2`` / ``kept_i``: returns how many,
+    and how many the tiles hold. (The tile's side is the constant :data:`KNN_TILE`: divisions
+    by it compile to shifts.)"""
+    across = (w + KNN_TILE - 1) // KNN_TILE
+    kept = m = 0
+    for ty in range(max(v - dv, 0) // KNN_TILE, min(v + dv, h - 1) // KNN_TILE + 1):
+        row = ty * across
+        a0 = start[row + max(u - du, 0) // KNN_TILE]
+        a1 = start[row + min(u + du, w - 1) // KNN_TILE + 1]
+        for p in range(a0, a1):
+            # candidate - query, as the point index computes it (the same bits)
+            dx = xyz[p, 0] - qx
+            dy = xyz[p, 1] - qy
+            dz = xyz[p, 2] - qz
+            d2 = dx * dx + dy * dy + dz * dz
+            kept_d2[kept] = d2
+            kept_i[kept] = ids[p]
+            kept += d2 <= limit
+        m += a1 - a0
+    return kept, m
+
+
 @kernel
 def _image_knn(start: np.ndarray, xyz: np.ndarray, ids: np.ndarray, pixels: np.ndarray,
-               w: int, h: int, tile: int, cam: np.ndarray, scale: float, center: np.ndarray,
-               k: int, lo: int, hi: int, out_d2: np.ndarray, out_i: np.ndarray,
-               missed: np.ndarray) -> int:
+               w: int, h: int, cam: np.ndarray, scale: float, center: np.ndarray, k: int,
+               lo: int, hi: int, out_d2: np.ndarray, out_i: np.ndarray, missed: np.ndarray
+               ) -> int:
     """:func:`image_knn` of the samples at tile-sorted positions ``[lo, hi)``
-    (:func:`sample_tiles`: ``start``, ``xyz``, ``ids``); writes rows ``ids[p]`` of the (N, k)
-    ``out_d2`` / ``out_i``, lists the samples left to the point index in ``missed`` and
-    returns how many.
+    (:func:`sample_tiles` with :data:`KNN_TILE`: ``start``, ``xyz``, ``ids``); writes rows
+    ``ids[p]`` of the (N, k) ``out_d2`` / ``out_i``, lists the samples left to the point
+    index in ``missed`` and returns how many.
 
     A sample's window is sized for a squared distance ``limit`` (:func:`_reach`): every
     sample within it lies inside, so when at least k of the window's samples are within
@@ -422,8 +449,6 @@ def _image_knn(start: np.ndarray, xyz: np.ndarray, ids: np.ndarray, pixels: np.n
     times the limit.
     """
     n = ids.shape[0]
-    across = (w + tile - 1) // tile
-    all_d2 = np.empty(n)
     kept_d2 = np.empty(n + 8)
     kept_i = np.empty(n + 8, dtype=np.int64)
     bd = np.empty(k + 1)  # the last slot takes every rank past the k-th
@@ -438,29 +463,15 @@ def _image_knn(start: np.ndarray, xyz: np.ndarray, ids: np.ndarray, pixels: np.n
         rb = np.sqrt(z * z + (qy * scale + center[1]) ** 2)
         limit = prev * KNN_GROWTH
         certified = False
-        du = dv = 2 * tile
+        du = dv = 2 * KNN_TILE
         if limit < np.inf:
             ru, rv = _reach(np.sqrt(limit) * scale, z, ra, rb, cam, w, h)
             if ru <= KNN_MAX_REACH and rv <= KNN_MAX_REACH:
                 du, dv, certified = ru, rv, True
         done = False
         for _ in range(3):
-            kept = m = 0
-            for ty in range(max(v - dv, 0) // tile, min(v + dv, h - 1) // tile + 1):
-                row = ty * across
-                a0 = start[row + max(u - du, 0) // tile]
-                a1 = start[row + min(u + du, w - 1) // tile + 1]
-                for p in range(a0, a1):
-                    # candidate - query, as the point index computes it (the same bits)
-                    dx = xyz[p, 0] - qx
-                    dy = xyz[p, 1] - qy
-                    dz = xyz[p, 2] - qz
-                    d2 = dx * dx + dy * dy + dz * dz
-                    all_d2[m] = d2
-                    m += 1
-                    kept_d2[kept] = d2
-                    kept_i[kept] = ids[p]
-                    kept += d2 <= limit
+            kept, m = _window_scan(start, xyz, ids, w, h, u, v, du, dv, qx, qy, qz, limit,
+                                   kept_d2, kept_i)
             if certified and kept >= k:
                 if kept > 4 * k:  # a wide window: keep the k-th best and its ties to rank
                     t = _kth_smallest(kept_d2, kept, bd[:k])
@@ -486,7 +497,10 @@ def _image_knn(start: np.ndarray, xyz: np.ndarray, ids: np.ndarray, pixels: np.n
                 done = True
                 break
             if m >= k:
-                limit = _kth_smallest(all_d2, m, bd[:k])
+                if kept < m:  # the window's distances again, all of them (a rare case)
+                    _window_scan(start, xyz, ids, w, h, u, v, du, dv, qx, qy, qz, np.inf,
+                                 kept_d2, kept_i)
+                limit = _kth_smallest(kept_d2, m, bd[:k])
             elif certified:
                 limit *= 4.0
             else:
