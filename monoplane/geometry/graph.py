@@ -121,14 +121,17 @@ class NeighbourGraph:
             empty = np.zeros((0, 2), dtype=np.int64)
             return cls(n, empty, np.zeros(n + 1, dtype=np.int64), np.zeros(0, dtype=np.int64),
                        tree, 0.0)
-        if image is None:
+        missed = None
+        if image is not None:
+            dist, nbr, missed = image_knn(np.ascontiguousarray(pts), image, kk + 1)
+            if missed.size:
+                tree = PointIndex(pts) if tree is None else tree
+        if missed is None or missed.size == n:  # (or the image search gave up)
             dist, nbr = tree.query_indexed(kk + 1)
         else:
-            dist, nbr, missed = image_knn(np.ascontiguousarray(pts), image, kk + 1)
             dist[missed] = 0.0  # rows the point index fills in below
             np.sqrt(dist, out=dist)
             if missed.size:
-                tree = PointIndex(pts) if tree is None else tree
                 dist[missed], nbr[missed] = tree.query(pts[missed], kk + 1)
         # Each thread lists the edges whose smaller end lies in its range of nodes; in range
         # order they are the sorted edge list.

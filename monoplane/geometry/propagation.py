@@ -69,6 +69,14 @@ KNN_MAX_REACH = 64
 KNN_GROWTH = 1.5
 #: Samples per thread below which :func:`image_knn` runs on one thread.
 KNN_THREADED = 4096
+#: :func:`image_knn` gives up on a frame whose samples are not near their 3D neighbours in
+#: the image (depth noise as large as the samples' spacing, scattered valid pixels): after
+#: :data:`KNN_PROBE` samples, when more than one in :data:`KNN_MISS_SHARE` was left to the
+#: point index or their windows held more than :data:`KNN_BUDGET` samples each (45-110 on
+#: sensor frames). The point index then answers for every sample.
+KNN_PROBE = 512
+KNN_MISS_SHARE = 8
+KNN_BUDGET = 150
 
 
 @kernel
@@ -362,8 +370,8 @@ def image_knn(points: np.ndarray, image: SampleImage, k: int
     idx : numpy.ndarray
         (N, k) int64 sample indices.
     missed : numpy.ndarray
-        (M,) int64 samples left to the point index (isolated ones, or all of them when the
-        frame holds fewer than ``k`` samples within reach).
+        (M,) int64 samples left to the point index: isolated ones, or all of them when the
+        search gave up on the frame (see :data:`KNN_PROBE`).
     """
     h, w = image.shape
     n = points.shape[0]
@@ -380,6 +388,8 @@ def image_knn(points: np.ndarray, image: SampleImage, k: int
                                     float(image.scale), center, int(k), a, b, d2, idx,
                                     missed[a:b])
         for a, b in parts])
+    if min(counts) < 0:
+        return d2, idx, np.arange(n, dtype=np.int64)
     return d2, idx, np.concatenate([missed[a:a + c]
                                     for (a, _), c in zip(parts, counts, strict=True)])
 
@@ -436,7 +446,7 @@ def _image_knn(start: np.ndarray, xyz: np.ndarray, ids: np.ndarray, pixels: np.n
     """:func:`image_knn` of the samples at tile-sorted positions ``[lo, hi)``
     (:func:`sample_tiles` with :data:`KNN_TILE`: ``start``, ``xyz``, ``ids``); writes rows
     ``ids[p]`` of the (N, k) ``out_d2`` / ``out_i``, lists the samples left to the point
-    index in ``missed`` and returns how many.
+    index in ``missed`` and returns how many, or -1 when it gave up (:data:`KNN_PROBE`).
 
     A sample's window is sized for a squared distance ``limit`` (:func:`_reach`): every
     sample within it lies inside, so when at least k of the window's samples are within
@@ -454,8 +464,12 @@ def _image_knn(start: np.ndarray, xyz: np.ndarray, ids: np.ndarray, pixels: np.n
     bd = np.empty(k + 1)  # the last slot takes every rank past the k-th
     bi = np.empty(k + 1, dtype=np.int64)
     prev = np.inf
-    count = 0
+    count = scanned = 0
     for p0 in range(lo, hi):
+        searched = p0 - lo
+        if searched >= KNN_PROBE and (KNN_MISS_SHARE * count > searched
+                                      or scanned > KNN_BUDGET * searched):
+            return -1
         qx, qy, qz = xyz[p0, 0], xyz[p0, 1], xyz[p0, 2]
         v, u = divmod(pixels[ids[p0]], w)
         z = qz * scale + center[2]
@@ -472,6 +486,7 @@ def _image_knn(start: np.ndarray, xyz: np.ndarray, ids: np.ndarray, pixels: np.n
         for _ in range(3):
             kept, m = _window_scan(start, xyz, ids, w, h, u, v, du, dv, qx, qy, qz, limit,
                                    kept_d2, kept_i)
+            scanned += m
             if certified and kept >= k:
                 if kept > 4 * k:  # a wide window: keep the k-th best and its ties to rank
                     t = _kth_smallest(kept_d2, kept, bd[:k])

@@ -80,3 +80,22 @@ def test_sample_image_needs_pixels_and_a_pinhole_camera():
     assert bare.sample_image is None
     with pytest.raises(InvalidInput, match="image holds 500 samples"):
         NeighbourGraph.build(cloud.points[:-1], 4, image=image)
+
+
+@pytest.mark.parametrize("spread", [0.0, 1.0])
+def test_frames_without_image_neighbours_are_left_to_the_point_index(spread):
+    """Depth drawn at random per pixel (no surface) or a few scattered valid pixels: the
+    samples' neighbours in 3D are not near them in the image, and the search gives up."""
+    rng = np.random.default_rng(3)
+    h, w = 120, 160
+    depth = rng.uniform(1.0, 9.0, (h, w))
+    if not spread:
+        depth[rng.random((h, w)) < 0.97] = 0.0
+    frame = Frame(rgb=None, K=intrinsics_matrix(130.0, 130.0, 79.5, 59.5),
+                  depth=depth.astype(np.float32),
+                  normals=np.tile(np.float32([0, 0, -1]), (h, w, 1)))
+    cloud = PlaneCloud.from_frame(frame, 4000, np.random.default_rng(0))
+    _, _, missed = image_knn(cloud.points, cloud.sample_image, 9)
+    np.testing.assert_array_equal(missed, np.arange(cloud.size))
+    g = cloud.neighbour_graph(8)
+    np.testing.assert_array_equal(g.edges, NeighbourGraph.build(cloud.points, 8).edges)
