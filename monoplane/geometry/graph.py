@@ -114,24 +114,24 @@ class NeighbourGraph:
         if image is not None and image.pixels.shape != (n,):
             raise InvalidInput(f"the image holds {image.pixels.shape[0]} samples, not the "
                                f"graph's {n} points")
-        if tree is None and image is None:
-            tree = PointIndex(pts)
         kk = min(k, n - 1)
         if kk < 1:
             empty = np.zeros((0, 2), dtype=np.int64)
             return cls(n, empty, np.zeros(n + 1, dtype=np.int64), np.zeros(0, dtype=np.int64),
-                       tree, 0.0)
-        missed = None
+                       PointIndex(pts) if tree is None and image is None else tree, 0.0)
+        missed = np.arange(n)  # the points the index answers for: all, without an image
         if image is not None:
             dist, nbr, missed = image_knn(np.ascontiguousarray(pts), image, kk + 1)
-            if missed.size:
-                tree = PointIndex(pts) if tree is None else tree
-        if missed is None or missed.size == n:  # (or the image search gave up)
-            dist, nbr = tree.query_indexed(kk + 1)
-        else:
-            dist[missed] = 0.0  # rows the point index fills in below
+        if not missed.size:  # the image found every point's neighbours
             np.sqrt(dist, out=dist)
-            if missed.size:
+        else:
+            if tree is None:
+                tree = PointIndex(pts)
+            if missed.size == n:  # no image, or the image search gave up
+                dist, nbr = tree.query_indexed(kk + 1)
+            else:
+                dist[missed] = 0.0  # rows the point index fills in below
+                np.sqrt(dist, out=dist)
                 dist[missed], nbr[missed] = tree.query(pts[missed], kk + 1)
         # Each thread lists the edges whose smaller end lies in its range of nodes; in range
         # order they are the sorted edge list.

@@ -10,6 +10,7 @@ outside it need no distance.
 
 from __future__ import annotations
 
+from functools import partial
 from typing import NamedTuple
 
 import numpy as np
@@ -383,10 +384,9 @@ def image_knn(points: np.ndarray, image: SampleImage, k: int
     center = np.ascontiguousarray(image.center, dtype=np.float64)
     # Contiguous runs of tiles on parallel threads: each writes the rows of its own samples.
     parts = chunks(n, KNN_THREADED)
-    counts = run_threaded([
-        lambda a=a, b=b: _image_knn(start, xyz, ids, image.pixels, w, h, cam,
-                                    float(image.scale), center, int(k), a, b, d2, idx,
-                                    missed[a:b])
+    counts: list[int] = run_threaded([
+        partial(_image_knn, start, xyz, ids, image.pixels, w, h, cam, float(image.scale),
+                center, int(k), a, b, d2, idx, missed[a:b])
         for a, b in parts])
     if min(counts) < 0:
         return d2, idx, np.arange(n, dtype=np.int64)
