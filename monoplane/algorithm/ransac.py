@@ -259,7 +259,7 @@ class SequentialRansac:
             nonlocal t_graph
             t = time.perf_counter()
             if cloud.lattice is None:
-                graph = NeighbourGraph.build(cloud.points, cfg.knn, tree=cloud.tree)
+                graph = cloud.neighbour_graph(cfg.knn)
             else:
                 graph = NeighbourGraph.from_lattice(cloud.points, cloud.lattice,
                                                     cloud.center / cloud.scale,

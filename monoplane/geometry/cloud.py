@@ -43,6 +43,8 @@ from monoplane.geometry.graph import NeighbourGraph
 from monoplane.geometry.lattice import lattice_lines, lattice_step, lattice_stride
 from monoplane.geometry.neighbours import PointIndex
 from monoplane.geometry.propagation import (
+    TILE,
+    SampleImage,
     closest_plane,
     mixed_samples,
     propagate_pixels,
@@ -158,6 +160,23 @@ class PlaneCloud:
     def tree(self) -> PointIndex:
         """Nearest-neighbour index over ``points`` (built on first use)."""
         return PointIndex(self.points)
+
+    @property
+    def sample_image(self) -> SampleImage | None:
+        """Where the points lie in the frame's image, for searches in 3D through the image
+        (the kNN graph, :meth:`propagate`); None for a cloud without an image or with
+        intrinsics other than a pinhole camera's."""
+        if (self.pixels is None or self.shape is None or self.intrinsics is None
+                or not np.array_equal(self.intrinsics[2], [0.0, 0.0, 1.0])):
+            return None
+        return SampleImage(self.pixels, self.shape, self.intrinsics, self.center, self.scale)
+
+    def neighbour_graph(self, k: int) -> NeighbourGraph:
+        """The kNN graph over ``points`` (:meth:`NeighbourGraph.build`), found through the
+        image when the cloud has one (:attr:`sample_image`), else with :attr:`tree`."""
+        image = self.sample_image
+        return NeighbourGraph.build(self.points, k, tree=None if image else self.tree,
+                                    image=image)
 
     @cached_property
     def image_nearest_sample(self) -> np.ndarray:
@@ -407,7 +426,7 @@ class PlaneCloud:
             out[pixels] = labels
             return out.reshape(h, w), labels.copy()
         if graph is None:
-            graph = NeighbourGraph.build(self.points, PROPAGATION_GRAPH_K, tree=self.tree)
+            graph = self.neighbour_graph(PROPAGATION_GRAPH_K)
         radius = PROPAGATION_RADIUS_FACTOR * (graph.spacing if spacing is None else spacing)
         # Nearest sample in the image first (a distance transform, far cheaper than a 3D query
         # for every pixel); pixels where that choice is doubtful are resolved in 3D.
@@ -420,10 +439,9 @@ class PlaneCloud:
         # Pixels farther than the radius from their image-nearest sample lie across a depth
         # jump from it: their nearest samples in 3D are looked up in the image around them
         # when the intrinsics say where a point projects, else in the point index.
-        cam = np.zeros((0, 3))
-        if self.intrinsics is not None and np.array_equal(self.intrinsics[2], [0.0, 0.0, 1.0]):
-            cam = np.asarray(self.intrinsics, dtype=np.float64)
-        tiles = sample_tiles(pixels, self.points, w, h)
+        image = self.sample_image
+        cam = np.zeros((0, 3)) if image is None else image.intrinsics
+        tiles = sample_tiles(pixels, self.points, w, h, TILE)
 
         def label_chunk(a: int, b: int) -> None:
             gap = propagate_pixels(out, valid, all_pixels, self.all_points, near, self.points,

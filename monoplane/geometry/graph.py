@@ -16,6 +16,7 @@ import numpy as np
 from monoplane.errors import InvalidInput
 from monoplane.geometry.components import largest_component
 from monoplane.geometry.neighbours import PointIndex
+from monoplane.geometry.propagation import SampleImage, image_knn
 from monoplane.jit import chunks, inline, kernel, run_threaded
 
 #: Nodes per thread below which the edge list is built on one thread.
@@ -78,8 +79,8 @@ class NeighbourGraph:
             return self._indptr, self._indices
 
     @classmethod
-    def build(cls, points: np.ndarray, k: int, tree: PointIndex | None = None
-              ) -> NeighbourGraph:
+    def build(cls, points: np.ndarray, k: int, tree: PointIndex | None = None,
+              image: SampleImage | None = None) -> NeighbourGraph:
         """Connect every point to its ``k`` nearest neighbours (symmetrised, deduplicated).
 
         Parameters
@@ -90,10 +91,17 @@ class NeighbourGraph:
             Neighbours per point, >= 1; capped at N - 1.
         tree : PointIndex, optional
             An existing index over exactly these points, to avoid building another.
+        image : SampleImage, optional
+            Where the points lie in their frame's image: their neighbours are then found
+            through the image (:func:`~monoplane.geometry.propagation.image_knn`), and only
+            the few it leaves in the point index (built for them when ``tree`` is None). The
+            same graph either way.
 
         Returns
         -------
         NeighbourGraph
+            Its ``tree`` is None when the image found every point's neighbours and none
+            was given.
         """
         pts = np.asarray(points, dtype=np.float64)
         if pts.ndim != 2 or pts.shape[1] != 3:
@@ -101,17 +109,30 @@ class NeighbourGraph:
         if k < 1:
             raise InvalidInput(f"k must be at least 1, got {k}")
         n = pts.shape[0]
-        if tree is None:
-            tree = PointIndex(pts)
-        elif tree.n != n:
+        if tree is not None and tree.n != n:
             raise InvalidInput(f"the index holds {tree.n} points, not the graph's {n}")
+        if image is not None and image.pixels.shape != (n,):
+            raise InvalidInput(f"the image holds {image.pixels.shape[0]} samples, not the "
+                               f"graph's {n} points")
         kk = min(k, n - 1)
         if kk < 1:
             empty = np.zeros((0, 2), dtype=np.int64)
             return cls(n, empty, np.zeros(n + 1, dtype=np.int64), np.zeros(0, dtype=np.int64),
-                       tree, 0.0)
-        dist, nbr = tree.query_indexed(kk + 1)
-        nbr = np.ascontiguousarray(nbr, dtype=np.int64)
+                       PointIndex(pts) if tree is None and image is None else tree, 0.0)
+        missed = np.arange(n)  # the points the index answers for: all, without an image
+        if image is not None:
+            dist, nbr, missed = image_knn(np.ascontiguousarray(pts), image, kk + 1)
+        if not missed.size:  # the image found every point's neighbours
+            np.sqrt(dist, out=dist)
+        else:
+            if tree is None:
+                tree = PointIndex(pts)
+            if missed.size == n:  # no image, or the image search gave up
+                dist, nbr = tree.query_indexed(kk + 1)
+            else:
+                dist[missed] = 0.0  # rows the point index fills in below
+                np.sqrt(dist, out=dist)
+                dist[missed], nbr[missed] = tree.query(pts[missed], kk + 1)
         # Each thread lists the edges whose smaller end lies in its range of nodes; in range
         # order they are the sorted edge list.
         parts = run_threaded([lambda a=a, b=b: _knn_edges(nbr, a, b)
@@ -361,12 +382,13 @@ def _knn_edges(nbr: np.ndarray, lo_start: int, lo_stop: int) -> np.ndarray:
     ``nbr`` is the (N, K) int64 neighbour table of a kNN query (a row may contain the point
     itself, anywhere among exact duplicates). Returns the (E, 2) edges ``i < j`` sorted by
     ``(i, j)`` without self-loops or repeats. A bucket per smaller end, sorted in place,
-    replaces a global sort of all pairs; every row is read, only the range's buckets filled.
+    replaces a global sort of all pairs; the rows from ``lo_start`` on are read (a row before
+    it has a smaller end before it too), only the range's buckets filled.
     """
     n, k = nbr.shape
     width = lo_stop - lo_start
     start = np.zeros(width + 1, dtype=np.int64)
-    for i in range(n):
+    for i in range(lo_start, n):
         for c in range(k):
             j = nbr[i, c]
             lo = min(i, j)
@@ -376,7 +398,7 @@ def _knn_edges(nbr: np.ndarray, lo_start: int, lo_stop: int) -> np.ndarray:
         start[i + 1] += start[i]
     bucket = np.empty(start[width], dtype=np.int64)
     fill = start[:width].copy()
-    for i in range(n):
+    for i in range(lo_start, n):
         for c in range(k):
             j = nbr[i, c]
             lo = min(i, j)
