@@ -83,12 +83,17 @@ def normal_costs(angles: np.ndarray, epsilon_n: float) -> np.ndarray:
 
 def data_costs(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, plane: np.ndarray,
                model_normal: np.ndarray | None, epsilon: float, epsilon_n: float = np.pi,
-               payback: np.ndarray | None = None, keep: float = 1.0
-               ) -> tuple[np.ndarray, np.ndarray]:
+               payback: np.ndarray | None = None, keep: float = 1.0,
+               gate: float = np.pi) -> tuple[np.ndarray, np.ndarray]:
     """Data costs f(0, p) and f(1, p) + g(1, p) of a pool for one hypothesis, in one pass.
 
     :func:`msac_costs` of the point-to-plane distances, plus :func:`normal_costs` of the
     angles to the model normal when one is given.
+
+    With a model normal and ``gate`` below π, a point whose normal lies more than ``gate``
+    from the model normal cannot be an inlier: its f(1, p) + g(1, p) is +inf, and the cut
+    fixes it as an outlier whatever its neighbours (g alone grows too slowly for that: at
+    3 ε_n it is e², which the (1 - λ) weight makes smaller than one edge's cut cost).
 
     With ``payback`` (a graph cut's :func:`~monoplane.algorithm.graphcut.pool_payback`) and
     ``keep`` (its 1 - λ), a point whose distance cost alone already makes it an outlier in
@@ -113,26 +118,33 @@ def data_costs(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, plane:
         (M,) float64 bound of each point's edges (see above); ``None``: every cost exact.
     keep : float
         Weight 1 - λ of the data term in the cut's energy, with ``payback``.
+    gate : float
+        Largest angle in radians between a point's normal and the model normal at which
+        the point may be an inlier (π: no gate).
 
     Returns
     -------
     f0, data1 : numpy.ndarray
-        (M,) float64 costs of the outlier and the inlier label.
+        (M,) float64 costs of the outlier and the inlier label (data1 +inf where gated).
     """
     use_normal = model_normal is not None
     mn = np.zeros(3) if model_normal is None else np.asarray(model_normal, dtype=np.float64)
     bound = np.zeros(0) if payback is None else np.ascontiguousarray(payback, dtype=np.float64)
+    # Gated below this cosine; -2 gates nothing (the cosine of unit normals is at least -1).
+    cos_gate = float(np.cos(gate)) if gate < np.pi else -2.0
     return _data_costs(points, normals, np.ascontiguousarray(pool, dtype=np.int64),
                        np.asarray(plane, dtype=np.float64), mn, float(epsilon),
-                       float(epsilon_n), use_normal, bound, float(keep))
+                       float(epsilon_n), use_normal, bound, float(keep), cos_gate)
 
 
 @kernel
 def _data_costs(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, plane: np.ndarray,
                 model_normal: np.ndarray, epsilon: float, epsilon_n: float, use_normal: bool,
-                payback: np.ndarray, keep: float) -> tuple[np.ndarray, np.ndarray]:
+                payback: np.ndarray, keep: float, cos_gate: float
+                ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`data_costs` (``use_normal`` False ignores ``model_normal``; an empty
-    ``payback`` skips no normal term)."""
+    ``payback`` skips no normal term; a normal whose cosine to the model normal is below
+    ``cos_gate`` gets an infinite inlier cost)."""
     m = pool.shape[0]
     bounded = payback.shape[0] > 0
     f0 = np.zeros(m)
@@ -156,7 +168,9 @@ def _data_costs(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, plane
         if use_normal:
             cos = (model_normal[0] * normals[p, 0] + model_normal[1] * normals[p, 1]
                    + model_normal[2] * normals[p, 2])
-            if cos < cos_skip:
+            if cos < cos_gate:
+                data1[i] = np.inf
+            elif cos < cos_skip:
                 rho = np.arccos(min(max(cos, -1.0), 1.0))
                 if rho >= epsilon_n:
                     data1[i] += np.exp(rho / epsilon_n - 1.0)

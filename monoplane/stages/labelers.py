@@ -36,6 +36,7 @@ from monoplane.contracts import (
     Stage,
     param,
 )
+from monoplane.errors import check_config
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.hookspecs import hookimpl
@@ -194,8 +195,16 @@ class ProximityGraphCutConfig(ProximityAffinities):
 
     lambda_: float = param(0.95, "smoothness weight λ in E = (1-λ)(E_d + E_n) + λE_s")
     normal_term: bool = param(True, "add the normal data energy E_n to the data term")
+    normal_gate_deg: float = param(
+        180.0, "a point whose normal lies more than this angle in degrees from the plane "
+        "hypothesis' model normal cannot be its inlier, whatever its neighbours (with "
+        "normal_term; 180: no gate)")
     normalise: bool = param(
         False, "divide E_s by the graph's mean degree (off: the paper's weights as given)")
+
+    def __post_init__(self) -> None:
+        check_config([(0 < self.normal_gate_deg <= 180,
+                       f"normal_gate_deg must lie in (0, 180], got {self.normal_gate_deg}")])
 
 
 class ProximityGraphCutLabeler(_PoolGraphCut):
@@ -225,7 +234,8 @@ class ProximityGraphCutLabeler(_PoolGraphCut):
         f0, data1 = data_costs(cloud.points, cloud.normals, pool, plane,
                                model_normal if self.config.normal_term else None,
                                params.epsilon, params.epsilon_n, terms.payback,
-                               1.0 - self.config.lambda_)
+                               1.0 - self.config.lambda_,
+                               float(np.deg2rad(self.config.normal_gate_deg)))
         return self._minimize(terms, f0, data1)
 
 

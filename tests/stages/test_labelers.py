@@ -11,6 +11,7 @@ from monoplane.algorithm.graphcut import (
     proximity_weights,
 )
 from monoplane.contracts import RansacParams
+from monoplane.errors import ConfigError
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.stages.labelers import (
@@ -213,3 +214,16 @@ def test_proximity_labeler_scales_the_affinities_of_a_graph_that_has_a_scale():
                   context)
     full = proximity_weights(cloud.points, graph.edges, cloud.normals, cloud.colors)
     np.testing.assert_allclose(context.weights, 0.5 + graph.affinity_scale * (full - 0.5))
+
+
+def test_normal_gate_is_validated_and_removes_a_tilted_patch_smoothness_kept():
+    with pytest.raises(ConfigError, match="normal_gate_deg must lie in"):
+        ProximityGraphCutLabeler.Config(normal_gate_deg=0.0)
+    # A coplanar patch whose normals turn 40° from the plane: gated at 30° it is not taken.
+    cloud, _, _, patch = grid_cloud(tilt_deg=40.0)
+    plain, _ = run(ProximityGraphCutLabeler(), cloud)
+    assert plain.inliers[patch].all()
+    gated, _ = run(ProximityGraphCutLabeler(ProximityGraphCutLabeler.Config(normal_gate_deg=30.0)),
+                   cloud)
+    assert not gated.inliers[patch].any()
+    assert gated.inliers[:900][~np.isin(np.arange(900), patch)].mean() > 0.95
