@@ -196,9 +196,9 @@ class ProximityGraphCutConfig(ProximityAffinities):
     lambda_: float = param(0.95, "smoothness weight λ in E = (1-λ)(E_d + E_n) + λE_s")
     normal_term: bool = param(True, "add the normal data energy E_n to the data term")
     normal_gate_deg: float = param(
-        180.0, "a point whose normal lies more than this angle in degrees from the plane "
-        "hypothesis' model normal cannot be its inlier, whatever its neighbours (with "
-        "normal_term; 180: no gate)")
+        180.0, "a point whose normal, and every graph neighbour's, lies more than this angle "
+        "in degrees from the hypothesis' model normal cannot be its inlier, whatever the "
+        "smoothness (with normal_term; 180: no gate)")
     normalise: bool = param(
         False, "divide E_s by the graph's mean degree (off: the paper's weights as given)")
 
@@ -235,7 +235,7 @@ class ProximityGraphCutLabeler(_PoolGraphCut):
                                model_normal if self.config.normal_term else None,
                                params.epsilon, params.epsilon_n, terms.payback,
                                1.0 - self.config.lambda_,
-                               float(np.deg2rad(self.config.normal_gate_deg)))
+                               float(np.deg2rad(self.config.normal_gate_deg)), terms.edges)
         return self._minimize(terms, f0, data1)
 
 
