@@ -223,10 +223,17 @@ def test_normal_gate_is_validated_and_removes_a_tilted_patch_smoothness_kept():
     # smoothness carries the plane over all of it; gated at 30°, over its rim (the two
     # rows next to the plane, whose kNN reach the plane's points) at most.
     cloud, _, _, patch = grid_cloud(tilt_deg=40.0)
+    # Given normals are not gated by default; normals estimated from depth are.
     plain, _ = run(ProximityGraphCutLabeler(), cloud)
     assert plain.inliers[patch].all()
-    gated, _ = run(ProximityGraphCutLabeler(ProximityGraphCutLabeler.Config(normal_gate_deg=30.0)),
+    cloud.normals_from_depth = True
+    from_depth, _ = run(ProximityGraphCutLabeler(ProximityGraphCutLabeler.Config(
+        normal_gate_deg=30.0)), cloud)
+    cloud.normals_from_depth = False
+    cfg = ProximityGraphCutLabeler.Config
+    gated, _ = run(ProximityGraphCutLabeler(cfg(normal_gate_deg=30.0, gate_given_normals=True)),
                    cloud)
     inner = (cloud.points[patch, 0] > 0.07) & (cloud.points[patch, 1] > 0.07)
     assert inner.sum() == 64 and not gated.inliers[patch][inner].any()
+    np.testing.assert_array_equal(from_depth.inliers, gated.inliers)
     assert gated.inliers[:900][~np.isin(np.arange(900), patch)].mean() > 0.95
