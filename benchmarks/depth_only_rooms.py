@@ -8,7 +8,7 @@ estimated from it), as on a robot. Prints VOI, RI and SC against the rooms' grou
 and the wall time a frame, means over the rooms. Usage::
 
     python3 benchmarks/depth_only_rooms.py --preset rgbd-fast --preset monoplane-nocrf \\
-        --size 640x480 --n 8
+        --size 640x480 --n 8 [--set labeler.normal_gate_deg=20]
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ import numpy as np
 
 from monoplane import Pipeline
 from monoplane.evaluation.segmentation import segmentation_scores
+from monoplane.host.config import parse_override
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from test_rgbd_fast import sensor_frame  # noqa: E402  (the test module is not a package)
@@ -32,9 +33,13 @@ def main() -> None:
     parser.add_argument("--preset", action="append", required=True, help="repeatable")
     parser.add_argument("--size", default="320x240", help="WIDTHxHEIGHT (default 320x240)")
     parser.add_argument("--n", type=int, default=4, help="rooms 0 .. N-1 (default 4)")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="config override of every preset (repeatable)")
     args = parser.parse_args()
     width, height = (int(v) for v in args.size.split("x"))
-    pipes = {name: Pipeline.from_preset(name) for name in args.preset}
+    # Values are read as the CLI's --set reads them (TOML: 20 is an int, grid a string).
+    overrides = {f"{table}.{key}": value for table, key, value in map(parse_override, args.set)}
+    pipes = {name: Pipeline.from_preset(name, overrides=overrides) for name in args.preset}
     rows: dict[str, list[tuple[float, float, float, float]]] = {name: [] for name in pipes}
     for seed in range(args.n):
         frame, truth = sensor_frame(seed, width, height)

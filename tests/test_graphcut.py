@@ -356,3 +356,74 @@ def test_a_pool_not_within_the_last_one_is_not_shrunk():
     assert shrink_subgraph(np.zeros(0, dtype=np.int64), np.array([2]), edges[:0]) is None
     kept, rows = shrink_subgraph(old, np.array([3, 5]), edges)
     assert kept.tolist() == [[0, 1]] and rows.tolist() == [1]
+
+
+def test_normal_gate_keeps_a_plane_off_a_point_its_smoothness_would_carry():
+    # Three points on the plane z = 0 in a chain, the middle one's normal 40° from the model
+    # normal (ε_n = 10°): f(0) = 1 and f(1) = 0 each, g(1, middle) = e³. Cut cost 1, λ = 0.95.
+    # All inliers: 0.05 e³ = 1.004; middle out: 0.05 + 2 λ = 1.95; all out: 0.15 + 2 λ = 2.05.
+    pts = np.array([[0.0, 0.0, 0.0], [0.01, 0.0, 0.0], [0.02, 0.0, 0.0]])
+    t = np.deg2rad(40.0)
+    nrm = np.array([[0.0, 0.0, -1.0], [np.sin(t), 0.0, -np.cos(t)], [0.0, 0.0, -1.0]])
+    pool = np.arange(3, dtype=np.int64)
+    plane, mn = np.array([0.0, 0.0, -1.0, 0.0]), np.array([0.0, 0.0, -1.0])
+    edges = np.array([[0, 1], [1, 2]])
+    eps_n = np.deg2rad(10.0)
+    f0, data1 = data_costs(pts, nrm, pool, plane, mn, 0.02, eps_n)
+    labels, value = minimize_gc_ransac(f0, data1, edges, 1.0, 0.95)
+    assert labels.all() and value == pytest.approx(0.05 * np.e ** 3)
+    # Gated at 30°: the middle point cannot be an inlier, its neighbours stay.
+    f0, data1 = data_costs(pts, nrm, pool, plane, mn, 0.02, eps_n, gate=np.deg2rad(30.0))
+    assert np.isinf(data1[1]) and np.array_equal(data1[[0, 2]], [0.0, 0.0])
+    labels, value = minimize_gc_ransac(f0, data1, edges, 1.0, 0.95)
+    assert labels.tolist() == [True, False, True] and value == pytest.approx(0.05 + 2 * 0.95)
+    # A gate above the middle normal's angle changes nothing.
+    same = data_costs(pts, nrm, pool, plane, mn, 0.02, eps_n, gate=np.deg2rad(45.0))
+    np.testing.assert_array_equal(same[1], data_costs(pts, nrm, pool, plane, mn, 0.02, eps_n)[1])
+
+
+def test_normal_gate_cuts_exactly_at_its_angle_and_only_with_a_model_normal():
+    gate = np.deg2rad(30.0)
+    tilt = gate * np.array([0.5, 1 - 1e-6, 1 + 1e-6, 3.0])
+    nrm = np.stack([np.sin(tilt), np.zeros(4), -np.cos(tilt)], axis=1)
+    pts = np.zeros((4, 3))
+    pool = np.arange(4, dtype=np.int64)
+    plane, mn = np.array([0.0, 0.0, -1.0, 0.0]), np.array([0.0, 0.0, -1.0])
+    _, data1 = data_costs(pts, nrm, pool, plane, mn, 0.02, np.deg2rad(10.0), gate=gate)
+    assert np.isinf(data1).tolist() == [False, False, True, True]
+    np.testing.assert_allclose(data1[:2], normal_costs(tilt[:2], np.deg2rad(10.0)))
+    _, data1 = data_costs(pts, nrm, pool, plane, None, 0.02, gate=gate)
+    assert not np.isinf(data1).any()
+
+
+def test_normal_gate_with_edges_spares_turned_points_beside_unturned_ones():
+    # Five points on the plane z = 0 in a chain; points 1-3 turned 35° (ε_n = 10°: g = e^2.5,
+    # inlier unary 0.05 e^2.5 = 0.609). Cut cost 1, λ = 0.95. With the chain's edges only point
+    # 2, whose neighbours are both turned, is gated; then [1, 1, 0, 1, 1] costs
+    # 0.05 + 2 (0.609) + 2 λ = 3.168, against 3.559 for [1, 1, 0, 0, 1] and 3.95 for
+    # [1, 0, 0, 0, 1]. Ungated, all inliers (3 x 0.609 = 1.827) win.
+    pts = np.zeros((5, 3))
+    pts[:, 0] = 0.01 * np.arange(5)
+    t = np.deg2rad(35.0)
+    nrm = np.tile([0.0, 0.0, -1.0], (5, 1))
+    nrm[1:4] = [np.sin(t), 0.0, -np.cos(t)]
+    pool = np.arange(5, dtype=np.int64)
+    plane, mn = np.array([0.0, 0.0, -1.0, 0.0]), np.array([0.0, 0.0, -1.0])
+    chain = np.array([[0, 1], [1, 2], [2, 3], [3, 4]])
+    args = (pts, nrm, pool, plane, mn, 0.02, np.deg2rad(10.0))
+    f0, data1 = data_costs(*args)
+    labels, _ = minimize_gc_ransac(f0, data1, chain, 1.0, 0.95)
+    assert labels.all()
+    f0, data1 = data_costs(*args, gate=np.deg2rad(30.0), edges=chain)
+    assert np.isinf(data1).tolist() == [False, False, True, False, False]
+    labels, value = minimize_gc_ransac(f0, data1, chain, 1.0, 0.95)
+    assert labels.tolist() == [True, True, False, True, True]
+    assert value == pytest.approx(0.05 + 2 * 0.05 * np.exp(2.5) + 2 * 0.95)
+    # Without the edges every turned point is gated; two turned points side by side both have
+    # an unturned neighbour, so neither is.
+    assert np.isinf(data_costs(*args, gate=np.deg2rad(30.0))[1]).sum() == 3
+    short = chain[[0, 1, 3]]  # 0-1, 1-2, 3-4: point 2's only other neighbour is gone
+    nrm[3] = [0.0, 0.0, -1.0]
+    assert not np.isinf(data_costs(*args, gate=np.deg2rad(30.0), edges=chain)[1]).any()
+    assert np.isinf(data_costs(*args, gate=np.deg2rad(30.0), edges=short)[1]).tolist() == [
+        False, False, True, False, False]

@@ -83,12 +83,23 @@ def normal_costs(angles: np.ndarray, epsilon_n: float) -> np.ndarray:
 
 def data_costs(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, plane: np.ndarray,
                model_normal: np.ndarray | None, epsilon: float, epsilon_n: float = np.pi,
-               payback: np.ndarray | None = None, keep: float = 1.0
+               payback: np.ndarray | None = None, keep: float = 1.0,
+               gate: float = np.pi, edges: np.ndarray | None = None
                ) -> tuple[np.ndarray, np.ndarray]:
     """Data costs f(0, p) and f(1, p) + g(1, p) of a pool for one hypothesis, in one pass.
 
     :func:`msac_costs` of the point-to-plane distances, plus :func:`normal_costs` of the
     angles to the model normal when one is given.
+
+    With a model normal and ``gate`` below π, a point whose normal lies more than ``gate``
+    from the model normal (*turned*) cannot be an inlier: its f(1, p) + g(1, p) is +inf, and
+    the cut fixes it as an outlier whatever its neighbours. g alone cannot do that: at 3 ε_n
+    it is e², which the (1 - λ) weight makes far smaller than what a point within ε pays on
+    its edges as an outlier (the both-outlier cost ½ λ (f(0, p) + f(0, q)) per edge). With
+    ``edges`` (the pool's graph) only a turned point whose neighbours are all turned too is
+    gated: a surface that turns away from the plane (a globe beside a cabinet front), not a
+    plane's own noisy normal or the band along a crease, whose normals blur into the next
+    face's; those keep g and the smoothness decides.
 
     With ``payback`` (a graph cut's :func:`~monoplane.algorithm.graphcut.pool_payback`) and
     ``keep`` (its 1 - λ), a point whose distance cost alone already makes it an outlier in
@@ -113,35 +124,56 @@ def data_costs(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, plane:
         (M,) float64 bound of each point's edges (see above); ``None``: every cost exact.
     keep : float
         Weight 1 - λ of the data term in the cut's energy, with ``payback``.
+    gate : float
+        Largest angle in radians between a point's normal and the model normal at which
+        the point may be an inlier (π: no gate).
+    edges : numpy.ndarray, optional
+        (E, 2) int64 pool positions of the pool's graph edges: a turned point with a
+        neighbour that is not turned is not gated. ``None``: every turned point is.
 
     Returns
     -------
     f0, data1 : numpy.ndarray
-        (M,) float64 costs of the outlier and the inlier label.
+        (M,) float64 costs of the outlier and the inlier label (data1 +inf where gated).
     """
     use_normal = model_normal is not None
     mn = np.zeros(3) if model_normal is None else np.asarray(model_normal, dtype=np.float64)
     bound = np.zeros(0) if payback is None else np.ascontiguousarray(payback, dtype=np.float64)
-    return _data_costs(points, normals, np.ascontiguousarray(pool, dtype=np.int64),
-                       np.asarray(plane, dtype=np.float64), mn, float(epsilon),
-                       float(epsilon_n), use_normal, bound, float(keep))
+    # Turned below this cosine; -2 turns nothing (the cosine of unit normals is at least -1).
+    cos_gate = float(np.cos(gate)) if gate < np.pi and use_normal else -2.0
+    f0, data1, turned = _data_costs(points, normals, np.ascontiguousarray(pool, dtype=np.int64),
+                                    np.asarray(plane, dtype=np.float64), mn, float(epsilon),
+                                    float(epsilon_n), use_normal, bound, float(keep), cos_gate)
+    if cos_gate > -2.0:
+        pairs = (np.zeros((0, 2), dtype=np.int64) if edges is None else
+                 np.ascontiguousarray(np.asarray(edges, dtype=np.int64).reshape(-1, 2)))
+        _gate_turned(data1, turned, pairs, edges is not None)
+    return f0, data1
 
 
 @kernel
 def _data_costs(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, plane: np.ndarray,
                 model_normal: np.ndarray, epsilon: float, epsilon_n: float, use_normal: bool,
-                payback: np.ndarray, keep: float) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`data_costs` (``use_normal`` False ignores ``model_normal``; an empty
-    ``payback`` skips no normal term)."""
+                payback: np.ndarray, keep: float, cos_gate: float
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`data_costs` before the gate (``use_normal`` False ignores ``model_normal``; an
+    empty ``payback`` skips no normal term), and the (M,) bool points whose normal's cosine
+    to the model normal is below ``cos_gate``."""
     m = pool.shape[0]
     bounded = payback.shape[0] > 0
     f0 = np.zeros(m)
     data1 = np.empty(m)
+    turned = np.zeros(m, dtype=np.bool_)
     # arccos only where the angle can reach ε_n: above this cosine it is surely smaller (the
     # margin is far wider than arccos's rounding), so the result is that of testing every point.
     cos_skip = np.cos(epsilon_n) + 1e-9
     for i in range(m):
         p = pool[i]
+        cos = 1.0
+        if use_normal:
+            cos = (model_normal[0] * normals[p, 0] + model_normal[1] * normals[p, 1]
+                   + model_normal[2] * normals[p, 2])
+            turned[i] = cos < cos_gate
         phi = (plane[0] * points[p, 0] + plane[1] * points[p, 1] + plane[2] * points[p, 2]
                + plane[3])
         r = (phi / epsilon) ** 2
@@ -154,13 +186,30 @@ def _data_costs(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, plane
             if bounded and keep * r > payback[i] * (1.0 + 1e-9) + 1e-12:
                 continue
         if use_normal:
-            cos = (model_normal[0] * normals[p, 0] + model_normal[1] * normals[p, 1]
-                   + model_normal[2] * normals[p, 2])
             if cos < cos_skip:
                 rho = np.arccos(min(max(cos, -1.0), 1.0))
                 if rho >= epsilon_n:
                     data1[i] += np.exp(rho / epsilon_n - 1.0)
-    return f0, data1
+    return f0, data1, turned
+
+
+@kernel
+def _gate_turned(data1: np.ndarray, turned: np.ndarray, edges: np.ndarray,
+                 by_neighbours: bool) -> None:
+    """Set ``data1`` (M,) to +inf, in place, at the ``turned`` (M,) points; with
+    ``by_neighbours`` only at those whose every neighbour along the (E, 2) ``edges`` is
+    turned too (see :func:`data_costs`)."""
+    gated = turned.copy()
+    if by_neighbours:
+        for e in range(edges.shape[0]):
+            i, j = edges[e, 0], edges[e, 1]
+            if not turned[j]:
+                gated[i] = False
+            if not turned[i]:
+                gated[j] = False
+    for i in range(data1.shape[0]):
+        if gated[i]:
+            data1[i] = np.inf
 
 
 def proximity_weights(points: np.ndarray, edges: np.ndarray, normals: np.ndarray | None = None,

@@ -119,6 +119,9 @@ class PlaneCloud:
         (3, 3) float64 intrinsics the frame's points were unprojected with
         (:meth:`from_frame`); :meth:`propagate` then finds the samples near a pixel in 3D
         through the image. None otherwise (a point index serves instead).
+    normals_from_depth : bool
+        True when the frame's normals were estimated from its depth by the cue stage
+        (:attr:`monoplane.datamodel.Frame.normals_from_depth`), not given with the input.
     """
 
     points: np.ndarray
@@ -134,6 +137,7 @@ class PlaneCloud:
     stride: int | None = None
     lattice: np.ndarray | None = None
     intrinsics: np.ndarray | None = None
+    normals_from_depth: bool = False
 
     def __post_init__(self) -> None:
         n = self.points.shape[0]
@@ -290,7 +294,8 @@ class PlaneCloud:
         return cls(points=points, normals=normals, colors=colors,
                    pixels=keep, center=center, scale=scale, shape=frame.shape,
                    all_points=all_points, all_pixels=all_pixels, stride=stride,
-                   lattice=lattice, intrinsics=np.asarray(frame.K, dtype=np.float64))
+                   lattice=lattice, intrinsics=np.asarray(frame.K, dtype=np.float64),
+                   normals_from_depth=frame.normals_from_depth)
 
     @classmethod
     def from_points(cls, points: np.ndarray, normals: np.ndarray, colors: np.ndarray | None,

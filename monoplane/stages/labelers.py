@@ -39,6 +39,7 @@ from monoplane.contracts import (
     Stage,
     param,
 )
+from monoplane.errors import check_config
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.hookspecs import hookimpl
@@ -214,8 +215,18 @@ class ProximityGraphCutConfig(ProximityAffinities):
 
     lambda_: float = param(0.95, "smoothness weight λ in E = (1-λ)(E_d + E_n) + λE_s")
     normal_term: bool = param(True, "add the normal data energy E_n to the data term")
+    normal_gate_deg: float = param(
+        20.0, "a point whose normal, and every graph neighbour's, lies more than this angle "
+        "in degrees from the hypothesis' model normal cannot be its inlier, whatever the "
+        "smoothness (with normal_term, on normals estimated from the depth; 180: no gate)")
+    gate_given_normals: bool = param(
+        False, "apply normal_gate_deg also to normals given with the input (a network's)")
     normalise: bool = param(
         False, "divide E_s by the graph's mean degree (off: the paper's weights as given)")
+
+    def __post_init__(self) -> None:
+        check_config([(0 < self.normal_gate_deg <= 180,
+                       f"normal_gate_deg must lie in (0, 180], got {self.normal_gate_deg}")])
 
 
 class ProximityGraphCutLabeler(_PoolGraphCut):
@@ -235,6 +246,17 @@ class ProximityGraphCutLabeler(_PoolGraphCut):
         # Ascending distinct edge rows as many as the graph's are all of them, in order.
         return weights if edge_ids.size == weights.size else weights[edge_ids]
 
+    def _gate(self, cloud: PlaneCloud) -> float:
+        """The normal gate in radians for ``cloud`` (π: none). Normals estimated from a
+        sensor's depth measure the surface the distances measure, and a curved surface beside
+        a plane turns them away from it; a network's normals are smoothed predictions, on
+        which the gate trims planes on curved surfaces into bands that pass the planarity
+        test (docs/evaluation.md, "The normal gate, eighth round")."""
+        c = self.config
+        if c.normal_gate_deg >= 180 or not (cloud.normals_from_depth or c.gate_given_normals):
+            return np.pi
+        return float(np.deg2rad(c.normal_gate_deg))
+
     def label(self, cloud: PlaneCloud, graph: NeighbourGraph, pool: np.ndarray,
               plane: np.ndarray, model_normal: np.ndarray, params: RansacParams,
               context: LabelingContext | None = None) -> Labeling:
@@ -245,7 +267,7 @@ class ProximityGraphCutLabeler(_PoolGraphCut):
         f0, data1 = data_costs(cloud.points, cloud.normals, pool, plane,
                                model_normal if self.config.normal_term else None,
                                params.epsilon, params.epsilon_n, terms.payback,
-                               1.0 - self.config.lambda_)
+                               1.0 - self.config.lambda_, self._gate(cloud), terms.edges)
         return self._minimize(terms, f0, data1)
 
 

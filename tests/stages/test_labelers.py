@@ -11,6 +11,7 @@ from monoplane.algorithm.graphcut import (
     proximity_weights,
 )
 from monoplane.contracts import RansacParams
+from monoplane.errors import ConfigError
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
 from monoplane.stages.labelers import (
@@ -213,3 +214,26 @@ def test_proximity_labeler_scales_the_affinities_of_a_graph_that_has_a_scale():
                   context)
     full = proximity_weights(cloud.points, graph.edges, cloud.normals, cloud.colors)
     np.testing.assert_allclose(context.weights, 0.5 + graph.affinity_scale * (full - 0.5))
+
+
+def test_normal_gate_is_validated_and_removes_a_tilted_patch_smoothness_kept():
+    with pytest.raises(ConfigError, match="normal_gate_deg must lie in"):
+        ProximityGraphCutLabeler.Config(normal_gate_deg=0.0)
+    # A coplanar 10x10 patch whose normals turn 40° from the plane, in the grid's corner: the
+    # smoothness carries the plane over all of it; gated at 30°, over its rim (the two
+    # rows next to the plane, whose kNN reach the plane's points) at most.
+    cloud, _, _, patch = grid_cloud(tilt_deg=40.0)
+    # Given normals are not gated by default; normals estimated from depth are.
+    plain, _ = run(ProximityGraphCutLabeler(), cloud)
+    assert plain.inliers[patch].all()
+    cloud.normals_from_depth = True
+    from_depth, _ = run(ProximityGraphCutLabeler(ProximityGraphCutLabeler.Config(
+        normal_gate_deg=30.0)), cloud)
+    cloud.normals_from_depth = False
+    cfg = ProximityGraphCutLabeler.Config
+    gated, _ = run(ProximityGraphCutLabeler(cfg(normal_gate_deg=30.0, gate_given_normals=True)),
+                   cloud)
+    inner = (cloud.points[patch, 0] > 0.07) & (cloud.points[patch, 1] > 0.07)
+    assert inner.sum() == 64 and not gated.inliers[patch][inner].any()
+    np.testing.assert_array_equal(from_depth.inliers, gated.inliers)
+    assert gated.inliers[:900][~np.isin(np.arange(900), patch)].mean() > 0.95
