@@ -460,6 +460,12 @@ def test_block_means_from_counts_equal_the_per_pixel_sums(uniform, num_labels, s
     np.testing.assert_array_equal(got, ref)
 
 
+def _no_taps() -> tuple[np.ndarray, ...]:
+    """Interpolation taps for upsampled_labels when it reads an upsampled array instead."""
+    return (np.zeros((1, 2), np.int64), np.zeros((1, 2), np.float32),
+            np.zeros((1, 2), np.int64), np.zeros((1, 2), np.float32))
+
+
 @pytest.mark.parametrize("uniform", [True, False])
 def test_final_labels_kernels_equal_the_numpy_argmax(uniform):
     from monoplane.algorithm.crf_labels import exact_labels, upsampled_labels
@@ -487,10 +493,11 @@ def test_final_labels_kernels_equal_the_numpy_argmax(uniform):
             got = np.full((h, w), -1, dtype=np.int32)
             close = np.zeros(200, bool)
             for y0, y1 in zip(bounds[:-1], bounds[1:], strict=True):
-                # No certified cells: every pixel reads its messages.
-                upsampled_labels(fine, lab.astype(np.int64), band, *args, margin,
-                                 np.full(1, -1), np.zeros(1), h + w, 1, 0.0, 0.0, y0, y1, got,
-                                 close)
+                # No certified cells: every pixel reads its messages (from fine; one coarse
+                # cell, whose taps are not read).
+                upsampled_labels(np.zeros((1, 1, num), np.float32), *_no_taps(), fine,
+                                 lab.astype(np.int64), band, *args, margin, np.full(1, -1),
+                                 np.zeros(1), h + w, 0.0, 0.0, y0, y1, got, close)
             np.testing.assert_array_equal(close, expected_close)
             assert close[0]
             exact_labels(exact[close], lab.astype(np.int64), band[close], *args, got)
@@ -549,10 +556,48 @@ def test_certified_cells_give_the_labels_the_upsampled_argmax_gives(uniform, ste
     assert (cell_label >= 0).mean() > 0.3
     got, expected = (np.full((h, w), -1, np.int32) for _ in range(2))
     close, expected_close = np.zeros(40, bool), np.zeros(40, bool)
-    upsampled_labels(fine, lab.astype(np.int64), band, *args, cell_label, cell_gap, step, ws,
-                     slack, hard, 0, h, got, close)
-    upsampled_labels(fine, lab.astype(np.int64), band, *args, np.full(hs * ws, -1), cell_gap,
-                     step, ws, slack, hard, 0, h, expected, expected_close)
+    upsampled_labels(coarse, *_no_taps(), fine, lab.astype(np.int64), band, *args, cell_label,
+                     cell_gap, step, slack, hard, 0, h, got, close)
+    upsampled_labels(coarse, *_no_taps(), fine, lab.astype(np.int64), band, *args,
+                     np.full(hs * ws, -1), cell_gap, step, slack, hard, 0, h, expected,
+                     expected_close)
+    np.testing.assert_array_equal(got, expected)
+    np.testing.assert_array_equal(close, expected_close)
+
+
+@pytest.mark.parametrize("num", [2, 5, 21])
+@pytest.mark.parametrize("step, shape", [(8, (45, 70)), (3, (31, 40)), (5, (20, 24))])
+def test_interpolated_messages_are_cv2_resize_bit_for_bit(num, step, shape):
+    # The labelling interpolates the coarse messages where it needs them instead of reading
+    # cv2.resize's upsampling (for these label counts): the same float32 values, hence the
+    # same labels and close calls. Coarse messages of three magnitudes, a zero and a -0.
+    from monoplane.algorithm.crf_labels import _interpolate, bilinear_taps, upsampled_labels
+
+    rng = np.random.default_rng(num * step)
+    h, w = shape
+    hs, ws = -(-h // step), -(-w // step)
+    coarse = (rng.normal(size=(hs, ws, num)) * rng.choice([1e-3, 1.0, 30.0], (hs, ws, num))
+              ).astype(np.float32)
+    coarse[0, 0, 0], coarse[-1, -1, -1] = 0.0, -0.0
+    fine = cv2.resize(coarse, (ws * step, hs * step), interpolation=cv2.INTER_LINEAR
+                      ).reshape(hs * step, ws * step, num)
+    rows, row_w = bilinear_taps(h, hs, step, clamp_weights=False)
+    cols, col_w = bilinear_taps(w, ws, step, clamp_weights=True)
+    message = np.empty(num, np.float32)
+    for y in range(h):
+        for x in range(w):
+            _interpolate(coarse, rows, row_w, cols, col_w, y, x, message)
+            np.testing.assert_array_equal(message.view(np.int32), fine[y, x].view(np.int32))
+    lab = rng.integers(0, num, (h, w)).astype(np.int64)
+    band = np.sort(rng.choice(h * w, h * w // 3, replace=False))
+    values = unary_from_labels(np.array([1, 0]), num, 0.55, uniform_label=0)
+    args = (values[0, 1], values[0, 0], values[1, 0], True, 0.05, np.full(hs * ws, -1),
+            np.zeros(hs * ws), step, 0.0, 0.0, 0, h)
+    got, expected = (np.full((h, w), -1, np.int32) for _ in range(2))
+    close, expected_close = np.zeros(band.size, bool), np.zeros(band.size, bool)
+    upsampled_labels(coarse, rows, row_w, cols, col_w, np.zeros((0, 0, num), np.float32), lab,
+                     band, *args, got, close)
+    upsampled_labels(coarse, *_no_taps(), fine, lab, band, *args, expected, expected_close)
     np.testing.assert_array_equal(got, expected)
     np.testing.assert_array_equal(close, expected_close)
 

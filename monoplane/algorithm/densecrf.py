@@ -23,7 +23,13 @@ import numpy as np
 
 # PermutohedralLattice and pairwise are not used here: they stay importable from this module, where
 # they lived until the split into mean_field.py.
-from monoplane.algorithm.crf_labels import certified_cells, exact_labels, upsampled_labels
+from monoplane.algorithm.crf_labels import (
+    RESIZED_LABEL_COUNTS,
+    bilinear_taps,
+    certified_cells,
+    exact_labels,
+    upsampled_labels,
+)
 from monoplane.algorithm.mean_field import (  # noqa: F401
     GaussianKernel,
     PermutohedralLattice,
@@ -488,10 +494,14 @@ def dense_crf(
     blurred = _blurred(kernels, q)
     coarse_pairwise = _sum_in_place([k.message_from(b)
                                      for k, b in zip(kernels, blurred, strict=True)])
-    # cv2 maps fine pixel u to coarse position (u + 0.5) / step - 0.5.
+    # Bilinear upsampling as cv2 does it (fine pixel u at coarse position (u + 0.5) / step
+    # - 0.5): interpolated by the labelling where it needs the messages, or (label counts
+    # whose cv2 arithmetic differs) upsampled whole by cv2.
     coarse_messages = coarse_pairwise.reshape(hs, ws, num_labels)
-    fine = cv2.resize(coarse_messages, (ws * step, hs * step),
-                      interpolation=cv2.INTER_LINEAR).reshape(hs * step, ws * step, -1)
+    fine = np.zeros((0, 0, num_labels), np.float32)
+    if num_labels in RESIZED_LABEL_COUNTS:
+        fine = cv2.resize(coarse_messages, (ws * step, hs * step),
+                          interpolation=cv2.INTER_LINEAR).reshape(hs * step, ws * step, -1)
     return _full_resolution_labels(grid, params, lab, band, coarse_messages, fine, blurred)
 
 
@@ -500,13 +510,13 @@ def _full_resolution_labels(grid: CrfGrid, params: CrfParams, lab: np.ndarray, b
                             ) -> np.ndarray:
     """(H, W) int32 final labels of :func:`dense_crf` on a coarse grid: observed labels
     ``lab`` (H, W), ascending flat pixels of the ``band``, coarse messages ``coarse``
-    (hs, ws, L) float32 and their upsampling ``fine`` (≥H, ≥W, L), and each kernel's lattice
-    values ``blurred``."""
+    (hs, ws, L) float32 and, when not empty, their upsampling ``fine`` (≥H, ≥W, L), and each
+    kernel's lattice values ``blurred``."""
     (h, w), step = grid.shape, grid.step
     hs, ws = -(-h // step), -(-w // step)
     # The unary takes three values per label map (own label, other label, uniform): the
     # final argmax reads them instead of an (H W, L) unary array.
-    values = unary_from_labels(np.array([1, 0]), fine.shape[2], params.confidence,
+    values = unary_from_labels(np.array([1, 0]), coarse.shape[2], params.confidence,
                                uniform_label=0)
     unary = (values[0, 1], values[0, 0], values[1, 0], bool(params.uniform_nonplanar))
     lab64 = lab.astype(np.int64)
@@ -518,9 +528,11 @@ def _full_resolution_labels(grid: CrfGrid, params: CrfParams, lab: np.ndarray, b
     # features might overturn them: those pixels are labelled again from exact messages.
     cell_label, cell_gap, slack = certified_cells(coarse)
     hard = float(values[0, 0]) - float(values[0, 1]) + slack
-    run_threaded([partial(upsampled_labels, fine, lab64, band, *unary,
-                          float(params.band_margin), cell_label, cell_gap, step, ws, slack,
-                          hard, a, b, out, close)
+    rows, row_w = bilinear_taps(h, hs, step, clamp_weights=False)
+    cols, col_w = bilinear_taps(w, ws, step, clamp_weights=True)
+    run_threaded([partial(upsampled_labels, coarse, rows, row_w, cols, col_w, fine, lab64,
+                          band, *unary, float(params.band_margin), cell_label, cell_gap, step,
+                          slack, hard, a, b, out, close)
                   for a, b in chunks(h, _THREADED_ROWS)])
     band = band[close]
     fu = (band % w + 0.5) / step - 0.5
