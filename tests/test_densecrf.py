@@ -456,8 +456,21 @@ def test_block_means_from_counts_equal_the_per_pixel_sums(uniform, num_labels, s
     prob = np.exp(-unary)  # the per-pixel formulation it replaces
     ref = np.stack([np.bincount(block, prob[:, k], hs * ws) for k in range(num_labels)], 1)
     ref /= np.bincount(block, minlength=hs * ws)[:, None]
-    got = _block_mean_probabilities(lab.ravel(), block, hs * ws, num_labels, p)
+    got = _block_mean_probabilities(lab.astype(np.int32), step, num_labels, p)
     np.testing.assert_array_equal(got, ref)
+
+
+@pytest.mark.parametrize("step, shape", [(3, (192, 256)), (8, (480, 640)), (5, (37, 53))])
+def test_band_pixels_are_the_pixels_of_the_flagged_blocks(step, shape):
+    from monoplane.algorithm.densecrf import _band_pixels
+
+    h, w = shape
+    hs, ws = -(-h // step), -(-w // step)
+    edge = np.random.default_rng(step).random((hs, ws)) < 0.3
+    edge[-1, -1] = True  # a block cut by both image borders
+    block = (np.arange(h) // step)[:, None] * ws + (np.arange(w) // step)[None, :]
+    np.testing.assert_array_equal(_band_pixels(edge, step, h, w),
+                                  np.flatnonzero(edge.ravel()[block.ravel()]))
 
 
 def _no_taps() -> tuple[np.ndarray, ...]:
@@ -496,11 +509,11 @@ def test_final_labels_kernels_equal_the_numpy_argmax(uniform):
                 # No certified cells: every pixel reads its messages (from fine; one coarse
                 # cell, whose taps are not read).
                 upsampled_labels(np.zeros((1, 1, num), np.float32), *_no_taps(), fine,
-                                 lab.astype(np.int64), band, *args, margin, np.full(1, -1),
+                                 lab.astype(np.int32), band, *args, margin, np.full(1, -1),
                                  np.zeros(1), h + w, 0.0, 0.0, y0, y1, got, close)
             np.testing.assert_array_equal(close, expected_close)
             assert close[0]
-            exact_labels(exact[close], lab.astype(np.int64), band[close], *args, got)
+            exact_labels(exact[close], lab.astype(np.int32), band[close], *args, got)
             np.testing.assert_array_equal(got, expected)
 
 
@@ -556,9 +569,9 @@ def test_certified_cells_give_the_labels_the_upsampled_argmax_gives(uniform, ste
     assert (cell_label >= 0).mean() > 0.3
     got, expected = (np.full((h, w), -1, np.int32) for _ in range(2))
     close, expected_close = np.zeros(40, bool), np.zeros(40, bool)
-    upsampled_labels(coarse, *_no_taps(), fine, lab.astype(np.int64), band, *args, cell_label,
+    upsampled_labels(coarse, *_no_taps(), fine, lab.astype(np.int32), band, *args, cell_label,
                      cell_gap, step, slack, hard, 0, h, got, close)
-    upsampled_labels(coarse, *_no_taps(), fine, lab.astype(np.int64), band, *args,
+    upsampled_labels(coarse, *_no_taps(), fine, lab.astype(np.int32), band, *args,
                      np.full(hs * ws, -1), cell_gap, step, slack, hard, 0, h, expected,
                      expected_close)
     np.testing.assert_array_equal(got, expected)
@@ -588,7 +601,7 @@ def test_interpolated_messages_are_cv2_resize_bit_for_bit(num, step, shape):
         for x in range(w):
             _interpolate(coarse, rows, row_w, cols, col_w, y, x, message)
             np.testing.assert_array_equal(message.view(np.int32), fine[y, x].view(np.int32))
-    lab = rng.integers(0, num, (h, w)).astype(np.int64)
+    lab = rng.integers(0, num, (h, w)).astype(np.int32)
     band = np.sort(rng.choice(h * w, h * w // 3, replace=False))
     values = unary_from_labels(np.array([1, 0]), num, 0.55, uniform_label=0)
     args = (values[0, 1], values[0, 0], values[1, 0], True, 0.05, np.full(hs * ws, -1),

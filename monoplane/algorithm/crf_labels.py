@@ -142,7 +142,7 @@ def upsampled_labels(coarse: np.ndarray, rows: np.ndarray, row_w: np.ndarray,
     with the taps of :func:`bilinear_taps` (``rows`` and ``row_w`` (≥H, 2) along the height,
     ``cols`` and ``col_w`` (≥W, 2) along the width) when ``fine`` is empty (0, 0, L); else
     they are read from ``fine`` (≥H, ≥W, L) float32, ``cv2.resize``'s upsampling, and the
-    taps are not read. ``labels`` (H, W) int64 observed
+    taps are not read. ``labels`` (H, W) int32 observed
     labels, ``band`` (K,) int64 ascending flat pixels, ``close`` (K,) bool; the unary of a
     pixel is ``u_own`` at its label and ``u_other`` elsewhere, or ``u_uniform`` everywhere for
     label 0 when ``uniform_nonplanar``. float32 arithmetic and the first maximum, as

@@ -238,10 +238,11 @@ class _Cues:
         return pos, columns
 
 
-def _block_mean_probabilities(labels: np.ndarray, block: np.ndarray, num_blocks: int,
-                              num_labels: int, params: CrfParams) -> np.ndarray:
-    """(B, L) float64 mean over each block's pixels of ``exp(-unary)`` (the unary of
-    :func:`unary_from_labels`), from label counts instead of an (N, L) exponential.
+def _block_mean_probabilities(labels: np.ndarray, step: int, num_labels: int,
+                              params: CrfParams) -> np.ndarray:
+    """(B, L) float64 mean over each ``step`` x ``step`` block's pixels of ``exp(-unary)``
+    (the unary of :func:`unary_from_labels`) of the (H, W) int32 ``labels``, blocks in
+    raster order, from label counts instead of an (N, L) exponential.
 
     A pixel's probabilities take only three values (its label's, another label's, or uniform
     for a non-planar pixel when ``uniform_nonplanar``), so a block's sum is counts times those
@@ -253,8 +254,7 @@ def _block_mean_probabilities(labels: np.ndarray, block: np.ndarray, num_blocks:
     row = np.exp(-unary_from_labels(np.array([1, 0]), num_labels, params.confidence,
                                     uniform_label=0))
     p_own, p_other, p_uniform = float(row[0, 1]), float(row[0, 0]), float(row[1, 0])
-    counts, own = _block_counts(np.ascontiguousarray(labels, dtype=np.int64), block,
-                                num_blocks, num_labels, bool(params.uniform_nonplanar))
+    counts, own = _block_counts(labels, step, num_labels, bool(params.uniform_nonplanar))
     size = counts[:, 0].astype(np.float64)
     n_uniform = counts[:, 1].astype(np.float64)
     total = own * p_own + ((size - n_uniform)[:, None] - own) * p_other \
@@ -263,21 +263,46 @@ def _block_mean_probabilities(labels: np.ndarray, block: np.ndarray, num_blocks:
 
 
 @kernel
-def _block_counts(labels: np.ndarray, block: np.ndarray, num_blocks: int, num_labels: int,
+def _block_counts(labels: np.ndarray, step: int, num_labels: int,
                   uniform_nonplanar: bool) -> tuple[np.ndarray, np.ndarray]:
-    """One pass over the (N,) int64 ``labels`` and their (N,) int64 ``block``: (B, 2) int64
-    pixels and uniform pixels (label 0 when ``uniform_nonplanar``) of each block, and (B, L)
-    int64 pixels of each block observed with each label, uniform ones left out."""
-    counts = np.zeros((num_blocks, 2), dtype=np.int64)
-    own = np.zeros((num_blocks, num_labels), dtype=np.int64)
-    for i in range(labels.shape[0]):
-        b = block[i]
-        counts[b, 0] += 1
-        if uniform_nonplanar and labels[i] == 0:
-            counts[b, 1] += 1
-        else:
-            own[b, labels[i]] += 1
+    """One pass over the (H, W) int32 ``labels``: (B, 2) int64 pixels and uniform pixels
+    (label 0 when ``uniform_nonplanar``) of each ``step`` x ``step`` block (raster order),
+    and (B, L) int64 pixels of each block observed with each label, uniform ones left out."""
+    h, w = labels.shape
+    ws = -(-w // step)
+    counts = np.zeros((-(-h // step) * ws, 2), dtype=np.int64)
+    own = np.zeros((counts.shape[0], num_labels), dtype=np.int64)
+    for y in range(h):
+        row = (y // step) * ws
+        for x in range(w):
+            b = row + x // step
+            counts[b, 0] += 1
+            if uniform_nonplanar and labels[y, x] == 0:
+                counts[b, 1] += 1
+            else:
+                own[b, labels[y, x]] += 1
     return counts, own
+
+
+@kernel
+def _band_pixels(edge: np.ndarray, step: int, h: int, w: int) -> np.ndarray:
+    """(K,) int64 ascending flat pixels of an (H, W) image whose ``step`` x ``step`` block
+    is flagged in the (hs, ws) bool ``edge``."""
+    ws = edge.shape[1]
+    count = 0
+    for y in range(h):
+        for b in range(ws):
+            if edge[y // step, b]:
+                count += min(w, (b + 1) * step) - b * step
+    out = np.empty(count, np.int64)
+    k = 0
+    for y in range(h):
+        for b in range(ws):
+            if edge[y // step, b]:
+                for x in range(b * step, min(w, (b + 1) * step)):
+                    out[k] = y * w + x
+                    k += 1
+    return out
 
 
 def _sum_in_place(arrays: list[np.ndarray]) -> np.ndarray:
@@ -360,15 +385,12 @@ class CrfGrid:
         The flattened, scaled cues (pixel features of the band are taken from them).
     kernels : list of GaussianKernel
         The enabled kernels over the grid cells (blocks, or pixels when ``step`` is 1).
-    block : numpy.ndarray
-        (H W,) int64 block of each pixel (empty when ``step`` is 1).
     """
 
     shape: tuple[int, int]
     step: int
     cues: _Cues
     kernels: list[GaussianKernel]
-    block: np.ndarray
 
 
 def crf_grid(shape: tuple[int, int], params: CrfParams, rgb: np.ndarray | None = None,
@@ -403,17 +425,15 @@ def crf_grid(shape: tuple[int, int], params: CrfParams, rgb: np.ndarray | None =
         v, u = np.mgrid[0:h, 0:w]
         kernels = _kernels(cues.features(params, u.ravel(), v.ravel(), h * w,
                                          np.arange(h * w)), threaded)
-        return CrfGrid((h, w), 1, cues, kernels, np.zeros(0, dtype=np.int64))
+        return CrfGrid((h, w), 1, cues, kernels)
     hs, ws = -(-h // step), -(-w // step)
     # Block centres: the pixel at (step//2, step//2) of each block, clipped to the image.
     cv, cu = np.mgrid[0:hs, 0:ws]
     centre = (np.minimum(cv * step + step // 2, h - 1) * w
               + np.minimum(cu * step + step // 2, w - 1)).ravel()
-    block = (np.minimum(np.arange(h) // step, hs - 1)[:, None] * ws
-             + np.minimum(np.arange(w) // step, ws - 1)[None, :]).ravel()
     kernels = _kernels(cues.features(params, cu.ravel(), cv.ravel(), hs * ws, centre),
                        threaded)
-    return CrfGrid((h, w), step, cues, kernels, block)
+    return CrfGrid((h, w), step, cues, kernels)
 
 
 def dense_crf(
@@ -476,21 +496,23 @@ def dense_crf(
         raise InvalidInput(f"the CRF grid is for {grid.shape} images, the labels are "
                            f"{lab.shape}")
     h, w = lab.shape
-    step, kernels, block = grid.step, grid.kernels, grid.block
+    step, kernels = grid.step, grid.kernels
     if step == 1:
         unary = unary_from_labels(lab, num_labels, params.confidence,
                                   uniform_label=0 if params.uniform_nonplanar else None)
         q = mean_field(unary, kernels, params.iterations)
         return q.argmax(axis=1).astype(np.int32).reshape(lab.shape)
     hs, ws = -(-h // step), -(-w // step)
-    mean = _block_mean_probabilities(lab.ravel(), block, hs * ws, num_labels, params)
+    # The kernels below read the labels as int32 (no copy when they are).
+    lab = np.ascontiguousarray(lab, dtype=np.int32)
+    mean = _block_mean_probabilities(lab, step, num_labels, params)
     q = mean_field(-np.log(mean), kernels, params.iterations)
     # Near a label change of the coarse result, interpolated messages would blur the edge:
     # there each pixel gets its messages from the coarse lattices sliced at its own features,
     # so the boundary follows the full-resolution colour, depth and normal edges.
     coarse = q.argmax(axis=1).reshape(hs, ws)
     edge = _not_constant_3x3(coarse)
-    band = np.flatnonzero(edge.ravel()[block])
+    band = _band_pixels(edge, step, h, w)
     blurred = _blurred(kernels, q)
     coarse_pairwise = _sum_in_place([k.message_from(b)
                                      for k, b in zip(kernels, blurred, strict=True)])
@@ -509,7 +531,7 @@ def _full_resolution_labels(grid: CrfGrid, params: CrfParams, lab: np.ndarray, b
                             coarse: np.ndarray, fine: np.ndarray, blurred: list[np.ndarray]
                             ) -> np.ndarray:
     """(H, W) int32 final labels of :func:`dense_crf` on a coarse grid: observed labels
-    ``lab`` (H, W), ascending flat pixels of the ``band``, coarse messages ``coarse``
+    ``lab`` (H, W) int32, ascending flat pixels of the ``band``, coarse messages ``coarse``
     (hs, ws, L) float32 and, when not empty, their upsampling ``fine`` (≥H, ≥W, L), and each
     kernel's lattice values ``blurred``."""
     (h, w), step = grid.shape, grid.step
@@ -519,7 +541,6 @@ def _full_resolution_labels(grid: CrfGrid, params: CrfParams, lab: np.ndarray, b
     values = unary_from_labels(np.array([1, 0]), coarse.shape[2], params.confidence,
                                uniform_label=0)
     unary = (values[0, 1], values[0, 0], values[1, 0], bool(params.uniform_nonplanar))
-    lab64 = lab.astype(np.int64)
     out = np.empty((h, w), dtype=np.int32)
     close = np.empty(band.shape[0], dtype=np.bool_)
     # Every pixel is labelled from the upsampled messages first (most of them, away from the
@@ -530,7 +551,7 @@ def _full_resolution_labels(grid: CrfGrid, params: CrfParams, lab: np.ndarray, b
     hard = float(values[0, 0]) - float(values[0, 1]) + slack
     rows, row_w = bilinear_taps(h, hs, step, clamp_weights=False)
     cols, col_w = bilinear_taps(w, ws, step, clamp_weights=True)
-    run_threaded([partial(upsampled_labels, coarse, rows, row_w, cols, col_w, fine, lab64,
+    run_threaded([partial(upsampled_labels, coarse, rows, row_w, cols, col_w, fine, lab,
                           band, *unary, float(params.band_margin), cell_label, cell_gap, step,
                           slack, hard, a, b, out, close)
                   for a, b in chunks(h, _THREADED_ROWS)])
@@ -538,5 +559,5 @@ def _full_resolution_labels(grid: CrfGrid, params: CrfParams, lab: np.ndarray, b
     fu = (band % w + 0.5) / step - 0.5
     fv = (band // w + 0.5) / step - 0.5
     pos, columns = grid.cues.columns(params, fu, fv, hs * ws, band)
-    exact_labels(_band_messages(grid.kernels, blurred, pos, columns), lab64, band, *unary, out)
+    exact_labels(_band_messages(grid.kernels, blurred, pos, columns), lab, band, *unary, out)
     return out
