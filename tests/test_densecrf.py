@@ -96,6 +96,61 @@ def _elevate(f: np.ndarray) -> np.ndarray:
     return cf @ basis.T
 
 
+def _enclose_by_division(f: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Adams et al.'s enclosing simplex of one (d,) point as first written (floors of
+    quotients, ranks by pairwise comparison): key0, rank, float32 weights."""
+    d = f.size
+    d1 = d + 1
+    scale = np.sqrt(2.0 / 3.0) * d1 / np.sqrt(np.arange(1, d + 1) * np.arange(2, d + 2))
+    elevated = np.empty(d1)
+    tail = 0.0
+    for j in range(d, 0, -1):
+        cf = f[j - 1] * scale[j - 1]
+        elevated[j] = tail - j * cf
+        tail += cf
+    elevated[0] = tail
+    rem0 = np.empty(d1)
+    for j in range(d1):
+        down = np.floor(elevated[j] / d1) * d1
+        rem0[j] = down + d1 if down + d1 - elevated[j] < elevated[j] - down else down
+    total = 0.0
+    for j in range(d1):
+        total += rem0[j]
+    s = np.int64(np.rint(total / d1))
+    diff = elevated - rem0
+    rank = np.array([s + sum(diff[j] > diff[k] or (j < k and diff[j] == diff[k])
+                             for j in range(d1)) for k in range(d1)], np.int64)
+    rem0[rank < 0] += d1
+    rem0[rank > d] -= d1
+    rank[rank < 0] += d1
+    rank[rank > d] -= d1
+    bary = np.zeros(d1 + 1)
+    for k in range(d1):
+        v = (elevated[k] - rem0[k]) / d1
+        bary[d - rank[k]] += v
+        bary[d - rank[k] + 1] -= v
+    bary[0] += 1.0 + bary[d1]
+    return rem0[:d].astype(np.int64), rank, bary[:d1].astype(np.float32)
+
+
+@pytest.mark.parametrize("dim", [2, 3, 5])
+def test_enclosing_simplices_equal_the_division_formulation_bit_for_bit(dim):
+    # The kernel floors e * (1 / (d+1)) instead of e / (d+1) away from integers: the same
+    # simplices and weights, also at points on lattice hyperplanes (integer and half-integer
+    # features, zero) and ties between residuals.
+    rng = np.random.default_rng(dim)
+    f = np.concatenate([rng.normal(size=(300, dim)) * 30.0,
+                        rng.integers(-20, 20, (100, dim)) * 1.0,
+                        rng.integers(-20, 20, (100, dim)) * 0.5 / np.sqrt(2.0 / 3.0),
+                        np.zeros((1, dim))])
+    key0, rank, weights = lk.enclosing_simplices(f)
+    for i in range(f.shape[0]):
+        k, r, w = _enclose_by_division(f[i])
+        np.testing.assert_array_equal(key0[i], k)
+        np.testing.assert_array_equal(rank[i], r)
+        np.testing.assert_array_equal(weights[i].view(np.int32), w.view(np.int32))
+
+
 @pytest.mark.parametrize("dim", [1, 2, 3, 5, 8])
 def test_lattice_kernels_against_slow_references(dim):
     """Each numba kernel against a plain numpy/Python reference on random features."""

@@ -274,13 +274,14 @@ def _block_counts(labels: np.ndarray, step: int, num_labels: int,
     own = np.zeros((counts.shape[0], num_labels), dtype=np.int64)
     for y in range(h):
         row = (y // step) * ws
-        for x in range(w):
-            b = row + x // step
-            counts[b, 0] += 1
-            if uniform_nonplanar and labels[y, x] == 0:
-                counts[b, 1] += 1
-            else:
-                own[b, labels[y, x]] += 1
+        for c in range(ws):
+            b = row + c
+            for x in range(c * step, min(w, (c + 1) * step)):
+                counts[b, 0] += 1
+                if uniform_nonplanar and labels[y, x] == 0:
+                    counts[b, 1] += 1
+                else:
+                    own[b, labels[y, x]] += 1
     return counts, own
 
 

@@ -85,19 +85,31 @@ def _enclose(f: np.ndarray, scale: np.ndarray, elevated: np.ndarray, rem0: np.nd
         tail += cf
     elevated[0] = tail
     total = 0.0
+    inv = 1.0 / d1
     for j in range(d1):
-        down = np.floor(elevated[j] / d1) * d1
+        # floor(e / d1) from e * (1 / d1), within a few ulps of the quotient: the same floor
+        # unless the quotient lies that close to an integer, where it is divided after all.
+        t = elevated[j] * inv
+        down = np.floor(t)
+        near = 1e-12 * (abs(t) + 1.0)
+        if t - down < near or down + 1.0 - t < near:
+            down = np.floor(elevated[j] / d1)
+        down *= d1
         up = down + d1
         rem0[j] = up if up - elevated[j] < elevated[j] - down else down
         total += rem0[j]
     s = np.int64(np.rint(total / d1))
     for j in range(d1):
         diff[j] = elevated[j] - rem0[j]
+    # Rank: how many residuals are larger, ties going to the lower index (counted as sums of
+    # comparisons, which compile without branches).
     for k in range(d1):
         r = s
-        for j in range(d1):
-            if diff[j] > diff[k] or (j < k and diff[j] == diff[k]):
-                r += 1
+        dk = diff[k]
+        for j in range(k):
+            r += diff[j] >= dk
+        for j in range(k + 1, d1):
+            r += diff[j] > dk
         rank[k] = r
     for k in range(d1):
         if rank[k] < 0:
@@ -345,7 +357,9 @@ def add_messages_at(head: np.ndarray, tail: np.ndarray, div: float, div2: float,
         for k in range(a):
             f[k] = head[i, k]
         for k in range(d - a):
-            f[a + k] = tail[i, k] / div / div2
+            f[a + k] = tail[i, k] / div
+            if div2 != 1.0:  # x / 1 is x: one division less for the normals
+                f[a + k] /= div2
         _enclose(f, scale, elevated, rem0, diff, rank, bary)
         acc[:] = 0.0
         # Vertex r's key is key0 + r, less d+1 where rank > d - r: every key of the simplex
