@@ -312,38 +312,43 @@ def gate_filled_pixels(points: np.ndarray, valid: np.ndarray, before: np.ndarray
         (H, W) int32 ``after``, with ``before``'s label restored where the new plane does
         not fit (or the depth is invalid).
     """
-    out = np.asarray(after, dtype=np.int32).copy()
+    out = np.array(after, dtype=np.int32)
+    # Labels are small: int32 (no copy when they are, as the RANSAC's are).
+    before = np.ascontiguousarray(before, dtype=np.int32)
     test_angle = normals is not None and max_angle_deg < 180.0
-    fail = _gate_failures(
-        out, np.asarray(before, dtype=np.int64), np.ascontiguousarray(points, dtype=np.float64),
+    fail, failed = _gate_failures(
+        out, before, np.ascontiguousarray(points, dtype=np.float64),
         np.asarray(valid, dtype=bool), np.ascontiguousarray(params, dtype=np.float64),
         float(max_distance),
         np.asarray(normals, dtype=np.float32) if test_angle else np.zeros((1, 1, 3), np.float32),
         float(np.cos(np.radians(max_angle_deg))), test_angle)
-    if patch_px > 0 and fail.any():
+    if not failed:
+        return out
+    if patch_px > 0:
         # A morphological opening keeps the failures that form patches: a blob of a curved
         # object or of an object in front, not the thin band along a crease where the cue's
         # blurred normals lie between the two planes' and the CRF is right.
         kernel = np.ones((2 * patch_px + 1, 2 * patch_px + 1), np.uint8)
         fail = cv2.morphologyEx(fail, cv2.MORPH_OPEN, kernel)
-    back = fail.astype(bool)
-    out[back] = np.asarray(before)[back]
+    np.copyto(out, before, where=fail.view(bool))  # fail holds 0 and 1
     return out
 
 
 @kernel
 def _gate_failures(after: np.ndarray, before: np.ndarray, points: np.ndarray, valid: np.ndarray,
                    params: np.ndarray, max_distance: float, normals: np.ndarray,
-                   cos_limit: float, test_angle: bool) -> np.ndarray:
-    """(H, W) uint8, 1 at the pixels :func:`gate_filled_pixels` sends back before any opening.
+                   cos_limit: float, test_angle: bool) -> tuple[np.ndarray, int]:
+    """(H, W) uint8, 1 at the pixels :func:`gate_filled_pixels` sends back before any
+    opening, and how many there are.
 
-    ``after`` (H, W) int32 and ``before`` (H, W) int64 labels, ``points`` (H, W, 3) float64,
+    ``after`` and ``before`` (H, W) int32 labels, ``points`` (H, W, 3) float64,
     ``valid`` (H, W) bool, ``params`` (P, 4) float64, ``normals`` (H, W, 3) float32 (read
     only when ``test_angle``). The sums run in the order (and the float32 normal length in
     the precision) of the numpy einsums they replace, so the failures are the same.
     """
     h, w = after.shape
     fail = np.zeros((h, w), dtype=np.uint8)
+    failed = 0
     half = np.float32(0.5)
     for y in range(h):
         for x in range(w):
@@ -361,7 +366,8 @@ def _gate_failures(after: np.ndarray, before: np.ndarray, points: np.ndarray, va
                 fits = not known or cos >= cos_limit
             if not fits:
                 fail[y, x] = 1
-    return fail
+                failed += 1
+    return fail, failed
 
 
 def clean_regions(rec: Reconstruction, labels: np.ndarray, min_area: int,
