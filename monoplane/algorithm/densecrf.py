@@ -330,29 +330,36 @@ def _blurred(kernels: list[GaussianKernel], q: np.ndarray) -> list[np.ndarray]:
     return [done[i] for i in range(len(kernels))]
 
 
-def _band_messages(kernels: list[GaussianKernel], blurred: list[np.ndarray], pos: np.ndarray,
-                   columns: list[tuple[np.ndarray | None, tuple[float, float], float]]
-                   ) -> np.ndarray:
-    """(K, L) float32 pairwise messages at the band's K pixels: every kernel's lattice values
-    ``blurred`` (M, L) sliced at the pixels' own features (``pos`` and ``columns`` from
-    :meth:`_Cues.columns`), summed in kernel order as :func:`_sum_in_place` sums them.
+def _exact_band_labels(grid: CrfGrid, params: CrfParams, blurred: list[np.ndarray],
+                       band: np.ndarray, lab: np.ndarray, unary: tuple, out: np.ndarray) -> None:
+    """Label the (K,) ascending flat pixels ``band`` of ``out`` (H, W) int32 from their exact
+    pairwise messages: every kernel's lattice values ``blurred`` (M, L) sliced at the pixels'
+    own features (:meth:`_Cues.columns` at their positions on the coarse grid), summed in
+    kernel order as :func:`_sum_in_place` sums them, then :func:`exact_labels` with the
+    observed labels ``lab`` (H, W) int32 and the ``unary`` values.
 
-    Pieces of the band run on parallel threads, each through all kernels in order, so the
-    sums do not depend on the threads.
+    Pieces of the band run on parallel threads, each through its features, all kernels in
+    order and its labels, so the sums do not depend on the threads.
     """
-    for tail, _, _ in columns:
-        if tail is not None and not np.all(np.isfinite(tail)):
-            raise InvalidInput("dense CRF cues contain NaN or inf")
-    k = pos.shape[0]
-    out = np.zeros((k, blurred[0].shape[1]), np.float32)
-    none = np.zeros((k, 0))
+    (h, w), step = grid.shape, grid.step
+    hs, ws = -(-h // step), -(-w // step)
 
     def piece(rows: tuple[int, int]) -> None:
-        for kern, values, (tail, div, _) in zip(kernels, blurred, columns, strict=True):
-            kern.add_message_at(values, pos, none if tail is None else tail, div, rows, out)
+        pixels = band[rows[0]:rows[1]]
+        fu = (pixels % w + 0.5) / step - 0.5
+        fv = (pixels // w + 0.5) / step - 0.5
+        pos, columns = grid.cues.columns(params, fu, fv, hs * ws, pixels)
+        for tail, _, _ in columns:
+            if tail is not None and not np.all(np.isfinite(tail)):
+                raise InvalidInput("dense CRF cues contain NaN or inf")
+        messages = np.zeros((pixels.size, blurred[0].shape[1]), np.float32)
+        none = np.zeros((pixels.size, 0))
+        for kern, values, (tail, div, _) in zip(grid.kernels, blurred, columns, strict=True):
+            kern.add_message_at(values, pos, none if tail is None else tail, div,
+                                (0, pixels.size), messages)
+        exact_labels(messages, lab, pixels, *unary, out)
 
-    run_threaded([partial(piece, rows) for rows in chunks(k, _THREADED_PIXELS)])
-    return out
+    run_threaded([partial(piece, rows) for rows in chunks(band.size, _THREADED_PIXELS)])
 
 
 def _not_constant_3x3(image: np.ndarray) -> np.ndarray:
@@ -556,9 +563,5 @@ def _full_resolution_labels(grid: CrfGrid, params: CrfParams, lab: np.ndarray, b
                           band, *unary, float(params.band_margin), cell_label, cell_gap, step,
                           slack, hard, a, b, out, close)
                   for a, b in chunks(h, _THREADED_ROWS)])
-    band = band[close]
-    fu = (band % w + 0.5) / step - 0.5
-    fv = (band // w + 0.5) / step - 0.5
-    pos, columns = grid.cues.columns(params, fu, fv, hs * ws, band)
-    exact_labels(_band_messages(grid.kernels, blurred, pos, columns), lab, band, *unary, out)
+    _exact_band_labels(grid, params, blurred, band[close], lab, unary, out)
     return out
