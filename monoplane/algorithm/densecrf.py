@@ -254,7 +254,13 @@ def _block_mean_probabilities(labels: np.ndarray, step: int, num_labels: int,
     row = np.exp(-unary_from_labels(np.array([1, 0]), num_labels, params.confidence,
                                     uniform_label=0))
     p_own, p_other, p_uniform = float(row[0, 1]), float(row[0, 0]), float(row[1, 0])
-    counts, own = _block_counts(labels, step, num_labels, bool(params.uniform_nonplanar))
+    h, w = labels.shape
+    counts = np.zeros((-(-h // step) * -(-w // step), 2), dtype=np.int64)
+    own = np.zeros((counts.shape[0], num_labels), dtype=np.int64)
+    # Rows of blocks on the frame's threads: each counts its own blocks.
+    run_threaded([partial(_block_counts, labels, step, bool(params.uniform_nonplanar),
+                          a * step, min(h, b * step), counts, own)
+                  for a, b in chunks(-(-h // step), _THREADED_ROWS // step + 1)])
     size = counts[:, 0].astype(np.float64)
     n_uniform = counts[:, 1].astype(np.float64)
     total = own * p_own + ((size - n_uniform)[:, None] - own) * p_other \
@@ -263,16 +269,15 @@ def _block_mean_probabilities(labels: np.ndarray, step: int, num_labels: int,
 
 
 @kernel
-def _block_counts(labels: np.ndarray, step: int, num_labels: int,
-                  uniform_nonplanar: bool) -> tuple[np.ndarray, np.ndarray]:
-    """One pass over the (H, W) int32 ``labels``: (B, 2) int64 pixels and uniform pixels
-    (label 0 when ``uniform_nonplanar``) of each ``step`` x ``step`` block (raster order),
-    and (B, L) int64 pixels of each block observed with each label, uniform ones left out."""
-    h, w = labels.shape
+def _block_counts(labels: np.ndarray, step: int, uniform_nonplanar: bool, y0: int, y1: int,
+                  counts: np.ndarray, own: np.ndarray) -> None:
+    """Add rows ``y0:y1`` of the (H, W) int32 ``labels`` to the (B, 2) int64 ``counts`` of
+    pixels and uniform pixels (label 0 when ``uniform_nonplanar``) of each ``step`` x
+    ``step`` block (raster order) and to the (B, L) int64 ``own`` pixels of each block
+    observed with each label, uniform ones left out."""
+    w = labels.shape[1]
     ws = -(-w // step)
-    counts = np.zeros((-(-h // step) * ws, 2), dtype=np.int64)
-    own = np.zeros((counts.shape[0], num_labels), dtype=np.int64)
-    for y in range(h):
+    for y in range(y0, y1):
         row = (y // step) * ws
         for c in range(ws):
             b = row + c
@@ -282,7 +287,6 @@ def _block_counts(labels: np.ndarray, step: int, num_labels: int,
                     counts[b, 1] += 1
                 else:
                     own[b, labels[y, x]] += 1
-    return counts, own
 
 
 @kernel
