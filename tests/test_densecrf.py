@@ -174,11 +174,11 @@ def test_lattice_kernels_against_slow_references(dim):
     lo = key0.min(axis=0) - 2 * d1
     radix = key0.max(axis=0) + 2 * d1 - lo + 1
     place = np.concatenate([[1], np.cumprod(radix[:-1])]).astype(np.int64)
-    vertex_of, codes, _, _ = lk.insert_vertices(key0 - lo, rank, place)
+    vertex_of, codes, table, index = lk.insert_vertices(key0 - lo, rank, place)
     ref_codes = ((vertices[:, :, :dim] - lo) @ place).astype(np.int64)
     np.testing.assert_array_equal(codes[vertex_of], ref_codes)
     assert len(set(codes.tolist())) == codes.size == np.unique(ref_codes).size
-    neighbours = lk.lattice_neighbours(codes, place)
+    neighbours = lk.lattice_neighbours(codes, place, table, index)
     where = {c: i for i, c in enumerate(codes.tolist())}
     for a in range(d1):
         step = -np.ones(dim, np.int64)

@@ -158,7 +158,7 @@ def insert_vertices(key0: np.ndarray, rank: np.ndarray, place: np.ndarray
         (M,) int64 packed key of each vertex, in order of first use.
     table, index : numpy.ndarray
         The hash table: slot -> code (-1 = empty) and slot -> vertex index, for
-        :func:`add_messages_at`.
+        :func:`lattice_neighbours` and :func:`add_messages_at`.
     """
     n, d = key0.shape
     d1 = d + 1
@@ -194,26 +194,22 @@ def insert_vertices(key0: np.ndarray, rank: np.ndarray, place: np.ndarray
 
 
 @numba.njit(cache=True, nogil=True)
-def lattice_neighbours(codes: np.ndarray, place: np.ndarray) -> np.ndarray:
+def lattice_neighbours(codes: np.ndarray, place: np.ndarray, table: np.ndarray,
+                       index: np.ndarray) -> np.ndarray:
     """(d+1, M, 2) int32 index of each vertex's neighbour one step back/forward along each
     lattice direction, -1 where that neighbour is not in use (it holds zero and drops out).
 
     In key coordinates the step along direction ``a`` adds ``d+1`` to coordinate ``a`` (when
-    ``a < d``) and subtracts 1 from every coordinate.
+    ``a < d``) and subtracts 1 from every coordinate. The neighbours are looked up in the
+    hash table of :func:`insert_vertices` (``table``, ``index``), which holds every code.
     """
     m = codes.size
     d = place.size
     d1 = d + 1
-    bits = 1
-    while (1 << bits) < 2 * m + 16:
+    bits = 0
+    while (1 << bits) < table.size:
         bits += 1
-    table = np.full(1 << bits, -1, np.int64)
-    index = np.empty(1 << bits, np.int32)
     shift = np.uint64(64 - bits)
-    for v in range(m):
-        h = _slot(table, codes[v], shift)
-        table[h] = codes[v]
-        index[h] = v
     place_sum = 0
     for k in range(d):
         place_sum += place[k]
