@@ -363,7 +363,10 @@ def _exact_band_labels(grid: CrfGrid, params: CrfParams, blurred: list[np.ndarra
                                 (0, pixels.size), messages)
         exact_labels(messages, lab, pixels, *unary, out)
 
-    run_threaded([partial(piece, rows) for rows in chunks(band.size, _THREADED_PIXELS)])
+    # Four pieces a thread: a thread that the machine holds back leaves its later pieces
+    # to the others.
+    run_threaded([partial(piece, rows)
+                  for rows in chunks(band.size, _THREADED_PIXELS, per_thread=4)])
 
 
 def _not_constant_3x3(image: np.ndarray) -> np.ndarray:
@@ -566,6 +569,6 @@ def _full_resolution_labels(grid: CrfGrid, params: CrfParams, lab: np.ndarray, b
     run_threaded([partial(upsampled_labels, coarse, rows, row_w, cols, col_w, fine, lab,
                           band, *unary, float(params.band_margin), cell_label, cell_gap, step,
                           slack, hard, a, b, out, close)
-                  for a, b in chunks(h, _THREADED_ROWS)])
+                  for a, b in chunks(h, _THREADED_ROWS, per_thread=4)])
     _exact_band_labels(grid, params, blurred, band[close], lab, unary, out)
     return out
