@@ -633,6 +633,26 @@ def test_certified_cells_give_the_labels_the_upsampled_argmax_gives(uniform, ste
     np.testing.assert_array_equal(close, expected_close)
 
 
+@pytest.mark.parametrize("num", [2, 3, 21])
+def test_best_two_equal_argmax_partition_and_abs_max(num):
+    # One compiled pass against the numpy formulation it replaced, with ties for the first
+    # and the second place, -0 and a row of equal values.
+    from monoplane.algorithm.crf_labels import _best_two
+
+    rng = np.random.default_rng(num)
+    values = rng.integers(-3, 4, (300, num)).astype(np.float32) * np.float32(0.7)
+    values[:100] += rng.normal(size=(100, num)).astype(np.float32)
+    values[5] = 1.5
+    values[6, 0] = -0.0
+    flat = values.astype(np.float64)
+    top2 = np.partition(flat, num - 2, axis=1)[:, -2:]
+    best, lead, largest = _best_two(values)
+    np.testing.assert_array_equal(best, flat.argmax(axis=1))
+    np.testing.assert_array_equal(lead, top2[:, 1] - top2[:, 0])
+    assert largest == float(np.abs(flat).max())
+    assert (lead == 0).sum() > 10
+
+
 @pytest.mark.parametrize("num", [2, 5, 21])
 @pytest.mark.parametrize("step, shape", [(8, (45, 70)), (3, (31, 40)), (5, (20, 24))])
 def test_interpolated_messages_are_cv2_resize_bit_for_bit(num, step, shape):

@@ -50,17 +50,44 @@ def certified_cells(coarse: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
         What the lead must exceed beyond the unary's advantage.
     """
     hs, ws, num = coarse.shape
-    flat = coarse.reshape(-1, num).astype(np.float64)
-    best = flat.argmax(axis=1)
-    top2 = np.partition(flat, num - 2, axis=1)[:, -2:]
+    best, lead, largest = _best_two(np.ascontiguousarray(coarse).reshape(-1, num))
     square = np.ones((3, 3), np.uint8)
     # Erosion and dilation pad with +inf and -inf: the minimum and maximum over the window
     # clipped at the border. Labels are small integers, exact in float32.
     grid = best.reshape(hs, ws).astype(np.float32)
     agree = (cv2.erode(grid, square) == cv2.dilate(grid, square)).ravel()
-    gap = cv2.erode((top2[:, 1] - top2[:, 0]).reshape(hs, ws), square).ravel()
+    gap = cv2.erode(lead.reshape(hs, ws), square).ravel()
     label = np.where(agree, best, -1).astype(np.int64)
-    return label, gap, _SLACK * (1.0 + float(np.abs(flat).max()))
+    return label, gap, _SLACK * (1.0 + largest)
+
+
+@kernel
+def _best_two(values: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """Per row of the (N, L) float32 ``values`` (L >= 2): the first largest entry's index
+    (N,) int64, its lead over the second largest (N,) float64 (0 when two share the
+    maximum), and the largest magnitude of all, in float64 (exact from float32): what
+    ``argmax``, a partition and ``abs().max()`` of the float64 values give, in one pass."""
+    n, num = values.shape
+    best = np.empty(n, np.int64)
+    lead = np.empty(n)
+    largest = 0.0
+    for i in range(n):
+        first = np.float64(values[i, 0])
+        arg = 0
+        second = -np.inf
+        largest = max(largest, abs(first))
+        for j in range(1, num):
+            v = np.float64(values[i, j])
+            largest = max(largest, abs(v))
+            if v > first:
+                second = first
+                first = v
+                arg = j
+            elif v > second:
+                second = v
+        best[i] = arg
+        lead[i] = first - second
+    return best, lead, largest
 
 
 #: Label counts whose ``cv2.resize`` does not take the arithmetic :func:`bilinear_taps`
