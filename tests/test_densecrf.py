@@ -96,6 +96,61 @@ def _elevate(f: np.ndarray) -> np.ndarray:
     return cf @ basis.T
 
 
+def _enclose_by_division(f: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Adams et al.'s enclosing simplex of one (d,) point as first written (floors of
+    quotients, ranks by pairwise comparison): key0, rank, float32 weights."""
+    d = f.size
+    d1 = d + 1
+    scale = np.sqrt(2.0 / 3.0) * d1 / np.sqrt(np.arange(1, d + 1) * np.arange(2, d + 2))
+    elevated = np.empty(d1)
+    tail = 0.0
+    for j in range(d, 0, -1):
+        cf = f[j - 1] * scale[j - 1]
+        elevated[j] = tail - j * cf
+        tail += cf
+    elevated[0] = tail
+    rem0 = np.empty(d1)
+    for j in range(d1):
+        down = np.floor(elevated[j] / d1) * d1
+        rem0[j] = down + d1 if down + d1 - elevated[j] < elevated[j] - down else down
+    total = 0.0
+    for j in range(d1):
+        total += rem0[j]
+    s = np.int64(np.rint(total / d1))
+    diff = elevated - rem0
+    rank = np.array([s + sum(diff[j] > diff[k] or (j < k and diff[j] == diff[k])
+                             for j in range(d1)) for k in range(d1)], np.int64)
+    rem0[rank < 0] += d1
+    rem0[rank > d] -= d1
+    rank[rank < 0] += d1
+    rank[rank > d] -= d1
+    bary = np.zeros(d1 + 1)
+    for k in range(d1):
+        v = (elevated[k] - rem0[k]) / d1
+        bary[d - rank[k]] += v
+        bary[d - rank[k] + 1] -= v
+    bary[0] += 1.0 + bary[d1]
+    return rem0[:d].astype(np.int64), rank, bary[:d1].astype(np.float32)
+
+
+@pytest.mark.parametrize("dim", [2, 3, 5])
+def test_enclosing_simplices_equal_the_division_formulation_bit_for_bit(dim):
+    # The kernel floors e * (1 / (d+1)) instead of e / (d+1) away from integers: the same
+    # simplices and weights, also at points on lattice hyperplanes (integer and half-integer
+    # features, zero) and ties between residuals.
+    rng = np.random.default_rng(dim)
+    f = np.concatenate([rng.normal(size=(300, dim)) * 30.0,
+                        rng.integers(-20, 20, (100, dim)) * 1.0,
+                        rng.integers(-20, 20, (100, dim)) * 0.5 / np.sqrt(2.0 / 3.0),
+                        np.zeros((1, dim))])
+    key0, rank, weights = lk.enclosing_simplices(f)
+    for i in range(f.shape[0]):
+        k, r, w = _enclose_by_division(f[i])
+        np.testing.assert_array_equal(key0[i], k)
+        np.testing.assert_array_equal(rank[i], r)
+        np.testing.assert_array_equal(weights[i].view(np.int32), w.view(np.int32))
+
+
 @pytest.mark.parametrize("dim", [1, 2, 3, 5, 8])
 def test_lattice_kernels_against_slow_references(dim):
     """Each numba kernel against a plain numpy/Python reference on random features."""
@@ -119,11 +174,11 @@ def test_lattice_kernels_against_slow_references(dim):
     lo = key0.min(axis=0) - 2 * d1
     radix = key0.max(axis=0) + 2 * d1 - lo + 1
     place = np.concatenate([[1], np.cumprod(radix[:-1])]).astype(np.int64)
-    vertex_of, codes, _, _ = lk.insert_vertices(key0 - lo, rank, place)
+    vertex_of, codes, table, index = lk.insert_vertices(key0 - lo, rank, place)
     ref_codes = ((vertices[:, :, :dim] - lo) @ place).astype(np.int64)
     np.testing.assert_array_equal(codes[vertex_of], ref_codes)
     assert len(set(codes.tolist())) == codes.size == np.unique(ref_codes).size
-    neighbours = lk.lattice_neighbours(codes, place)
+    neighbours = lk.lattice_neighbours(codes, place, table, index)
     where = {c: i for i, c in enumerate(codes.tolist())}
     for a in range(d1):
         step = -np.ones(dim, np.int64)
@@ -456,8 +511,27 @@ def test_block_means_from_counts_equal_the_per_pixel_sums(uniform, num_labels, s
     prob = np.exp(-unary)  # the per-pixel formulation it replaces
     ref = np.stack([np.bincount(block, prob[:, k], hs * ws) for k in range(num_labels)], 1)
     ref /= np.bincount(block, minlength=hs * ws)[:, None]
-    got = _block_mean_probabilities(lab.ravel(), block, hs * ws, num_labels, p)
+    got = _block_mean_probabilities(lab.astype(np.int32), step, num_labels, p)
     np.testing.assert_array_equal(got, ref)
+
+
+@pytest.mark.parametrize("step, shape", [(3, (192, 256)), (8, (480, 640)), (5, (37, 53))])
+def test_band_pixels_are_the_pixels_of_the_flagged_blocks(step, shape):
+    from monoplane.algorithm.densecrf import _band_pixels
+
+    h, w = shape
+    hs, ws = -(-h // step), -(-w // step)
+    edge = np.random.default_rng(step).random((hs, ws)) < 0.3
+    edge[-1, -1] = True  # a block cut by both image borders
+    block = (np.arange(h) // step)[:, None] * ws + (np.arange(w) // step)[None, :]
+    np.testing.assert_array_equal(_band_pixels(edge, step, h, w),
+                                  np.flatnonzero(edge.ravel()[block.ravel()]))
+
+
+def _no_taps() -> tuple[np.ndarray, ...]:
+    """Interpolation taps for upsampled_labels when it reads an upsampled array instead."""
+    return (np.zeros((1, 2), np.int64), np.zeros((1, 2), np.float32),
+            np.zeros((1, 2), np.int64), np.zeros((1, 2), np.float32))
 
 
 @pytest.mark.parametrize("uniform", [True, False])
@@ -487,13 +561,14 @@ def test_final_labels_kernels_equal_the_numpy_argmax(uniform):
             got = np.full((h, w), -1, dtype=np.int32)
             close = np.zeros(200, bool)
             for y0, y1 in zip(bounds[:-1], bounds[1:], strict=True):
-                # No certified cells: every pixel reads its messages.
-                upsampled_labels(fine, lab.astype(np.int64), band, *args, margin,
-                                 np.full(1, -1), np.zeros(1), h + w, 1, 0.0, 0.0, y0, y1, got,
-                                 close)
+                # No certified cells: every pixel reads its messages (from fine; one coarse
+                # cell, whose taps are not read).
+                upsampled_labels(np.zeros((1, 1, num), np.float32), *_no_taps(), fine,
+                                 lab.astype(np.int32), band, *args, margin, np.full(1, -1),
+                                 np.zeros(1), h + w, 0.0, 0.0, y0, y1, got, close)
             np.testing.assert_array_equal(close, expected_close)
             assert close[0]
-            exact_labels(exact[close], lab.astype(np.int64), band[close], *args, got)
+            exact_labels(exact[close], lab.astype(np.int32), band[close], *args, got)
             np.testing.assert_array_equal(got, expected)
 
 
@@ -549,10 +624,68 @@ def test_certified_cells_give_the_labels_the_upsampled_argmax_gives(uniform, ste
     assert (cell_label >= 0).mean() > 0.3
     got, expected = (np.full((h, w), -1, np.int32) for _ in range(2))
     close, expected_close = np.zeros(40, bool), np.zeros(40, bool)
-    upsampled_labels(fine, lab.astype(np.int64), band, *args, cell_label, cell_gap, step, ws,
-                     slack, hard, 0, h, got, close)
-    upsampled_labels(fine, lab.astype(np.int64), band, *args, np.full(hs * ws, -1), cell_gap,
-                     step, ws, slack, hard, 0, h, expected, expected_close)
+    upsampled_labels(coarse, *_no_taps(), fine, lab.astype(np.int32), band, *args, cell_label,
+                     cell_gap, step, slack, hard, 0, h, got, close)
+    upsampled_labels(coarse, *_no_taps(), fine, lab.astype(np.int32), band, *args,
+                     np.full(hs * ws, -1), cell_gap, step, slack, hard, 0, h, expected,
+                     expected_close)
+    np.testing.assert_array_equal(got, expected)
+    np.testing.assert_array_equal(close, expected_close)
+
+
+@pytest.mark.parametrize("num", [2, 3, 21])
+def test_best_two_equal_argmax_partition_and_abs_max(num):
+    # One compiled pass against the numpy formulation it replaced, with ties for the first
+    # and the second place, -0 and a row of equal values.
+    from monoplane.algorithm.crf_labels import _best_two
+
+    rng = np.random.default_rng(num)
+    values = rng.integers(-3, 4, (300, num)).astype(np.float32) * np.float32(0.7)
+    values[:100] += rng.normal(size=(100, num)).astype(np.float32)
+    values[5] = 1.5
+    values[6, 0] = -0.0
+    flat = values.astype(np.float64)
+    top2 = np.partition(flat, num - 2, axis=1)[:, -2:]
+    best, lead, largest = _best_two(values)
+    np.testing.assert_array_equal(best, flat.argmax(axis=1))
+    np.testing.assert_array_equal(lead, top2[:, 1] - top2[:, 0])
+    assert largest == float(np.abs(flat).max())
+    assert (lead == 0).sum() > 10
+
+
+@pytest.mark.parametrize("num", [2, 5, 21])
+@pytest.mark.parametrize("step, shape", [(8, (45, 70)), (3, (31, 40)), (5, (20, 24))])
+def test_interpolated_messages_are_cv2_resize_bit_for_bit(num, step, shape):
+    # The labelling interpolates the coarse messages where it needs them instead of reading
+    # cv2.resize's upsampling (for these label counts): the same float32 values, hence the
+    # same labels and close calls. Coarse messages of three magnitudes, a zero and a -0.
+    from monoplane.algorithm.crf_labels import _interpolate, bilinear_taps, upsampled_labels
+
+    rng = np.random.default_rng(num * step)
+    h, w = shape
+    hs, ws = -(-h // step), -(-w // step)
+    coarse = (rng.normal(size=(hs, ws, num)) * rng.choice([1e-3, 1.0, 30.0], (hs, ws, num))
+              ).astype(np.float32)
+    coarse[0, 0, 0], coarse[-1, -1, -1] = 0.0, -0.0
+    fine = cv2.resize(coarse, (ws * step, hs * step), interpolation=cv2.INTER_LINEAR
+                      ).reshape(hs * step, ws * step, num)
+    rows, row_w = bilinear_taps(h, hs, step, clamp_weights=False)
+    cols, col_w = bilinear_taps(w, ws, step, clamp_weights=True)
+    message = np.empty(num, np.float32)
+    for y in range(h):
+        for x in range(w):
+            _interpolate(coarse, rows, row_w, cols, col_w, y, x, message)
+            np.testing.assert_array_equal(message.view(np.int32), fine[y, x].view(np.int32))
+    lab = rng.integers(0, num, (h, w)).astype(np.int32)
+    band = np.sort(rng.choice(h * w, h * w // 3, replace=False))
+    values = unary_from_labels(np.array([1, 0]), num, 0.55, uniform_label=0)
+    args = (values[0, 1], values[0, 0], values[1, 0], True, 0.05, np.full(hs * ws, -1),
+            np.zeros(hs * ws), step, 0.0, 0.0, 0, h)
+    got, expected = (np.full((h, w), -1, np.int32) for _ in range(2))
+    close, expected_close = np.zeros(band.size, bool), np.zeros(band.size, bool)
+    upsampled_labels(coarse, rows, row_w, cols, col_w, np.zeros((0, 0, num), np.float32), lab,
+                     band, *args, got, close)
+    upsampled_labels(coarse, *_no_taps(), fine, lab, band, *args, expected, expected_close)
     np.testing.assert_array_equal(got, expected)
     np.testing.assert_array_equal(close, expected_close)
 

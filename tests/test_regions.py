@@ -244,6 +244,34 @@ def test_merge_coplanar_joins_only_agreeing_regions_of_one_label():
     np.testing.assert_array_equal(new, [[1, 0, 1, 0, 2, 0, 3]] * 2)
 
 
+@pytest.mark.parametrize("seed", range(6))
+def test_absorb_choices_equal_the_numpy_loop(seed):
+    # The compiled choice of each small region's plane against the loop it replaces: first
+    # the pairs with the region first, then second, the first smallest RMS (argmin: a NaN
+    # wins), kept when within the tolerance; ties, inf (no points) and NaN included.
+    from monoplane.algorithm.regions import _absorb_into
+
+    rng = np.random.default_rng(seed)
+    num = 30
+    small = rng.random(num) < 0.4
+    rms = rng.choice([0.1, 0.2, 0.3, 0.5, np.inf], size=(num, num))
+    rms[rng.random((num, num)) < 0.02] = np.nan
+    pairs = np.argwhere(np.triu(rng.random((num, num)) < 0.15, 1)) + 1
+    expected = np.arange(num + 1, dtype=np.int32)
+    for s in np.flatnonzero(small) + 1:
+        other = np.concatenate([pairs[pairs[:, 0] == s, 1], pairs[pairs[:, 1] == s, 0]])
+        cand = other[~small[other - 1]]
+        if cand.size:
+            fit = rms[s - 1, cand - 1]
+            best = int(np.argmin(fit))
+            if fit[best] <= 0.25:
+                expected[s] = cand[best]
+    got = np.arange(num + 1, dtype=np.int32)
+    _absorb_into(small, rms, pairs.astype(np.int64), 0.25, got)
+    np.testing.assert_array_equal(got, expected)
+    assert (got != np.arange(num + 1)).any()
+
+
 def test_absorb_small_regions_exact():
     # Large regions 1 (z = 5) and 2 (z = 8); small region 3 lies on z = 5 and touches both: it
     # joins 1. Small region 4 lies on z = 20 and touches 2 only: it becomes 0. Small region 5

@@ -23,7 +23,13 @@ import numpy as np
 
 # PermutohedralLattice and pairwise are not used here: they stay importable from this module, where
 # they lived until the split into mean_field.py.
-from monoplane.algorithm.crf_labels import certified_cells, exact_labels, upsampled_labels
+from monoplane.algorithm.crf_labels import (
+    RESIZED_LABEL_COUNTS,
+    bilinear_taps,
+    certified_cells,
+    exact_labels,
+    upsampled_labels,
+)
 from monoplane.algorithm.mean_field import (  # noqa: F401
     GaussianKernel,
     PermutohedralLattice,
@@ -232,10 +238,11 @@ class _Cues:
         return pos, columns
 
 
-def _block_mean_probabilities(labels: np.ndarray, block: np.ndarray, num_blocks: int,
-                              num_labels: int, params: CrfParams) -> np.ndarray:
-    """(B, L) float64 mean over each block's pixels of ``exp(-unary)`` (the unary of
-    :func:`unary_from_labels`), from label counts instead of an (N, L) exponential.
+def _block_mean_probabilities(labels: np.ndarray, step: int, num_labels: int,
+                              params: CrfParams) -> np.ndarray:
+    """(B, L) float64 mean over each ``step`` x ``step`` block's pixels of ``exp(-unary)``
+    (the unary of :func:`unary_from_labels`) of the (H, W) int32 ``labels``, blocks in
+    raster order, from label counts instead of an (N, L) exponential.
 
     A pixel's probabilities take only three values (its label's, another label's, or uniform
     for a non-planar pixel when ``uniform_nonplanar``), so a block's sum is counts times those
@@ -247,8 +254,13 @@ def _block_mean_probabilities(labels: np.ndarray, block: np.ndarray, num_blocks:
     row = np.exp(-unary_from_labels(np.array([1, 0]), num_labels, params.confidence,
                                     uniform_label=0))
     p_own, p_other, p_uniform = float(row[0, 1]), float(row[0, 0]), float(row[1, 0])
-    counts, own = _block_counts(np.ascontiguousarray(labels, dtype=np.int64), block,
-                                num_blocks, num_labels, bool(params.uniform_nonplanar))
+    h, w = labels.shape
+    counts = np.zeros((-(-h // step) * -(-w // step), 2), dtype=np.int64)
+    own = np.zeros((counts.shape[0], num_labels), dtype=np.int64)
+    # Rows of blocks on the frame's threads: each counts its own blocks.
+    run_threaded([partial(_block_counts, labels, step, bool(params.uniform_nonplanar),
+                          a * step, min(h, b * step), counts, own)
+                  for a, b in chunks(-(-h // step), _THREADED_ROWS // step + 1)])
     size = counts[:, 0].astype(np.float64)
     n_uniform = counts[:, 1].astype(np.float64)
     total = own * p_own + ((size - n_uniform)[:, None] - own) * p_other \
@@ -257,21 +269,45 @@ def _block_mean_probabilities(labels: np.ndarray, block: np.ndarray, num_blocks:
 
 
 @kernel
-def _block_counts(labels: np.ndarray, block: np.ndarray, num_blocks: int, num_labels: int,
-                  uniform_nonplanar: bool) -> tuple[np.ndarray, np.ndarray]:
-    """One pass over the (N,) int64 ``labels`` and their (N,) int64 ``block``: (B, 2) int64
-    pixels and uniform pixels (label 0 when ``uniform_nonplanar``) of each block, and (B, L)
-    int64 pixels of each block observed with each label, uniform ones left out."""
-    counts = np.zeros((num_blocks, 2), dtype=np.int64)
-    own = np.zeros((num_blocks, num_labels), dtype=np.int64)
-    for i in range(labels.shape[0]):
-        b = block[i]
-        counts[b, 0] += 1
-        if uniform_nonplanar and labels[i] == 0:
-            counts[b, 1] += 1
-        else:
-            own[b, labels[i]] += 1
-    return counts, own
+def _block_counts(labels: np.ndarray, step: int, uniform_nonplanar: bool, y0: int, y1: int,
+                  counts: np.ndarray, own: np.ndarray) -> None:
+    """Add rows ``y0:y1`` of the (H, W) int32 ``labels`` to the (B, 2) int64 ``counts`` of
+    pixels and uniform pixels (label 0 when ``uniform_nonplanar``) of each ``step`` x
+    ``step`` block (raster order) and to the (B, L) int64 ``own`` pixels of each block
+    observed with each label, uniform ones left out."""
+    w = labels.shape[1]
+    ws = -(-w // step)
+    for y in range(y0, y1):
+        row = (y // step) * ws
+        for c in range(ws):
+            b = row + c
+            for x in range(c * step, min(w, (c + 1) * step)):
+                counts[b, 0] += 1
+                if uniform_nonplanar and labels[y, x] == 0:
+                    counts[b, 1] += 1
+                else:
+                    own[b, labels[y, x]] += 1
+
+
+@kernel
+def _band_pixels(edge: np.ndarray, step: int, h: int, w: int) -> np.ndarray:
+    """(K,) int64 ascending flat pixels of an (H, W) image whose ``step`` x ``step`` block
+    is flagged in the (hs, ws) bool ``edge``."""
+    ws = edge.shape[1]
+    count = 0
+    for y in range(h):
+        for b in range(ws):
+            if edge[y // step, b]:
+                count += min(w, (b + 1) * step) - b * step
+    out = np.empty(count, np.int64)
+    k = 0
+    for y in range(h):
+        for b in range(ws):
+            if edge[y // step, b]:
+                for x in range(b * step, min(w, (b + 1) * step)):
+                    out[k] = y * w + x
+                    k += 1
+    return out
 
 
 def _sum_in_place(arrays: list[np.ndarray]) -> np.ndarray:
@@ -298,29 +334,39 @@ def _blurred(kernels: list[GaussianKernel], q: np.ndarray) -> list[np.ndarray]:
     return [done[i] for i in range(len(kernels))]
 
 
-def _band_messages(kernels: list[GaussianKernel], blurred: list[np.ndarray], pos: np.ndarray,
-                   columns: list[tuple[np.ndarray | None, tuple[float, float], float]]
-                   ) -> np.ndarray:
-    """(K, L) float32 pairwise messages at the band's K pixels: every kernel's lattice values
-    ``blurred`` (M, L) sliced at the pixels' own features (``pos`` and ``columns`` from
-    :meth:`_Cues.columns`), summed in kernel order as :func:`_sum_in_place` sums them.
+def _exact_band_labels(grid: CrfGrid, params: CrfParams, blurred: list[np.ndarray],
+                       band: np.ndarray, lab: np.ndarray, unary: tuple, out: np.ndarray) -> None:
+    """Label the (K,) ascending flat pixels ``band`` of ``out`` (H, W) int32 from their exact
+    pairwise messages: every kernel's lattice values ``blurred`` (M, L) sliced at the pixels'
+    own features (:meth:`_Cues.columns` at their positions on the coarse grid), summed in
+    kernel order as :func:`_sum_in_place` sums them, then :func:`exact_labels` with the
+    observed labels ``lab`` (H, W) int32 and the ``unary`` values.
 
-    Pieces of the band run on parallel threads, each through all kernels in order, so the
-    sums do not depend on the threads.
+    Pieces of the band run on parallel threads, each through its features, all kernels in
+    order and its labels, so the sums do not depend on the threads.
     """
-    for tail, _, _ in columns:
-        if tail is not None and not np.all(np.isfinite(tail)):
-            raise InvalidInput("dense CRF cues contain NaN or inf")
-    k = pos.shape[0]
-    out = np.zeros((k, blurred[0].shape[1]), np.float32)
-    none = np.zeros((k, 0))
+    (h, w), step = grid.shape, grid.step
+    hs, ws = -(-h // step), -(-w // step)
 
     def piece(rows: tuple[int, int]) -> None:
-        for kern, values, (tail, div, _) in zip(kernels, blurred, columns, strict=True):
-            kern.add_message_at(values, pos, none if tail is None else tail, div, rows, out)
+        pixels = band[rows[0]:rows[1]]
+        fu = (pixels % w + 0.5) / step - 0.5
+        fv = (pixels // w + 0.5) / step - 0.5
+        pos, columns = grid.cues.columns(params, fu, fv, hs * ws, pixels)
+        for tail, _, _ in columns:
+            if tail is not None and not np.all(np.isfinite(tail)):
+                raise InvalidInput("dense CRF cues contain NaN or inf")
+        messages = np.zeros((pixels.size, blurred[0].shape[1]), np.float32)
+        none = np.zeros((pixels.size, 0))
+        for kern, values, (tail, div, _) in zip(grid.kernels, blurred, columns, strict=True):
+            kern.add_message_at(values, pos, none if tail is None else tail, div,
+                                (0, pixels.size), messages)
+        exact_labels(messages, lab, pixels, *unary, out)
 
-    run_threaded([partial(piece, rows) for rows in chunks(k, _THREADED_PIXELS)])
-    return out
+    # Four pieces a thread: a thread that the machine holds back leaves its later pieces
+    # to the others.
+    run_threaded([partial(piece, rows)
+                  for rows in chunks(band.size, _THREADED_PIXELS, per_thread=4)])
 
 
 def _not_constant_3x3(image: np.ndarray) -> np.ndarray:
@@ -354,15 +400,12 @@ class CrfGrid:
         The flattened, scaled cues (pixel features of the band are taken from them).
     kernels : list of GaussianKernel
         The enabled kernels over the grid cells (blocks, or pixels when ``step`` is 1).
-    block : numpy.ndarray
-        (H W,) int64 block of each pixel (empty when ``step`` is 1).
     """
 
     shape: tuple[int, int]
     step: int
     cues: _Cues
     kernels: list[GaussianKernel]
-    block: np.ndarray
 
 
 def crf_grid(shape: tuple[int, int], params: CrfParams, rgb: np.ndarray | None = None,
@@ -397,17 +440,15 @@ def crf_grid(shape: tuple[int, int], params: CrfParams, rgb: np.ndarray | None =
         v, u = np.mgrid[0:h, 0:w]
         kernels = _kernels(cues.features(params, u.ravel(), v.ravel(), h * w,
                                          np.arange(h * w)), threaded)
-        return CrfGrid((h, w), 1, cues, kernels, np.zeros(0, dtype=np.int64))
+        return CrfGrid((h, w), 1, cues, kernels)
     hs, ws = -(-h // step), -(-w // step)
     # Block centres: the pixel at (step//2, step//2) of each block, clipped to the image.
     cv, cu = np.mgrid[0:hs, 0:ws]
     centre = (np.minimum(cv * step + step // 2, h - 1) * w
               + np.minimum(cu * step + step // 2, w - 1)).ravel()
-    block = (np.minimum(np.arange(h) // step, hs - 1)[:, None] * ws
-             + np.minimum(np.arange(w) // step, ws - 1)[None, :]).ravel()
     kernels = _kernels(cues.features(params, cu.ravel(), cv.ravel(), hs * ws, centre),
                        threaded)
-    return CrfGrid((h, w), step, cues, kernels, block)
+    return CrfGrid((h, w), step, cues, kernels)
 
 
 def dense_crf(
@@ -470,28 +511,34 @@ def dense_crf(
         raise InvalidInput(f"the CRF grid is for {grid.shape} images, the labels are "
                            f"{lab.shape}")
     h, w = lab.shape
-    step, kernels, block = grid.step, grid.kernels, grid.block
+    step, kernels = grid.step, grid.kernels
     if step == 1:
         unary = unary_from_labels(lab, num_labels, params.confidence,
                                   uniform_label=0 if params.uniform_nonplanar else None)
         q = mean_field(unary, kernels, params.iterations)
         return q.argmax(axis=1).astype(np.int32).reshape(lab.shape)
     hs, ws = -(-h // step), -(-w // step)
-    mean = _block_mean_probabilities(lab.ravel(), block, hs * ws, num_labels, params)
+    # The kernels below read the labels as int32 (no copy when they are).
+    lab = np.ascontiguousarray(lab, dtype=np.int32)
+    mean = _block_mean_probabilities(lab, step, num_labels, params)
     q = mean_field(-np.log(mean), kernels, params.iterations)
     # Near a label change of the coarse result, interpolated messages would blur the edge:
     # there each pixel gets its messages from the coarse lattices sliced at its own features,
     # so the boundary follows the full-resolution colour, depth and normal edges.
     coarse = q.argmax(axis=1).reshape(hs, ws)
     edge = _not_constant_3x3(coarse)
-    band = np.flatnonzero(edge.ravel()[block])
+    band = _band_pixels(edge, step, h, w)
     blurred = _blurred(kernels, q)
     coarse_pairwise = _sum_in_place([k.message_from(b)
                                      for k, b in zip(kernels, blurred, strict=True)])
-    # cv2 maps fine pixel u to coarse position (u + 0.5) / step - 0.5.
+    # Bilinear upsampling as cv2 does it (fine pixel u at coarse position (u + 0.5) / step
+    # - 0.5): interpolated by the labelling where it needs the messages, or (label counts
+    # whose cv2 arithmetic differs) upsampled whole by cv2.
     coarse_messages = coarse_pairwise.reshape(hs, ws, num_labels)
-    fine = cv2.resize(coarse_messages, (ws * step, hs * step),
-                      interpolation=cv2.INTER_LINEAR).reshape(hs * step, ws * step, -1)
+    fine = np.zeros((0, 0, num_labels), np.float32)
+    if num_labels in RESIZED_LABEL_COUNTS:
+        fine = cv2.resize(coarse_messages, (ws * step, hs * step),
+                          interpolation=cv2.INTER_LINEAR).reshape(hs * step, ws * step, -1)
     return _full_resolution_labels(grid, params, lab, band, coarse_messages, fine, blurred)
 
 
@@ -499,17 +546,16 @@ def _full_resolution_labels(grid: CrfGrid, params: CrfParams, lab: np.ndarray, b
                             coarse: np.ndarray, fine: np.ndarray, blurred: list[np.ndarray]
                             ) -> np.ndarray:
     """(H, W) int32 final labels of :func:`dense_crf` on a coarse grid: observed labels
-    ``lab`` (H, W), ascending flat pixels of the ``band``, coarse messages ``coarse``
-    (hs, ws, L) float32 and their upsampling ``fine`` (≥H, ≥W, L), and each kernel's lattice
-    values ``blurred``."""
+    ``lab`` (H, W) int32, ascending flat pixels of the ``band``, coarse messages ``coarse``
+    (hs, ws, L) float32 and, when not empty, their upsampling ``fine`` (≥H, ≥W, L), and each
+    kernel's lattice values ``blurred``."""
     (h, w), step = grid.shape, grid.step
     hs, ws = -(-h // step), -(-w // step)
     # The unary takes three values per label map (own label, other label, uniform): the
     # final argmax reads them instead of an (H W, L) unary array.
-    values = unary_from_labels(np.array([1, 0]), fine.shape[2], params.confidence,
+    values = unary_from_labels(np.array([1, 0]), coarse.shape[2], params.confidence,
                                uniform_label=0)
     unary = (values[0, 1], values[0, 0], values[1, 0], bool(params.uniform_nonplanar))
-    lab64 = lab.astype(np.int64)
     out = np.empty((h, w), dtype=np.int32)
     close = np.empty(band.shape[0], dtype=np.bool_)
     # Every pixel is labelled from the upsampled messages first (most of them, away from the
@@ -518,13 +564,11 @@ def _full_resolution_labels(grid: CrfGrid, params: CrfParams, lab: np.ndarray, b
     # features might overturn them: those pixels are labelled again from exact messages.
     cell_label, cell_gap, slack = certified_cells(coarse)
     hard = float(values[0, 0]) - float(values[0, 1]) + slack
-    run_threaded([partial(upsampled_labels, fine, lab64, band, *unary,
-                          float(params.band_margin), cell_label, cell_gap, step, ws, slack,
-                          hard, a, b, out, close)
-                  for a, b in chunks(h, _THREADED_ROWS)])
-    band = band[close]
-    fu = (band % w + 0.5) / step - 0.5
-    fv = (band // w + 0.5) / step - 0.5
-    pos, columns = grid.cues.columns(params, fu, fv, hs * ws, band)
-    exact_labels(_band_messages(grid.kernels, blurred, pos, columns), lab64, band, *unary, out)
+    rows, row_w = bilinear_taps(h, hs, step, clamp_weights=False)
+    cols, col_w = bilinear_taps(w, ws, step, clamp_weights=True)
+    run_threaded([partial(upsampled_labels, coarse, rows, row_w, cols, col_w, fine, lab,
+                          band, *unary, float(params.band_margin), cell_label, cell_gap, step,
+                          slack, hard, a, b, out, close)
+                  for a, b in chunks(h, _THREADED_ROWS, per_thread=4)])
+    _exact_band_labels(grid, params, blurred, band[close], lab, unary, out)
     return out

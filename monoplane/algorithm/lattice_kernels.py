@@ -85,19 +85,31 @@ def _enclose(f: np.ndarray, scale: np.ndarray, elevated: np.ndarray, rem0: np.nd
         tail += cf
     elevated[0] = tail
     total = 0.0
+    inv = 1.0 / d1
     for j in range(d1):
-        down = np.floor(elevated[j] / d1) * d1
+        # floor(e / d1) from e * (1 / d1), within a few ulps of the quotient: the same floor
+        # unless the quotient lies that close to an integer, where it is divided after all.
+        t = elevated[j] * inv
+        down = np.floor(t)
+        near = 1e-12 * (abs(t) + 1.0)
+        if t - down < near or down + 1.0 - t < near:
+            down = np.floor(elevated[j] / d1)
+        down *= d1
         up = down + d1
         rem0[j] = up if up - elevated[j] < elevated[j] - down else down
         total += rem0[j]
     s = np.int64(np.rint(total / d1))
     for j in range(d1):
         diff[j] = elevated[j] - rem0[j]
+    # Rank: how many residuals are larger, ties going to the lower index (counted as sums of
+    # comparisons, which compile without branches).
     for k in range(d1):
         r = s
-        for j in range(d1):
-            if diff[j] > diff[k] or (j < k and diff[j] == diff[k]):
-                r += 1
+        dk = diff[k]
+        for j in range(k):
+            r += diff[j] >= dk
+        for j in range(k + 1, d1):
+            r += diff[j] > dk
         rank[k] = r
     for k in range(d1):
         if rank[k] < 0:
@@ -146,7 +158,7 @@ def insert_vertices(key0: np.ndarray, rank: np.ndarray, place: np.ndarray
         (M,) int64 packed key of each vertex, in order of first use.
     table, index : numpy.ndarray
         The hash table: slot -> code (-1 = empty) and slot -> vertex index, for
-        :func:`add_messages_at`.
+        :func:`lattice_neighbours` and :func:`add_messages_at`.
     """
     n, d = key0.shape
     d1 = d + 1
@@ -182,26 +194,22 @@ def insert_vertices(key0: np.ndarray, rank: np.ndarray, place: np.ndarray
 
 
 @numba.njit(cache=True, nogil=True)
-def lattice_neighbours(codes: np.ndarray, place: np.ndarray) -> np.ndarray:
+def lattice_neighbours(codes: np.ndarray, place: np.ndarray, table: np.ndarray,
+                       index: np.ndarray) -> np.ndarray:
     """(d+1, M, 2) int32 index of each vertex's neighbour one step back/forward along each
     lattice direction, -1 where that neighbour is not in use (it holds zero and drops out).
 
     In key coordinates the step along direction ``a`` adds ``d+1`` to coordinate ``a`` (when
-    ``a < d``) and subtracts 1 from every coordinate.
+    ``a < d``) and subtracts 1 from every coordinate. The neighbours are looked up in the
+    hash table of :func:`insert_vertices` (``table``, ``index``), which holds every code.
     """
     m = codes.size
     d = place.size
     d1 = d + 1
-    bits = 1
-    while (1 << bits) < 2 * m + 16:
+    bits = 0
+    while (1 << bits) < table.size:
         bits += 1
-    table = np.full(1 << bits, -1, np.int64)
-    index = np.empty(1 << bits, np.int32)
     shift = np.uint64(64 - bits)
-    for v in range(m):
-        h = _slot(table, codes[v], shift)
-        table[h] = codes[v]
-        index[h] = v
     place_sum = 0
     for k in range(d):
         place_sum += place[k]
@@ -345,7 +353,9 @@ def add_messages_at(head: np.ndarray, tail: np.ndarray, div: float, div2: float,
         for k in range(a):
             f[k] = head[i, k]
         for k in range(d - a):
-            f[a + k] = tail[i, k] / div / div2
+            f[a + k] = tail[i, k] / div
+            if div2 != 1.0:  # x / 1 is x: one division less for the normals
+                f[a + k] /= div2
         _enclose(f, scale, elevated, rem0, diff, rank, bary)
         acc[:] = 0.0
         # Vertex r's key is key0 + r, less d+1 where rank > d - r: every key of the simplex

@@ -75,7 +75,7 @@ class PermutohedralLattice:
         self._vertex_of, codes, self._table, self._index = lk.insert_vertices(key0 - lo, rank,
                                                                                 place)
         self.num_vertices = int(codes.size)
-        self._neighbours = lk.lattice_neighbours(codes, place)
+        self._neighbours = lk.lattice_neighbours(codes, place, self._table, self._index)
 
     def filter(self, values: np.ndarray) -> np.ndarray:
         """Apply the lattice Gaussian to per-point values.

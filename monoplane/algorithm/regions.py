@@ -22,6 +22,8 @@ available for stricter splitting.
 
 from __future__ import annotations
 
+from functools import partial
+
 import cv2
 import numpy as np
 
@@ -38,7 +40,10 @@ from monoplane.algorithm.region_scan import scan_pieces
 from monoplane.datamodel import Reconstruction
 from monoplane.errors import InvalidInput
 from monoplane.geometry.components import graph_components, label_regions
-from monoplane.jit import kernel
+from monoplane.jit import chunks, kernel, run_threaded
+
+#: Rows per threaded piece of the fill gate, below which one thread does the whole image.
+_THREADED_ROWS = 64
 
 #: The paper's minimum region size, in pixels at 256 x 192 (appendix).
 MIN_AREA_AT_REFERENCE = 300
@@ -258,17 +263,39 @@ def _absorb_remap(moments: RegionMoments, area: np.ndarray, edges: np.ndarray,
     remap[1:][small] = 0
     if not small.any():
         return remap
-    rms = moments.rms(params)
-    for s in np.flatnonzero(small) + 1:
-        other = np.concatenate([edges[edges[:, 0] == s, 1], edges[edges[:, 1] == s, 0]])
-        cand = other[~small[other - 1]]
-        if not cand.size:
-            continue
-        fit = rms[s - 1, cand - 1]
-        best = int(np.argmin(fit))
-        if fit[best] <= max_distance:
-            remap[s] = cand[best]
+    _absorb_into(small, moments.rms(params), np.ascontiguousarray(edges, dtype=np.int64),
+                 float(max_distance), remap)
     return remap
+
+
+@kernel
+def _absorb_into(small: np.ndarray, rms: np.ndarray, edges: np.ndarray, max_distance: float,
+                 remap: np.ndarray) -> None:
+    """Set ``remap[s]`` (R+1,) int32 of each region ``s`` flagged in the (R,) bool ``small``
+    to the adjacent region that is not small whose plane its points fit best, when the
+    (R, R) float64 ``rms[s - 1, b - 1]`` is at most ``max_distance``.
+
+    The candidates are the pairs of the sorted (E, 2) int64 ``edges`` with ``s`` first, then
+    those with ``s`` second, and the first smallest RMS (a NaN, as ``numpy.argmin``) wins.
+    """
+    for s in range(1, small.size + 1):
+        if not small[s - 1]:
+            continue
+        best = -1
+        fit = np.inf
+        found = False
+        for side in range(2):
+            for e in range(edges.shape[0]):
+                if edges[e, side] != s:
+                    continue
+                b = edges[e, 1 - side]
+                if small[b - 1]:
+                    continue
+                v = rms[s - 1, b - 1]
+                if not found or (fit == fit and (v != v or v < fit)):
+                    best, fit, found = b, v, True
+        if found and fit <= max_distance:
+            remap[s] = best
 
 
 def gate_filled_pixels(points: np.ndarray, valid: np.ndarray, before: np.ndarray,
@@ -312,41 +339,51 @@ def gate_filled_pixels(points: np.ndarray, valid: np.ndarray, before: np.ndarray
         (H, W) int32 ``after``, with ``before``'s label restored where the new plane does
         not fit (or the depth is invalid).
     """
-    out = np.asarray(after, dtype=np.int32).copy()
+    out = np.array(after, dtype=np.int32)
+    # Labels are small: int32 (no copy when they are, as the RANSAC's are).
+    before = np.ascontiguousarray(before, dtype=np.int32)
     test_angle = normals is not None and max_angle_deg < 180.0
-    fail = _gate_failures(
-        out, np.asarray(before, dtype=np.int64), np.ascontiguousarray(points, dtype=np.float64),
-        np.asarray(valid, dtype=bool), np.ascontiguousarray(params, dtype=np.float64),
-        float(max_distance),
-        np.asarray(normals, dtype=np.float32) if test_angle else np.zeros((1, 1, 3), np.float32),
-        float(np.cos(np.radians(max_angle_deg))), test_angle)
-    if patch_px > 0 and fail.any():
+    fail = np.empty(out.shape, np.uint8)
+    # Pixels are independent: row blocks on the frame's threads.
+    args = (out, before, np.ascontiguousarray(points, dtype=np.float64),
+            np.asarray(valid, dtype=bool), np.ascontiguousarray(params, dtype=np.float64),
+            float(max_distance),
+            np.asarray(normals, dtype=np.float32) if test_angle
+            else np.zeros((1, 1, 3), np.float32),
+            float(np.cos(np.radians(max_angle_deg))), test_angle)
+    failed = sum(run_threaded([partial(_gate_failures, *args, y0, y1, fail)
+                               for y0, y1 in chunks(out.shape[0], _THREADED_ROWS)]))
+    if not failed:
+        return out
+    if patch_px > 0:
         # A morphological opening keeps the failures that form patches: a blob of a curved
         # object or of an object in front, not the thin band along a crease where the cue's
         # blurred normals lie between the two planes' and the CRF is right.
         kernel = np.ones((2 * patch_px + 1, 2 * patch_px + 1), np.uint8)
         fail = cv2.morphologyEx(fail, cv2.MORPH_OPEN, kernel)
-    back = fail.astype(bool)
-    out[back] = np.asarray(before)[back]
+    np.copyto(out, before, where=fail.view(bool))  # fail holds 0 and 1
     return out
 
 
 @kernel
 def _gate_failures(after: np.ndarray, before: np.ndarray, points: np.ndarray, valid: np.ndarray,
                    params: np.ndarray, max_distance: float, normals: np.ndarray,
-                   cos_limit: float, test_angle: bool) -> np.ndarray:
-    """(H, W) uint8, 1 at the pixels :func:`gate_filled_pixels` sends back before any opening.
+                   cos_limit: float, test_angle: bool, y0: int, y1: int,
+                   fail: np.ndarray) -> int:
+    """Rows ``y0:y1`` of the (H, W) uint8 ``fail``: 1 at the pixels
+    :func:`gate_filled_pixels` sends back before any opening, else 0; returns how many.
 
-    ``after`` (H, W) int32 and ``before`` (H, W) int64 labels, ``points`` (H, W, 3) float64,
+    ``after`` and ``before`` (H, W) int32 labels, ``points`` (H, W, 3) float64,
     ``valid`` (H, W) bool, ``params`` (P, 4) float64, ``normals`` (H, W, 3) float32 (read
     only when ``test_angle``). The sums run in the order (and the float32 normal length in
     the precision) of the numpy einsums they replace, so the failures are the same.
     """
-    h, w = after.shape
-    fail = np.zeros((h, w), dtype=np.uint8)
+    w = after.shape[1]
+    failed = 0
     half = np.float32(0.5)
-    for y in range(h):
+    for y in range(y0, y1):
         for x in range(w):
+            fail[y, x] = 0
             lab = after[y, x]
             if lab <= 0 or lab == before[y, x]:
                 continue
@@ -361,7 +398,8 @@ def _gate_failures(after: np.ndarray, before: np.ndarray, points: np.ndarray, va
                 fits = not known or cos >= cos_limit
             if not fits:
                 fail[y, x] = 1
-    return fail
+                failed += 1
+    return failed
 
 
 def clean_regions(rec: Reconstruction, labels: np.ndarray, min_area: int,
@@ -445,7 +483,7 @@ def clean_regions(rec: Reconstruction, labels: np.ndarray, min_area: int,
     kept = np.flatnonzero(area >= min_area) + 1
     remap = np.zeros(area.size + 1, dtype=np.int32)
     remap[kept] = np.arange(1, kept.size + 1, dtype=np.int32)
-    final = remap[to][pieces]
+    final = np.take(remap[to], pieces)  # remap[to][pieces], without an intp copy of pieces
     moments = moments.combine(remap[1:], kept.size)
     source = origin[kept - 1]
     if not split:
