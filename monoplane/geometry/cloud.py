@@ -119,9 +119,12 @@ class PlaneCloud:
         (3, 3) float64 intrinsics the frame's points were unprojected with
         (:meth:`from_frame`); :meth:`propagate` then finds the samples near a pixel in 3D
         through the image. None otherwise (a point index serves instead).
-    normals_from_depth : bool
-        True when the frame's normals were estimated from its depth by the cue stage
-        (:attr:`monoplane.datamodel.Frame.normals_from_depth`), not given with the input.
+    normals_from_sensor_depth : bool
+        True when the frame's normals were estimated from its own depth
+        (:attr:`monoplane.datamodel.Frame.normals_from_depth`) and that depth was measured,
+        not predicted by a network (:attr:`monoplane.datamodel.Frame.depth_predicted`). False
+        for normals given with the input, a network's normals, normals from a network's depth
+        and a cloud without a frame. The proximity labeler's normal gate reads it.
     """
 
     points: np.ndarray
@@ -137,7 +140,7 @@ class PlaneCloud:
     stride: int | None = None
     lattice: np.ndarray | None = None
     intrinsics: np.ndarray | None = None
-    normals_from_depth: bool = False
+    normals_from_sensor_depth: bool = False
 
     def __post_init__(self) -> None:
         n = self.points.shape[0]
@@ -295,7 +298,8 @@ class PlaneCloud:
                    pixels=keep, center=center, scale=scale, shape=frame.shape,
                    all_points=all_points, all_pixels=all_pixels, stride=stride,
                    lattice=lattice, intrinsics=np.asarray(frame.K, dtype=np.float64),
-                   normals_from_depth=frame.normals_from_depth)
+                   normals_from_sensor_depth=(frame.normals_from_depth
+                                              and not frame.depth_predicted))
 
     @classmethod
     def from_points(cls, points: np.ndarray, normals: np.ndarray, colors: np.ndarray | None,

@@ -218,9 +218,11 @@ class ProximityGraphCutConfig(ProximityAffinities):
     normal_gate_deg: float = param(
         20.0, "a point whose normal, and every graph neighbour's, lies more than this angle "
         "in degrees from the hypothesis' model normal cannot be its inlier, whatever the "
-        "smoothness (with normal_term, on normals estimated from the depth; 180: no gate)")
+        "smoothness (with normal_term, on normals estimated from a sensor's depth; 180: no "
+        "gate)")
     gate_given_normals: bool = param(
-        False, "apply normal_gate_deg also to normals given with the input (a network's)")
+        False, "apply normal_gate_deg also to normals not estimated from a sensor's depth "
+        "(given with the input, a network's, or estimated from a network's depth)")
     normalise: bool = param(
         False, "divide E_s by the graph's mean degree (off: the paper's weights as given)")
 
@@ -248,12 +250,14 @@ class ProximityGraphCutLabeler(_PoolGraphCut):
 
     def _gate(self, cloud: PlaneCloud) -> float:
         """The normal gate in radians for ``cloud`` (π: none). Normals estimated from a
-        sensor's depth measure the surface the distances measure, and a curved surface beside
-        a plane turns them away from it; a network's normals are smoothed predictions, on
-        which the gate trims planes on curved surfaces into bands that pass the planarity
-        test (docs/evaluation.md, "The normal gate, eighth round")."""
+        sensor's depth (:attr:`PlaneCloud.normals_from_sensor_depth`) measure the surface the
+        distances measure, and a curved surface beside a plane turns them away from it. A
+        network's normals, and normals estimated from a network's depth, are smoothed
+        predictions, on which the gate trims planes on curved surfaces into bands that pass
+        the planarity test (docs/evaluation.md, "The normal gate, eighth round")."""
         c = self.config
-        if c.normal_gate_deg >= 180 or not (cloud.normals_from_depth or c.gate_given_normals):
+        if c.normal_gate_deg >= 180 or not (cloud.normals_from_sensor_depth
+                                            or c.gate_given_normals):
             return np.pi
         return float(np.deg2rad(c.normal_gate_deg))
 

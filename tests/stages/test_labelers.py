@@ -226,10 +226,10 @@ def test_normal_gate_is_validated_and_removes_a_tilted_patch_smoothness_kept():
     # Given normals are not gated by default; normals estimated from depth are.
     plain, _ = run(ProximityGraphCutLabeler(), cloud)
     assert plain.inliers[patch].all()
-    cloud.normals_from_depth = True
+    cloud.normals_from_sensor_depth = True
     from_depth, _ = run(ProximityGraphCutLabeler(ProximityGraphCutLabeler.Config(
         normal_gate_deg=30.0)), cloud)
-    cloud.normals_from_depth = False
+    cloud.normals_from_sensor_depth = False
     cfg = ProximityGraphCutLabeler.Config
     gated, _ = run(ProximityGraphCutLabeler(cfg(normal_gate_deg=30.0, gate_given_normals=True)),
                    cloud)
