@@ -180,10 +180,12 @@ class PlaneCloud:
 
     def neighbour_graph(self, k: int) -> NeighbourGraph:
         """The kNN graph over ``points`` (:meth:`NeighbourGraph.build`), found through the
-        image when the cloud has one (:attr:`sample_image`), else with :attr:`tree`."""
+        image when the cloud has one (:attr:`sample_image`), else with :attr:`tree`. The few
+        samples the image search leaves go to :attr:`tree` too, built then and kept for its
+        later users (the pixels :meth:`label_points` misses, NAPSAC sampling)."""
         image = self.sample_image
-        return NeighbourGraph.build(self.points, k, tree=None if image else self.tree,
-                                    image=image)
+        return NeighbourGraph.build(self.points, k, tree=(lambda: self.tree) if image
+                                    else self.tree, image=image)
 
     @cached_property
     def image_nearest_sample(self) -> np.ndarray:

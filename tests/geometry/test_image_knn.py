@@ -54,9 +54,11 @@ def test_graph_through_the_image_is_the_kd_graph(threads, skew, monkeypatch):
     g = cloud.neighbour_graph(8)
     np.testing.assert_array_equal(g.edges, ref.edges)
     assert g.spacing == ref.spacing
-    # The lone pixels' samples (when drawn) are left to a point index built for them.
+    # The lone pixels' samples (when drawn) are left to the cloud's own point index, built
+    # for them and kept on the cloud.
     _, _, missed = image_knn(cloud.points, cloud.sample_image, 9)
     assert (g.tree is None) == (missed.size == 0)
+    assert g.tree is None or g.tree is cloud.tree
 
 
 def test_frames_of_fewer_samples_than_neighbours():
@@ -99,3 +101,4 @@ def test_frames_without_image_neighbours_are_left_to_the_point_index(spread):
     np.testing.assert_array_equal(missed, np.arange(cloud.size))
     g = cloud.neighbour_graph(8)
     np.testing.assert_array_equal(g.edges, NeighbourGraph.build(cloud.points, 8).edges)
+    assert g.tree is cloud.tree  # one index per cloud: the graph's is the cloud's
