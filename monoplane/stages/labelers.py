@@ -16,9 +16,8 @@ The graph cuts run only on the kNN subgraph of the points still in the pool.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
-from functools import cached_property, partial
+from functools import partial
 
 import numpy as np
 
@@ -169,25 +168,9 @@ class _PoolGraphCut(Labeler):
         """Minimise the pool's energy for the data costs of one hypothesis."""
         inliers, _ = minimize_gc_ransac(f0, data1, terms.edges, terms.cut, self.config.lambda_,
                                         terms.scale, payback=terms.payback, with_energy=False)
-        return _CutLabeling(inliers, partial(gc_ransac_cut_energy, f0, data1, terms.edges,
-                                             terms.cut, self.config.lambda_, inliers,
-                                             terms.scale))
-
-
-class _CutLabeling(Labeling):
-    """A graph cut's :class:`~monoplane.contracts.Labeling` whose energy is summed (a pass
-    over the pool's points and edges) when it is first read: the driver reads it only to
-    compare local-optimisation rounds, and a search without them (``lo_iterations = 0``)
-    never does."""
-
-    def __init__(self, inliers: np.ndarray, energy_of: Callable[[], float]) -> None:
-        self.inliers = inliers
-        self._energy_of = energy_of
-
-    @cached_property
-    def energy(self) -> float:  # type: ignore[override]
-        """The energy of this labelling (see the class)."""
-        return self._energy_of()
+        # Summed when the driver first reads it (local optimisation only).
+        return Labeling(inliers, partial(gc_ransac_cut_energy, f0, data1, terms.edges,
+                                         terms.cut, self.config.lambda_, inliers, terms.scale))
 
 
 class GraphCutLabeler(_PoolGraphCut):
