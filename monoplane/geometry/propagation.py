@@ -135,6 +135,16 @@ def _reach(rho: float, z: float, ra: float, rb: float, cam: np.ndarray, w: int, 
 
 
 @inline
+def _camera_radii(x0: float, x1: float, x2: float, scale: float, center: np.ndarray
+                  ) -> tuple[float, float, float]:
+    """``(z, ra, rb)`` of :func:`_reach` for the normalised point ``(x0, x1, x2)`` of a cloud
+    whose camera-frame points are ``x * scale + center`` (``center`` (3,) float64)."""
+    z = x2 * scale + center[2]
+    return (z, np.sqrt(z * z + (x0 * scale + center[0]) ** 2),
+            np.sqrt(z * z + (x1 * scale + center[1]) ** 2))
+
+
+@inline
 def _nearest_in_image(pix: int, x0: float, x1: float, x2: float, start: np.ndarray,
                       xyz: np.ndarray, ids: np.ndarray, w: int, h: int, cam: np.ndarray,
                       scale: float, center: np.ndarray, bound2: float, best_d: np.ndarray,
@@ -152,9 +162,7 @@ def _nearest_in_image(pix: int, x0: float, x1: float, x2: float, start: np.ndarr
     k = best_d.shape[0]
     across = (w + TILE - 1) // TILE
     v, u = divmod(pix, w)
-    z = x2 * scale + center[2]
-    ra = np.sqrt(z * z + (x0 * scale + center[0]) ** 2)
-    rb = np.sqrt(z * z + (x1 * scale + center[1]) ** 2)
+    z, ra, rb = _camera_radii(x0, x1, x2, scale, center)
     du, dv = _reach(np.sqrt(bound2) * scale, z, ra, rb, cam, w, h)
     found = 0
     worst = bound2  # candidates must come before (worst, worst_i)
@@ -472,9 +480,7 @@ def _image_knn(start: np.ndarray, xyz: np.ndarray, ids: np.ndarray, pixels: np.n
             return -1
         qx, qy, qz = xyz[p0, 0], xyz[p0, 1], xyz[p0, 2]
         v, u = divmod(pixels[ids[p0]], w)
-        z = qz * scale + center[2]
-        ra = np.sqrt(z * z + (qx * scale + center[0]) ** 2)
-        rb = np.sqrt(z * z + (qy * scale + center[1]) ** 2)
+        z, ra, rb = _camera_radii(qx, qy, qz, scale, center)
         limit = prev * KNN_GROWTH
         certified = False
         du = dv = 2 * KNN_TILE
