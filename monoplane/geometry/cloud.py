@@ -476,7 +476,7 @@ class PlaneCloud:
             return labels.copy()
         if spacing is None:
             if graph is None:
-                graph = NeighbourGraph.build(self.points, PROPAGATION_GRAPH_K, tree=self.tree)
+                graph = self.neighbour_graph(PROPAGATION_GRAPH_K)
             spacing = graph.spacing
         p = np.zeros((0, 4)) if planes is None else np.asarray(planes, dtype=np.float64)
         out = self.label_points(self.all_points, labels, p.reshape(-1, 4),
