@@ -71,10 +71,11 @@ KNN_GROWTH = 1.5
 #: Samples per thread below which :func:`image_knn` runs on one thread.
 KNN_THREADED = 4096
 #: :func:`image_knn` gives up on a frame whose samples are not near their 3D neighbours in
-#: the image (depth noise as large as the samples' spacing, scattered valid pixels): after
-#: :data:`KNN_PROBE` samples, when more than one in :data:`KNN_MISS_SHARE` was left to the
-#: point index or their windows held more than :data:`KNN_BUDGET` samples each (45-110 on
-#: sensor frames). The point index then answers for every sample.
+#: the image (depth noise as large as the samples' spacing, scattered valid pixels): from
+#: the :data:`KNN_PROBE`-th sample of a thread's run on, before each sample, when more than
+#: one in :data:`KNN_MISS_SHARE` of those searched so far was left to the point index or
+#: their windows held more than :data:`KNN_BUDGET` samples each (45-110 on sensor frames).
+#: The point index then answers for every sample.
 KNN_PROBE = 512
 KNN_MISS_SHARE = 8
 KNN_BUDGET = 150
