@@ -463,9 +463,9 @@ def _image_knn(start: np.ndarray, xyz: np.ndarray, ids: np.ndarray, pixels: np.n
     :func:`monoplane.geometry.neighbours._cell_knn` ranks its candidates (without
     data-dependent branches). The first limit is :data:`KNN_GROWTH` times the previous
     sample's k-th squared distance (the first sample of a run gets a window of two tiles and
-    no certificate); a window with fewer than k within its limit gives the next one the k-th
-    smallest distance it holds, which holds k; one with fewer than k samples at all, four
-    times the limit.
+    no certificate, twice as wide while it holds fewer than k samples); a window with fewer
+    than k within its limit gives the next one the k-th smallest distance it holds, which
+    holds k; one with fewer than k samples at all, four times the limit.
     """
     n = ids.shape[0]
     kept_d2 = np.empty(n + 8)
@@ -525,8 +525,11 @@ def _image_knn(start: np.ndarray, xyz: np.ndarray, ids: np.ndarray, pixels: np.n
                 limit = _kth_smallest(kept_d2, m, bd[:k])
             elif certified:
                 limit *= 4.0
-            else:
-                break
+            else:  # no limit yet (a run's first sample) and fewer than k here: a wider one
+                du, dv = 2 * du, 2 * dv
+                if du > KNN_MAX_REACH or dv > KNN_MAX_REACH:
+                    break
+                continue
             du, dv = _reach(np.sqrt(limit) * scale, z, ra, rb, cam, w, h)
             certified = True
             if du > KNN_MAX_REACH or dv > KNN_MAX_REACH:
