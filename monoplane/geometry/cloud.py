@@ -117,8 +117,9 @@ class PlaneCloud:
         for a random sample or a cloud without an image.
     intrinsics : numpy.ndarray or None
         (3, 3) float64 intrinsics the frame's points were unprojected with
-        (:meth:`from_frame`); :meth:`propagate` then finds the samples near a pixel in 3D
-        through the image. None otherwise (a point index serves instead).
+        (:meth:`from_frame`); the kNN graph (:meth:`neighbour_graph`) and :meth:`propagate`
+        then find the samples near a point in 3D through the image. None otherwise (a point
+        index serves instead).
     normals_from_sensor_depth : bool
         True when the frame's normals were estimated from its own depth
         (:attr:`monoplane.datamodel.Frame.normals_from_depth`) and that depth was measured,

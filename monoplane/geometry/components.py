@@ -309,9 +309,10 @@ def _lattice_largest_component(members: np.ndarray, lattice: np.ndarray, points:
     """:func:`lattice_largest_component`.
 
     It runs once per plane the search finds, on a cloud of 40 000 points of which a plane
-    holds a few per cent: every pass is over the members or the nodes a line visits, never
-    over all points (distances from the camera as they are needed, the union-find forest
-    and the set sizes only at the members).
+    holds a few per cent: past the raster scan of the lattice (one membership test a node)
+    and the list of the members, the work is at the members and the nodes a line from them
+    visits (distances from the camera as they are needed, the union-find forest and the
+    set sizes only at the members).
     """
     n = members.shape[0]
     ids = np.flatnonzero(members)  # ascending: the order of the result

@@ -41,7 +41,7 @@ class NeighbourGraph:
         only the edge list; the RANSAC builds these on its background thread).
     tree : PointIndex or None
         Nearest-neighbour index over the points the graph was built on; None for a graph
-        that needed none (the pixel-grid graph of :mod:`monoplane.stages.graph_refiner`).
+        that needed none (a kNN graph found through the image, the lattice graph).
     spacing : float
         Median distance from a point to its nearest other point, in the points' unit.
     affinity_scale : numpy.ndarray or None

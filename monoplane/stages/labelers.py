@@ -194,7 +194,9 @@ class GraphCutLabeler(_PoolGraphCut):
 
 @dataclass
 class ProximityGraphCutConfig(ProximityAffinities):
-    """Parameters of MonoPlane's proximity-guided graph-cut labeler (paper §IV-A values)."""
+    """Parameters of MonoPlane's proximity-guided graph-cut labeler: the paper's §IV-A values,
+    plus a normal gate on normals estimated from a sensor's depth (``normal_gate_deg``; 180
+    turns it off, as the ``monoplane-paper`` preset does)."""
 
     lambda_: float = param(0.95, "smoothness weight λ in E = (1-λ)(E_d + E_n) + λE_s")
     normal_term: bool = param(True, "add the normal data energy E_n to the data term")
