@@ -204,7 +204,8 @@ class ProximityGraphCutConfig(ProximityAffinities):
         20.0, "a point whose normal, and every graph neighbour's, lies more than this angle "
         "in degrees from the hypothesis' model normal cannot be its inlier, whatever the "
         "smoothness (with normal_term, on normals estimated from a sensor's depth; 180: no "
-        "gate)")
+        "gate). An absolute angle: it does not follow ransac.epsilon_n_deg (20 is twice its "
+        "default)")
     gate_given_normals: bool = param(
         False, "apply normal_gate_deg also to normals not estimated from a sensor's depth "
         "(given with the input, a network's, or estimated from a network's depth)")
