@@ -22,7 +22,6 @@ import numpy as np
 
 from monoplane import Pipeline
 from monoplane.evaluation.segmentation import segmentation_scores
-from monoplane.host.config import parse_override
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from test_rgbd_fast import sensor_frame  # noqa: E402  (the test module is not a package)
@@ -37,9 +36,8 @@ def main() -> None:
                         help="config override of every preset (repeatable)")
     args = parser.parse_args()
     width, height = (int(v) for v in args.size.split("x"))
-    # Values are read as the CLI's --set reads them (TOML: 20 is an int, grid a string).
-    overrides = {f"{table}.{key}": value for table, key, value in map(parse_override, args.set)}
-    pipes = {name: Pipeline.from_preset(name, overrides=overrides) for name in args.preset}
+    # The CLI's --set strings, read as it reads them (TOML: 20 is an int, grid a string).
+    pipes = {name: Pipeline.from_preset(name, overrides=args.set) for name in args.preset}
     rows: dict[str, list[tuple[float, float, float, float]]] = {name: [] for name in pipes}
     for seed in range(args.n):
         frame, truth = sensor_frame(seed, width, height)

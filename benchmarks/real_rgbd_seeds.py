@@ -18,8 +18,6 @@ from pathlib import Path
 
 import numpy as np
 
-from monoplane.host.config import parse_override
-
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from test_real_rgbd import (  # noqa: E402  (the test module is not a package)
     REAL,
@@ -39,13 +37,10 @@ def main() -> None:
     args = ap.parse_args()
     if not REAL.is_dir():
         sys.exit(f"real RGB-D frames not found at {REAL}")
-    # Values are read as the CLI's --set reads them (TOML: 6 is an int, grid a string).
-    overrides = {f"{table}.{key}": value
-                 for table, key, value in map(parse_override, args.set)}
     with tempfile.TemporaryDirectory() as tmp:
         frames = real_frames(Path(tmp))
         truths = {name: surface_truths(frame, name) for name, frame in frames.items()}
-        sweep = seed_sweep(frames, truths, overrides, range(args.seeds))
+        sweep = seed_sweep(frames, truths, args.set, range(args.seeds))
     for seed, got in sweep.items():
         fails = [m for name, g in got.items() for m in failed_checks(name, g)]
         print(f"seed {seed:2d}: {'; '.join(fails) if fails else 'pass'}", flush=True)

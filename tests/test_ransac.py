@@ -430,12 +430,9 @@ def test_statements_are_checked_and_kept_by_subclasses_that_do_not_override():
     assert not SequentialRansac(UniformSampler(), MsacScorer(), ThresholdLabeler()).compiled_search
 
 
-@pytest.mark.parametrize("rejections", [0, 1])
-def test_max_rejections_passes_over_a_plane_that_falls_apart(rejections):
-    # Plane z = 3 seen as 4x4-pixel tiles (768 px, no tile reaches the 10 % minimum support)
-    # and one compact patch of plane z = 2 (384 px): the tiled plane has more inliers, so it
-    # is found first and falls apart into its tiles. Stopping there loses the patch; passing
-    # over the tiles once finds it.
+def tiled_frame() -> Frame:
+    """48x96 depth-only frame: plane z = 3 as 4x4-pixel tiles 8 pixels apart over the left
+    64 columns (768 px), a compact patch of plane z = 2 in the top right (384 px)."""
     h, w = 48, 96
     depth = np.zeros((h, w), dtype=np.float32)
     for r in range(0, h, 8):
@@ -443,7 +440,16 @@ def test_max_rejections_passes_over_a_plane_that_falls_apart(rejections):
             depth[r:r + 4, c:c + 4] = 3.0
     depth[:24, 80:] = 2.0
     normals = np.tile(np.array([0, 0, -1], dtype=np.float32), (h, w, 1))
-    frame = Frame(rgb=None, K=default_intrinsics(w, h, 60.0), depth=depth, normals=normals)
+    return Frame(rgb=None, K=default_intrinsics(w, h, 60.0), depth=depth, normals=normals)
+
+
+@pytest.mark.parametrize("rejections", [0, 1])
+def test_max_rejections_passes_over_a_plane_that_falls_apart(rejections):
+    # Plane z = 3 seen as 4x4-pixel tiles (768 px, no tile reaches the 10 % minimum support)
+    # and one compact patch of plane z = 2 (384 px): the tiled plane has more inliers, so it
+    # is found first and falls apart into its tiles. Stopping there loses the patch; passing
+    # over the tiles once finds it.
+    frame = tiled_frame()
     rec = make("monoplane-nocrf", split_components=True, min_support=0.1,
                max_rejections=rejections).run(frame)
     assert rec.num_planes == rejections
@@ -459,14 +465,7 @@ def test_lattice_fragments_pass_over_a_plane_that_falls_apart_on_the_lattice(
     # The tiled plane of the test above on the pixel lattice (every pixel a sample): its
     # labelled inliers reach the minimum support, its parts do not. With lattice_fragments it
     # is passed over without max_rejections, and the patch is found; random samples ignore it.
-    h, w = 48, 96
-    depth = np.zeros((h, w), dtype=np.float32)
-    for r in range(0, h, 8):
-        for c in range(0, 64, 8):
-            depth[r:r + 4, c:c + 4] = 3.0
-    depth[:24, 80:] = 2.0
-    normals = np.tile(np.array([0, 0, -1], dtype=np.float32), (h, w, 1))
-    frame = Frame(rgb=None, K=default_intrinsics(w, h, 60.0), depth=depth, normals=normals)
+    frame = tiled_frame()
     rec = make("monoplane-nocrf", split_components=True, min_support=0.1, sampling=sampling,
                lattice_fragments=fragments).run(frame)
     assert rec.num_planes == found

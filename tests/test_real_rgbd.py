@@ -195,13 +195,13 @@ def failed_checks(name: str, got: dict[str, tuple[float, float]]) -> list[str]:
     return failed
 
 
-def seed_sweep(frames: dict, truths: dict, overrides: dict, seeds=SWEEP_SEEDS
+def seed_sweep(frames: dict, truths: dict, overrides: list[str], seeds=SWEEP_SEEDS
                ) -> dict[int, dict[str, dict[str, tuple[float, float]]]]:
-    """:func:`coverage` of each frame under the ``rgbd`` preset with ``overrides``, per
-    ``ransac.seed``."""
+    """:func:`coverage` of each frame under the ``rgbd`` preset with ``overrides``
+    (``--set`` strings ``table.key=value``), per ``ransac.seed``."""
     out = {}
     for seed in seeds:
-        pipe = Pipeline.from_preset("rgbd", overrides={**overrides, "ransac.seed": seed})
+        pipe = Pipeline.from_preset("rgbd", overrides=[*overrides, f"ransac.seed={seed}"])
         out[seed] = {name: coverage(pipe.run(frame), truths[name])
                      for name, frame in frames.items()}
     return out
@@ -261,7 +261,7 @@ SWEEP_FLOOR = {"random": (5, 111), "grid": (4, 111)}
 def test_real_frames_pass_at_enough_seeds(real_truths, sampling):
     # One seed decides the fast tests above; the sampling is judged over twelve.
     frames, truths = real_truths
-    sweep = seed_sweep(frames, truths, {"ransac.sampling": sampling})
+    sweep = seed_sweep(frames, truths, [f"ransac.sampling={sampling}"])
     fails = {seed: [m for name, g in got.items() for m in failed_checks(name, g)]
              for seed, got in sweep.items()}
     passed = sum(len(g) - len(failed_checks(name, g))

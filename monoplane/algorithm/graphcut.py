@@ -343,11 +343,7 @@ def minimize_gc_ransac(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray,
         raise InvalidInput(f"lambda must lie in [0, 1], got {lambda_}")
     if not pairwise_scale > 0:
         raise InvalidInput(f"pairwise_scale must be positive, got {pairwise_scale}")
-    f0 = np.ascontiguousarray(f0, dtype=np.float64)
-    data1 = np.ascontiguousarray(data1, dtype=np.float64)
-    edges = np.ascontiguousarray(np.asarray(edges, dtype=np.int64).reshape(-1, 2))
-    cut = np.ascontiguousarray(np.broadcast_to(np.asarray(cut_cost, dtype=np.float64),
-                                               edges.shape[:1]))
+    f0, data1, edges, cut = _energy_arrays(f0, data1, edges, cut_cost)
     lam, ls = float(lambda_), float(lambda_ * pairwise_scale)
     # With f(0, p) <= 1 an edge whose cut costs at least 1/2 is submodular whatever the
     # hypothesis (2 λs w >= λs >= its both-outlier cost), so most calls check nothing.
@@ -389,13 +385,23 @@ def gc_ransac_cut_energy(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray,
     float
         Its energy, summed as :func:`minimize_gc_ransac` sums it (the same float).
     """
+    f0, data1, edges, cut = _energy_arrays(f0, data1, edges, cut_cost)
+    return float(_gc_ransac_energy(f0, data1, edges, cut, float(lambda_),
+                                   float(lambda_ * pairwise_scale),
+                                   np.ascontiguousarray(labels, dtype=np.bool_)))
+
+
+def _energy_arrays(f0: np.ndarray, data1: np.ndarray, edges: np.ndarray,
+                   cut_cost: np.ndarray | float
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The arrays of :func:`minimize_gc_ransac`'s energy as its kernels take them: (M,) float64
+    ``f0`` and ``data1``, (E, 2) int64 ``edges`` and (E,) float64 cut costs (a scalar
+    broadcast), each contiguous."""
     edges = np.ascontiguousarray(np.asarray(edges, dtype=np.int64).reshape(-1, 2))
     cut = np.ascontiguousarray(np.broadcast_to(np.asarray(cut_cost, dtype=np.float64),
                                                edges.shape[:1]))
-    return float(_gc_ransac_energy(np.ascontiguousarray(f0, dtype=np.float64),
-                                   np.ascontiguousarray(data1, dtype=np.float64), edges, cut,
-                                   float(lambda_), float(lambda_ * pairwise_scale),
-                                   np.ascontiguousarray(labels, dtype=np.bool_)))
+    return (np.ascontiguousarray(f0, dtype=np.float64),
+            np.ascontiguousarray(data1, dtype=np.float64), edges, cut)
 
 
 @kernel

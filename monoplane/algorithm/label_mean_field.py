@@ -23,7 +23,7 @@ import functools
 
 import numpy as np
 
-from monoplane.jit import chunks, kernel, run_threaded
+from monoplane.jit import chunks, inline, kernel, run_threaded
 
 #: Margin of the label bound, in units of the temperature: a dropped label has probability
 #: below exp(-30) ≈ 1e-13 at every update (module docstring).
@@ -178,45 +178,57 @@ def _initial(ptr: np.ndarray, labels: np.ndarray, costs: np.ndarray, start: np.n
     return q
 
 
+@inline
+def _node_update(ptr: np.ndarray, labels: np.ndarray, costs: np.ndarray, indptr: np.ndarray,
+                 indices: np.ndarray, weights: np.ndarray, q: np.ndarray, weight: np.float32,
+                 scale: np.float32, i: int, out: np.ndarray, o: int) -> None:
+    """Node ``i``'s new probabilities from ``q`` (M,) float32 into ``out[o + s]`` (float32)
+    for each of its slots ``s``: the Potts messages of its neighbours' shared labels, then a
+    softmax of weight × messages + costs. The two nodes' label lists are ascending, so one
+    merge pass finds the labels they share."""
+    a, b = ptr[i], ptr[i + 1]
+    for s in range(a, b):
+        out[o + s] = 0.0
+    for jj in range(indptr[i], indptr[i + 1]):
+        j = indices[jj]
+        w = weights[jj]
+        s, t, t_end = a, ptr[j], ptr[j + 1]
+        while s < b and t < t_end:
+            if labels[s] < labels[t]:
+                s += 1
+            elif labels[s] > labels[t]:
+                t += 1
+            else:
+                out[o + s] += w * q[t]
+                s += 1
+                t += 1
+    low = np.float32(np.inf)
+    for s in range(a, b):
+        out[o + s] = out[o + s] * weight + costs[s]
+        low = min(low, out[o + s])
+    total = np.float32(0.0)
+    for s in range(a, b):
+        out[o + s] = np.exp((out[o + s] - low) * scale)
+        total += out[o + s]
+    for s in range(a, b):
+        out[o + s] /= total
+
+
 @kernel
 def _update(ptr: np.ndarray, labels: np.ndarray, costs: np.ndarray, indptr: np.ndarray,
             indices: np.ndarray, weights: np.ndarray, q: np.ndarray, weight: np.float32,
             scale: np.float32, row0: int, row1: int, out: np.ndarray, changed_out: np.ndarray,
             settle: np.float32) -> None:
-    """One update of nodes ``row0:row1``: ``out`` (M,) float32 from ``q`` (M,) float32.
+    """One update of nodes ``row0:row1`` (:func:`_node_update`): ``out`` (M,) float32 from
+    ``q`` (M,) float32.
 
     ``changed_out`` (N,) bool receives whether each node's probabilities changed by more than
-    ``settle`` (0: changed at all). The two nodes' label lists are ascending, so one merge
-    pass finds the labels they share.
+    ``settle`` (0: changed at all).
     """
     for i in range(row0, row1):
-        a, b = ptr[i], ptr[i + 1]
-        for s in range(a, b):
-            out[s] = 0.0
-        for jj in range(indptr[i], indptr[i + 1]):
-            j = indices[jj]
-            w = weights[jj]
-            s, t, t_end = a, ptr[j], ptr[j + 1]
-            while s < b and t < t_end:
-                if labels[s] < labels[t]:
-                    s += 1
-                elif labels[s] > labels[t]:
-                    t += 1
-                else:
-                    out[s] += w * q[t]
-                    s += 1
-                    t += 1
-        low = np.float32(np.inf)
-        for s in range(a, b):
-            out[s] = out[s] * weight + costs[s]
-            low = min(low, out[s])
-        total = np.float32(0.0)
-        for s in range(a, b):
-            out[s] = np.exp((out[s] - low) * scale)
-            total += out[s]
+        _node_update(ptr, labels, costs, indptr, indices, weights, q, weight, scale, i, out, 0)
         moved = False
-        for s in range(a, b):
-            out[s] /= total
+        for s in range(ptr[i], ptr[i + 1]):
             moved = moved or abs(out[s] - q[s]) > settle
         changed_out[i] = moved
 
@@ -251,37 +263,13 @@ def _update_due(ptr: np.ndarray, labels: np.ndarray, costs: np.ndarray, indptr: 
                 indices: np.ndarray, weights: np.ndarray, q: np.ndarray, weight: np.float32,
                 scale: np.float32, due: np.ndarray, slots: np.ndarray, k0: int, k1: int,
                 new: np.ndarray) -> None:
-    """The update of :func:`_update` of the nodes ``due[k0:k1]`` (:func:`_due_nodes`), from
-    ``q`` (M,) float32 into their ``slots`` of ``new`` (float32), with the same float32
-    operations in the same order."""
+    """The update (:func:`_node_update`) of the nodes ``due[k0:k1]`` (:func:`_due_nodes`),
+    from ``q`` (M,) float32 into their ``slots`` of ``new`` (float32)."""
     for k in range(k0, k1):
         i = due[k]
-        a, b, o = ptr[i], ptr[i + 1], slots[k] - ptr[i]  # slot s of node i is new[o + s]
-        for s in range(a, b):
-            new[o + s] = 0.0
-        for jj in range(indptr[i], indptr[i + 1]):
-            j = indices[jj]
-            w = weights[jj]
-            s, t, t_end = a, ptr[j], ptr[j + 1]
-            while s < b and t < t_end:
-                if labels[s] < labels[t]:
-                    s += 1
-                elif labels[s] > labels[t]:
-                    t += 1
-                else:
-                    new[o + s] += w * q[t]
-                    s += 1
-                    t += 1
-        low = np.float32(np.inf)
-        for s in range(a, b):
-            new[o + s] = new[o + s] * weight + costs[s]
-            low = min(low, new[o + s])
-        total = np.float32(0.0)
-        for s in range(a, b):
-            new[o + s] = np.exp((new[o + s] - low) * scale)
-            total += new[o + s]
-        for s in range(a, b):
-            new[o + s] /= total
+        # Slot s of node i is new[slots[k] - ptr[i] + s].
+        _node_update(ptr, labels, costs, indptr, indices, weights, q, weight, scale, i, new,
+                     slots[k] - ptr[i])
 
 
 @kernel

@@ -7,6 +7,7 @@ cloud normalised into the unit sphere, so thresholds are in unit-sphere units as
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
 
@@ -70,21 +71,44 @@ class RansacParams:
         return float(np.deg2rad(self.epsilon_n_deg))
 
 
-@dataclass
 class Labeling:
     """Result of labelling the remaining points for one plane hypothesis.
+
+    Parameters
+    ----------
+    inliers : numpy.ndarray
+        (M,) bool over the ``pool`` passed to the labeler.
+    energy : float or callable
+        Value of the labeler's energy at this labelling (lower is better), or a function of
+        no arguments that returns it, called when :attr:`energy` is first read: the driver
+        reads it only to compare local-optimisation rounds, and a labeler whose energy costs
+        a pass over its points and edges need not sum it for a search without them.
 
     Attributes
     ----------
     inliers : numpy.ndarray
-        (M,) bool over the ``pool`` passed to the labeler.
+        As given.
     energy : float
-        Value of the labeler's energy at this labelling (lower is better); the driver's local
-        optimisation keeps a refit only while this decreases.
+        The energy (see above); the driver's local optimisation keeps a refit only while it
+        decreases.
     """
 
-    inliers: np.ndarray
-    energy: float
+    __slots__ = ("_energy", "inliers")
+
+    def __init__(self, inliers: np.ndarray, energy: float | Callable[[], float]) -> None:
+        self.inliers = inliers
+        self._energy = energy
+
+    @property
+    def energy(self) -> float:
+        """The labelling's energy (see the class), summed on first read when given lazily."""
+        if callable(self._energy):
+            self._energy = float(self._energy())
+        return self._energy
+
+    def __repr__(self) -> str:
+        energy = "(not summed yet)" if callable(self._energy) else self._energy
+        return f"Labeling({self.inliers.sum()} of {self.inliers.size} inliers, energy={energy})"
 
 
 class CueProvider(Stage):

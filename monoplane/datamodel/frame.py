@@ -48,7 +48,9 @@ class Frame:
     normals_from_depth : bool
         True when ``normals`` were estimated from this frame's own ``depth`` (no normal cue of
         their own): they then carry no evidence that the depth does not, and the planarity
-        test (:mod:`monoplane.algorithm.planarity`) judges curvature by the depth alone.
+        test (:mod:`monoplane.algorithm.planarity`) judges curvature by the depth alone. With
+        a measured depth (not ``depth_predicted``) the proximity labeler's normal gate also
+        applies to them (:attr:`monoplane.geometry.cloud.PlaneCloud.normals_from_sensor_depth`).
     depth_predicted : bool
         True when a network predicted ``depth`` from the image. Even a metric network's depth
         warps by several percent, so registration treats its scale and shape as estimates, as

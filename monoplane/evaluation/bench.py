@@ -312,7 +312,9 @@ def bench(preset: str = "monoplane", sizes: Sequence[tuple[int, int]] = DEFAULT_
         Extra plugin modules to register (by import name), e.g. a baseline not installed.
     isolate : bool
         Run each size (and range) in a fresh child process (its own peak RSS; see the module
-        docstring).
+        docstring) with the command line's allocator policy
+        (:func:`~monoplane.host.allocator.keep_freed_memory`). False: in this process, whose
+        allocator policy is left as it is.
     objects : sequence of (int, int), optional
         Scene-complexity ranges ``(min, max)`` of objects per scene (e.g.
         :data:`COMPLEXITY_LEVELS`); ``None``: the usual scenes. See the module docstring.
@@ -363,7 +365,10 @@ def bench(preset: str = "monoplane", sizes: Sequence[tuple[int, int]] = DEFAULT_
     for arg in tqdm(args, disable=not progress, unit="run", desc="bench"):
         if isolate:
             ctx = multiprocessing.get_context("spawn")
-            with ProcessPoolExecutor(max_workers=1, mp_context=ctx) as pool:
+            # The child starts with the C library's default allocator policy: give it the
+            # command line's (monoplane.host.allocator), so its peak memory is the CLI's.
+            with ProcessPoolExecutor(max_workers=1, mp_context=ctx,
+                                     initializer=keep_freed_memory) as pool:
                 results.append(pool.submit(_bench_size, *arg).result())
         else:
             results.append(_bench_size(*arg))
@@ -388,9 +393,6 @@ def _bench_size(preset: str, overrides: list[str], size: tuple[int, int], seed: 
     from monoplane.host.pipeline import Pipeline
     from monoplane.synth import generate
 
-    # The allocator policy of the command line's processes (an isolated child starts with
-    # the C library's default).
-    keep_freed_memory()
     tracker = StagePeakTracker()
     pm = _plugin_manager(plugins, tracker)
     pipe = Pipeline.from_preset(preset, overrides=overrides, pm=pm)

@@ -117,11 +117,15 @@ class PlaneCloud:
         for a random sample or a cloud without an image.
     intrinsics : numpy.ndarray or None
         (3, 3) float64 intrinsics the frame's points were unprojected with
-        (:meth:`from_frame`); :meth:`propagate` then finds the samples near a pixel in 3D
-        through the image. None otherwise (a point index serves instead).
-    normals_from_depth : bool
-        True when the frame's normals were estimated from its depth by the cue stage
-        (:attr:`monoplane.datamodel.Frame.normals_from_depth`), not given with the input.
+        (:meth:`from_frame`); the kNN graph (:meth:`neighbour_graph`) and :meth:`propagate`
+        then find the samples near a point in 3D through the image. None otherwise (a point
+        index serves instead).
+    normals_from_sensor_depth : bool
+        True when the frame's normals were estimated from its own depth
+        (:attr:`monoplane.datamodel.Frame.normals_from_depth`) and that depth was measured,
+        not predicted by a network (:attr:`monoplane.datamodel.Frame.depth_predicted`). False
+        for normals given with the input, a network's normals, normals from a network's depth
+        and a cloud without a frame. The proximity labeler's normal gate reads it.
     """
 
     points: np.ndarray
@@ -137,7 +141,7 @@ class PlaneCloud:
     stride: int | None = None
     lattice: np.ndarray | None = None
     intrinsics: np.ndarray | None = None
-    normals_from_depth: bool = False
+    normals_from_sensor_depth: bool = False
 
     def __post_init__(self) -> None:
         n = self.points.shape[0]
@@ -177,10 +181,12 @@ class PlaneCloud:
 
     def neighbour_graph(self, k: int) -> NeighbourGraph:
         """The kNN graph over ``points`` (:meth:`NeighbourGraph.build`), found through the
-        image when the cloud has one (:attr:`sample_image`), else with :attr:`tree`."""
+        image when the cloud has one (:attr:`sample_image`), else with :attr:`tree`. The few
+        samples the image search leaves go to :attr:`tree` too, built then and kept for its
+        later users (the pixels :meth:`label_points` misses, NAPSAC sampling)."""
         image = self.sample_image
-        return NeighbourGraph.build(self.points, k, tree=None if image else self.tree,
-                                    image=image)
+        return NeighbourGraph.build(self.points, k, tree=(lambda: self.tree) if image
+                                    else self.tree, image=image)
 
     @cached_property
     def image_nearest_sample(self) -> np.ndarray:
@@ -295,7 +301,8 @@ class PlaneCloud:
                    pixels=keep, center=center, scale=scale, shape=frame.shape,
                    all_points=all_points, all_pixels=all_pixels, stride=stride,
                    lattice=lattice, intrinsics=np.asarray(frame.K, dtype=np.float64),
-                   normals_from_depth=frame.normals_from_depth)
+                   normals_from_sensor_depth=(frame.normals_from_depth
+                                              and not frame.depth_predicted))
 
     @classmethod
     def from_points(cls, points: np.ndarray, normals: np.ndarray, colors: np.ndarray | None,
@@ -470,7 +477,7 @@ class PlaneCloud:
             return labels.copy()
         if spacing is None:
             if graph is None:
-                graph = NeighbourGraph.build(self.points, PROPAGATION_GRAPH_K, tree=self.tree)
+                graph = self.neighbour_graph(PROPAGATION_GRAPH_K)
             spacing = graph.spacing
         p = np.zeros((0, 4)) if planes is None else np.asarray(planes, dtype=np.float64)
         out = self.label_points(self.all_points, labels, p.reshape(-1, 4),

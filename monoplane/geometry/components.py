@@ -184,7 +184,7 @@ def _largest_component(members: np.ndarray, edges: np.ndarray) -> np.ndarray:
         a, b = edges[e, 0], edges[e, 1]
         if members[a] and members[b]:
             _union(parent, a, b)
-    return _largest_root_members(members, parent)
+    return _largest_root_members(np.flatnonzero(members), parent)
 
 
 @kernel
@@ -309,9 +309,10 @@ def _lattice_largest_component(members: np.ndarray, lattice: np.ndarray, points:
     """:func:`lattice_largest_component`.
 
     It runs once per plane the search finds, on a cloud of 40 000 points of which a plane
-    holds a few per cent: every pass is over the members or the nodes a line visits, never
-    over all points (distances from the camera as they are needed, the union-find forest
-    and the set sizes only at the members).
+    holds a few per cent: past the raster scan of the lattice (one membership test a node)
+    and the list of the members, the work is at the members and the nodes a line from them
+    visits (distances from the camera as they are needed, the union-find forest and the
+    set sizes only at the members).
     """
     n = members.shape[0]
     ids = np.flatnonzero(members)  # ascending: the order of the result
@@ -345,8 +346,25 @@ def _lattice_largest_component(members: np.ndarray, lattice: np.ndarray, points:
                         break
                     if _camera_distance(points, shift, b) > distance - limit:
                         break  # not an occluder in front of the plane: its part ends here
-    # The largest set (the lowest member's on ties), as _largest_root_members finds it.
-    size = np.empty(n, dtype=np.int64)  # at the roots, which are members
+    return _largest_root_members(ids, parent)
+
+
+@inline
+def _camera_distance(points: np.ndarray, shift: np.ndarray, p: int) -> float:
+    """Distance from the camera of normalised point ``p`` of (N, 3) ``points``, whose frame
+    has the camera at ``-shift``."""
+    x = points[p, 0] + shift[0]
+    y = points[p, 1] + shift[1]
+    z = points[p, 2] + shift[2]
+    return np.sqrt(x * x + y * y + z * z)
+
+
+@inline
+def _largest_root_members(ids: np.ndarray, parent: np.ndarray) -> np.ndarray:
+    """(K,) bool over the K members ``ids`` (ascending int64 nodes): in the union-find forest
+    ``parent`` (read at the members and their ancestors only), True on the largest set of
+    members (the one of the lowest member on ties)."""
+    size = np.empty(parent.shape[0], dtype=np.int64)  # used at the roots, which are members
     for p in ids:
         size[p] = 0
     root = np.empty(ids.shape[0], dtype=np.int64)
@@ -361,40 +379,3 @@ def _lattice_largest_component(members: np.ndarray, lattice: np.ndarray, points:
         if best < 0 or size[root[k]] > size[best]:
             best = root[k]
     return root == best
-
-
-@inline
-def _camera_distance(points: np.ndarray, shift: np.ndarray, p: int) -> float:
-    """Distance from the camera of normalised point ``p`` of (N, 3) ``points``, whose frame
-    has the camera at ``-shift``."""
-    x = points[p, 0] + shift[0]
-    y = points[p, 1] + shift[1]
-    z = points[p, 2] + shift[2]
-    return np.sqrt(x * x + y * y + z * z)
-
-
-@inline
-def _largest_root_members(members: np.ndarray, parent: np.ndarray) -> np.ndarray:
-    """(K,) bool over the members in order: in the union-find forest ``parent``, True on the
-    largest set of members (the one of the lowest member on ties)."""
-    m = members.shape[0]
-    size = np.zeros(m, dtype=np.int64)
-    root = np.empty(m, dtype=np.int64)
-    for p in range(m):
-        if members[p]:
-            r = p
-            while parent[r] != r:
-                r = parent[r]
-            root[p] = r
-            size[r] += 1
-    best = -1
-    for p in range(m):  # ascending, so ties go to the component of the lowest member
-        if members[p] and (best < 0 or size[root[p]] > size[best]):
-            best = root[p]
-    out = np.zeros(members.sum(), dtype=np.bool_)
-    k = 0
-    for p in range(m):
-        if members[p]:
-            out[k] = root[p] == best
-            k += 1
-    return out

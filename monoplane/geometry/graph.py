@@ -9,6 +9,7 @@ is what keeps max-flow fast.
 from __future__ import annotations
 
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -40,7 +41,7 @@ class NeighbourGraph:
         only the edge list; the RANSAC builds these on its background thread).
     tree : PointIndex or None
         Nearest-neighbour index over the points the graph was built on; None for a graph
-        that needed none (the pixel-grid graph of :mod:`monoplane.stages.graph_refiner`).
+        that needed none (a kNN graph found through the image, the lattice graph).
     spacing : float
         Median distance from a point to its nearest other point, in the points' unit.
     affinity_scale : numpy.ndarray or None
@@ -79,7 +80,8 @@ class NeighbourGraph:
             return self._indptr, self._indices
 
     @classmethod
-    def build(cls, points: np.ndarray, k: int, tree: PointIndex | None = None,
+    def build(cls, points: np.ndarray, k: int,
+              tree: PointIndex | Callable[[], PointIndex] | None = None,
               image: SampleImage | None = None) -> NeighbourGraph:
         """Connect every point to its ``k`` nearest neighbours (symmetrised, deduplicated).
 
@@ -89,8 +91,10 @@ class NeighbourGraph:
             (N, 3) float points (normalised RANSAC frame).
         k : int
             Neighbours per point, >= 1; capped at N - 1.
-        tree : PointIndex, optional
-            An existing index over exactly these points, to avoid building another.
+        tree : PointIndex or callable, optional
+            An index over exactly these points, to avoid building another, or a function
+            returning it (called only when the index is needed: a cloud's cached index,
+            :attr:`monoplane.geometry.cloud.PlaneCloud.tree`).
         image : SampleImage, optional
             Where the points lie in their frame's image: their neighbours are then found
             through the image (:func:`~monoplane.geometry.propagation.image_knn`), and only
@@ -100,8 +104,8 @@ class NeighbourGraph:
         Returns
         -------
         NeighbourGraph
-            Its ``tree`` is None when the image found every point's neighbours and none
-            was given.
+            Its ``tree`` is None when the image found every point's neighbours and no
+            index was given (a function returning one is then not called).
         """
         pts = np.asarray(points, dtype=np.float64)
         if pts.ndim != 2 or pts.shape[1] != 3:
@@ -109,8 +113,9 @@ class NeighbourGraph:
         if k < 1:
             raise InvalidInput(f"k must be at least 1, got {k}")
         n = pts.shape[0]
-        if tree is not None and tree.n != n:
-            raise InvalidInput(f"the index holds {tree.n} points, not the graph's {n}")
+        given = tree if isinstance(tree, PointIndex) else None  # not through a function
+        if given is not None and given.n != n:
+            raise InvalidInput(f"the index holds {given.n} points, not the graph's {n}")
         if image is not None and image.pixels.shape != (n,):
             raise InvalidInput(f"the image holds {image.pixels.shape[0]} samples, not the "
                                f"graph's {n} points")
@@ -118,28 +123,27 @@ class NeighbourGraph:
         if kk < 1:
             empty = np.zeros((0, 2), dtype=np.int64)
             return cls(n, empty, np.zeros(n + 1, dtype=np.int64), np.zeros(0, dtype=np.int64),
-                       PointIndex(pts) if tree is None and image is None else tree, 0.0)
+                       _index(pts, tree) if image is None else given, 0.0)
         missed = np.arange(n)  # the points the index answers for: all, without an image
         if image is not None:
             dist, nbr, missed = image_knn(np.ascontiguousarray(pts), image, kk + 1)
         if not missed.size:  # the image found every point's neighbours
             np.sqrt(dist, out=dist)
         else:
-            if tree is None:
-                tree = PointIndex(pts)
+            given = _index(pts, tree)
             if missed.size == n:  # no image, or the image search gave up
-                dist, nbr = tree.query_indexed(kk + 1)
+                dist, nbr = given.query_indexed(kk + 1)
             else:
                 dist[missed] = 0.0  # rows the point index fills in below
                 np.sqrt(dist, out=dist)
-                dist[missed], nbr[missed] = tree.query(pts[missed], kk + 1)
+                dist[missed], nbr[missed] = given.query(pts[missed], kk + 1)
         # Each thread lists the edges whose smaller end lies in its range of nodes; in range
         # order they are the sorted edge list.
         parts = run_threaded([lambda a=a, b=b: _knn_edges(nbr, a, b)
                               for a, b in chunks(n, THREADED_NODES)])
         edges = np.concatenate(parts) if len(parts) > 1 else parts[0]
         spacing = float(np.median(dist[:, 1]))
-        return cls(n, edges, None, None, tree, spacing)
+        return cls(n, edges, None, None, given, spacing)
 
     @classmethod
     def from_lattice(cls, points: np.ndarray, lattice: np.ndarray, shift: np.ndarray,
@@ -305,6 +309,15 @@ class NeighbourGraph:
             a.flags.writeable = False
         self._last_subgraph = (pool.copy(), edges, edge_ids)
         return edges, edge_ids
+
+
+def _index(points: np.ndarray, tree: PointIndex | Callable[[], PointIndex] | None
+           ) -> PointIndex:
+    """The point index over ``points`` that :meth:`NeighbourGraph.build` was given, from the
+    function that provides it, or built now."""
+    if tree is None:
+        return PointIndex(points)
+    return tree if isinstance(tree, PointIndex) else tree()
 
 
 def shrink_subgraph(old_pool: np.ndarray, pool: np.ndarray, edges: np.ndarray

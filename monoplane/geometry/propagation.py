@@ -71,10 +71,11 @@ KNN_GROWTH = 1.5
 #: Samples per thread below which :func:`image_knn` runs on one thread.
 KNN_THREADED = 4096
 #: :func:`image_knn` gives up on a frame whose samples are not near their 3D neighbours in
-#: the image (depth noise as large as the samples' spacing, scattered valid pixels): after
-#: :data:`KNN_PROBE` samples, when more than one in :data:`KNN_MISS_SHARE` was left to the
-#: point index or their windows held more than :data:`KNN_BUDGET` samples each (45-110 on
-#: sensor frames). The point index then answers for every sample.
+#: the image (depth noise as large as the samples' spacing, scattered valid pixels): from
+#: the :data:`KNN_PROBE`-th sample of a thread's run on, before each sample, when more than
+#: one in :data:`KNN_MISS_SHARE` of those searched so far was left to the point index or
+#: their windows held more than :data:`KNN_BUDGET` samples each (45-110 on sensor frames).
+#: The point index then answers for every sample.
 KNN_PROBE = 512
 KNN_MISS_SHARE = 8
 KNN_BUDGET = 150
@@ -135,6 +136,16 @@ def _reach(rho: float, z: float, ra: float, rb: float, cam: np.ndarray, w: int, 
 
 
 @inline
+def _camera_radii(x0: float, x1: float, x2: float, scale: float, center: np.ndarray
+                  ) -> tuple[float, float, float]:
+    """``(z, ra, rb)`` of :func:`_reach` for the normalised point ``(x0, x1, x2)`` of a cloud
+    whose camera-frame points are ``x * scale + center`` (``center`` (3,) float64)."""
+    z = x2 * scale + center[2]
+    return (z, np.sqrt(z * z + (x0 * scale + center[0]) ** 2),
+            np.sqrt(z * z + (x1 * scale + center[1]) ** 2))
+
+
+@inline
 def _nearest_in_image(pix: int, x0: float, x1: float, x2: float, start: np.ndarray,
                       xyz: np.ndarray, ids: np.ndarray, w: int, h: int, cam: np.ndarray,
                       scale: float, center: np.ndarray, bound2: float, best_d: np.ndarray,
@@ -152,9 +163,7 @@ def _nearest_in_image(pix: int, x0: float, x1: float, x2: float, start: np.ndarr
     k = best_d.shape[0]
     across = (w + TILE - 1) // TILE
     v, u = divmod(pix, w)
-    z = x2 * scale + center[2]
-    ra = np.sqrt(z * z + (x0 * scale + center[0]) ** 2)
-    rb = np.sqrt(z * z + (x1 * scale + center[1]) ** 2)
+    z, ra, rb = _camera_radii(x0, x1, x2, scale, center)
     du, dv = _reach(np.sqrt(bound2) * scale, z, ra, rb, cam, w, h)
     found = 0
     worst = bound2  # candidates must come before (worst, worst_i)
@@ -454,9 +463,9 @@ def _image_knn(start: np.ndarray, xyz: np.ndarray, ids: np.ndarray, pixels: np.n
     :func:`monoplane.geometry.neighbours._cell_knn` ranks its candidates (without
     data-dependent branches). The first limit is :data:`KNN_GROWTH` times the previous
     sample's k-th squared distance (the first sample of a run gets a window of two tiles and
-    no certificate); a window with fewer than k within its limit gives the next one the k-th
-    smallest distance it holds, which holds k; one with fewer than k samples at all, four
-    times the limit.
+    no certificate, twice as wide while it holds fewer than k samples); a window with fewer
+    than k within its limit gives the next one the k-th smallest distance it holds, which
+    holds k; one with fewer than k samples at all, four times the limit.
     """
     n = ids.shape[0]
     kept_d2 = np.empty(n + 8)
@@ -472,9 +481,7 @@ def _image_knn(start: np.ndarray, xyz: np.ndarray, ids: np.ndarray, pixels: np.n
             return -1
         qx, qy, qz = xyz[p0, 0], xyz[p0, 1], xyz[p0, 2]
         v, u = divmod(pixels[ids[p0]], w)
-        z = qz * scale + center[2]
-        ra = np.sqrt(z * z + (qx * scale + center[0]) ** 2)
-        rb = np.sqrt(z * z + (qy * scale + center[1]) ** 2)
+        z, ra, rb = _camera_radii(qx, qy, qz, scale, center)
         limit = prev * KNN_GROWTH
         certified = False
         du = dv = 2 * KNN_TILE
@@ -518,8 +525,11 @@ def _image_knn(start: np.ndarray, xyz: np.ndarray, ids: np.ndarray, pixels: np.n
                 limit = _kth_smallest(kept_d2, m, bd[:k])
             elif certified:
                 limit *= 4.0
-            else:
-                break
+            else:  # no limit yet (a run's first sample) and fewer than k here: a wider one
+                du, dv = 2 * du, 2 * dv
+                if du > KNN_MAX_REACH or dv > KNN_MAX_REACH:
+                    break
+                continue
             du, dv = _reach(np.sqrt(limit) * scale, z, ra, rb, cam, w, h)
             certified = True
             if du > KNN_MAX_REACH or dv > KNN_MAX_REACH:

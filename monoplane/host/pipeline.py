@@ -221,9 +221,9 @@ class Pipeline:
 
     def neighbour_graph(self, cloud: PlaneCloud) -> NeighbourGraph:
         """The kNN graph (``ransac.knn`` neighbours) over a cloud's points that the RANSAC's
-        labeler and a cloud refiner work on."""
-        return NeighbourGraph.build(cloud.points, self.config.host["ransac"].knn,
-                                    tree=cloud.tree)
+        labeler and a cloud refiner work on (:meth:`PlaneCloud.neighbour_graph
+        <monoplane.geometry.cloud.PlaneCloud.neighbour_graph>`)."""
+        return cloud.neighbour_graph(self.config.host["ransac"].knn)
 
     def segment_cloud(self, cloud: PlaneCloud, graph: NeighbourGraph, rng: np.random.Generator,
                       name: str = "cloud", timings: dict[str, float] | None = None,

@@ -16,9 +16,8 @@ The graph cuts run only on the kNN subgraph of the points still in the pool.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
-from functools import cached_property, partial
+from functools import partial
 
 import numpy as np
 
@@ -169,25 +168,9 @@ class _PoolGraphCut(Labeler):
         """Minimise the pool's energy for the data costs of one hypothesis."""
         inliers, _ = minimize_gc_ransac(f0, data1, terms.edges, terms.cut, self.config.lambda_,
                                         terms.scale, payback=terms.payback, with_energy=False)
-        return _CutLabeling(inliers, partial(gc_ransac_cut_energy, f0, data1, terms.edges,
-                                             terms.cut, self.config.lambda_, inliers,
-                                             terms.scale))
-
-
-class _CutLabeling(Labeling):
-    """A graph cut's :class:`~monoplane.contracts.Labeling` whose energy is summed (a pass
-    over the pool's points and edges) when it is first read: the driver reads it only to
-    compare local-optimisation rounds, and a search without them (``lo_iterations = 0``)
-    never does."""
-
-    def __init__(self, inliers: np.ndarray, energy_of: Callable[[], float]) -> None:
-        self.inliers = inliers
-        self._energy_of = energy_of
-
-    @cached_property
-    def energy(self) -> float:  # type: ignore[override]
-        """The energy of this labelling (see the class)."""
-        return self._energy_of()
+        # Summed when the driver first reads it (local optimisation only).
+        return Labeling(inliers, partial(gc_ransac_cut_energy, f0, data1, terms.edges,
+                                         terms.cut, self.config.lambda_, inliers, terms.scale))
 
 
 class GraphCutLabeler(_PoolGraphCut):
@@ -211,16 +194,21 @@ class GraphCutLabeler(_PoolGraphCut):
 
 @dataclass
 class ProximityGraphCutConfig(ProximityAffinities):
-    """Parameters of MonoPlane's proximity-guided graph-cut labeler (paper §IV-A values)."""
+    """Parameters of MonoPlane's proximity-guided graph-cut labeler: the paper's §IV-A values,
+    plus a normal gate on normals estimated from a sensor's depth (``normal_gate_deg``; 180
+    turns it off, as the ``monoplane-paper`` preset does)."""
 
     lambda_: float = param(0.95, "smoothness weight λ in E = (1-λ)(E_d + E_n) + λE_s")
     normal_term: bool = param(True, "add the normal data energy E_n to the data term")
     normal_gate_deg: float = param(
         20.0, "a point whose normal, and every graph neighbour's, lies more than this angle "
         "in degrees from the hypothesis' model normal cannot be its inlier, whatever the "
-        "smoothness (with normal_term, on normals estimated from the depth; 180: no gate)")
+        "smoothness (with normal_term, on normals estimated from a sensor's depth; 180: no "
+        "gate). An absolute angle: it does not follow ransac.epsilon_n_deg (20 is twice its "
+        "default)")
     gate_given_normals: bool = param(
-        False, "apply normal_gate_deg also to normals given with the input (a network's)")
+        False, "apply normal_gate_deg also to normals not estimated from a sensor's depth "
+        "(given with the input, a network's, or estimated from a network's depth)")
     normalise: bool = param(
         False, "divide E_s by the graph's mean degree (off: the paper's weights as given)")
 
@@ -248,12 +236,14 @@ class ProximityGraphCutLabeler(_PoolGraphCut):
 
     def _gate(self, cloud: PlaneCloud) -> float:
         """The normal gate in radians for ``cloud`` (π: none). Normals estimated from a
-        sensor's depth measure the surface the distances measure, and a curved surface beside
-        a plane turns them away from it; a network's normals are smoothed predictions, on
-        which the gate trims planes on curved surfaces into bands that pass the planarity
-        test (docs/evaluation.md, "The normal gate, eighth round")."""
+        sensor's depth (:attr:`PlaneCloud.normals_from_sensor_depth`) measure the surface the
+        distances measure, and a curved surface beside a plane turns them away from it. A
+        network's normals, and normals estimated from a network's depth, are smoothed
+        predictions, on which the gate trims planes on curved surfaces into bands that pass
+        the planarity test (docs/evaluation.md, "The normal gate, eighth round")."""
         c = self.config
-        if c.normal_gate_deg >= 180 or not (cloud.normals_from_depth or c.gate_given_normals):
+        if c.normal_gate_deg >= 180 or not (cloud.normals_from_sensor_depth
+                                            or c.gate_given_normals):
             return np.pi
         return float(np.deg2rad(c.normal_gate_deg))
 

@@ -69,6 +69,16 @@ def test_format_bench_orders_stages_and_sub_steps() -> None:
     assert format_bench([again]) == text
 
 
+def test_bench_in_this_process_leaves_its_allocator_policy(monkeypatch) -> None:
+    # Only an isolated child takes the command line's policy; the caller's stays its own.
+    calls: list[None] = []
+    monkeypatch.setattr("monoplane.evaluation.bench.keep_freed_memory",
+                        lambda: calls.append(None))
+    bench("seq-ransac", [(64, 48)], repeat=1, frames=1, progress=False, baselines=[],
+          isolate=False)
+    assert not calls
+
+
 def test_bench_runs_a_preset_and_a_baseline_on_several_frames() -> None:
     results = bench("seq-ransac", [(96, 72), (128, 96)], repeat=1, frames=2, progress=False,
                     baselines=["open3d-ransac"], isolate=False)

@@ -54,9 +54,11 @@ def test_graph_through_the_image_is_the_kd_graph(threads, skew, monkeypatch):
     g = cloud.neighbour_graph(8)
     np.testing.assert_array_equal(g.edges, ref.edges)
     assert g.spacing == ref.spacing
-    # The lone pixels' samples (when drawn) are left to a point index built for them.
+    # The lone pixels' samples (when drawn) are left to the cloud's own point index, built
+    # for them and kept on the cloud.
     _, _, missed = image_knn(cloud.points, cloud.sample_image, 9)
     assert (g.tree is None) == (missed.size == 0)
+    assert g.tree is None or g.tree is cloud.tree
 
 
 def test_frames_of_fewer_samples_than_neighbours():
@@ -99,3 +101,21 @@ def test_frames_without_image_neighbours_are_left_to_the_point_index(spread):
     np.testing.assert_array_equal(missed, np.arange(cloud.size))
     g = cloud.neighbour_graph(8)
     np.testing.assert_array_equal(g.edges, NeighbourGraph.build(cloud.points, 8).edges)
+    assert g.tree is cloud.tree  # one index per cloud: the graph's is the cloud's
+
+
+def test_a_runs_first_sample_widens_its_window_to_hold_k():
+    # Samples every 6 pixels: the first window (two tiles either way) holds 9 samples, fewer
+    # than the 10 asked for, and no earlier sample gives it a limit. It doubles instead of
+    # leaving the sample (and, with no limit for the next, every sample) to the point index.
+    h, w = 60, 80
+    depth = np.zeros((h, w), np.float32)
+    depth[::6, ::6] = 2.0
+    frame = Frame(rgb=None, K=intrinsics_matrix(70.0, 70.0, 39.5, 29.5), depth=depth,
+                  normals=np.tile(np.float32([0, 0, -1]), (h, w, 1)))
+    cloud = PlaneCloud.from_frame(frame)
+    d2, idx, missed = image_knn(cloud.points, cloud.sample_image, 10)
+    assert missed.size == 0
+    ref_d, ref_i = PointIndex(cloud.points).query_indexed(10)
+    np.testing.assert_array_equal(idx, ref_i)
+    np.testing.assert_array_equal(np.sqrt(d2), ref_d)

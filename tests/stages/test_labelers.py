@@ -10,7 +10,7 @@ from monoplane.algorithm.graphcut import (
     normal_costs,
     proximity_weights,
 )
-from monoplane.contracts import RansacParams
+from monoplane.contracts import Labeling, RansacParams
 from monoplane.errors import ConfigError
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.graph import NeighbourGraph
@@ -226,10 +226,10 @@ def test_normal_gate_is_validated_and_removes_a_tilted_patch_smoothness_kept():
     # Given normals are not gated by default; normals estimated from depth are.
     plain, _ = run(ProximityGraphCutLabeler(), cloud)
     assert plain.inliers[patch].all()
-    cloud.normals_from_depth = True
+    cloud.normals_from_sensor_depth = True
     from_depth, _ = run(ProximityGraphCutLabeler(ProximityGraphCutLabeler.Config(
         normal_gate_deg=30.0)), cloud)
-    cloud.normals_from_depth = False
+    cloud.normals_from_sensor_depth = False
     cfg = ProximityGraphCutLabeler.Config
     gated, _ = run(ProximityGraphCutLabeler(cfg(normal_gate_deg=30.0, gate_given_normals=True)),
                    cloud)
@@ -237,3 +237,11 @@ def test_normal_gate_is_validated_and_removes_a_tilted_patch_smoothness_kept():
     assert inner.sum() == 64 and not gated.inliers[patch][inner].any()
     np.testing.assert_array_equal(from_depth.inliers, gated.inliers)
     assert gated.inliers[:900][~np.isin(np.arange(900), patch)].mean() > 0.95
+
+
+def test_a_labelings_energy_given_as_a_function_is_summed_once_when_first_read():
+    calls = []
+    lab = Labeling(np.array([True, False]), lambda: calls.append(1) or 2.5)
+    assert not calls and "not summed yet" in repr(lab)
+    assert lab.energy == 2.5 and lab.energy == 2.5 and calls == [1]
+    assert Labeling(np.array([True]), 1.0).energy == 1.0
