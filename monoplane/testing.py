@@ -11,7 +11,8 @@ test suite once monoplane is installed:
 :func:`plane_scene` (its shorthands :func:`box_frame`, :func:`room_cues`) and
 :func:`two_view_room` build exactly known views of planes; :func:`stage_plugin` registers
 stage classes in a test; :func:`check_stage_contract`, which a plugin's own tests call on each
-of its stage classes, and :func:`check_baseline_contract` for ``monoplane eval`` baselines::
+of its stage classes, :func:`check_work_ahead` for a refiner's background work, and
+:func:`check_baseline_contract` for ``monoplane eval`` baselines::
 
     from monoplane.testing import check_stage_contract
 
@@ -460,6 +461,47 @@ def _check_multiview_stage(stage: Stage, room: TwoViewRoom) -> None:
                 f"view {v} plane {local} is linked to a global plane {glob} it does not match"
             linked += 1
     assert linked >= len(views), "exact views of one room must link some planes"
+
+
+def check_work_ahead(make_refiner: Callable[[], Any], frame: Frame, other: Frame,
+                     rec: Reconstruction, params: Any, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Assert that a refiner's background work (:class:`monoplane.contracts.WorkAhead`) changes
+    nothing.
+
+    With two threads, the work ``prepare(frame)`` starts is taken by ``refine`` and gives the
+    labels and planes of a refiner that did it all inside ``refine``; work prepared for
+    ``other`` is neither used nor kept; with one thread ``prepare`` starts nothing.
+
+    Parameters
+    ----------
+    make_refiner : callable
+        Returns a fresh refiner (a ``WorkAhead`` stage with ``prepare`` and ``refine``).
+    frame, other : Frame
+        The frame ``rec`` was made from, and another one.
+    rec : Reconstruction
+        A reconstruction of ``frame`` to refine.
+    params : RansacParams
+        Passed to ``refine``.
+    monkeypatch : pytest.MonkeyPatch
+        Sets ``OMP_NUM_THREADS`` (2, then 1).
+    """
+    monkeypatch.setenv("OMP_NUM_THREADS", "2")
+    expected = make_refiner().refine(rec, params)
+    refiner = make_refiner()
+    refiner.prepare(frame)
+    assert refiner._pending is not None and refiner._pending[0] is frame
+    out = refiner.refine(rec, params)
+    assert refiner._pending is None  # picked up
+    np.testing.assert_array_equal(out.labels, expected.labels)
+    np.testing.assert_array_equal(out.planes, expected.planes)
+    # Work prepared for another frame is not used (and not kept).
+    refiner.prepare(other)
+    np.testing.assert_array_equal(refiner.refine(rec, params).labels, expected.labels)
+    assert refiner._pending is None
+    # With one thread the refiner does all of its work itself, inside refine.
+    monkeypatch.setenv("OMP_NUM_THREADS", "1")
+    refiner.prepare(frame)
+    assert refiner._pending is None
 
 
 def check_baseline_contract(baseline: Callable[..., Reconstruction], seed: int = 0) -> None:

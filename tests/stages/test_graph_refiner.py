@@ -19,7 +19,7 @@ from monoplane.stages.graph_refiner import (
     lattice_cloud,
     pixel_graph,
 )
-from monoplane.testing import box_frame
+from monoplane.testing import box_frame, check_work_ahead
 
 #: The pipeline's shared thresholds at their defaults.
 PARAMS = RansacParams()
@@ -230,22 +230,8 @@ def test_graph_prepared_in_the_background_changes_nothing(monkeypatch):
     frame, _ = box_frame(width=160, height=120)
     rec = Pipeline.from_preset("range", overrides=["refiner.plugin=none"]).run(frame)
     config = GraphCrfConfig(max_points=10000)  # on a lattice of step 2
-    expected = GraphCrfRefiner(config).refine(rec, PARAMS)
-    refiner = GraphCrfRefiner(config)
-    refiner.prepare(frame)
-    assert refiner._pending is not None and refiner._pending[0] is frame
-    out = refiner.refine(rec, PARAMS)
-    assert refiner._pending is None  # picked up
-    np.testing.assert_array_equal(out.labels, expected.labels)
-    np.testing.assert_array_equal(out.planes, expected.planes)
-    # A graph prepared for another frame is not used (and not kept).
-    refiner.prepare(box_frame(width=128, height=96)[0])
-    np.testing.assert_array_equal(refiner.refine(rec, PARAMS).labels, expected.labels)
-    assert refiner._pending is None
-    # With one thread the refiner builds its graph itself, inside refine.
-    monkeypatch.setenv("OMP_NUM_THREADS", "1")
-    refiner.prepare(frame)
-    assert refiner._pending is None
+    check_work_ahead(lambda: GraphCrfRefiner(config), frame, box_frame(width=128, height=96)[0],
+                     rec, PARAMS, monkeypatch)
 
 
 def test_touching_pairs_and_label_order_match_numpy():

@@ -10,7 +10,7 @@ from monoplane.contracts import RansacParams
 from monoplane.datamodel import Frame, Reconstruction
 from monoplane.errors import ConfigError
 from monoplane.stages.refiners import DenseCrfRefiner, NoRefiner, monoplane_register_refiners
-from monoplane.testing import ROOM, check_stage_contract, room_cues
+from monoplane.testing import ROOM, check_stage_contract, check_work_ahead, room_cues
 
 #: The pipeline's shared thresholds at their defaults.
 PARAMS = RansacParams()
@@ -45,22 +45,7 @@ def test_dense_crf_work_prepared_in_the_background_changes_nothing(monkeypatch):
     monkeypatch.setenv("OMP_NUM_THREADS", "2")
     frame, gt = room()
     rec = noisy_reconstruction(frame, gt)
-    expected = DenseCrfRefiner().refine(rec, PARAMS)
-    refiner = DenseCrfRefiner()
-    refiner.prepare(frame)
-    assert refiner._pending is not None and refiner._pending[0] is frame
-    out = refiner.refine(rec, PARAMS)
-    assert refiner._pending is None  # picked up
-    np.testing.assert_array_equal(out.labels, expected.labels)
-    np.testing.assert_array_equal(out.planes, expected.planes)
-    # Work prepared for another frame is not used (and not kept).
-    refiner.prepare(room(seed=1)[0])
-    np.testing.assert_array_equal(refiner.refine(rec, PARAMS).labels, expected.labels)
-    assert refiner._pending is None
-    # With one thread the refiner does all of its work itself, inside refine.
-    monkeypatch.setenv("OMP_NUM_THREADS", "1")
-    refiner.prepare(frame)
-    assert refiner._pending is None
+    check_work_ahead(DenseCrfRefiner, frame, room(seed=1)[0], rec, PARAMS, monkeypatch)
 
 
 def test_points_reuse_the_rays_of_the_same_camera_only():
