@@ -226,7 +226,7 @@ def test_lattice_split_joins_a_plane_behind_a_thin_post(reach, whole):
 
 
 def test_sampling_must_be_named():
-    with pytest.raises(ConfigError, match="sampling must be one of random, grid"):
+    with pytest.raises(ConfigError, match="sampling must be one of auto, random, grid"):
         RansacConfig(sampling="lattice")
     with pytest.raises(ConfigError, match="lattice_max_turn_deg must lie in"):
         RansacConfig(lattice_max_turn_deg=0.0)

@@ -80,7 +80,7 @@ T = TypeVar("T")
 #: a threshold barely tighter would find the same planes at twice the cost.
 RESEARCH_BELOW = 0.6
 #: How a frame's pixels may be subsampled (``RansacConfig.sampling``).
-SAMPLINGS = ("random", "grid")
+SAMPLINGS = ("auto", "random", "grid")
 #: Lattice neighbours farther apart than this fraction of their distance from the camera
 #: are not linked (``sampling = "grid"``): a slanted plane 80 degrees from the view at 4 px
 #: lattice steps and f = 525 px spaces its samples 0.044 apart, a depth edge far more.
@@ -121,9 +121,10 @@ class RansacConfig:
     knn: int = param(8, "neighbours per point in the graph-cut neighbourhood graph")
     max_points: int = param(20000, "subsample the valid pixels to at most this many points")
     sampling: str = param(
-        "random", "how a frame's valid pixels are subsampled: 'random' (a uniform draw; the "
-        "graph is the kNN graph) or 'grid' (a regular pixel lattice; the graph is its "
-        "8-neighbourhood cut at depth jumps, no kNN query). Point clouds always use 'random'")
+        "auto", "how a frame's valid pixels are subsampled: 'random' (a uniform draw; the "
+        "graph is the kNN graph), 'grid' (a regular pixel lattice; the graph is its "
+        "8-neighbourhood cut at depth jumps, no kNN query) or 'auto' ('grid' on frames whose "
+        "normals come from a sensor's depth, else 'random'). Point clouds always use 'random'")
     lattice_max_turn_deg: float = param(
         180.0, "with sampling 'grid', lattice neighbours whose normals differ by more than "
         "this angle in degrees are not linked either (180: no such cut)")
@@ -248,8 +249,9 @@ class SequentialRansac:
         cfg = self.config
         rng = np.random.default_rng(cfg.seed)
         t = time.perf_counter()
-        cloud = PlaneCloud.from_frame(frame, cfg.max_points, rng, grid=cfg.sampling == "grid",
-                                      fractional=True)
+        grid = cfg.sampling == "grid" or (cfg.sampling == "auto"
+                                          and frame.normals_from_sensor_depth)
+        cloud = PlaneCloud.from_frame(frame, cfg.max_points, rng, grid=grid, fractional=True)
         t_cloud = time.perf_counter() - t
         t_graph = 0.0
 

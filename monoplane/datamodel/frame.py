@@ -49,8 +49,9 @@ class Frame:
         True when ``normals`` were estimated from this frame's own ``depth`` (no normal cue of
         their own): they then carry no evidence that the depth does not, and the planarity
         test (:mod:`monoplane.algorithm.planarity`) judges curvature by the depth alone. With
-        a measured depth (not ``depth_predicted``) the proximity labeler's normal gate also
-        applies to them (:attr:`monoplane.geometry.cloud.PlaneCloud.normals_from_sensor_depth`).
+        a measured depth (:attr:`normals_from_sensor_depth`) the proximity labeler's normal
+        gate also applies to them, and the default ``ransac.sampling = "auto"`` searches the
+        frame's pixel lattice.
     depth_predicted : bool
         True when a network predicted ``depth`` from the image. Even a metric network's depth
         warps by several percent, so registration treats its scale and shape as estimates, as
@@ -152,6 +153,20 @@ class Frame:
     def shape(self) -> tuple[int, int]:
         """``(H, W)``."""
         return self._shape
+
+    @property
+    def depth_measured(self) -> bool:
+        """True when ``depth`` is a sensor's metric measurement: neither predicted by a network
+        (``depth_predicted``) nor relative (a relative depth comes from a network or a
+        simulation of one, never from a range sensor). False without depth."""
+        return self.depth is not None and self.depth_kind == "metric" and not self.depth_predicted
+
+    @property
+    def normals_from_sensor_depth(self) -> bool:
+        """True when ``normals`` were estimated from a measured depth (``normals_from_depth``
+        and :attr:`depth_measured`): an organised sensor frame, which the defaults search on
+        its pixel lattice with the normal gate (docs/design.md, "Depth-only sensor frames")."""
+        return self.normals_from_depth and self.depth_measured
 
     @property
     def has_color(self) -> bool:

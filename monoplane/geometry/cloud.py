@@ -121,11 +121,11 @@ class PlaneCloud:
         then find the samples near a point in 3D through the image. None otherwise (a point
         index serves instead).
     normals_from_sensor_depth : bool
-        True when the frame's normals were estimated from its own depth
-        (:attr:`monoplane.datamodel.Frame.normals_from_depth`) and that depth was measured,
-        not predicted by a network (:attr:`monoplane.datamodel.Frame.depth_predicted`). False
-        for normals given with the input, a network's normals, normals from a network's depth
-        and a cloud without a frame. The proximity labeler's normal gate reads it.
+        :attr:`monoplane.datamodel.Frame.normals_from_sensor_depth` of the frame: its normals
+        were estimated from its own metric depth, not predicted by a network. False for
+        normals given with the input, a network's normals, normals from a network's or a
+        relative depth, and a cloud without a frame. The proximity labeler's normal gate
+        reads it.
     """
 
     points: np.ndarray
@@ -301,8 +301,7 @@ class PlaneCloud:
                    pixels=keep, center=center, scale=scale, shape=frame.shape,
                    all_points=all_points, all_pixels=all_pixels, stride=stride,
                    lattice=lattice, intrinsics=np.asarray(frame.K, dtype=np.float64),
-                   normals_from_sensor_depth=(frame.normals_from_depth
-                                              and not frame.depth_predicted))
+                   normals_from_sensor_depth=frame.normals_from_sensor_depth)
 
     @classmethod
     def from_points(cls, points: np.ndarray, normals: np.ndarray, colors: np.ndarray | None,
