@@ -137,7 +137,12 @@ def _workloads(report: bool = True) -> Iterator[tuple[str, Callable[[], Any]]]:
     frame = generate(0, "mild", width=256, height=192, n_views=1).views[0].frame
     for preset in config.list_presets():
         yield f"preset {preset}", functools.partial(_run_preset, preset, frame)
+    # The frame's depth is relative (a network's): its normals are fitted by the gated method
+    # and searched on the kNN graph. A sensor's metric depth takes box normals, the pixel
+    # lattice and the normal gate.
     yield "depth only", lambda: Pipeline.from_preset("monoplane").run(frame.with_(normals=None))
+    yield "sensor depth only", lambda: Pipeline.from_preset("monoplane").run(
+        frame.with_(normals=None, depth_kind="metric"))
     # range estimates its normals by the box method and samples on the pixel lattice, as
     # rgbd-fast does on the frame's own normals.
     yield "range image", lambda: Pipeline.from_preset("range").run(
