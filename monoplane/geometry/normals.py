@@ -61,9 +61,9 @@ from monoplane.geometry.normal_kernels import (
     _fit_interior,
     _fixed_point,
     _inverse_depth,
-    _relative_slope,
     _rims,
 )
+from monoplane.geometry.one_surface_windows import _one_surface
 from monoplane.jit import chunks, run_threaded
 
 #: The fitting methods of :func:`normals_from_depth`.
@@ -167,37 +167,31 @@ def _gated_normals(depth: np.ndarray, max_jump: float, params: np.ndarray, radiu
     labels = cv2.connectedComponents((valid & ~rim).view(np.uint8), connectivity=4,
                                      ltype=cv2.CV_32S)[1]
     r = radius - radius % stride
-    win = np.ones((2 * r + 1, 2 * r + 1), np.uint8)
-
     # A window without rims, with a single component and a small depth range cannot mix
     # surfaces, so its masked fit reduces to separable filters over the whole image. Only the
     # band near depth edges needs per-neighbour gating.
-    big = np.float32(np.inf)
-    lab_f = labels.astype(np.float32)
-    one_surface = (
-        (cv2.dilate(rim.view(np.uint8), win) == 0)
-        & (cv2.dilate(lab_f, win) == cv2.erode(np.where(labels > 0, lab_f, big), win))
-        & (cv2.dilate(z, win) / (1.0 + max_jump * r) <= cv2.erode(np.where(valid, z, big), win))
-    )
-    interior = valid & one_surface
+    interior = np.empty(z.shape, dtype=np.bool_)
+    band = np.empty(z.shape, dtype=np.bool_)
+    run_threaded([functools.partial(_one_surface, z, labels, rim, r, float(max_jump), a, b,
+                                    interior, band)
+                  for a, b in chunks(z.shape[0], _THREADED_ROWS)])
     # Window sums: full-footprint kernels with zero taps between the strided samples; zero
-    # padding outside the image acts like holes.
+    # padding outside the image acts like holes. OpenCV releases the GIL: one filter a thread.
     steps = np.arange(-r, r + 1, stride)
     one = np.zeros(2 * r + 1, dtype=np.float32)
     one[steps + r] = 1.0
     ramp = one * np.arange(-r, r + 1, dtype=np.float32)
     sums = np.empty((4,) + z.shape, dtype=np.float32)
     filters: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = [
-        (valid.astype(np.float32), one, one), (inv, ramp, one), (inv, one, ramp), (inv, one, one)]
-    for k, (img, kx, ky) in enumerate(filters):
-        cv2.sepFilter2D(img, cv2.CV_32F, kx, ky, dst=sums[k], borderType=cv2.BORDER_CONSTANT)
-    slope = _relative_slope(inv, labels)
+        (valid.view(np.uint8), one, one), (inv, ramp, one), (inv, one, ramp), (inv, one, one)]
+    run_threaded([functools.partial(cv2.sepFilter2D, img, cv2.CV_32F, kx, ky, dst=sums[k],
+                                    borderType=cv2.BORDER_CONSTANT)
+                  for k, (img, kx, ky) in enumerate(filters)])
     normals = np.zeros(z.shape + (3,), dtype=np.float32)
-    band = valid & ~interior
 
     def fit(a: int, b: int) -> None:
         _fit_interior(inv, labels, interior, sums, params, r, stride, support, a, b, normals)
-        _fit_band(inv, labels, rim, slope, band, params, r, stride, support, a, b, normals)
+        _fit_band(inv, labels, rim, band, params, r, stride, support, a, b, normals)
 
     # The band's cost follows the depth edges: smaller pieces keep the threads busy alike.
     run_threaded([functools.partial(fit, a, b)

@@ -1,0 +1,128 @@
+"""Which pixels of a depth map have a fitting window that cannot mix surfaces: the compiled
+split of :mod:`monoplane.geometry.normals`' gated method into the pixels fitted from window
+sums and the band near depth edges fitted sample by sample.
+
+The tests are window maxima (no float sums), so they are exact whatever the order of the
+passes and the rows each thread takes.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from monoplane.jit import inline, kernel
+
+
+@kernel
+def _one_surface(z: np.ndarray, labels: np.ndarray, rim: np.ndarray, r: int, max_jump: float,
+                 row0: int, row1: int, interior: np.ndarray, band: np.ndarray) -> None:
+    """Rows ``row0:row1`` of the (H, W) bool masks ``interior`` and ``band`` of the valid
+    pixels (``z > 0``) of the (H, W) float32 depth ``z``.
+
+    A valid pixel is ``interior`` when its ``(2r+1)²`` window (every pixel, cut by the image
+    border) cannot mix surfaces: it holds no ``rim`` pixel, the positive ``labels`` ((H, W)
+    int32 components of the valid non-rim pixels, 0 elsewhere) in it are all the same, and
+    its largest depth divided by ``1 + max_jump r`` (float32) is at most its smallest valid
+    depth. The other valid pixels are the ``band``.
+
+    The first two tests are one: the largest of a key that is the label, or the largest
+    int32 on a rim, equals the smallest of a key that is the label, the largest int32 on a
+    hole, or -1 on a rim, exactly when the window has no rim and one label. Smallest values
+    are taken as largest of the negated ones, so the four extremes are window maxima:
+    separable, exact, and the same whatever rows a thread takes. Each image row's maxima
+    along the row are taken once, into a ring of the ``2r + 1`` rows a window spans (small
+    enough to stay in cache), and each output row takes the maxima down that ring.
+    """
+    h, w = z.shape
+    size = 2 * r + 1
+    scale = np.float32(1.0 + max_jump * r)
+    # Rows padded by r values on each side that change no maximum.
+    hi = np.empty((size, w + 2 * r), np.int32)
+    lo = np.empty((size, w + 2 * r), np.int32)
+    zhi = np.empty((size, w + 2 * r), np.float32)
+    zlo = np.empty((size, w + 2 * r), np.float32)
+    col_hi = np.empty(w, np.int32)
+    col_lo = np.empty(w, np.int32)
+    col_zhi = np.empty(w, np.float32)
+    col_zlo = np.empty(w, np.float32)
+    spare_i = np.empty(w + 2 * r, np.int32)
+    spare_f = np.empty(w + 2 * r, np.float32)
+    for y in range(max(row0 - r, 0), min(row0 + r, h)):
+        k = y % size
+        _row_maxima(z, labels, rim, y, r, hi[k], lo[k], zhi[k], zlo[k], spare_i, spare_f)
+    for v in range(row0, row1):
+        if v + r < h:
+            k = (v + r) % size
+            _row_maxima(z, labels, rim, v + r, r, hi[k], lo[k], zhi[k], zlo[k], spare_i,
+                        spare_f)
+        first, last = max(v - r, 0), min(v + r, h - 1)
+        k = first % size
+        col_hi[:] = hi[k, :w]
+        col_lo[:] = lo[k, :w]
+        col_zhi[:] = zhi[k, :w]
+        col_zlo[:] = zlo[k, :w]
+        for y in range(first + 1, last + 1):
+            k = y % size
+            _max_of(col_hi, hi[k], col_hi)
+            _max_of(col_lo, lo[k], col_lo)
+            _max_of(col_zhi, zhi[k], col_zhi)
+            _max_of(col_zlo, zlo[k], col_zlo)
+        for u in range(w):
+            ok = col_hi[u] == -col_lo[u] and col_zhi[u] / scale <= -col_zlo[u]
+            valid = z[v, u] > 0
+            interior[v, u] = valid and ok
+            band[v, u] = valid and not ok
+
+
+@inline
+def _row_maxima(z: np.ndarray, labels: np.ndarray, rim: np.ndarray, y: int, r: int,
+                hi: np.ndarray, lo: np.ndarray, zhi: np.ndarray, zlo: np.ndarray,
+                spare_i: np.ndarray, spare_f: np.ndarray) -> None:
+    """The four keys of :func:`_one_surface` on image row ``y``, each at ``[u + r]`` of its
+    1-d buffer (``W + 2r`` long, the ends padded with values that change no maximum), then
+    their maxima over the ``2r + 1`` samples from each ``[u]`` on, in place (``spare_i``,
+    ``spare_f``: int32 and float32 scratch rows as long)."""
+    w = z.shape[1]
+    big = np.int32(2 ** 31 - 1)
+    low = np.float32(-np.inf)
+    for j in range(r):
+        hi[j], lo[j], zhi[j], zlo[j] = 0, -big, low, low
+        hi[w + r + j], lo[w + r + j], zhi[w + r + j], zlo[w + r + j] = 0, -big, low, low
+    for u in range(w):
+        lab = labels[y, u]
+        on_rim = rim[y, u]
+        hi[u + r] = big if on_rim else lab
+        lo[u + r] = np.int32(1) if on_rim else (-lab if lab > 0 else -big)
+        zhi[u + r] = z[y, u]
+        zlo[u + r] = -z[y, u] if z[y, u] > 0 else low
+    _window_max(hi, spare_i, 2 * r + 1)
+    _window_max(lo, spare_i, 2 * r + 1)
+    _window_max(zhi, spare_f, 2 * r + 1)
+    _window_max(zlo, spare_f, 2 * r + 1)
+
+
+@inline
+def _window_max(row: np.ndarray, spare: np.ndarray, size: int) -> None:
+    """``row[j] = max(row[j:j + size])`` in place, for every ``j`` whose window fits in the
+    1-d ``row``: maxima over windows of 2, 4, 8 ... samples, then of two overlapping ones.
+    Each pass goes between ``row`` and ``spare`` (as long), as loops over arrays that do not
+    overlap, which the compiler vectorises."""
+    n = row.shape[0]
+    src, dst = row, spare
+    step = 1
+    while 2 * step <= size:
+        _max_of(src[:n - step], src[step:], dst)
+        src, dst = dst, src
+        step *= 2
+    if size > step:
+        _max_of(src[:n - (size - step)], src[size - step:], dst)
+        src, dst = dst, src
+    if src is not row:
+        row[:] = src
+
+
+@inline
+def _max_of(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
+    """``out[j] = max(a[j], b[j])`` over the 1-d ``a`` (``b`` and ``out`` at least as long)."""
+    for j in range(a.shape[0]):
+        out[j] = max(a[j], b[j])
