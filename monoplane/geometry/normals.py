@@ -163,20 +163,9 @@ def _gated_normals(depth: np.ndarray, max_jump: float, params: np.ndarray, radiu
     z = np.where(np.isfinite(depth), depth, 0).astype(np.float32, copy=False)
     inv, rim = _discontinuities(z, max_jump)
     valid = z > 0
-    # 4-connected components of the valid non-rim pixels; only equality of labels matters.
-    labels = cv2.connectedComponents((valid & ~rim).view(np.uint8), connectivity=4,
-                                     ltype=cv2.CV_32S)[1]
     r = radius - radius % stride
-    # A window without rims, with a single component and a small depth range cannot mix
-    # surfaces, so its masked fit reduces to separable filters over the whole image. Only the
-    # band near depth edges needs per-neighbour gating.
-    interior = np.empty(z.shape, dtype=np.bool_)
-    band = np.empty(z.shape, dtype=np.bool_)
-    run_threaded([functools.partial(_one_surface, z, labels, rim, r, float(max_jump), a, b,
-                                    interior, band)
-                  for a, b in chunks(z.shape[0], _THREADED_ROWS)])
     # Window sums: full-footprint kernels with zero taps between the strided samples; zero
-    # padding outside the image acts like holes. OpenCV releases the GIL: one filter a thread.
+    # padding outside the image acts like holes.
     steps = np.arange(-r, r + 1, stride)
     one = np.zeros(2 * r + 1, dtype=np.float32)
     one[steps + r] = 1.0
@@ -184,9 +173,22 @@ def _gated_normals(depth: np.ndarray, max_jump: float, params: np.ndarray, radiu
     sums = np.empty((4,) + z.shape, dtype=np.float32)
     filters: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = [
         (valid.view(np.uint8), one, one), (inv, ramp, one), (inv, one, ramp), (inv, one, one)]
-    run_threaded([functools.partial(cv2.sepFilter2D, img, cv2.CV_32F, kx, ky, dst=sums[k],
-                                    borderType=cv2.BORDER_CONSTANT)
-                  for k, (img, kx, ky) in enumerate(filters)])
+    # The components (4-connected, of the valid non-rim pixels; only equality of labels
+    # matters) and the four filters are independent OpenCV calls, which release the GIL: they
+    # share the threads, the components first since they take longest.
+    labels = run_threaded([
+        functools.partial(_components, valid & ~rim),
+        *(functools.partial(cv2.sepFilter2D, img, cv2.CV_32F, kx, ky, dst=sums[k],
+                            borderType=cv2.BORDER_CONSTANT)
+          for k, (img, kx, ky) in enumerate(filters))])[0]
+    # A window without rims, with a single component and a small depth range cannot mix
+    # surfaces, so its masked fit reduces to the sums above. Only the band near depth edges
+    # needs per-neighbour gating.
+    interior = np.empty(z.shape, dtype=np.bool_)
+    band = np.empty(z.shape, dtype=np.bool_)
+    run_threaded([functools.partial(_one_surface, z, labels, rim, r, float(max_jump), a, b,
+                                    interior, band)
+                  for a, b in chunks(z.shape[0], _THREADED_ROWS)])
     normals = np.zeros(z.shape + (3,), dtype=np.float32)
 
     def fit(a: int, b: int) -> None:
@@ -197,6 +199,12 @@ def _gated_normals(depth: np.ndarray, max_jump: float, params: np.ndarray, radiu
     run_threaded([functools.partial(fit, a, b)
                   for a, b in chunks(z.shape[0], _THREADED_ROWS // _PIECES, _PIECES)])
     return normals
+
+
+def _components(mask: np.ndarray) -> np.ndarray:
+    """(H, W) int32 labels of the 4-connected components of the (H, W) bool ``mask``, 0
+    off it."""
+    return cv2.connectedComponents(mask.view(np.uint8), connectivity=4, ltype=cv2.CV_32S)[1]
 
 
 def _discontinuities(z: np.ndarray, max_jump: float) -> tuple[np.ndarray, np.ndarray]:
