@@ -105,20 +105,21 @@ def _row_maxima(z: np.ndarray, labels: np.ndarray, rim: np.ndarray, y: int, r: i
 def _window_max(row: np.ndarray, spare: np.ndarray, size: int) -> None:
     """``row[j] = max(row[j:j + size])`` in place, for every ``j`` whose window fits in the
     1-d ``row``: maxima over windows of 2, 4, 8 ... samples, then of two overlapping ones.
-    Each pass goes between ``row`` and ``spare`` (as long), as loops over arrays that do not
-    overlap, which the compiler vectorises."""
+    The passes go from ``row`` to ``spare`` (as long) and back, each a loop between two
+    arrays that do not overlap, which the compiler vectorises (a loop that alternates its
+    source and destination is not)."""
     n = row.shape[0]
-    src, dst = row, spare
-    step = 1
-    while 2 * step <= size:
-        _max_of(src[:n - step], src[step:], dst)
-        src, dst = dst, src
-        step *= 2
-    if size > step:
-        _max_of(src[:n - (size - step)], src[size - step:], dst)
-        src, dst = dst, src
-    if src is not row:
-        row[:] = src
+    step = 1  # row holds the maxima over windows of `step` samples
+    while 4 * step <= size:
+        _max_of(row[:n - step], row[step:], spare)
+        _max_of(spare[:n - 3 * step], spare[2 * step:], row)
+        step *= 4
+    if 2 * step <= size:
+        _max_of(row[:n - step], row[step:], spare)
+        _max_of(spare[:n - (size - step)], spare[size - 2 * step:], row)
+    elif size > step:
+        _max_of(row[:n - (size - step)], row[size - step:], spare)
+        row[:n - (size - step)] = spare[:n - (size - step)]
 
 
 @inline
