@@ -235,13 +235,23 @@ def _window_sums(inv: np.ndarray, labels: np.ndarray, v: int, u: int, r: int, st
 
 
 @inline
-def _valid_offsets(inv: np.ndarray, v: int, u: int, r: int, stride: int
+def _valid_offsets(inv: np.ndarray, v: int, u: int, r: int, stride: int, count: float
                    ) -> tuple[float, float, float, float, float, float]:
     """Count, ``Σdu``, ``Σdv``, ``Σdu²``, ``Σdu dv`` and ``Σdv²`` of the valid samples
     (``inv > 0``) of the window of pixel ``(v, u)``, every ``stride`` pixels within ``r``
-    (Chebyshev), cut by the image border. Sums of small integers, so exact in any order."""
+    (Chebyshev), cut by the image border; ``count`` is how many there are. Sums of small
+    integers, so exact in any order."""
     h, w = inv.shape
-    # Integer accumulators: the same values as float sums, with shorter dependency chains.
+    # The offsets that stay in the image, per axis: their number, sum and sum of squares.
+    nu = su1 = su2 = nv = sv1 = sv2 = 0
+    for d in range(-r, r + 1, stride):
+        if 0 <= u + d < w:
+            nu, su1, su2 = nu + 1, su1 + d, su2 + d * d
+        if 0 <= v + d < h:
+            nv, sv1, sv2 = nv + 1, sv1 + d, sv2 + d * d
+    if count == nu * nv:  # no hole, only the image border: the sums of a grid
+        return (float(nu * nv), float(nv * su1), float(nu * sv1), float(nv * su2),
+                float(su1 * sv1), float(nu * sv2))
     cnt = su = sv = suu = suv = svv = 0
     # The window's first column in the image, on the grid of offsets.
     lo_u = u - r if u >= r else u - r + ((r - u + stride - 1) // stride) * stride
@@ -304,7 +314,8 @@ def _fit_interior(inv: np.ndarray, labels: np.ndarray, interior: np.ndarray, sum
                 out[v, u, 0], out[v, u, 1], out[v, u, 2] = row[0, u], row[1, u], row[2, u]
             elif interior[v, u] and sums[0, v, u] < full:
                 # holes: the sums of offsets of the valid samples
-                cnt, su, sv, suu, suv, svv = _valid_offsets(inv, v, u, r, stride)
+                cnt, su, sv, suu, suv, svv = _valid_offsets(inv, v, u, r, stride,
+                                                            float(sums[0, v, u]))
                 a, b, c, good = _line_fit(cnt, su, sv, suu, suv, svv, float(sums[1, v, u]),
                                           float(sums[2, v, u]), float(sums[3, v, u]),
                                           min_support, stride)
