@@ -35,43 +35,42 @@ def _one_surface(z: np.ndarray, labels: np.ndarray, rim: np.ndarray, r: int, max
     """
     h, w = z.shape
     size = 2 * r + 1
+    m = w + 2 * r
     scale = np.float32(1.0 + max_jump * r)
-    # Rows padded by r values on each side that change no maximum.
-    hi = np.empty((size, w + 2 * r), np.int32)
-    lo = np.empty((size, w + 2 * r), np.int32)
-    zhi = np.empty((size, w + 2 * r), np.float32)
-    zlo = np.empty((size, w + 2 * r), np.float32)
-    col_hi = np.empty(w, np.int32)
-    col_lo = np.empty(w, np.int32)
-    col_zhi = np.empty(w, np.float32)
-    col_zlo = np.empty(w, np.float32)
-    spare_i = np.empty(w + 2 * r, np.int32)
-    spare_f = np.empty(w + 2 * r, np.float32)
-    for y in range(max(row0 - r, 0), min(row0 + r, h)):
-        k = y % size
-        _row_maxima(z, labels, rim, y, r, hi[k], lo[k], zhi[k], zlo[k], spare_i, spare_f)
-    for v in range(row0, row1):
-        if v + r < h:
-            k = (v + r) % size
-            _row_maxima(z, labels, rim, v + r, r, hi[k], lo[k], zhi[k], zlo[k], spare_i,
-                        spare_f)
-        first, last = max(v - r, 0), min(v + r, h - 1)
-        k = first % size
-        col_hi[:] = hi[k, :w]
-        col_lo[:] = lo[k, :w]
-        col_zhi[:] = zhi[k, :w]
-        col_zlo[:] = zlo[k, :w]
-        for y in range(first + 1, last + 1):
-            k = y % size
-            _max_of(col_hi, hi[k], col_hi)
-            _max_of(col_lo, lo[k], col_lo)
-            _max_of(col_zhi, zhi[k], col_zhi)
-            _max_of(col_zlo, zlo[k], col_zlo)
-        for u in range(w):
-            ok = col_hi[u] == -col_lo[u] and col_zhi[u] / scale <= -col_zlo[u]
-            valid = z[v, u] > 0
-            interior[v, u] = valid and ok
-            band[v, u] = valid and not ok
+    # Blocks of output rows; each holds the maxima along the rows of the rows its windows
+    # reach (padded by r values on each side, and rows off the image, that change no
+    # maximum), then down the columns in place: row i becomes output row block + i.
+    block = 64
+    hi = np.empty((block + 2 * r, m), np.int32)
+    lo = np.empty((block + 2 * r, m), np.int32)
+    zhi = np.empty((block + 2 * r, m), np.float32)
+    zlo = np.empty((block + 2 * r, m), np.float32)
+    spare_i = np.empty((block + 2 * r) * m, np.int32)
+    spare_f = np.empty((block + 2 * r) * m, np.float32)
+    big = np.int32(2 ** 31 - 1)
+    low = np.float32(-np.inf)
+    for v0 in range(row0, row1, block):
+        v1 = min(v0 + block, row1)
+        rows = v1 - v0 + 2 * r
+        for i in range(rows):
+            y = v0 - r + i
+            if 0 <= y < h:
+                _row_maxima(z, labels, rim, y, r, hi[i], lo[i], zhi[i], zlo[i], spare_i,
+                            spare_f)
+            else:
+                hi[i, :], lo[i, :], zhi[i, :], zlo[i, :] = 0, -big, low, low
+        n = rows * m
+        _window_max(hi.reshape(-1)[:n], spare_i, size, m)
+        _window_max(lo.reshape(-1)[:n], spare_i, size, m)
+        _window_max(zhi.reshape(-1)[:n], spare_f, size, m)
+        _window_max(zlo.reshape(-1)[:n], spare_f, size, m)
+        for v in range(v0, v1):
+            i = v - v0
+            for u in range(w):
+                ok = hi[i, u] == -lo[i, u] and zhi[i, u] / scale <= -zlo[i, u]
+                valid = z[v, u] > 0
+                interior[v, u] = valid and ok
+                band[v, u] = valid and not ok
 
 
 @inline
@@ -95,31 +94,33 @@ def _row_maxima(z: np.ndarray, labels: np.ndarray, rim: np.ndarray, y: int, r: i
         lo[u + r] = np.int32(1) if on_rim else (-lab if lab > 0 else -big)
         zhi[u + r] = z[y, u]
         zlo[u + r] = -z[y, u] if z[y, u] > 0 else low
-    _window_max(hi, spare_i, 2 * r + 1)
-    _window_max(lo, spare_i, 2 * r + 1)
-    _window_max(zhi, spare_f, 2 * r + 1)
-    _window_max(zlo, spare_f, 2 * r + 1)
+    _window_max(hi, spare_i, 2 * r + 1, 1)
+    _window_max(lo, spare_i, 2 * r + 1, 1)
+    _window_max(zhi, spare_f, 2 * r + 1, 1)
+    _window_max(zlo, spare_f, 2 * r + 1, 1)
 
 
 @inline
-def _window_max(row: np.ndarray, spare: np.ndarray, size: int) -> None:
-    """``row[j] = max(row[j:j + size])`` in place, for every ``j`` whose window fits in the
-    1-d ``row``: maxima over windows of 2, 4, 8 ... samples, then of two overlapping ones.
-    The passes go from ``row`` to ``spare`` (as long) and back, each a loop between two
-    arrays that do not overlap, which the compiler vectorises (a loop that alternates its
-    source and destination is not)."""
+def _window_max(row: np.ndarray, spare: np.ndarray, size: int, unit: int) -> None:
+    """``row[j] = max(row[j + unit k] for k < size)`` in place, for every ``j`` whose window
+    fits in the 1-d ``row`` (``unit`` 1: along a row; the row length: down the columns of
+    rows laid end to end): maxima over windows of 2, 4, 8 ... samples, then of two
+    overlapping ones. The passes go from ``row`` to ``spare`` (at least as long) and back,
+    each a loop between two arrays that do not overlap, which the compiler vectorises (a loop
+    that alternates its source and destination is not)."""
     n = row.shape[0]
     step = 1  # row holds the maxima over windows of `step` samples
     while 4 * step <= size:
-        _max_of(row[:n - step], row[step:], spare)
-        _max_of(spare[:n - 3 * step], spare[2 * step:], row)
+        _max_of(row[:n - step * unit], row[step * unit:], spare)
+        _max_of(spare[:n - 3 * step * unit], spare[2 * step * unit:], row)
         step *= 4
     if 2 * step <= size:
-        _max_of(row[:n - step], row[step:], spare)
-        _max_of(spare[:n - (size - step)], spare[size - 2 * step:], row)
+        _max_of(row[:n - step * unit], row[step * unit:], spare)
+        _max_of(spare[:n - (size - step) * unit], spare[(size - 2 * step) * unit:], row)
     elif size > step:
-        _max_of(row[:n - (size - step)], row[size - step:], spare)
-        row[:n - (size - step)] = spare[:n - (size - step)]
+        k = n - (size - step) * unit
+        _max_of(row[:k], row[(size - step) * unit:], spare)
+        row[:k] = spare[:k]
 
 
 @inline
