@@ -91,7 +91,7 @@ def _pair_edge(prev: float, a: float, b: float, nxt: float, jump: float) -> int:
 
 
 @inline
-def _relative_slope(inv: np.ndarray, labels: np.ndarray, v: int, u: int) -> float:
+def _relative_slope(inv: np.ndarray, labels: np.ndarray, v: int, u: int) -> np.float32:
     """Step of float32 inverse depth at pixel ``(v, u)`` relative to its value, per pixel.
 
     Per axis, the smaller of the two one-sided steps to neighbours of the same component (so a
@@ -299,16 +299,18 @@ def _fit_interior(inv: np.ndarray, labels: np.ndarray, interior: np.ndarray, sum
         # Full windows: the arithmetic of _line_fit and _store_normal without a branch on the
         # pixel, so that the loop runs on vector registers; a pixel that is not kept is
         # divided by 1 instead. The division is a ufunc: `/` checks each divisor for zero.
-        for u in range(w if good else 0):
-            a, b, c = _solve(c00, c01, c02, c11, c12, c22, inv_det, float(sums[1, v, u]),
-                             float(sums[2, v, u]), float(sums[3, v, u]))
-            nx, ny, nz, norm = _camera_normal(u, v, a, b, c, params)
-            ok = interior[v, u] & (sums[0, v, u] >= full) & (c > 0) & (norm > 0)
-            row[0, u], row[1, u], row[2, u] = nx, ny, nz
-            row[3, u] = norm if ok else 1.0
-            keep[u] = ok
-        for k in range(3):
-            np.divide(row[k], row[3], row[k])
+        # (An ill-posed full window, too few samples for min_support, keeps none.)
+        if good:
+            for u in range(w):
+                a, b, c = _solve(c00, c01, c02, c11, c12, c22, inv_det, float(sums[1, v, u]),
+                                 float(sums[2, v, u]), float(sums[3, v, u]))
+                nx, ny, nz, norm = _camera_normal(u, v, a, b, c, params)
+                ok = interior[v, u] & (sums[0, v, u] >= full) & (c > 0) & (norm > 0)
+                row[0, u], row[1, u], row[2, u] = nx, ny, nz
+                row[3, u] = norm if ok else 1.0
+                keep[u] = ok
+            for k in range(3):
+                np.divide(row[k], row[3], row[k])
         for u in range(w):
             if keep[u]:
                 out[v, u, 0], out[v, u, 1], out[v, u, 2] = row[0, u], row[1, u], row[2, u]
@@ -331,9 +333,9 @@ def _fit_band(inv: np.ndarray, labels: np.ndarray, rim: np.ndarray, band: np.nda
 
     Each window sample is gated: a rim pixel accepts samples within ``max_jump`` of its own
     inverse depth, any other pixel samples of its own component within ``max_jump`` plus its
-    own relative slope (:func:`_relative_slope`) per pixel of offset (Chebyshev). The fit is of inverse depth
-    relative to the centre's (:func:`_window_sums`). ``params`` is ``[max_jump, K
-    (row-major)]``.
+    own relative slope (:func:`_relative_slope`) per pixel of offset (Chebyshev). The fit is
+    of inverse depth relative to the centre's (:func:`_window_sums`). ``params`` is
+    ``[max_jump, K (row-major)]``.
     """
     w = inv.shape[1]
     max_jump = params[0]

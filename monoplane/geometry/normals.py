@@ -20,13 +20,15 @@ hypotheses. Each pixel's fit only uses neighbours on its own side of every depth
    catches edges that do not close a component); a rim pixel fits only neighbours within
    ``max_jump`` of its own depth, which excludes the farther side.
 
-Windows that provably see one surface (no rim, one component, small depth range) are fitted
-from window sums of the masked moments, taken for the whole image at once with separable
-filters; only the band near depth edges goes through the per-neighbour gating above. The
-discontinuities, the slopes and the fits are compiled kernels (:mod:`monoplane.jit`), the fits
-split by rows over the frame's threads: at 640x480 with the defaults they take about a quarter
-of the CPU time of the NumPy version they replaced (same decisions, normals equal to float
-rounding; docs/evaluation.md).
+Windows that provably see one surface (no rim, one component, small depth range: exact
+window maxima, :mod:`monoplane.geometry.one_surface_windows`) are fitted from window sums of
+the masked moments, taken for the whole image at once with separable filters; only the band
+near depth edges goes through the per-neighbour gating above. The discontinuities, the
+one-surface test and the fits are compiled kernels (:mod:`monoplane.jit`) split by rows over
+the frame's threads, and the components share the threads with the filters: at 640x480 with
+the defaults they take about a quarter of the CPU time of the NumPy version they replaced
+(same decisions, normals equal to float rounding), and the ninth round's reorganisation
+returns the same bits again (docs/evaluation.md).
 
 ``method="box"`` (an option; the presets keep the gated fits above) skips the components, the
 separable filters and most of the per-neighbour gating. A pixel's whole window (every pixel,

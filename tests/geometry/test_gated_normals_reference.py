@@ -132,7 +132,7 @@ def reference_gated(depth: np.ndarray, K: np.ndarray, radius: int, stride: int,
             for img, kx, ky in ((valid.astype(np.float32), one, one), (inv, ramp, one),
                                 (inv, one, ramp), (inv, one, one))]
     out = np.zeros(z.shape + (3,), np.float32)
-    for v, u in zip(*np.nonzero(valid)):
+    for v, u in zip(*np.nonzero(valid), strict=True):
         if interior[v, u]:
             # absolute inverse depth: the window's own sums of offsets, the filters' moments
             offsets = window_sums(inv, labels, rim, v, u, r, stride, False, 0.0)[:6]
