@@ -90,31 +90,28 @@ def _pair_edge(prev: float, a: float, b: float, nxt: float, jump: float) -> int:
     return -1 if step < 0 else 1
 
 
-@kernel
-def _relative_slope(inv: np.ndarray, labels: np.ndarray) -> np.ndarray:
-    """(H, W) float32 per-pixel step of inverse depth relative to its value, per pixel.
+@inline
+def _relative_slope(inv: np.ndarray, labels: np.ndarray, v: int, u: int) -> np.float32:
+    """Step of float32 inverse depth at pixel ``(v, u)`` relative to its value, per pixel.
 
     Per axis, the smaller of the two one-sided steps to neighbours of the same component (so a
-    step across an edge does not count); the larger of the two axes. 0 where unknown.
+    step across an edge does not count); the larger of the two axes. 0 where unknown. Float32
+    arithmetic throughout.
     """
     h, w = inv.shape
-    slope = np.zeros((h, w), dtype=np.float32)
-    for v in range(h):
-        for u in range(w):
-            if not inv[v, u] > 0:
-                continue
-            lab = labels[v, u]
-            best = np.float32(0.0)
-            for dv, du in ((0, 1), (1, 0)):
-                smaller = np.float32(np.inf)
-                for sign in (-1, 1):
-                    y, x = v + sign * dv, u + sign * du
-                    if 0 <= y < h and 0 <= x < w and lab > 0 and labels[y, x] == lab:
-                        smaller = min(smaller, abs(inv[y, x] - inv[v, u]))
-                if smaller != np.inf:
-                    best = max(best, smaller)
-            slope[v, u] = best / inv[v, u]
-    return slope
+    if not inv[v, u] > 0:
+        return np.float32(0.0)
+    lab = labels[v, u]
+    best = np.float32(0.0)
+    for dv, du in ((0, 1), (1, 0)):
+        smaller = np.float32(np.inf)
+        for sign in (-1, 1):
+            y, x = v + sign * dv, u + sign * du
+            if 0 <= y < h and 0 <= x < w and lab > 0 and labels[y, x] == lab:
+                smaller = min(smaller, abs(inv[y, x] - inv[v, u]))
+        if smaller != np.inf:
+            best = max(best, smaller)
+    return np.float32(best / inv[v, u])
 
 
 @inline
@@ -124,6 +121,20 @@ def _line_fit(cnt: float, su: float, sv: float, suu: float, suv: float, svv: flo
     """Least-squares fit ``y ≈ a du + b dv + c`` from its window sums: sample count, ``Σdu``,
     ``Σdv``, ``Σdu²``, ``Σdu dv``, ``Σdv²``, ``Σdu y``, ``Σdv y`` and ``Σy``. Returns ``a, b,
     c`` and whether the fit is well posed (enough samples, not all on one line)."""
+    c00, c01, c02, c11, c12, c22, inv_det, good = _cofactors(cnt, su, sv, suu, suv, svv,
+                                                             min_support, stride)
+    if not good:
+        return 0.0, 0.0, 0.0, False
+    a, b, c = _solve(c00, c01, c02, c11, c12, c22, inv_det, ru, rv, r1)
+    return a, b, c, True
+
+
+@inline
+def _cofactors(cnt: float, su: float, sv: float, suu: float, suv: float, svv: float,
+               min_support: int, stride: int
+               ) -> tuple[float, float, float, float, float, float, float, bool]:
+    """The cofactors and ``1 / det`` of the symmetric 3x3 normal equations of
+    :func:`_line_fit` (its sums of offsets), and whether the fit is well posed."""
     # Cramer's rule on the symmetric 3x3 normal equations.
     c00 = svv * cnt - sv * sv
     c01 = su * sv - suv * cnt
@@ -135,11 +146,17 @@ def _line_fit(cnt: float, su: float, sv: float, suu: float, suv: float, svv: flo
     # Samples on (nearly) one line give a singular system: no plane is defined there.
     n = max(cnt, 1.0)
     if not (cnt >= min_support and det > 1e-2 * (stride * stride) ** 2 * (n * n * n)):
-        return 0.0, 0.0, 0.0, False
-    inv_det = 1.0 / det
+        return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False
+    return c00, c01, c02, c11, c12, c22, 1.0 / det, True
+
+
+@inline
+def _solve(c00: float, c01: float, c02: float, c11: float, c12: float, c22: float,
+           inv_det: float, ru: float, rv: float, r1: float) -> tuple[float, float, float]:
+    """``a, b, c`` of :func:`_line_fit` from :func:`_cofactors` and the sums of ``y``."""
     return ((c00 * ru + c01 * rv + c02 * r1) * inv_det,
             (c01 * ru + c11 * rv + c12 * r1) * inv_det,
-            (c02 * ru + c12 * rv + c22 * r1) * inv_det, True)
+            (c02 * ru + c12 * rv + c22 * r1) * inv_det)
 
 
 @inline
@@ -175,16 +192,16 @@ def _store_normal(out: np.ndarray, v: int, u: int, grad_u: float, grad_v: float,
 
 @inline
 def _window_sums(inv: np.ndarray, labels: np.ndarray, v: int, u: int, r: int, stride: int,
-                 lab: int, on_rim: bool, ungated: bool, tol: float, max_jump: float
+                 lab: int, on_rim: bool, tol: float, max_jump: float
                  ) -> tuple[float, float, float, float, float, float, float, float, float]:
     """Window sums of the accepted samples around pixel ``(v, u)``, in the order of
     :func:`_line_fit`, the fitted value being the sample's inverse depth relative to the
     centre's, ``e = w / w_p - 1`` (so the fit's gradients are relative and one tolerance fits
     every depth range).
 
-    ``ungated``: every valid sample is accepted. Otherwise a rim pixel (``on_rim``) accepts
-    samples within ``max_jump`` of its own inverse depth, any other pixel samples of its own
-    component ``lab`` whose ``|e|`` stays within ``tol`` per pixel of offset (Chebyshev).
+    A rim pixel (``on_rim``) accepts valid samples within ``max_jump`` of its own inverse
+    depth, any other pixel samples of its own component ``lab`` whose ``|e|`` stays within
+    ``tol`` per pixel of offset (Chebyshev).
     """
     h, w = inv.shape
     c = inv[v, u]
@@ -199,8 +216,8 @@ def _window_sums(inv: np.ndarray, labels: np.ndarray, v: int, u: int, r: int, st
                 continue
             q = inv[y, x]
             e = q / c - 1.0
-            if ungated or on_rim:
-                if not (q > 0 and (ungated or abs(e) <= max_jump)):
+            if on_rim:
+                if not (q > 0 and abs(e) <= max_jump):
                     continue
             elif labels[y, x] != lab or not abs(e) <= tol * max(abs(du), abs(dv), 1):
                 continue
@@ -217,6 +234,43 @@ def _window_sums(inv: np.ndarray, labels: np.ndarray, v: int, u: int, r: int, st
     return cnt, su, sv, suu, suv, svv, ru, rv, r1
 
 
+@inline
+def _valid_offsets(inv: np.ndarray, v: int, u: int, r: int, stride: int, count: float
+                   ) -> tuple[float, float, float, float, float, float]:
+    """Count, ``Σdu``, ``Σdv``, ``Σdu²``, ``Σdu dv`` and ``Σdv²`` of the valid samples
+    (``inv > 0``) of the window of pixel ``(v, u)``, every ``stride`` pixels within ``r``
+    (Chebyshev), cut by the image border; ``count`` is how many there are. Sums of small
+    integers, so exact in any order."""
+    h, w = inv.shape
+    # The offsets that stay in the image, per axis: their number, sum and sum of squares.
+    nu = su1 = su2 = nv = sv1 = sv2 = 0
+    for d in range(-r, r + 1, stride):
+        if 0 <= u + d < w:
+            nu, su1, su2 = nu + 1, su1 + d, su2 + d * d
+        if 0 <= v + d < h:
+            nv, sv1, sv2 = nv + 1, sv1 + d, sv2 + d * d
+    if count == nu * nv:  # no hole, only the image border: the sums of a grid
+        return (float(nu * nv), float(nv * su1), float(nu * sv1), float(nv * su2),
+                float(su1 * sv1), float(nu * sv2))
+    cnt = su = sv = suu = suv = svv = 0
+    # The window's first column in the image, on the grid of offsets.
+    lo_u = u - r if u >= r else u - r + ((r - u + stride - 1) // stride) * stride
+    for dv in range(-r, r + 1, stride):
+        y = v + dv
+        if y < 0 or y >= h:
+            continue
+        for x in range(lo_u, min(u + r, w - 1) + 1, stride):
+            keep = 1 if inv[y, x] > 0 else 0
+            du = x - u
+            cnt += keep
+            su += keep * du
+            sv += keep * dv
+            suu += keep * du * du
+            suv += keep * du * dv
+            svv += keep * dv * dv
+    return float(cnt), float(su), float(sv), float(suu), float(suv), float(svv)
+
+
 @kernel
 def _fit_interior(inv: np.ndarray, labels: np.ndarray, interior: np.ndarray, sums: np.ndarray,
                   params: np.ndarray, r: int, stride: int, min_support: int, row0: int,
@@ -226,8 +280,8 @@ def _fit_interior(inv: np.ndarray, labels: np.ndarray, interior: np.ndarray, sum
 
     ``sums`` is (4, H, W) float32: per window, the count of valid samples and ``Σdu w``,
     ``Σdv w``, ``Σw``. A window with every sample valid has the same sums of offsets
-    everywhere; one with holes gets them from its samples (:func:`_window_sums` ungated, so
-    ``labels`` is not read). ``params`` is ``[max_jump, K (row-major)]``.
+    everywhere; one with holes gets them from its valid samples (:func:`_valid_offsets`).
+    ``params`` is ``[max_jump, K (row-major)]``.
     """
     w = inv.shape[1]
     side = (2 * r) // stride + 1
@@ -235,35 +289,53 @@ def _fit_interior(inv: np.ndarray, labels: np.ndarray, interior: np.ndarray, sum
     spread = 0.0  # Σdu² over a full window (= Σdv²)
     for d in range(-r, r + 1, stride):
         spread += float(d * d) * side
+    # The full windows' normal equations: the same for every pixel.
+    c00, c01, c02, c11, c12, c22, inv_det, good = _cofactors(full, 0.0, 0.0, spread, 0.0,
+                                                             spread, min_support, stride)
+    # One row of normals (x, y, z, then the norm) and whether each is kept.
+    row = np.empty((4, w), np.float64)
+    keep = np.zeros(w, np.bool_)
     for v in range(row0, row1):
+        # Full windows: the arithmetic of _line_fit and _store_normal without a branch on the
+        # pixel, so that the loop runs on vector registers; a pixel that is not kept is
+        # divided by 1 instead. The division is a ufunc: `/` checks each divisor for zero.
+        # (An ill-posed full window, too few samples for min_support, keeps none.)
+        if good:
+            for u in range(w):
+                a, b, c = _solve(c00, c01, c02, c11, c12, c22, inv_det, float(sums[1, v, u]),
+                                 float(sums[2, v, u]), float(sums[3, v, u]))
+                nx, ny, nz, norm = _camera_normal(u, v, a, b, c, params)
+                ok = interior[v, u] & (sums[0, v, u] >= full) & (c > 0) & (norm > 0)
+                row[0, u], row[1, u], row[2, u] = nx, ny, nz
+                row[3, u] = norm if ok else 1.0
+                keep[u] = ok
+            for k in range(3):
+                np.divide(row[k], row[3], row[k])
         for u in range(w):
-            if not interior[v, u]:
-                continue
-            cnt = float(sums[0, v, u])
-            ru, rv, r1 = float(sums[1, v, u]), float(sums[2, v, u]), float(sums[3, v, u])
-            if cnt < full:  # holes: the offsets of the valid samples, ungated
-                cnt, su, sv, suu, suv, svv, _, _, _ = _window_sums(
-                    inv, labels, v, u, r, stride, 0, False, True, 0.0, 0.0)
-                a, b, c, good = _line_fit(cnt, su, sv, suu, suv, svv, ru, rv, r1,
+            if keep[u]:
+                out[v, u, 0], out[v, u, 1], out[v, u, 2] = row[0, u], row[1, u], row[2, u]
+            elif interior[v, u] and sums[0, v, u] < full:
+                # holes: the sums of offsets of the valid samples
+                cnt, su, sv, suu, suv, svv = _valid_offsets(inv, v, u, r, stride,
+                                                            float(sums[0, v, u]))
+                a, b, c, good = _line_fit(cnt, su, sv, suu, suv, svv, float(sums[1, v, u]),
+                                          float(sums[2, v, u]), float(sums[3, v, u]),
                                           min_support, stride)
-            else:  # the same fit with the sums of offsets as constants the compiler can hoist
-                a, b, c, good = _line_fit(full, 0.0, 0.0, spread, 0.0, spread, ru, rv, r1,
-                                          min_support, stride)
-            if good:  # the line is absolute inverse depth: its centre value is c
-                _store_normal(out, v, u, a, b, c, params)
+                if good:  # the line is absolute inverse depth: its centre value is c
+                    _store_normal(out, v, u, a, b, c, params)
 
 
 @kernel
-def _fit_band(inv: np.ndarray, labels: np.ndarray, rim: np.ndarray, slope: np.ndarray,
-              band: np.ndarray, params: np.ndarray, r: int, stride: int, min_support: int,
-              row0: int, row1: int, out: np.ndarray) -> None:
+def _fit_band(inv: np.ndarray, labels: np.ndarray, rim: np.ndarray, band: np.ndarray,
+              params: np.ndarray, r: int, stride: int, min_support: int, row0: int, row1: int,
+              out: np.ndarray) -> None:
     """Edge-aware normals of the ``band`` pixels of rows ``row0:row1`` into ``out``.
 
     Each window sample is gated: a rim pixel accepts samples within ``max_jump`` of its own
     inverse depth, any other pixel samples of its own component within ``max_jump`` plus its
-    own relative ``slope`` per pixel of offset (Chebyshev). The fit is of inverse depth
-    relative to the centre's (:func:`_window_sums`). ``params`` is ``[max_jump, K
-    (row-major)]``.
+    own relative slope (:func:`_relative_slope`) per pixel of offset (Chebyshev). The fit is
+    of inverse depth relative to the centre's (:func:`_window_sums`). ``params`` is
+    ``[max_jump, K (row-major)]``.
     """
     w = inv.shape[1]
     max_jump = params[0]
@@ -272,13 +344,12 @@ def _fit_band(inv: np.ndarray, labels: np.ndarray, rim: np.ndarray, slope: np.nd
             if not band[v, u]:
                 continue
             cnt, su, sv, suu, suv, svv, ru, rv, r1 = _window_sums(
-                inv, labels, v, u, r, stride, labels[v, u], rim[v, u], False,
-                max_jump + slope[v, u], max_jump)
+                inv, labels, v, u, r, stride, labels[v, u], rim[v, u],
+                max_jump + _relative_slope(inv, labels, v, u), max_jump)
             a, b, c0, good = _line_fit(cnt, su, sv, suu, suv, svv, ru, rv, r1, min_support,
                                        stride)
             if good:  # near the centre w = w_p (1 + c0 + a du + b dv); w_p > 0 drops out
                 _store_normal(out, v, u, a, b, 1.0 + c0, params)
-
 
 
 @kernel

@@ -20,13 +20,15 @@ hypotheses. Each pixel's fit only uses neighbours on its own side of every depth
    catches edges that do not close a component); a rim pixel fits only neighbours within
    ``max_jump`` of its own depth, which excludes the farther side.
 
-Windows that provably see one surface (no rim, one component, small depth range) are fitted
-from window sums of the masked moments, taken for the whole image at once with separable
-filters; only the band near depth edges goes through the per-neighbour gating above. The
-discontinuities, the slopes and the fits are compiled kernels (:mod:`monoplane.jit`), the fits
-split by rows over the frame's threads: at 640x480 with the defaults they take about a quarter
-of the CPU time of the NumPy version they replaced (same decisions, normals equal to float
-rounding; docs/evaluation.md).
+Windows that provably see one surface (no rim, one component, small depth range: exact
+window maxima, :mod:`monoplane.geometry.one_surface_windows`) are fitted from window sums of
+the masked moments, taken for the whole image at once with separable filters; only the band
+near depth edges goes through the per-neighbour gating above. The discontinuities, the
+one-surface test and the fits are compiled kernels (:mod:`monoplane.jit`) split by rows over
+the frame's threads, and the components share the threads with the filters: at 640x480 with
+the defaults they take about a quarter of the CPU time of the NumPy version they replaced
+(same decisions, normals equal to float rounding), and the ninth round's reorganisation
+returns the same bits again (docs/evaluation.md).
 
 ``method="box"`` (an option; the presets keep the gated fits above) skips the components, the
 separable filters and most of the per-neighbour gating. A pixel's whole window (every pixel,
@@ -61,9 +63,9 @@ from monoplane.geometry.normal_kernels import (
     _fit_interior,
     _fixed_point,
     _inverse_depth,
-    _relative_slope,
     _rims,
 )
+from monoplane.geometry.one_surface_windows import _one_surface
 from monoplane.jit import chunks, run_threaded
 
 #: The fitting methods of :func:`normals_from_depth`.
@@ -194,23 +196,7 @@ def _gated_normals(depth: np.ndarray, max_jump: float, params: np.ndarray, radiu
     z = np.where(np.isfinite(depth), depth, 0).astype(np.float32, copy=False)
     inv, rim = _discontinuities(z, max_jump)
     valid = z > 0
-    # 4-connected components of the valid non-rim pixels; only equality of labels matters.
-    labels = cv2.connectedComponents((valid & ~rim).view(np.uint8), connectivity=4,
-                                     ltype=cv2.CV_32S)[1]
     r = radius - radius % stride
-    win = np.ones((2 * r + 1, 2 * r + 1), np.uint8)
-
-    # A window without rims, with a single component and a small depth range cannot mix
-    # surfaces, so its masked fit reduces to separable filters over the whole image. Only the
-    # band near depth edges needs per-neighbour gating.
-    big = np.float32(np.inf)
-    lab_f = labels.astype(np.float32)
-    one_surface = (
-        (cv2.dilate(rim.view(np.uint8), win) == 0)
-        & (cv2.dilate(lab_f, win) == cv2.erode(np.where(labels > 0, lab_f, big), win))
-        & (cv2.dilate(z, win) / (1.0 + max_jump * r) <= cv2.erode(np.where(valid, z, big), win))
-    )
-    interior = valid & one_surface
     # Window sums: full-footprint kernels with zero taps between the strided samples; zero
     # padding outside the image acts like holes.
     steps = np.arange(-r, r + 1, stride)
@@ -219,21 +205,39 @@ def _gated_normals(depth: np.ndarray, max_jump: float, params: np.ndarray, radiu
     ramp = one * np.arange(-r, r + 1, dtype=np.float32)
     sums = np.empty((4,) + z.shape, dtype=np.float32)
     filters: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = [
-        (valid.astype(np.float32), one, one), (inv, ramp, one), (inv, one, ramp), (inv, one, one)]
-    for k, (img, kx, ky) in enumerate(filters):
-        cv2.sepFilter2D(img, cv2.CV_32F, kx, ky, dst=sums[k], borderType=cv2.BORDER_CONSTANT)
-    slope = _relative_slope(inv, labels)
+        (valid.view(np.uint8), one, one), (inv, ramp, one), (inv, one, ramp), (inv, one, one)]
+    # The components (4-connected, of the valid non-rim pixels; only equality of labels
+    # matters) and the four filters are independent OpenCV calls, which release the GIL: they
+    # share the threads, the components first since they take longest.
+    labels = run_threaded([
+        functools.partial(_components, valid & ~rim),
+        *(functools.partial(cv2.sepFilter2D, img, cv2.CV_32F, kx, ky, dst=sums[k],
+                            borderType=cv2.BORDER_CONSTANT)
+          for k, (img, kx, ky) in enumerate(filters))])[0]
+    # A window without rims, with a single component and a small depth range cannot mix
+    # surfaces, so its masked fit reduces to the sums above. Only the band near depth edges
+    # needs per-neighbour gating.
+    interior = np.empty(z.shape, dtype=np.bool_)
+    band = np.empty(z.shape, dtype=np.bool_)
+    run_threaded([functools.partial(_one_surface, z, labels, rim, r, float(max_jump), a, b,
+                                    interior, band)
+                  for a, b in chunks(z.shape[0], _THREADED_ROWS)])
     normals = np.zeros(z.shape + (3,), dtype=np.float32)
-    band = valid & ~interior
 
     def fit(a: int, b: int) -> None:
         _fit_interior(inv, labels, interior, sums, params, r, stride, support, a, b, normals)
-        _fit_band(inv, labels, rim, slope, band, params, r, stride, support, a, b, normals)
+        _fit_band(inv, labels, rim, band, params, r, stride, support, a, b, normals)
 
     # The band's cost follows the depth edges: smaller pieces keep the threads busy alike.
     run_threaded([functools.partial(fit, a, b)
                   for a, b in chunks(z.shape[0], _THREADED_ROWS // _PIECES, _PIECES)])
     return normals
+
+
+def _components(mask: np.ndarray) -> np.ndarray:
+    """(H, W) int32 labels of the 4-connected components of the (H, W) bool ``mask``, 0
+    off it."""
+    return cv2.connectedComponents(mask.view(np.uint8), connectivity=4, ltype=cv2.CV_32S)[1]
 
 
 def _discontinuities(z: np.ndarray, max_jump: float) -> tuple[np.ndarray, np.ndarray]:
