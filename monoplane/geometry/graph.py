@@ -11,6 +11,7 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -23,6 +24,8 @@ from monoplane.jit import chunks, inline, kernel, run_threaded
 
 #: Nodes per thread below which the edge list is built on one thread.
 THREADED_NODES = 4096
+#: Edges per chunk below which the lattice graph's turn weights are computed on one thread.
+THREADED_EDGES = 10_000
 
 
 @dataclass
@@ -205,8 +208,15 @@ class NeighbourGraph:
         cos_min = -2.0 if max_turn_deg is None else float(np.cos(np.radians(max_turn_deg)))
         edges, gap, indptr, indices = pixel_grid_edges(
             lattice, points, np.asarray(shift, dtype=np.float64), float(max_jump), unit, cos_min)
-        spacing = float(np.median(gap)) if gap.size else 0.0
-        scale = None if turn_scale_deg is None else turn_scale(edges, unit, float(turn_scale_deg))
+        # The pairs' median length and the turn weights, each edge's alone, in chunks on
+        # parallel threads: they lie on the path to the first plane's labelling.
+        tasks: list[Callable[[], Any]] = [lambda: float(np.median(gap)) if gap.size else 0.0]
+        if turn_scale_deg is not None:
+            sigma = float(turn_scale_deg)
+            tasks += [lambda a=a, b=b: turn_scale(edges[a:b], unit, sigma)
+                      for a, b in chunks(edges.shape[0], THREADED_EDGES, per_thread=2)]
+        spacing, *parts = run_threaded(tasks)
+        scale = None if not parts else np.concatenate(parts) if len(parts) > 1 else parts[0]
         return cls(int(points.shape[0]), edges, indptr, indices, None, spacing, scale)
 
     def weighted_adjacency(self, weights: np.ndarray
