@@ -23,6 +23,7 @@ from monoplane.algorithm.graphcut import (
 )
 from monoplane.errors import InvalidInput
 from monoplane.geometry.graph import NeighbourGraph, shrink_subgraph
+from monoplane.geometry.lattice import turn_scale
 
 
 def brute_force(e: BinaryEnergy) -> tuple[np.ndarray, float]:
@@ -278,6 +279,22 @@ def test_proximity_weight_kernel_matches_the_vectorised_formula(seed, threads, m
         rtol=1e-12)
     with pytest.raises(InvalidInput, match=r"scale must be \(600,\)"):
         proximity_weights(pts, edges, nrm, col, *params, scale=scale[:-1])
+    # The edges' normal angles, when given, replace the arccos of the normals: the same bits
+    # for the lattice graph's angles (compiled alike, dot products summed in the same order;
+    # numpy's own arccos may differ in the last bit), the formula for any others.
+    i, j = edges.T
+    _, angles = turn_scale(np.ascontiguousarray(edges, dtype=np.int64), nrm, 10.0)
+    np.testing.assert_array_equal(
+        proximity_weights(pts, edges, nrm, col, *params, scale=scale, angles=angles),
+        proximity_weights(pts, edges, nrm, col, *params, scale=scale))
+    other = rng.uniform(0.0, np.pi, 600)
+    pos = -np.sum((pts[i] - pts[j]) ** 2, axis=1) / (2 * params[0])
+    without_n = reference_proximity_weights(pts, edges, None, col, *params)
+    np.testing.assert_allclose(
+        proximity_weights(pts, edges, nrm, col, *params, angles=other),
+        without_n + params[5] * np.exp(pos - other / (2 * params[2])), rtol=1e-12)
+    with pytest.raises(InvalidInput, match=r"angles must be \(600,\)"):
+        proximity_weights(pts, edges, nrm, col, *params, angles=other[:-1])
 
 
 def test_fused_data_costs_match_msac_and_normal_costs():

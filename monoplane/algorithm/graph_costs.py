@@ -215,8 +215,8 @@ def _gate_turned(data1: np.ndarray, turned: np.ndarray, edges: np.ndarray,
 def proximity_weights(points: np.ndarray, edges: np.ndarray, normals: np.ndarray | None = None,
                       colors: np.ndarray | None = None, alpha_p2: float = 0.005,
                       alpha_c2: float = 0.1, alpha_n2: float = 5.0, w_p: float = 1.0,
-                      w_c: float = 1.0, w_n: float = 1.0, scale: np.ndarray | None = None
-                      ) -> np.ndarray:
+                      w_c: float = 1.0, w_n: float = 1.0, scale: np.ndarray | None = None,
+                      angles: np.ndarray | None = None) -> np.ndarray:
     """Cost of cutting each edge in the proximity-guided pairwise term, 0.5 + k_p + k_c + k_n.
 
     k_p = w_p exp(-|p_i - p_j|² / 2α_p²)  (eq. kp),
@@ -243,6 +243,10 @@ def proximity_weights(points: np.ndarray, edges: np.ndarray, normals: np.ndarray
         ``0.5 + scale (cost - 0.5)`` (the lattice graph's down-weighting of pairs whose
         normals turn, :meth:`~monoplane.geometry.graph.NeighbourGraph.from_lattice`). The 0.5
         floor keeps every edge's table submodular.
+    angles : numpy.ndarray, optional
+        (E,) ``arccos(n_i · n_j)`` of each edge (clipped to [-1, 1]), when the caller has them
+        (:attr:`~monoplane.geometry.graph.NeighbourGraph.normal_angle`): k_n reads them
+        instead of computing them. Ignored without ``normals``.
 
     Returns
     -------
@@ -260,12 +264,17 @@ def proximity_weights(points: np.ndarray, edges: np.ndarray, normals: np.ndarray
         factor = np.ascontiguousarray(scale, dtype=np.float64)
         if factor.shape != (pairs.shape[0],):
             raise InvalidInput(f"scale must be ({pairs.shape[0]},), got {factor.shape}")
+    turn = (np.zeros(0) if angles is None or normals is None
+            else np.ascontiguousarray(angles, dtype=np.float64))
+    if turn.size and turn.shape != (pairs.shape[0],):
+        raise InvalidInput(f"angles must be ({pairs.shape[0]},), got {turn.shape}")
     # Each edge's weight is computed alone: chunks of edges on parallel threads change nothing.
     parts = run_threaded([
         lambda a=a, b=b: _proximity_weights(pts, pairs[a:b], nor, col, float(alpha_p2),
                                             float(alpha_c2), float(alpha_n2), float(w_p),
                                             float(w_c), float(w_n),
-                                            factor[a:b] if factor.size else factor)
+                                            factor[a:b] if factor.size else factor,
+                                            turn[a:b] if turn.size else turn)
         for a, b in chunks(pairs.shape[0], THREADED_EDGES)])
     return np.concatenate(parts) if len(parts) > 1 else parts[0]
 
@@ -273,10 +282,12 @@ def proximity_weights(points: np.ndarray, edges: np.ndarray, normals: np.ndarray
 @kernel
 def _proximity_weights(points: np.ndarray, edges: np.ndarray, normals: np.ndarray,
                        colors: np.ndarray, alpha_p2: float, alpha_c2: float, alpha_n2: float,
-                       w_p: float, w_c: float, w_n: float, scale: np.ndarray) -> np.ndarray:
+                       w_p: float, w_c: float, w_n: float, scale: np.ndarray, angles: np.ndarray
+                       ) -> np.ndarray:
     """:func:`proximity_weights` in one pass; empty (0, 3) ``normals``/``colors`` drop a term,
-    an empty ``scale`` scales nothing."""
+    an empty ``scale`` scales nothing, empty ``angles`` are computed from the normals."""
     use_n, use_c, use_s = normals.shape[0] > 0, colors.shape[0] > 0, scale.shape[0] > 0
+    given = angles.shape[0] > 0
     out = np.empty(edges.shape[0])
     for e in range(edges.shape[0]):
         i, j = edges[e, 0], edges[e, 1]
@@ -291,9 +302,13 @@ def _proximity_weights(points: np.ndarray, edges: np.ndarray, normals: np.ndarra
                 c2 += (colors[i, c] - colors[j, c]) ** 2
             w += w_c * np.exp(pos - c2 / (2.0 * alpha_c2))
         if use_n:
-            dot = 0.0
-            for c in range(3):
-                dot += normals[i, c] * normals[j, c]
-            w += w_n * np.exp(pos - np.arccos(min(max(dot, -1.0), 1.0)) / (2.0 * alpha_n2))
+            if given:
+                angle = angles[e]
+            else:
+                dot = 0.0
+                for c in range(3):
+                    dot += normals[i, c] * normals[j, c]
+                angle = np.arccos(min(max(dot, -1.0), 1.0))
+            w += w_n * np.exp(pos - angle / (2.0 * alpha_n2))
         out[e] = 0.5 + scale[e] * (w - 0.5) if use_s else w
     return out

@@ -52,6 +52,10 @@ class NeighbourGraph:
         (E,) factor in [0, 1] on each edge's affinity in the proximity labeler's cut cost
         (:func:`monoplane.algorithm.graph_costs.proximity_weights`), or None: 1 for all
         (the lattice graph's, :meth:`from_lattice` with ``turn_scale_deg``).
+    normal_angle : numpy.ndarray or None
+        (E,) angle in radians between the unit normals of each edge's ends, when the graph
+        computed it (:meth:`from_lattice` with ``turn_scale_deg``), else None: the proximity
+        labeler's normal affinity reads it instead of taking every arccos again.
     """
 
     num_nodes: int
@@ -61,6 +65,7 @@ class NeighbourGraph:
     tree: PointIndex | None
     spacing: float
     affinity_scale: np.ndarray | None = None
+    normal_angle: np.ndarray | None = None
     _last_subgraph: tuple[np.ndarray, np.ndarray, np.ndarray] | None = field(
         default=None, init=False, repr=False, compare=False)
     _lock: threading.Lock = field(default_factory=threading.Lock, init=False, repr=False,
@@ -185,7 +190,8 @@ class NeighbourGraph:
             σ in degrees: each kept pair's :attr:`affinity_scale` is ``exp(-t² / 2σ²)``, t the
             angle between its normals, so that a plane's labels spread less readily where the
             normals turn; unlike ``max_turn_deg`` no pair is cut for the noise of sensor or
-            network normals. Needs ``normals``. None: no :attr:`affinity_scale`.
+            network normals. Needs ``normals``. None: no :attr:`affinity_scale` (nor
+            :attr:`normal_angle`).
 
         Returns
         -------
@@ -216,8 +222,11 @@ class NeighbourGraph:
             tasks += [lambda a=a, b=b: turn_scale(edges[a:b], unit, sigma)
                       for a, b in chunks(edges.shape[0], THREADED_EDGES, per_thread=2)]
         spacing, *parts = run_threaded(tasks)
-        scale = None if not parts else np.concatenate(parts) if len(parts) > 1 else parts[0]
-        return cls(int(points.shape[0]), edges, indptr, indices, None, spacing, scale)
+        scale = angle = None
+        if parts:
+            scale, angle = (np.concatenate(a) if len(a) > 1 else a[0]
+                            for a in zip(*parts, strict=True))
+        return cls(int(points.shape[0]), edges, indptr, indices, None, spacing, scale, angle)
 
     def weighted_adjacency(self, weights: np.ndarray
                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

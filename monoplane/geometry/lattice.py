@@ -84,18 +84,22 @@ def lattice_stride(valid: np.ndarray, max_points: int) -> int:
 
 
 @kernel
-def turn_scale(edges: np.ndarray, normals: np.ndarray, sigma_deg: float) -> np.ndarray:
+def turn_scale(edges: np.ndarray, normals: np.ndarray, sigma_deg: float
+               ) -> tuple[np.ndarray, np.ndarray]:
     """(E,) ``exp(-t² / 2σ²)`` of the (E, 2) edges, t the angle in degrees between the unit
-    ``normals`` (N, 3) of their ends."""
+    ``normals`` (N, 3) of their ends, and (E,) those angles in radians (the proximity cut
+    costs take them, :func:`monoplane.algorithm.graph_costs.proximity_weights`)."""
     out = np.empty(edges.shape[0])
+    angle = np.empty(edges.shape[0])
     to_deg = 180.0 / np.pi
     for e in range(edges.shape[0]):
         a, b = edges[e, 0], edges[e, 1]
         cos = (normals[a, 0] * normals[b, 0] + normals[a, 1] * normals[b, 1]
                + normals[a, 2] * normals[b, 2])
-        t = np.arccos(min(max(cos, -1.0), 1.0)) * to_deg / sigma_deg
+        angle[e] = np.arccos(min(max(cos, -1.0), 1.0))
+        t = angle[e] * to_deg / sigma_deg
         out[e] = np.exp(-0.5 * t * t)
-    return out
+    return out, angle
 
 
 @kernel

@@ -333,7 +333,7 @@ def test_lattice_graph_weakens_pairs_whose_normals_turn():
     turn = np.radians(30.0)
     normals = np.where((u >= 16)[:, None], [np.sin(turn), 0.0, -np.cos(turn)], [0.0, 0.0, -1.0])
     plain = NeighbourGraph.from_lattice(pts, lattice, shift, 0.5, normals)
-    assert plain.affinity_scale is None
+    assert plain.affinity_scale is None and plain.normal_angle is None
     soft = NeighbourGraph.from_lattice(pts, lattice, shift, 0.5, normals, None, 10.0)
     np.testing.assert_array_equal(soft.edges, plain.edges)  # no pair is cut
     side = u >= 16
@@ -346,7 +346,7 @@ def test_lattice_graph_weakens_pairs_whose_normals_turn():
 
 
 @pytest.mark.parametrize("threads", [1, 2, 3])
-def test_lattice_graph_turn_weights_and_spacing_do_not_depend_on_threads(threads, monkeypatch):
+def test_lattice_graph_turn_weights_angles_spacing_do_not_depend_on_threads(threads, monkeypatch):
     # Random normals: the turn weights of the chunks, computed on parallel threads and joined,
     # are each edge's exp(-t^2 / 2 sigma^2), as on one thread; the spacing is the median gap.
     pts, lattice, shift = _lattice_frame()
@@ -363,5 +363,7 @@ def test_lattice_graph_turn_weights_and_spacing_do_not_depend_on_threads(threads
     i, j = g.edges.T
     t = np.degrees(np.arccos(np.clip(np.sum(normals[i] * normals[j], axis=1), -1.0, 1.0)))
     np.testing.assert_allclose(g.affinity_scale, np.exp(-t**2 / 200.0), rtol=1e-12)
+    np.testing.assert_array_equal(g.normal_angle, ref.normal_angle)
+    np.testing.assert_allclose(np.degrees(g.normal_angle), t, rtol=1e-12)
     gaps = np.linalg.norm(pts[i] - pts[j], axis=1)  # every pair is kept at max_jump 0.5
     assert g.spacing == pytest.approx(np.median(gaps), rel=1e-12)
