@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from monoplane.errors import InvalidInput
-from monoplane.jit import chunks, kernel, run_threaded
+from monoplane.jit import chunks, inline, kernel, run_threaded
 
 #: Edges per thread below which proximity weights are computed on one thread.
 THREADED_EDGES = 20_000
@@ -141,14 +141,36 @@ def data_costs(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, plane:
     bound = np.zeros(0) if payback is None else np.ascontiguousarray(payback, dtype=np.float64)
     # Turned below this cosine; -2 turns nothing (the cosine of unit normals is at least -1).
     cos_gate = float(np.cos(gate)) if gate < np.pi and use_normal else -2.0
-    f0, data1, turned = _data_costs(points, normals, np.ascontiguousarray(pool, dtype=np.int64),
-                                    np.asarray(plane, dtype=np.float64), mn, float(epsilon),
-                                    float(epsilon_n), use_normal, bound, float(keep), cos_gate)
+    idx = np.ascontiguousarray(pool, dtype=np.int64)
+    f0, data1, turned = _data_costs(points, normals, idx, np.asarray(plane, dtype=np.float64), mn,
+                                    float(epsilon), float(epsilon_n), use_normal, bound,
+                                    float(keep), cos_gate)
     if cos_gate > -2.0:
         pairs = (np.zeros((0, 2), dtype=np.int64) if edges is None else
                  np.ascontiguousarray(np.asarray(edges, dtype=np.int64).reshape(-1, 2)))
-        _gate_turned(data1, turned, pairs, edges is not None)
+        _gate_turned(data1, turned, pairs, edges is not None, normals, idx, mn,
+                     float(epsilon_n), bound, float(keep))
     return f0, data1
+
+
+@inline
+def _add_normal_term(data1: np.ndarray, i: int, cos: float, epsilon_n: float,
+                     cos_skip: float) -> None:
+    """Add g(1, p) of a point whose normal has cosine ``cos`` to the model normal to
+    ``data1[i]``. arccos only where the angle can reach ε_n: above ``cos_skip`` it is surely
+    smaller (the margin is far wider than arccos's rounding), so the result is that of
+    testing every point."""
+    if cos < cos_skip:
+        rho = np.arccos(min(max(cos, -1.0), 1.0))
+        if rho >= epsilon_n:
+            data1[i] += np.exp(rho / epsilon_n - 1.0)
+
+
+@inline
+def _fixed_by_distance(r: float, payback: np.ndarray, i: int, keep: float) -> bool:
+    """The test of graphcut._gc_ransac_network on a lower bound of its data1 - f0, the
+    distance cost ``r`` >= 1 alone (always False with an empty ``payback``)."""
+    return payback.shape[0] > 0 and keep * r > payback[i] * (1.0 + 1e-9) + 1e-12
 
 
 @kernel
@@ -158,14 +180,12 @@ def _data_costs(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, plane
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`data_costs` before the gate (``use_normal`` False ignores ``model_normal``; an
     empty ``payback`` skips no normal term), and the (M,) bool points whose normal's cosine
-    to the model normal is below ``cos_gate``."""
+    to the model normal is below ``cos_gate``. Their normal terms are left to
+    :func:`_gate_turned`: most of them are gated, and a gated point's term is never read."""
     m = pool.shape[0]
-    bounded = payback.shape[0] > 0
     f0 = np.zeros(m)
     data1 = np.empty(m)
     turned = np.zeros(m, dtype=np.bool_)
-    # arccos only where the angle can reach ε_n: above this cosine it is surely smaller (the
-    # margin is far wider than arccos's rounding), so the result is that of testing every point.
     cos_skip = np.cos(epsilon_n) + 1e-9
     for i in range(m):
         p = pool[i]
@@ -182,23 +202,22 @@ def _data_costs(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, plane
             data1[i] = 0.0
         else:
             data1[i] = r
-            # The test of graphcut._gc_ransac_network, on a lower bound of its data1 - f0.
-            if bounded and keep * r > payback[i] * (1.0 + 1e-9) + 1e-12:
+            if _fixed_by_distance(r, payback, i, keep):
                 continue
-        if use_normal:
-            if cos < cos_skip:
-                rho = np.arccos(min(max(cos, -1.0), 1.0))
-                if rho >= epsilon_n:
-                    data1[i] += np.exp(rho / epsilon_n - 1.0)
+        if use_normal and not turned[i]:
+            _add_normal_term(data1, i, cos, epsilon_n, cos_skip)
     return f0, data1, turned
 
 
 @kernel
 def _gate_turned(data1: np.ndarray, turned: np.ndarray, edges: np.ndarray,
-                 by_neighbours: bool) -> None:
+                 by_neighbours: bool, normals: np.ndarray, pool: np.ndarray,
+                 model_normal: np.ndarray, epsilon_n: float, payback: np.ndarray,
+                 keep: float) -> None:
     """Set ``data1`` (M,) to +inf, in place, at the ``turned`` (M,) points; with
     ``by_neighbours`` only at those whose every neighbour along the (E, 2) ``edges`` is
-    turned too (see :func:`data_costs`)."""
+    turned too (see :func:`data_costs`). The turned points left ungated get the normal term
+    :func:`_data_costs` left out, as it would have added it (same cosine, same bound test)."""
     gated = turned.copy()
     if by_neighbours:
         for e in range(edges.shape[0]):
@@ -207,9 +226,18 @@ def _gate_turned(data1: np.ndarray, turned: np.ndarray, edges: np.ndarray,
                 gated[i] = False
             if not turned[i]:
                 gated[j] = False
+    cos_skip = np.cos(epsilon_n) + 1e-9
     for i in range(data1.shape[0]):
         if gated[i]:
             data1[i] = np.inf
+        elif turned[i]:
+            # data1 holds the distance cost alone: 0 within ε, else r >= 1.
+            if data1[i] > 0.0 and _fixed_by_distance(data1[i], payback, i, keep):
+                continue
+            p = pool[i]
+            cos = (model_normal[0] * normals[p, 0] + model_normal[1] * normals[p, 1]
+                   + model_normal[2] * normals[p, 2])
+            _add_normal_term(data1, i, cos, epsilon_n, cos_skip)
 
 
 def proximity_weights(points: np.ndarray, edges: np.ndarray, normals: np.ndarray | None = None,
