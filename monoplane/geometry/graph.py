@@ -11,6 +11,7 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -219,7 +220,7 @@ class NeighbourGraph:
         tasks: list[Callable[[], Any]] = [lambda: float(np.median(gap)) if gap.size else 0.0]
         if turn_scale_deg is not None:
             sigma = float(turn_scale_deg)
-            tasks += [lambda a=a, b=b: turn_scale(edges[a:b], unit, sigma)
+            tasks += [partial(turn_scale, edges[a:b], unit, sigma)
                       for a, b in chunks(edges.shape[0], THREADED_EDGES, per_thread=2)]
         spacing, *parts = run_threaded(tasks)
         scale = angle = None

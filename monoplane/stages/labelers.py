@@ -229,8 +229,10 @@ class ProximityGraphCutLabeler(_PoolGraphCut):
         if weights is None:  # they depend on the frame only: once per frame
             # The lattice graph took the angles between its ends' normals (the cloud's, as the
             # driver builds it) for its turn weights: k_n reads them.
+            affinities: tuple[float, float, float, float, float, float] = (
+                self.config.affinities())
             weights = proximity_weights(cloud.points, graph.edges, cloud.normals, cloud.colors,
-                                        *self.config.affinities(), scale=graph.affinity_scale,
+                                        *affinities, scale=graph.affinity_scale,
                                         angles=graph.normal_angle)
             weights.flags.writeable = False  # shared by every pool of the frame
             context.weights = weights
