@@ -23,6 +23,7 @@ from monoplane.algorithm.graphcut import (
 )
 from monoplane.errors import InvalidInput
 from monoplane.geometry.graph import NeighbourGraph, shrink_subgraph
+from monoplane.geometry.lattice import turn_scale
 
 
 def brute_force(e: BinaryEnergy) -> tuple[np.ndarray, float]:
@@ -278,6 +279,22 @@ def test_proximity_weight_kernel_matches_the_vectorised_formula(seed, threads, m
         rtol=1e-12)
     with pytest.raises(InvalidInput, match=r"scale must be \(600,\)"):
         proximity_weights(pts, edges, nrm, col, *params, scale=scale[:-1])
+    # The edges' normal angles, when given, replace the arccos of the normals: the same bits
+    # for the lattice graph's angles (compiled alike, dot products summed in the same order;
+    # numpy's own arccos may differ in the last bit), the formula for any others.
+    i, j = edges.T
+    _, angles = turn_scale(np.ascontiguousarray(edges, dtype=np.int64), nrm, 10.0)
+    np.testing.assert_array_equal(
+        proximity_weights(pts, edges, nrm, col, *params, scale=scale, angles=angles),
+        proximity_weights(pts, edges, nrm, col, *params, scale=scale))
+    other = rng.uniform(0.0, np.pi, 600)
+    pos = -np.sum((pts[i] - pts[j]) ** 2, axis=1) / (2 * params[0])
+    without_n = reference_proximity_weights(pts, edges, None, col, *params)
+    np.testing.assert_allclose(
+        proximity_weights(pts, edges, nrm, col, *params, angles=other),
+        without_n + params[5] * np.exp(pos - other / (2 * params[2])), rtol=1e-12)
+    with pytest.raises(InvalidInput, match=r"angles must be \(600,\)"):
+        proximity_weights(pts, edges, nrm, col, *params, angles=other[:-1])
 
 
 def test_fused_data_costs_match_msac_and_normal_costs():
@@ -356,6 +373,46 @@ def test_a_pool_not_within_the_last_one_is_not_shrunk():
     assert shrink_subgraph(np.zeros(0, dtype=np.int64), np.array([2]), edges[:0]) is None
     kept, rows = shrink_subgraph(old, np.array([3, 5]), edges)
     assert kept.tolist() == [[0, 1]] and rows.tolist() == [1]
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_gated_bounded_data_costs_match_the_plain_formulas(seed):
+    # The gate with the pool's edges and the payback bound: +inf at a turned point whose
+    # neighbours are all turned; f(1) alone at a point its distance fixes as an outlier; else
+    # f(1) + g(1). (The turned points' normal terms are added after the gate; the result must
+    # not show it.)
+    rng = np.random.default_rng(seed)
+    pts = rng.uniform(-1.0, 1.0, (600, 3))
+    pts[:300, 2] = 0.01 + rng.normal(0, 0.01, 300)
+    nrm = rng.normal(size=(600, 3)) + [0.0, 0.0, -2.0]
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    graph = NeighbourGraph.build(pts, 6)
+    pool = np.sort(rng.choice(600, 500, replace=False))
+    edges, _ = graph.subgraph(pool)
+    cut = proximity_weights(pts[pool], edges, nrm[pool])
+    lam, eps, eps_n, gate = 0.95, 0.02, np.deg2rad(10.0), np.deg2rad(30.0)
+    plane, mn = np.array([0.0, 0.0, -1.0, 0.01]), np.array([0.0, 0.0, -1.0])
+    payback = pool_payback(pool.size, edges, cut, lam)
+    f0, data1 = data_costs(pts, nrm, pool, plane, mn, eps, eps_n, payback, 1 - lam, gate, edges)
+    ref_f0, f1 = msac_costs(np.abs(pts[pool] @ plane[:3] + plane[3]), eps)
+    angles = normal_angles(nrm[pool], mn)
+    g1 = normal_costs(angles, eps_n)
+    turned = angles > gate
+    gated = turned.copy()
+    for i, j in edges:
+        gated[i] &= turned[j]
+        gated[j] &= turned[i]
+    fixed = (f1 >= 1.0) & ((1 - lam) * f1 > payback * (1 + 1e-9) + 1e-12)
+    expected = np.where(gated, np.inf, np.where(fixed, f1, f1 + g1))
+    np.testing.assert_array_equal(f0, ref_f0)
+    np.testing.assert_allclose(data1, expected, rtol=1e-12)
+    assert gated.any() and (turned & ~gated & ~fixed & (g1 > 0)).any() and (fixed & ~gated).any()
+    # The cut is the one of the exact, ungated-by-bound costs with the same gate.
+    exact = data_costs(pts, nrm, pool, plane, mn, eps, eps_n, gate=gate, edges=edges)
+    labels, value = minimize_gc_ransac(f0, data1, edges, cut, lam, payback=payback)
+    again, value_again = minimize_gc_ransac(*exact, edges, cut, lam, payback=payback)
+    np.testing.assert_array_equal(labels, again)
+    assert value == value_again
 
 
 def test_normal_gate_keeps_a_plane_off_a_point_its_smoothness_would_carry():

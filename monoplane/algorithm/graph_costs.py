@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from monoplane.errors import InvalidInput
-from monoplane.jit import chunks, kernel, run_threaded
+from monoplane.jit import chunks, inline, kernel, run_threaded
 
 #: Edges per thread below which proximity weights are computed on one thread.
 THREADED_EDGES = 20_000
@@ -141,14 +141,36 @@ def data_costs(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, plane:
     bound = np.zeros(0) if payback is None else np.ascontiguousarray(payback, dtype=np.float64)
     # Turned below this cosine; -2 turns nothing (the cosine of unit normals is at least -1).
     cos_gate = float(np.cos(gate)) if gate < np.pi and use_normal else -2.0
-    f0, data1, turned = _data_costs(points, normals, np.ascontiguousarray(pool, dtype=np.int64),
-                                    np.asarray(plane, dtype=np.float64), mn, float(epsilon),
-                                    float(epsilon_n), use_normal, bound, float(keep), cos_gate)
+    idx = np.ascontiguousarray(pool, dtype=np.int64)
+    f0, data1, turned = _data_costs(points, normals, idx, np.asarray(plane, dtype=np.float64), mn,
+                                    float(epsilon), float(epsilon_n), use_normal, bound,
+                                    float(keep), cos_gate)
     if cos_gate > -2.0:
         pairs = (np.zeros((0, 2), dtype=np.int64) if edges is None else
                  np.ascontiguousarray(np.asarray(edges, dtype=np.int64).reshape(-1, 2)))
-        _gate_turned(data1, turned, pairs, edges is not None)
+        _gate_turned(data1, turned, pairs, edges is not None, normals, idx, mn,
+                     float(epsilon_n), bound, float(keep))
     return f0, data1
+
+
+@inline
+def _add_normal_term(data1: np.ndarray, i: int, cos: float, epsilon_n: float,
+                     cos_skip: float) -> None:
+    """Add g(1, p) of a point whose normal has cosine ``cos`` to the model normal to
+    ``data1[i]``. arccos only where the angle can reach ε_n: above ``cos_skip`` it is surely
+    smaller (the margin is far wider than arccos's rounding), so the result is that of
+    testing every point."""
+    if cos < cos_skip:
+        rho = np.arccos(min(max(cos, -1.0), 1.0))
+        if rho >= epsilon_n:
+            data1[i] += np.exp(rho / epsilon_n - 1.0)
+
+
+@inline
+def _fixed_by_distance(r: float, payback: np.ndarray, i: int, keep: float) -> bool:
+    """The test of graphcut._gc_ransac_network on a lower bound of its data1 - f0, the
+    distance cost ``r`` >= 1 alone (always False with an empty ``payback``)."""
+    return payback.shape[0] > 0 and keep * r > payback[i] * (1.0 + 1e-9) + 1e-12
 
 
 @kernel
@@ -158,14 +180,12 @@ def _data_costs(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, plane
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`data_costs` before the gate (``use_normal`` False ignores ``model_normal``; an
     empty ``payback`` skips no normal term), and the (M,) bool points whose normal's cosine
-    to the model normal is below ``cos_gate``."""
+    to the model normal is below ``cos_gate``. Their normal terms are left to
+    :func:`_gate_turned`: most of them are gated, and a gated point's term is never read."""
     m = pool.shape[0]
-    bounded = payback.shape[0] > 0
     f0 = np.zeros(m)
     data1 = np.empty(m)
     turned = np.zeros(m, dtype=np.bool_)
-    # arccos only where the angle can reach ε_n: above this cosine it is surely smaller (the
-    # margin is far wider than arccos's rounding), so the result is that of testing every point.
     cos_skip = np.cos(epsilon_n) + 1e-9
     for i in range(m):
         p = pool[i]
@@ -182,23 +202,22 @@ def _data_costs(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, plane
             data1[i] = 0.0
         else:
             data1[i] = r
-            # The test of graphcut._gc_ransac_network, on a lower bound of its data1 - f0.
-            if bounded and keep * r > payback[i] * (1.0 + 1e-9) + 1e-12:
+            if _fixed_by_distance(r, payback, i, keep):
                 continue
-        if use_normal:
-            if cos < cos_skip:
-                rho = np.arccos(min(max(cos, -1.0), 1.0))
-                if rho >= epsilon_n:
-                    data1[i] += np.exp(rho / epsilon_n - 1.0)
+        if use_normal and not turned[i]:
+            _add_normal_term(data1, i, cos, epsilon_n, cos_skip)
     return f0, data1, turned
 
 
 @kernel
 def _gate_turned(data1: np.ndarray, turned: np.ndarray, edges: np.ndarray,
-                 by_neighbours: bool) -> None:
+                 by_neighbours: bool, normals: np.ndarray, pool: np.ndarray,
+                 model_normal: np.ndarray, epsilon_n: float, payback: np.ndarray,
+                 keep: float) -> None:
     """Set ``data1`` (M,) to +inf, in place, at the ``turned`` (M,) points; with
     ``by_neighbours`` only at those whose every neighbour along the (E, 2) ``edges`` is
-    turned too (see :func:`data_costs`)."""
+    turned too (see :func:`data_costs`). The turned points left ungated get the normal term
+    :func:`_data_costs` left out, as it would have added it (same cosine, same bound test)."""
     gated = turned.copy()
     if by_neighbours:
         for e in range(edges.shape[0]):
@@ -207,16 +226,25 @@ def _gate_turned(data1: np.ndarray, turned: np.ndarray, edges: np.ndarray,
                 gated[i] = False
             if not turned[i]:
                 gated[j] = False
+    cos_skip = np.cos(epsilon_n) + 1e-9
     for i in range(data1.shape[0]):
         if gated[i]:
             data1[i] = np.inf
+        elif turned[i]:
+            # data1 holds the distance cost alone: 0 within ε, else r >= 1.
+            if data1[i] > 0.0 and _fixed_by_distance(data1[i], payback, i, keep):
+                continue
+            p = pool[i]
+            cos = (model_normal[0] * normals[p, 0] + model_normal[1] * normals[p, 1]
+                   + model_normal[2] * normals[p, 2])
+            _add_normal_term(data1, i, cos, epsilon_n, cos_skip)
 
 
 def proximity_weights(points: np.ndarray, edges: np.ndarray, normals: np.ndarray | None = None,
                       colors: np.ndarray | None = None, alpha_p2: float = 0.005,
                       alpha_c2: float = 0.1, alpha_n2: float = 5.0, w_p: float = 1.0,
-                      w_c: float = 1.0, w_n: float = 1.0, scale: np.ndarray | None = None
-                      ) -> np.ndarray:
+                      w_c: float = 1.0, w_n: float = 1.0, scale: np.ndarray | None = None,
+                      angles: np.ndarray | None = None) -> np.ndarray:
     """Cost of cutting each edge in the proximity-guided pairwise term, 0.5 + k_p + k_c + k_n.
 
     k_p = w_p exp(-|p_i - p_j|² / 2α_p²)  (eq. kp),
@@ -243,6 +271,10 @@ def proximity_weights(points: np.ndarray, edges: np.ndarray, normals: np.ndarray
         ``0.5 + scale (cost - 0.5)`` (the lattice graph's down-weighting of pairs whose
         normals turn, :meth:`~monoplane.geometry.graph.NeighbourGraph.from_lattice`). The 0.5
         floor keeps every edge's table submodular.
+    angles : numpy.ndarray, optional
+        (E,) ``arccos(n_i · n_j)`` of each edge (clipped to [-1, 1]), when the caller has them
+        (:attr:`~monoplane.geometry.graph.NeighbourGraph.normal_angle`): k_n reads them
+        instead of computing them. Ignored without ``normals``.
 
     Returns
     -------
@@ -260,12 +292,17 @@ def proximity_weights(points: np.ndarray, edges: np.ndarray, normals: np.ndarray
         factor = np.ascontiguousarray(scale, dtype=np.float64)
         if factor.shape != (pairs.shape[0],):
             raise InvalidInput(f"scale must be ({pairs.shape[0]},), got {factor.shape}")
+    turn = (np.zeros(0) if angles is None or normals is None
+            else np.ascontiguousarray(angles, dtype=np.float64))
+    if turn.size and turn.shape != (pairs.shape[0],):
+        raise InvalidInput(f"angles must be ({pairs.shape[0]},), got {turn.shape}")
     # Each edge's weight is computed alone: chunks of edges on parallel threads change nothing.
     parts = run_threaded([
         lambda a=a, b=b: _proximity_weights(pts, pairs[a:b], nor, col, float(alpha_p2),
                                             float(alpha_c2), float(alpha_n2), float(w_p),
                                             float(w_c), float(w_n),
-                                            factor[a:b] if factor.size else factor)
+                                            factor[a:b] if factor.size else factor,
+                                            turn[a:b] if turn.size else turn)
         for a, b in chunks(pairs.shape[0], THREADED_EDGES)])
     return np.concatenate(parts) if len(parts) > 1 else parts[0]
 
@@ -273,10 +310,12 @@ def proximity_weights(points: np.ndarray, edges: np.ndarray, normals: np.ndarray
 @kernel
 def _proximity_weights(points: np.ndarray, edges: np.ndarray, normals: np.ndarray,
                        colors: np.ndarray, alpha_p2: float, alpha_c2: float, alpha_n2: float,
-                       w_p: float, w_c: float, w_n: float, scale: np.ndarray) -> np.ndarray:
+                       w_p: float, w_c: float, w_n: float, scale: np.ndarray, angles: np.ndarray
+                       ) -> np.ndarray:
     """:func:`proximity_weights` in one pass; empty (0, 3) ``normals``/``colors`` drop a term,
-    an empty ``scale`` scales nothing."""
+    an empty ``scale`` scales nothing, empty ``angles`` are computed from the normals."""
     use_n, use_c, use_s = normals.shape[0] > 0, colors.shape[0] > 0, scale.shape[0] > 0
+    given = angles.shape[0] > 0
     out = np.empty(edges.shape[0])
     for e in range(edges.shape[0]):
         i, j = edges[e, 0], edges[e, 1]
@@ -291,9 +330,13 @@ def _proximity_weights(points: np.ndarray, edges: np.ndarray, normals: np.ndarra
                 c2 += (colors[i, c] - colors[j, c]) ** 2
             w += w_c * np.exp(pos - c2 / (2.0 * alpha_c2))
         if use_n:
-            dot = 0.0
-            for c in range(3):
-                dot += normals[i, c] * normals[j, c]
-            w += w_n * np.exp(pos - np.arccos(min(max(dot, -1.0), 1.0)) / (2.0 * alpha_n2))
+            if given:
+                angle = angles[e]
+            else:
+                dot = 0.0
+                for c in range(3):
+                    dot += normals[i, c] * normals[j, c]
+                angle = np.arccos(min(max(dot, -1.0), 1.0))
+            w += w_n * np.exp(pos - angle / (2.0 * alpha_n2))
         out[e] = 0.5 + scale[e] * (w - 0.5) if use_s else w
     return out

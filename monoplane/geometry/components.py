@@ -266,7 +266,7 @@ def lattice_largest_component(members: np.ndarray, lattice: np.ndarray, points: 
     between them has no point or a point nearer to the camera than the first member by more
     than its jump limit (an occluder in front), and their 3D distance is within ``max_jump``
     times the first member's distance from the camera (the jump test of
-    :func:`monoplane.geometry.graph.pixel_grid_edges`). With ``reach`` 1 these are the
+    :func:`monoplane.geometry.lattice.pixel_grid_edges`). With ``reach`` 1 these are the
     lattice graph's own links; with more, a plane seen on both sides of a table leg stays one
     part, as the kNN graph, which links in 3D, keeps it. A node between them that lies as far
     as the members or farther (the rest of a curved surface, a floor seen through a ring)

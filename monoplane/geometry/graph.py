@@ -11,17 +11,22 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
+from typing import Any
 
 import numpy as np
 
 from monoplane.errors import InvalidInput
 from monoplane.geometry.components import largest_component
+from monoplane.geometry.lattice import pixel_grid_edges, turn_scale
 from monoplane.geometry.neighbours import PointIndex
 from monoplane.geometry.propagation import SampleImage, image_knn
 from monoplane.jit import chunks, inline, kernel, run_threaded
 
 #: Nodes per thread below which the edge list is built on one thread.
 THREADED_NODES = 4096
+#: Edges per chunk below which the lattice graph's turn weights are computed on one thread.
+THREADED_EDGES = 10_000
 
 
 @dataclass
@@ -48,6 +53,10 @@ class NeighbourGraph:
         (E,) factor in [0, 1] on each edge's affinity in the proximity labeler's cut cost
         (:func:`monoplane.algorithm.graph_costs.proximity_weights`), or None: 1 for all
         (the lattice graph's, :meth:`from_lattice` with ``turn_scale_deg``).
+    normal_angle : numpy.ndarray or None
+        (E,) angle in radians between the unit normals of each edge's ends, when the graph
+        computed it (:meth:`from_lattice` with ``turn_scale_deg``), else None: the proximity
+        labeler's normal affinity reads it instead of taking every arccos again.
     """
 
     num_nodes: int
@@ -57,6 +66,7 @@ class NeighbourGraph:
     tree: PointIndex | None
     spacing: float
     affinity_scale: np.ndarray | None = None
+    normal_angle: np.ndarray | None = None
     _last_subgraph: tuple[np.ndarray, np.ndarray, np.ndarray] | None = field(
         default=None, init=False, repr=False, compare=False)
     _lock: threading.Lock = field(default_factory=threading.Lock, init=False, repr=False,
@@ -181,7 +191,8 @@ class NeighbourGraph:
             σ in degrees: each kept pair's :attr:`affinity_scale` is ``exp(-t² / 2σ²)``, t the
             angle between its normals, so that a plane's labels spread less readily where the
             normals turn; unlike ``max_turn_deg`` no pair is cut for the noise of sensor or
-            network normals. Needs ``normals``. None: no :attr:`affinity_scale`.
+            network normals. Needs ``normals``. None: no :attr:`affinity_scale` (nor
+            :attr:`normal_angle`).
 
         Returns
         -------
@@ -204,9 +215,19 @@ class NeighbourGraph:
         cos_min = -2.0 if max_turn_deg is None else float(np.cos(np.radians(max_turn_deg)))
         edges, gap, indptr, indices = pixel_grid_edges(
             lattice, points, np.asarray(shift, dtype=np.float64), float(max_jump), unit, cos_min)
-        spacing = float(np.median(gap)) if gap.size else 0.0
-        scale = None if turn_scale_deg is None else _turn_scale(edges, unit, float(turn_scale_deg))
-        return cls(int(points.shape[0]), edges, indptr, indices, None, spacing, scale)
+        # The pairs' median length and the turn weights, each edge's alone, in chunks on
+        # parallel threads: they lie on the path to the first plane's labelling.
+        tasks: list[Callable[[], Any]] = [lambda: float(np.median(gap)) if gap.size else 0.0]
+        if turn_scale_deg is not None:
+            sigma = float(turn_scale_deg)
+            tasks += [partial(turn_scale, edges[a:b], unit, sigma)
+                      for a, b in chunks(edges.shape[0], THREADED_EDGES, per_thread=2)]
+        spacing, *parts = run_threaded(tasks)
+        scale = angle = None
+        if parts:
+            scale, angle = (np.concatenate(a) if len(a) > 1 else a[0]
+                            for a in zip(*parts, strict=True))
+        return cls(int(points.shape[0]), edges, indptr, indices, None, spacing, scale, angle)
 
     def weighted_adjacency(self, weights: np.ndarray
                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -502,99 +523,3 @@ def _pool_edges(num_nodes: int, edges: np.ndarray, pool: np.ndarray
     local = np.full(num_nodes, -1, dtype=np.int64)
     local[pool] = np.arange(pool.shape[0], dtype=np.int64)
     return _kept_edges(edges, local)
-
-
-@kernel
-def _turn_scale(edges: np.ndarray, normals: np.ndarray, sigma_deg: float) -> np.ndarray:
-    """(E,) ``exp(-t² / 2σ²)`` of the (E, 2) edges, t the angle in degrees between the unit
-    ``normals`` (N, 3) of their ends."""
-    out = np.empty(edges.shape[0])
-    to_deg = 180.0 / np.pi
-    for e in range(edges.shape[0]):
-        a, b = edges[e, 0], edges[e, 1]
-        cos = (normals[a, 0] * normals[b, 0] + normals[a, 1] * normals[b, 1]
-               + normals[a, 2] * normals[b, 2])
-        t = np.arccos(min(max(cos, -1.0), 1.0)) * to_deg / sigma_deg
-        out[e] = np.exp(-0.5 * t * t)
-    return out
-
-
-@kernel
-def pixel_grid_edges(index: np.ndarray, points: np.ndarray, shift: np.ndarray, max_jump: float,
-                     normals: np.ndarray, cos_min: float
-                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The 8-connected graph of :func:`monoplane.stages.graph_refiner.pixel_graph`, of the
-    (H, W) int64 node ``index`` of each pixel (-1: none).
-
-    A pair is cut when its 3D distance exceeds ``max_jump`` times the first point's distance
-    from the camera, or when the cosine between its ``normals`` ((N, 3) unit) is below
-    ``cos_min`` (-2 keeps every pair whatever its normals).
-
-    Nodes number the valid pixels in raster order, so the four forward neighbours of a
-    pixel, taken in raster order (right, below left, below, below right), are larger nodes
-    in ascending order: scanning the pixels gives the edges sorted by ``(i, j)``.
-
-    Returns
-    -------
-    edges : numpy.ndarray
-        (E, 2) int64 kept edges, ``i < j``, sorted.
-    gap : numpy.ndarray
-        (M,) float64 3D distance of every candidate pair, kept or not.
-    indptr, indices : numpy.ndarray
-        Adjacency: the neighbours of node ``i`` are its larger ones, ascending, then its
-        smaller ones, ascending.
-    """
-    h, w = index.shape
-    n = points.shape[0]
-    edges = np.empty((4 * n, 2), dtype=np.int64)
-    gap = np.empty(4 * n, dtype=np.float64)
-    kept = pairs = 0
-    for v in range(h):
-        for u in range(w):
-            a = index[v, u]
-            if a < 0:
-                continue
-            # sqrt of the squares summed in order, as numpy's norm over an axis of 3.
-            x = points[a, 0] + shift[0]
-            y = points[a, 1] + shift[1]
-            z = points[a, 2] + shift[2]
-            reach = max_jump * max(np.sqrt(x * x + y * y + z * z), 1e-12)
-            for dv, du in ((0, 1), (1, -1), (1, 0), (1, 1)):
-                vv, uu = v + dv, u + du
-                if vv >= h or not 0 <= uu < w:
-                    continue
-                b = index[vv, uu]
-                if b < 0:
-                    continue
-                dx = points[a, 0] - points[b, 0]
-                dy = points[a, 1] - points[b, 1]
-                dz = points[a, 2] - points[b, 2]
-                g = np.sqrt(dx * dx + dy * dy + dz * dz)
-                gap[pairs] = g
-                pairs += 1
-                agree = (normals[a, 0] * normals[b, 0] + normals[a, 1] * normals[b, 1]
-                         + normals[a, 2] * normals[b, 2])
-                if g <= reach and agree >= cos_min:
-                    edges[kept, 0] = a
-                    edges[kept, 1] = b
-                    kept += 1
-    edges = edges[:kept].copy()
-    larger = np.zeros(n, dtype=np.int64)
-    degree = np.zeros(n, dtype=np.int64)
-    for e in range(kept):
-        larger[edges[e, 0]] += 1
-        degree[edges[e, 0]] += 1
-        degree[edges[e, 1]] += 1
-    indptr = np.zeros(n + 1, dtype=np.int64)
-    for i in range(n):
-        indptr[i + 1] = indptr[i] + degree[i]
-    first = indptr[:-1].copy()  # next free slot of each node's larger neighbours
-    second = indptr[:-1] + larger  # ... and of its smaller ones
-    indices = np.empty(2 * kept, dtype=np.int64)
-    for e in range(kept):
-        a, b = edges[e, 0], edges[e, 1]
-        indices[first[a]] = b
-        first[a] += 1
-        indices[second[b]] = a
-        second[b] += 1
-    return edges, gap[:pairs].copy(), indptr, indices

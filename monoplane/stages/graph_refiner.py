@@ -40,7 +40,8 @@ from monoplane.datamodel import Frame, Reconstruction, orient_towards_camera
 from monoplane.errors import check_config
 from monoplane.geometry.cloud import PlaneCloud
 from monoplane.geometry.components import graph_components, same_label_components
-from monoplane.geometry.graph import NeighbourGraph, pixel_grid_edges
+from monoplane.geometry.graph import NeighbourGraph
+from monoplane.geometry.lattice import pixel_grid_edges
 from monoplane.geometry.planes import fit_planes_per_label
 from monoplane.hookspecs import hookimpl
 from monoplane.jit import chunks, kernel, run_threaded

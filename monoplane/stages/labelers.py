@@ -227,8 +227,13 @@ class ProximityGraphCutLabeler(_PoolGraphCut):
              context: GraphCutContext) -> np.ndarray:
         weights = context.weights
         if weights is None:  # they depend on the frame only: once per frame
+            # The lattice graph took the angles between its ends' normals (the cloud's, as the
+            # driver builds it) for its turn weights: k_n reads them.
+            affinities: tuple[float, float, float, float, float, float] = (
+                self.config.affinities())
             weights = proximity_weights(cloud.points, graph.edges, cloud.normals, cloud.colors,
-                                        *self.config.affinities(), scale=graph.affinity_scale)
+                                        *affinities, scale=graph.affinity_scale,
+                                        angles=graph.normal_angle)
             weights.flags.writeable = False  # shared by every pool of the frame
             context.weights = weights
         # Ascending distinct edge rows as many as the graph's are all of them, in order.

@@ -333,7 +333,7 @@ def test_lattice_graph_weakens_pairs_whose_normals_turn():
     turn = np.radians(30.0)
     normals = np.where((u >= 16)[:, None], [np.sin(turn), 0.0, -np.cos(turn)], [0.0, 0.0, -1.0])
     plain = NeighbourGraph.from_lattice(pts, lattice, shift, 0.5, normals)
-    assert plain.affinity_scale is None
+    assert plain.affinity_scale is None and plain.normal_angle is None
     soft = NeighbourGraph.from_lattice(pts, lattice, shift, 0.5, normals, None, 10.0)
     np.testing.assert_array_equal(soft.edges, plain.edges)  # no pair is cut
     side = u >= 16
@@ -343,3 +343,27 @@ def test_lattice_graph_weakens_pairs_whose_normals_turn():
     np.testing.assert_allclose(soft.affinity_scale[across], np.exp(-4.5))
     with pytest.raises(InvalidInput, match="turn_scale_deg need"):
         NeighbourGraph.from_lattice(pts, lattice, shift, 0.5, None, None, 10.0)
+
+
+@pytest.mark.parametrize("threads", [1, 2, 3])
+def test_lattice_graph_turn_weights_angles_spacing_do_not_depend_on_threads(threads, monkeypatch):
+    # Random normals: the turn weights of the chunks, computed on parallel threads and joined,
+    # are each edge's exp(-t^2 / 2 sigma^2), as on one thread; the spacing is the median gap.
+    pts, lattice, shift = _lattice_frame()
+    normals = np.random.default_rng(3).normal(size=pts.shape) + [0.0, 0.0, -3.0]
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    monkeypatch.setattr("monoplane.geometry.graph.THREADED_EDGES", 7)
+    monkeypatch.setenv("OMP_NUM_THREADS", str(threads))
+    g = NeighbourGraph.from_lattice(pts, lattice, shift, 0.5, normals, None, 10.0)
+    monkeypatch.setenv("OMP_NUM_THREADS", "1")
+    ref = NeighbourGraph.from_lattice(pts, lattice, shift, 0.5, normals, None, 10.0)
+    np.testing.assert_array_equal(g.edges, ref.edges)
+    np.testing.assert_array_equal(g.affinity_scale, ref.affinity_scale)
+    assert g.spacing == ref.spacing
+    i, j = g.edges.T
+    t = np.degrees(np.arccos(np.clip(np.sum(normals[i] * normals[j], axis=1), -1.0, 1.0)))
+    np.testing.assert_allclose(g.affinity_scale, np.exp(-t**2 / 200.0), rtol=1e-12)
+    np.testing.assert_array_equal(g.normal_angle, ref.normal_angle)
+    np.testing.assert_allclose(np.degrees(g.normal_angle), t, rtol=1e-12)
+    gaps = np.linalg.norm(pts[i] - pts[j], axis=1)  # every pair is kept at max_jump 0.5
+    assert g.spacing == pytest.approx(np.median(gaps), rel=1e-12)

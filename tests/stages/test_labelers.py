@@ -216,6 +216,24 @@ def test_proximity_labeler_scales_the_affinities_of_a_graph_that_has_a_scale():
     np.testing.assert_allclose(context.weights, 0.5 + graph.affinity_scale * (full - 0.5))
 
 
+def test_proximity_labeler_reads_the_normal_angles_of_a_graph_that_has_them():
+    # The lattice graph keeps the angles between its ends' normals (NeighbourGraph.normal_angle):
+    # the labeler's cut costs read them (all right angles here: k_n = w_n exp(pos - π/2 / 2α_n²)).
+    cloud, _, _, _ = grid_cloud()
+    graph = NeighbourGraph.build(cloud.points, k=8)
+    graph.normal_angle = np.full(graph.num_edges, np.pi / 2)
+    labeler = ProximityGraphCutLabeler()
+    context = labeler.new_context()
+    labeler.label(cloud, graph, np.arange(cloud.size, dtype=np.int64), PLANE,
+                  np.array([0.0, 0.0, -1.0]), RansacParams(epsilon=EPS, epsilon_n_deg=10.0),
+                  context)
+    i, j = graph.edges.T
+    pos = -np.sum((cloud.points[i] - cloud.points[j]) ** 2, axis=1) / (2 * 0.005)
+    without_n = proximity_weights(cloud.points, graph.edges, None, cloud.colors)
+    np.testing.assert_allclose(context.weights, without_n + np.exp(pos - np.pi / 20.0),
+                               rtol=1e-12)
+
+
 def test_normal_gate_is_validated_and_removes_a_tilted_patch_smoothness_kept():
     with pytest.raises(ConfigError, match="normal_gate_deg must lie in"):
         ProximityGraphCutLabeler.Config(normal_gate_deg=0.0)
