@@ -35,7 +35,7 @@ def _store_normal(out: np.ndarray, v: int, u: int, grad_u: float, grad_v: float,
 
 # --- The reference: monoplane/geometry/normal_kernels.py's box kernels at a627dc0 ---
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _box_planes(fixed: np.ndarray, r: int, scale: float, tol: float,
                 params: np.ndarray, row0: int, row1: int, reach: np.ndarray,
                 out: np.ndarray) -> None:
@@ -121,7 +121,7 @@ def _box_planes(fixed: np.ndarray, r: int, scale: float, tol: float,
             sn -= cnt[i]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _fixed_point(inv: np.ndarray, rim: np.ndarray, scale: float, row0: int, row1: int,
                  fixed: np.ndarray) -> None:
     """Rows ``row0:row1`` of the (H, W) int32 fixed-point inverse depth ``round(inv *
@@ -149,7 +149,7 @@ def _own_slope(inv: np.ndarray, rim: np.ndarray, v: int, u: int) -> float:
     return best
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _box_band(inv: np.ndarray, rim: np.ndarray, reach: np.ndarray, params: np.ndarray,
               k_inv: np.ndarray, radius: int, r: int, stride: int, min_support: int,
               row0: int, row1: int, out: np.ndarray) -> None:
