@@ -409,15 +409,21 @@ def _box_band(inv: np.ndarray, rim: np.ndarray, reach: np.ndarray, params: np.nd
     ``(2r+1)²`` window every ``stride`` pixels by the gated rule without the components:
     within ``max_jump`` of its own inverse depth, plus (off the rim) its own relative slope
     per pixel of offset. ``k_inv`` is (3, 3) float64 ``K^-1``; ``reach`` (``1 / d``) and
-    ``out`` hold the box fits.
+    ``out`` hold the box fits. Every pixel of the rows without a box fit is written to
+    ``out``, 0 where it gets no normal (holes included).
     """
     h, w = inv.shape
     max_jump = params[0]
     half = max(radius // 2, 1)
     for v in range(row0, row1):
         for u in range(w):
+            if reach[v, u] > 0:  # a box fit of its own
+                continue
+            # Every other pixel is written here (zero unless it gets a normal), so ``out``
+            # needs no zeroing pass before the box fits.
+            out[v, u, 0] = out[v, u, 1] = out[v, u, 2] = 0
             p = inv[v, u]
-            if not p > 0 or reach[v, u] > 0:
+            if not p > 0:
                 continue
             # The ray of this pixel
             hx = k_inv[0, 0] * u + k_inv[0, 1] * v + k_inv[0, 2]

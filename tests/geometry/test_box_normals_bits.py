@@ -348,3 +348,18 @@ def test_sensor_frames_give_the_reference_bits(monkeypatch: pytest.MonkeyPatch,
     for name, depth, K in _sensor_frames():
         new = normals_from_depth(depth, K, method="box")
         assert same_bits(new, reference_box_normals(depth, K, 6, 2)), name
+
+
+def test_every_pixel_is_written_without_a_zeroed_buffer(monkeypatch: pytest.MonkeyPatch) -> None:
+    # The box method allocates its normals uninitialised: the box fits and _box_band must
+    # write every pixel between them. NaN-filled buffers show any pixel they miss.
+    depth = random_depth(np.random.default_rng(11), 90, 120)
+    K = default_intrinsics(120, 90)
+    expected = reference_box_normals(depth, K, 6, 2)
+    full = np.full
+
+    def garbage(shape, dtype=float):  # NaN in float buffers, ones in the others
+        return full(shape, np.nan if np.dtype(dtype).kind == "f" else 1, dtype)
+
+    monkeypatch.setattr(np, "empty", garbage)
+    assert same_bits(normals_from_depth(depth, K, radius=6, stride=2, method="box"), expected)
