@@ -480,43 +480,51 @@ def _box_band(inv: np.ndarray, rim: np.ndarray, reach: np.ndarray, params: np.nd
     ``(2r+1)²`` window every ``stride`` pixels by the gated rule without the components:
     within ``max_jump`` of its own inverse depth, plus (off the rim) its own relative slope
     per pixel of offset. ``k_inv`` is (3, 3) float64 ``K^-1``; ``reach`` (``1 / d``) and
-    ``out`` hold the box fits.
+    ``out`` hold the box fits. Every pixel of the rows without a box fit is written to
+    ``out``, 0 where it gets no normal (holes included).
     """
     h, w = inv.shape
     max_jump = params[0]
-    # The inner ring first, then the outer one.
     half = max(radius // 2, 1)
-    offsets = np.empty((16, 2), np.int64)
-    k = 0
-    for ring in (half, radius):
-        for dv in (-ring, 0, ring):
-            for du in (-ring, 0, ring):
-                if dv != 0 or du != 0:
-                    offsets[k, 0], offsets[k, 1] = dv, du
-                    k += 1
     for v in range(row0, row1):
         for u in range(w):
+            if reach[v, u] > 0:  # a box fit of its own
+                continue
+            # Every other pixel is written here (zero unless it gets a normal), so ``out``
+            # needs no zeroing pass before the box fits.
+            out[v, u, 0] = out[v, u, 1] = out[v, u, 2] = 0
             p = inv[v, u]
-            if not p > 0 or reach[v, u] > 0:
+            if not p > 0:
                 continue
             # The ray of this pixel
             hx = k_inv[0, 0] * u + k_inv[0, 1] * v + k_inv[0, 2]
             hy = k_inv[1, 0] * u + k_inv[1, 1] * v + k_inv[1, 2]
             hz = k_inv[2, 0] * u + k_inv[2, 1] * v + k_inv[2, 2]
-            best, pick = max_jump * p, -1
-            for k in range(offsets.shape[0]):
-                if k == 8 and pick >= 0:  # the inner ring had one
+            # The inner ring first, then the outer one, in raster order (a tie goes to the
+            # later offset); the border tests only for pixels near the image border.
+            best, py, px = max_jump * p, -1, -1
+            inside = radius <= v < h - radius and radius <= u < w - radius
+            for ring in (half, radius):
+                if py >= 0:  # the inner ring had one
                     break
-                y, x = v + offsets[k, 0], u + offsets[k, 1]
-                if y < 0 or y >= h or x < 0 or x >= w or not reach[y, x] > 0:
-                    continue
-                dot = out[y, x, 0] * hx + out[y, x, 1] * hy + out[y, x, 2] * hz
-                miss = abs(dot * reach[y, x] + p)  # |predicted - p|, predicted = -dot / d
-                if miss <= best:
-                    best, pick = miss, k
-            if pick >= 0:
-                y, x = v + offsets[pick, 0], u + offsets[pick, 1]
-                out[v, u, 0], out[v, u, 1], out[v, u, 2] = out[y, x, 0], out[y, x, 1], out[y, x, 2]
+                for dv in (-ring, 0, ring):
+                    y = v + dv
+                    if not inside and (y < 0 or y >= h):
+                        continue
+                    for du in (-ring, 0, ring):
+                        x = u + du
+                        if (dv == 0 and du == 0) or not inside and (x < 0 or x >= w):
+                            continue
+                        q = reach[y, x]
+                        if not q > 0:
+                            continue
+                        dot = out[y, x, 0] * hx + out[y, x, 1] * hy + out[y, x, 2] * hz
+                        miss = abs(dot * q + p)  # |predicted - p|, predicted = -dot / d
+                        if miss <= best:
+                            best, py, px = miss, y, x
+            if py >= 0:
+                for c in range(3):
+                    out[v, u, c] = out[py, px, c]
                 continue
             # Samples within max_jump of the pixel's inverse depth, plus (off the rim) its
             # own relative slope per pixel of offset, e = w / w_p - 1 (the gated fit's rule

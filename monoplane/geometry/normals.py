@@ -258,15 +258,16 @@ def _box_normals(depth: np.ndarray, max_jump: float, params: np.ndarray, K: np.n
     # Holes need no zeroing here: the inverse depth of 0, NaN and inf is 0 either way.
     inv, rim = _discontinuities(depth.astype(np.float32, copy=False), max_jump)
     top = float(inv.max())
-    normals = np.zeros(inv.shape + (3,), dtype=np.float32)
     if not top > 0:
-        return normals
+        return np.zeros(inv.shape + (3,), dtype=np.float32)
     # 2^bits steps up to the largest inverse depth, with 2^(2 bits) * (2 radius + 1) * (W + 1)
     # below 2^62: it bounds every int64 sum (the widest, a window's Σ u' × column sum, is
     # below 2^bits (2 radius + 1)² W), so none overflows: 24 bits at 640x480, 22 at 1920x1080.
     bits = min(24, int((62 - np.log2((2 * radius + 1) * (inv.shape[1] + 1))) // 2))
     scale = float(2.0 ** (bits - np.ceil(np.log2(top))))
     reach = np.zeros(inv.shape, dtype=np.float32)
+    # Not zeroed: the box fits write their pixels, :func:`_box_band` every other one.
+    normals = np.empty(inv.shape + (3,), dtype=np.float32)
     fixed = np.empty(inv.shape, dtype=np.int32)
     pieces = chunks(inv.shape[0], _THREADED_ROWS)
     run_threaded([functools.partial(_fixed_point, inv, rim, scale, a, b, fixed)
