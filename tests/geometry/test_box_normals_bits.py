@@ -14,11 +14,13 @@ import pytest
 from monoplane.datamodel import default_intrinsics, intrinsics_matrix
 from monoplane.geometry import normal_kernels
 from monoplane.geometry.normals import _ONE_SURFACE_RMS, _discontinuities, normals_from_depth
+from monoplane.jit import _with_helpers
 
 SHARED = Path(__file__).resolve().parents[3] / "shared" / "data"
 
-_line_fit = numba.njit(inline="always")(normal_kernels._line_fit)
-_camera_normal = numba.njit(inline="always")(normal_kernels._camera_normal)
+# The shared helpers as the library compiles them (with the helpers they call in turn).
+_line_fit = numba.njit(inline="always")(_with_helpers(normal_kernels._line_fit))
+_camera_normal = numba.njit(inline="always")(_with_helpers(normal_kernels._camera_normal))
 
 
 @numba.njit(inline="always")
