@@ -51,6 +51,8 @@ zero normal too, which downstream code treats as invalid.
 from __future__ import annotations
 
 import functools
+from collections.abc import Mapping
+from typing import Any
 
 import cv2
 import numpy as np
@@ -74,6 +76,10 @@ NORMALS_METHODS = ("gated", "box")
 #: What a cue stage's ``normals_method`` may name: a fitting method, or ``"auto"``
 #: (:func:`fit_method`).
 NORMALS_CHOICES = ("auto", *NORMALS_METHODS)
+
+#: The ``normals_method`` of every cue stage that does not state one: its config default and
+#: what :func:`cue_normals_from_depth` uses when the options name no method.
+DEFAULT_NORMALS_METHOD = "auto"
 
 #: Rows of the image per threaded piece of the fit below which one thread does it all.
 _THREADED_ROWS = 64
@@ -127,6 +133,39 @@ def fit_method(choice: str, measured: bool) -> str:
     if choice != "auto":
         return choice
     return "box" if measured else "gated"
+
+
+def cue_normals_from_depth(depth: np.ndarray, K: np.ndarray, options: Mapping[str, Any],
+                           measured: bool) -> tuple[np.ndarray, str]:
+    """A cue stage's normals from one depth map, with the frame note that says how.
+
+    Resolves the options' ``method`` (default :data:`DEFAULT_NORMALS_METHOD`) for this depth
+    map with :func:`fit_method`, then runs :func:`normals_from_depth`.
+
+    Parameters
+    ----------
+    depth : numpy.ndarray
+        (H, W) z-depth (see :func:`normals_from_depth`).
+    K : numpy.ndarray
+        (3, 3) pinhole intrinsics in pixels.
+    options : mapping
+        Keyword arguments of :func:`normals_from_depth`, whose ``method`` may also be
+        ``"auto"`` or missing (a cue stage's ``normals_options()``); not modified.
+    measured : bool
+        Whether the depth is a sensor's metric measurement
+        (:attr:`monoplane.datamodel.Frame.depth_measured`).
+
+    Returns
+    -------
+    normals : numpy.ndarray
+        (H, W, 3) float32 unit normals, camera frame, as :func:`normals_from_depth` returns.
+    note : str
+        The frame note naming the fitting method used.
+    """
+    kwargs = dict(options)
+    method = fit_method(kwargs.pop("method", DEFAULT_NORMALS_METHOD), measured)
+    normals = normals_from_depth(depth, K, method=method, **kwargs)
+    return normals, f"normals: estimated from depth (edge-aware inverse-depth fits, {method})"
 
 
 def normals_from_depth(depth: np.ndarray, K: np.ndarray, *, radius: int | None = None,
