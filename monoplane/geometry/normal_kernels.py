@@ -260,6 +260,7 @@ def _valid_offsets(inv: np.ndarray, v: int, u: int, r: int, stride: int, count: 
         if y < 0 or y >= h:
             continue
         for x in range(lo_u, min(u + r, w - 1) + 1, stride):
+            # Same moments as _box_band's gated ones, in exact integers (no residual terms).
             keep = 1 if inv[y, x] > 0 else 0
             du = x - u
             cnt += keep
@@ -272,9 +273,9 @@ def _valid_offsets(inv: np.ndarray, v: int, u: int, r: int, stride: int, count: 
 
 
 @kernel
-def _fit_interior(inv: np.ndarray, labels: np.ndarray, interior: np.ndarray, sums: np.ndarray,
-                  params: np.ndarray, r: int, stride: int, min_support: int, row0: int,
-                  row1: int, out: np.ndarray) -> None:
+def _fit_interior(inv: np.ndarray, interior: np.ndarray, sums: np.ndarray, params: np.ndarray,
+                  r: int, stride: int, min_support: int, row0: int, row1: int,
+                  out: np.ndarray) -> None:
     """Normals of the ``interior`` pixels of rows ``row0:row1`` into ``out`` ((H, W, 3)
     float32), each from the fit of absolute inverse depth over its whole window.
 
@@ -542,6 +543,8 @@ def _box_band(inv: np.ndarray, rim: np.ndarray, reach: np.ndarray, params: np.nd
                     e = inv[y, x] * to_e - 1.0
                     tol = max_jump + slope * max(abs(x - u), abs(dv), 1)
                     keep = 1.0 if inv[y, x] > 0 and abs(e) <= tol else 0.0
+                    # _valid_offsets' moments in float, in this order for the bits, plus the
+                    # residual sums.
                     fu = float(x - u)
                     cnt += keep
                     su += keep * fu

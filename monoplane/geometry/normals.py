@@ -264,7 +264,7 @@ def _gated_normals(depth: np.ndarray, max_jump: float, params: np.ndarray, radiu
     normals = np.zeros(z.shape + (3,), dtype=np.float32)
 
     def fit(a: int, b: int) -> None:
-        _fit_interior(inv, labels, interior, sums, params, r, stride, support, a, b, normals)
+        _fit_interior(inv, interior, sums, params, r, stride, support, a, b, normals)
         _fit_band(inv, labels, rim, band, params, r, stride, support, a, b, normals)
 
     # The band's cost follows the depth edges: smaller pieces keep the threads busy alike.
