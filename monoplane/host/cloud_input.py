@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from monoplane.algorithm.ransac import refit_and_renumber
+from monoplane.algorithm.plane_refit import refit_and_renumber
 from monoplane.datamodel import CloudResult
 from monoplane.errors import InvalidInput
 from monoplane.geometry.cloud import PlaneCloud, normalised_cloud
