@@ -30,18 +30,19 @@ the defaults they take about a quarter of the CPU time of the NumPy version they
 (same decisions, normals equal to float rounding), and the ninth round's reorganisation
 returns the same bits again (docs/evaluation.md).
 
-``method="box"`` (an option; the presets keep the gated fits above) skips the components, the
-separable filters and most of the per-neighbour gating. A pixel's whole window (every pixel,
-no stride) is *one surface* when it lies in the image, holds valid non-rim samples only and
-its inverse depth follows one line to ``_ONE_SURFACE_RMS`` (relative RMS); its fit comes from
-window sums of fixed-point inverse depth, which are exact integers, so they can run from one
-row and column to the next (O(1) per pixel) and do not depend on the thread split. A pixel
+``method="box"`` (the default's choice, ``"auto"``, on a sensor's metric depth:
+:func:`fit_method`) skips the components, the separable filters and most of the
+per-neighbour gating. A pixel's whole window (every pixel, no stride) is *one surface* when
+it lies in the image, holds valid non-rim samples only and its inverse depth follows one line
+to ``_ONE_SURFACE_RMS`` (relative RMS); its fit comes from window sums of fixed-point inverse
+depth, which are exact integers, so they can run from one row and column to the next (O(1)
+per pixel) and do not depend on the thread split. A pixel
 without such a window of its own lies in the window of nearby ones that have one: it takes
 the normal of the one, among 16 offsets within ``radius``, whose plane predicts its inverse
 depth best (within ``max_jump``). What is left (rim pixels, slivers narrower than a window)
-is fitted sample by sample as in 3., without the components. About 2.7 times less CPU than the
-gated method at 640x480; on noisy synthetic depth its normals are closer to the truth,
-but the presets' real-frame checks do not all hold with it (docs/evaluation.md).
+is fitted sample by sample as in 3., without the components. About half the gated method's
+CPU at 640x480 since the ninth round's speed-up of the gated fit; on noisy sensor depth its
+normals are closer to the truth (docs/design.md, "Depth-only sensor frames").
 
 Holes (depth 0, NaN or inf) contribute nothing and get a zero normal. Pixels without enough
 well-spread support (fewer than ``min_support`` accepted neighbours, or all on a line) get a
@@ -114,8 +115,9 @@ def fit_method(choice: str, measured: bool) -> str:
 
     ``"auto"`` is ``"box"`` on a sensor's metric depth (``measured``) and ``"gated"`` on a
     network's or a relative depth. On sensor depth the box fit is the more accurate (median
-    error 3.0° against 5.2° on Kinect-like noise) and twice as fast; the network-cue tables
-    were measured with the gated fit (docs/design.md, "Depth-only sensor frames").
+    error 3.0° against 5.2° on Kinect-like noise) and faster (8-9 against 12-16 ms wall at
+    640x480); the network-cue tables were measured with the gated fit (docs/design.md,
+    "Depth-only sensor frames").
 
     Parameters
     ----------
@@ -197,7 +199,7 @@ def normals_from_depth(depth: np.ndarray, K: np.ndarray, *, radius: int | None =
         gated to its own side. ``"box"``: full windows of one surface are fitted from
         exact window sums over every pixel (``stride`` unused there), and a pixel near an
         edge takes the plane of a nearby such window that holds it (see the module notes);
-        a few times faster, as accurate on planes.
+        faster, as accurate on planes.
 
     Returns
     -------

@@ -72,9 +72,10 @@ class NormalsFromDepthOptions:
     max_jump: float = param(
         0.05, "relative depth jump between neighbouring pixels that marks a depth edge")
     normals_method: str = param(
-        DEFAULT_NORMALS_METHOD, "how normals are fitted: 'gated' (per-sample gating near edges), 'box' "
-                "(window sums; a few times faster) or 'auto' ('box' on a sensor's metric "
-                "depth, 'gated' on a network's or a relative depth)")
+        DEFAULT_NORMALS_METHOD,
+        "how normals are fitted: 'gated' (per-sample gating near edges), 'box' (window sums; "
+        "faster) or 'auto' ('box' on a sensor's metric depth, 'gated' on a network's or a "
+        "relative depth)")
 
     def __post_init__(self) -> None:
         if self.normals_method not in NORMALS_CHOICES:
