@@ -96,7 +96,8 @@ def _relative_slope(inv: np.ndarray, labels: np.ndarray, v: int, u: int) -> np.f
 
     Per axis, the smaller of the two one-sided steps to neighbours of the same component (so a
     step across an edge does not count); the larger of the two axes. 0 where unknown. Float32
-    arithmetic throughout.
+    arithmetic throughout. See also :func:`_own_slope`, the box method's float64 twin that
+    tells sides by rims instead of components.
     """
     h, w = inv.shape
     if not inv[v, u] > 0:
@@ -453,7 +454,9 @@ def _fixed_point(inv: np.ndarray, rim: np.ndarray, scale: float, row0: int, row1
 @inline
 def _own_slope(inv: np.ndarray, rim: np.ndarray, v: int, u: int) -> float:
     """Step of inverse depth per pixel at ``(v, u)``: per axis the smaller one-sided step to
-    a valid non-rim neighbour, the larger of the two axes (0 if unknown)."""
+    a valid non-rim neighbour, the larger of the two axes (0 if unknown). See also
+    :func:`_relative_slope`, the gated method's float32 twin on components; each keeps its
+    own arithmetic for its method's bits."""
     h, w = inv.shape
     best = 0.0
     for dv, du in ((0, 1), (1, 0)):
