@@ -167,6 +167,14 @@ def _add_normal_term(data1: np.ndarray, i: int, cos: float, epsilon_n: float,
 
 
 @inline
+def _cos_to(model_normal: np.ndarray, normals: np.ndarray, p: int) -> float:
+    """Cosine of the (N, 3) ``normals[p]`` to the unit ``model_normal`` (3,): one expression
+    for :func:`_data_costs` and :func:`_gate_turned`, whose bits must agree."""
+    return (model_normal[0] * normals[p, 0] + model_normal[1] * normals[p, 1]
+            + model_normal[2] * normals[p, 2])
+
+
+@inline
 def _fixed_by_distance(r: float, payback: np.ndarray, i: int, keep: float) -> bool:
     """The test of graphcut._gc_ransac_network on a lower bound of its data1 - f0, the
     distance cost ``r`` >= 1 alone (always False with an empty ``payback``)."""
@@ -191,8 +199,7 @@ def _data_costs(points: np.ndarray, normals: np.ndarray, pool: np.ndarray, plane
         p = pool[i]
         cos = 1.0
         if use_normal:
-            cos = (model_normal[0] * normals[p, 0] + model_normal[1] * normals[p, 1]
-                   + model_normal[2] * normals[p, 2])
+            cos = _cos_to(model_normal, normals, p)
             turned[i] = cos < cos_gate
         phi = (plane[0] * points[p, 0] + plane[1] * points[p, 1] + plane[2] * points[p, 2]
                + plane[3])
@@ -234,9 +241,7 @@ def _gate_turned(data1: np.ndarray, turned: np.ndarray, edges: np.ndarray,
             # data1 holds the distance cost alone: 0 within ε, else r >= 1.
             if data1[i] > 0.0 and _fixed_by_distance(data1[i], payback, i, keep):
                 continue
-            p = pool[i]
-            cos = (model_normal[0] * normals[p, 0] + model_normal[1] * normals[p, 1]
-                   + model_normal[2] * normals[p, 2])
+            cos = _cos_to(model_normal, normals, pool[i])
             _add_normal_term(data1, i, cos, epsilon_n, cos_skip)
 
 

@@ -43,6 +43,7 @@ from typing import Any, NamedTuple, TypeVar
 
 import numpy as np
 
+from monoplane.algorithm.plane_refit import refit_and_renumber
 from monoplane.contracts import (
     SAMPLER_DRAWS,
     Labeler,
@@ -126,22 +127,25 @@ class RansacConfig:
         "8-neighbourhood cut at depth jumps, no kNN query) or 'auto' ('grid' on frames whose "
         "normals come from a sensor's depth, else 'random'). Point clouds always use 'random'")
     lattice_max_turn_deg: float = param(
-        180.0, "with sampling 'grid', lattice neighbours whose normals differ by more than "
-        "this angle in degrees are not linked either (180: no such cut)")
+        180.0, "on the lattice (sampling 'grid', or 'auto' on a sensor frame), neighbours "
+        "whose normals differ by more than this angle in degrees are not linked either "
+        "(180: no such cut)")
     lattice_turn_deg: float = param(
-        10.0, "with sampling 'grid', the proximity labeler's affinity of two lattice neighbours "
-        "(their cut cost above its 0.5 floor) is scaled by exp(-t²/2σ²), t the angle between "
-        "their normals: this σ in degrees (0: not scaled)")
+        10.0, "on the lattice (sampling 'grid', or 'auto' on a sensor frame), the proximity "
+        "labeler's affinity of two lattice neighbours (their cut cost above its 0.5 floor) is "
+        "scaled by exp(-t²/2σ²), t the angle between their normals: this σ in degrees (0: not "
+        "scaled)")
     lattice_split_reach: int = param(
-        6, "with sampling 'grid' and split_components, a plane's inliers also connect across "
-        "up to this many lattice steps along a lattice line when every sample between them lies "
-        "in front of them or has no depth (a thin occluder such as a table leg); 1: the lattice "
-        "graph's links only")
+        6, "on the lattice (sampling 'grid', or 'auto' on a sensor frame) with "
+        "split_components, a plane's inliers also connect across up to this many lattice steps "
+        "along a lattice line when every sample between them lies in front of them or has no "
+        "depth (a thin occluder such as a table leg); 1: the lattice graph's links only")
     lattice_fragments: int = param(
-        0, "with sampling 'grid' and split_components, a plane whose labelled inliers reach "
-        "min_support but fall apart into parts each below it is set aside (its points leave "
-        "the pool as non-planar) without stopping the search, up to this many times a search "
-        "(a surface seen edge-on: the lattice's jump test parts what the kNN graph links)")
+        0, "on the lattice (sampling 'grid', or 'auto' on a sensor frame) with "
+        "split_components, a plane whose labelled inliers reach min_support but fall apart "
+        "into parts each below it is set aside (its points leave the pool as non-planar) "
+        "without stopping the search, up to this many times a search (a surface seen edge-on: "
+        "the lattice's jump test parts what the kNN graph links)")
     lo_iterations: int = param(1, "local optimisation rounds (refit + relabel) per plane")
     split_components: bool = param(
         False, "keep only the largest graph-connected component of each plane's inliers")
@@ -567,34 +571,3 @@ class SequentialRansac:
                               else np.zeros((0, 4)),
                               rmse=rmse * cloud.scale, support=support)
 
-
-def refit_and_renumber(points: np.ndarray, labels: np.ndarray, count: int
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Least-squares plane of each label on all its points; labels too small to fit a plane
-    become non-planar and the others are renumbered 1..P in their order.
-
-    Parameters
-    ----------
-    points : numpy.ndarray
-        (V, 3) float64 points, any frame and unit.
-    labels : numpy.ndarray
-        (V,) int label of each point, 0 = none, at most ``count``.
-    count : int
-        Number of labels.
-
-    Returns
-    -------
-    renumber : numpy.ndarray
-        (count + 1,) int32 new label of each old one (0 for the dropped ones).
-    planes : numpy.ndarray
-        (P, 4) float64 unit-normal planes in the points' frame, not oriented.
-    rmse : numpy.ndarray
-        (P,) RMS point-to-plane distance, the points' unit.
-    support : numpy.ndarray
-        (P,) int64 points per plane.
-    """
-    planes, rmse, support = fit_planes_per_label(points, labels, count)
-    kept = ~np.isnan(rmse)
-    renumber = np.zeros(count + 1, dtype=np.int32)
-    renumber[1:][kept] = np.arange(1, int(kept.sum()) + 1)
-    return renumber, planes[kept], rmse[kept], support[kept]

@@ -25,7 +25,7 @@ from monoplane.cues.transforms import (
 )
 from monoplane.datamodel import Frame
 from monoplane.errors import InvalidInput
-from monoplane.geometry.normals import fit_method, normals_from_depth
+from monoplane.geometry.normals import cue_normals_from_depth
 
 
 class CueNetwork:
@@ -51,7 +51,8 @@ class CueNetwork:
     normals_options : dict, optional
         Keyword arguments for :func:`~monoplane.geometry.normals.normals_from_depth`; its
         ``method`` may be ``"auto"`` (:func:`~monoplane.geometry.normals.fit_method`, per
-        frame).
+        frame), which is also what a missing ``method`` means
+        (:data:`~monoplane.geometry.normals.DEFAULT_NORMALS_METHOD`).
     depth_model_key : str
         The config key that sets ``depth_model``, named in the error when it is missing.
 
@@ -244,12 +245,9 @@ class CueNetwork:
                     notes.append(f"normals: from {self.profile.name} network "
                                  f"{normal_model.path.name}")
                 else:
-                    options = dict(self.normals_options)
-                    options["method"] = fit_method(options.get("method", "gated"),
-                                                   frame.depth_measured)
-                    normals = normals_from_depth(depth, frame.K, **options)
-                    notes.append(f"normals: estimated from depth (edge-aware inverse-depth "
-                                 f"fits, {options['method']})")
+                    normals, note = cue_normals_from_depth(
+                        depth, frame.K, self.normals_options, frame.depth_measured)
+                    notes.append(note)
                     changes["normals_from_depth"] = True
             if not changes.get("normals_from_depth"):
                 # A float32 copy zeroed in place: half the cost of np.where and a cast (2

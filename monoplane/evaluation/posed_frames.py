@@ -223,6 +223,8 @@ def monocular_cues(depth: np.ndarray, K: np.ndarray, level: str, rng: np.random.
     corrupted, scale = corrupt_depth(depth, params, rng)
     if not with_normals:
         return corrupted, None, scale
+    # Stands in for a network's normals, so the gated fit on purpose (not the cue stage's
+    # "auto", which would pick box on this metric depth): the tables were measured with it.
     clean = normals_from_depth(depth, K)
     normals = corrupt_normals(np.where((depth > 0)[..., None], clean, 0.0), K, params, rng)
     return corrupted, normals, scale

@@ -56,7 +56,9 @@ class NeighbourGraph:
     normal_angle : numpy.ndarray or None
         (E,) angle in radians between the unit normals of each edge's ends, when the graph
         computed it (:meth:`from_lattice` with ``turn_scale_deg``), else None: the proximity
-        labeler's normal affinity reads it instead of taking every arccos again.
+        labeler's normal affinity reads it instead of taking every arccos again. These are
+        the angles of the normals given to :meth:`from_lattice`; the proximity labeler
+        assumes those are its cloud's normals, so build the graph from the cloud's own.
     """
 
     num_nodes: int

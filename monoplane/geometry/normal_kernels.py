@@ -96,7 +96,8 @@ def _relative_slope(inv: np.ndarray, labels: np.ndarray, v: int, u: int) -> np.f
 
     Per axis, the smaller of the two one-sided steps to neighbours of the same component (so a
     step across an edge does not count); the larger of the two axes. 0 where unknown. Float32
-    arithmetic throughout.
+    arithmetic throughout. See also :func:`_own_slope`, the box method's float64 twin that
+    tells sides by rims instead of components.
     """
     h, w = inv.shape
     if not inv[v, u] > 0:
@@ -260,6 +261,7 @@ def _valid_offsets(inv: np.ndarray, v: int, u: int, r: int, stride: int, count: 
         if y < 0 or y >= h:
             continue
         for x in range(lo_u, min(u + r, w - 1) + 1, stride):
+            # Same moments as _box_band's gated ones, in exact integers (no residual terms).
             keep = 1 if inv[y, x] > 0 else 0
             du = x - u
             cnt += keep
@@ -272,9 +274,9 @@ def _valid_offsets(inv: np.ndarray, v: int, u: int, r: int, stride: int, count: 
 
 
 @kernel
-def _fit_interior(inv: np.ndarray, labels: np.ndarray, interior: np.ndarray, sums: np.ndarray,
-                  params: np.ndarray, r: int, stride: int, min_support: int, row0: int,
-                  row1: int, out: np.ndarray) -> None:
+def _fit_interior(inv: np.ndarray, interior: np.ndarray, sums: np.ndarray, params: np.ndarray,
+                  r: int, stride: int, min_support: int, row0: int, row1: int,
+                  out: np.ndarray) -> None:
     """Normals of the ``interior`` pixels of rows ``row0:row1`` into ``out`` ((H, W, 3)
     float32), each from the fit of absolute inverse depth over its whole window.
 
@@ -452,7 +454,9 @@ def _fixed_point(inv: np.ndarray, rim: np.ndarray, scale: float, row0: int, row1
 @inline
 def _own_slope(inv: np.ndarray, rim: np.ndarray, v: int, u: int) -> float:
     """Step of inverse depth per pixel at ``(v, u)``: per axis the smaller one-sided step to
-    a valid non-rim neighbour, the larger of the two axes (0 if unknown)."""
+    a valid non-rim neighbour, the larger of the two axes (0 if unknown). See also
+    :func:`_relative_slope`, the gated method's float32 twin on components; each keeps its
+    own arithmetic for its method's bits."""
     h, w = inv.shape
     best = 0.0
     for dv, du in ((0, 1), (1, 0)):
@@ -542,6 +546,8 @@ def _box_band(inv: np.ndarray, rim: np.ndarray, reach: np.ndarray, params: np.nd
                     e = inv[y, x] * to_e - 1.0
                     tol = max_jump + slope * max(abs(x - u), abs(dv), 1)
                     keep = 1.0 if inv[y, x] > 0 and abs(e) <= tol else 0.0
+                    # _valid_offsets' moments in float, in this order for the bits, plus the
+                    # residual sums.
                     fu = float(x - u)
                     cnt += keep
                     su += keep * fu

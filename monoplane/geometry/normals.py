@@ -30,18 +30,19 @@ the defaults they take about a quarter of the CPU time of the NumPy version they
 (same decisions, normals equal to float rounding), and the ninth round's reorganisation
 returns the same bits again (docs/evaluation.md).
 
-``method="box"`` (an option; the presets keep the gated fits above) skips the components, the
-separable filters and most of the per-neighbour gating. A pixel's whole window (every pixel,
-no stride) is *one surface* when it lies in the image, holds valid non-rim samples only and
-its inverse depth follows one line to ``_ONE_SURFACE_RMS`` (relative RMS); its fit comes from
-window sums of fixed-point inverse depth, which are exact integers, so they can run from one
-row and column to the next (O(1) per pixel) and do not depend on the thread split. A pixel
+``method="box"`` (the default's choice, ``"auto"``, on a sensor's metric depth:
+:func:`fit_method`) skips the components, the separable filters and most of the
+per-neighbour gating. A pixel's whole window (every pixel, no stride) is *one surface* when
+it lies in the image, holds valid non-rim samples only and its inverse depth follows one line
+to ``_ONE_SURFACE_RMS`` (relative RMS); its fit comes from window sums of fixed-point inverse
+depth, which are exact integers, so they can run from one row and column to the next (O(1)
+per pixel) and do not depend on the thread split. A pixel
 without such a window of its own lies in the window of nearby ones that have one: it takes
 the normal of the one, among 16 offsets within ``radius``, whose plane predicts its inverse
 depth best (within ``max_jump``). What is left (rim pixels, slivers narrower than a window)
-is fitted sample by sample as in 3., without the components. About 2.7 times less CPU than the
-gated method at 640x480; on noisy synthetic depth its normals are closer to the truth,
-but the presets' real-frame checks do not all hold with it (docs/evaluation.md).
+is fitted sample by sample as in 3., without the components. About half the gated method's
+CPU at 640x480 since the ninth round's speed-up of the gated fit; on noisy sensor depth its
+normals are closer to the truth (docs/design.md, "Depth-only sensor frames").
 
 Holes (depth 0, NaN or inf) contribute nothing and get a zero normal. Pixels without enough
 well-spread support (fewer than ``min_support`` accepted neighbours, or all on a line) get a
@@ -51,6 +52,8 @@ zero normal too, which downstream code treats as invalid.
 from __future__ import annotations
 
 import functools
+from collections.abc import Mapping
+from typing import Any
 
 import cv2
 import numpy as np
@@ -74,6 +77,10 @@ NORMALS_METHODS = ("gated", "box")
 #: What a cue stage's ``normals_method`` may name: a fitting method, or ``"auto"``
 #: (:func:`fit_method`).
 NORMALS_CHOICES = ("auto", *NORMALS_METHODS)
+
+#: The ``normals_method`` of every cue stage that does not state one: its config default and
+#: what :func:`cue_normals_from_depth` uses when the options name no method.
+DEFAULT_NORMALS_METHOD = "auto"
 
 #: Rows of the image per threaded piece of the fit below which one thread does it all.
 _THREADED_ROWS = 64
@@ -108,8 +115,9 @@ def fit_method(choice: str, measured: bool) -> str:
 
     ``"auto"`` is ``"box"`` on a sensor's metric depth (``measured``) and ``"gated"`` on a
     network's or a relative depth. On sensor depth the box fit is the more accurate (median
-    error 3.0° against 5.2° on Kinect-like noise) and twice as fast; the network-cue tables
-    were measured with the gated fit (docs/design.md, "Depth-only sensor frames").
+    error 3.0° against 5.2° on Kinect-like noise) and faster (8-9 against 12-16 ms wall at
+    640x480); the network-cue tables were measured with the gated fit (docs/design.md,
+    "Depth-only sensor frames").
 
     Parameters
     ----------
@@ -127,6 +135,39 @@ def fit_method(choice: str, measured: bool) -> str:
     if choice != "auto":
         return choice
     return "box" if measured else "gated"
+
+
+def cue_normals_from_depth(depth: np.ndarray, K: np.ndarray, options: Mapping[str, Any],
+                           measured: bool) -> tuple[np.ndarray, str]:
+    """A cue stage's normals from one depth map, with the frame note that says how.
+
+    Resolves the options' ``method`` (default :data:`DEFAULT_NORMALS_METHOD`) for this depth
+    map with :func:`fit_method`, then runs :func:`normals_from_depth`.
+
+    Parameters
+    ----------
+    depth : numpy.ndarray
+        (H, W) z-depth (see :func:`normals_from_depth`).
+    K : numpy.ndarray
+        (3, 3) pinhole intrinsics in pixels.
+    options : mapping
+        Keyword arguments of :func:`normals_from_depth`, whose ``method`` may also be
+        ``"auto"`` or missing (a cue stage's ``normals_options()``); not modified.
+    measured : bool
+        Whether the depth is a sensor's metric measurement
+        (:attr:`monoplane.datamodel.Frame.depth_measured`).
+
+    Returns
+    -------
+    normals : numpy.ndarray
+        (H, W, 3) float32 unit normals, camera frame, as :func:`normals_from_depth` returns.
+    note : str
+        The frame note naming the fitting method used.
+    """
+    kwargs = dict(options)
+    method = fit_method(kwargs.pop("method", DEFAULT_NORMALS_METHOD), measured)
+    normals = normals_from_depth(depth, K, method=method, **kwargs)
+    return normals, f"normals: estimated from depth (edge-aware inverse-depth fits, {method})"
 
 
 def normals_from_depth(depth: np.ndarray, K: np.ndarray, *, radius: int | None = None,
@@ -158,7 +199,7 @@ def normals_from_depth(depth: np.ndarray, K: np.ndarray, *, radius: int | None =
         gated to its own side. ``"box"``: full windows of one surface are fitted from
         exact window sums over every pixel (``stride`` unused there), and a pixel near an
         edge takes the plane of a nearby such window that holds it (see the module notes);
-        a few times faster, as accurate on planes.
+        faster, as accurate on planes.
 
     Returns
     -------
@@ -225,7 +266,7 @@ def _gated_normals(depth: np.ndarray, max_jump: float, params: np.ndarray, radiu
     normals = np.zeros(z.shape + (3,), dtype=np.float32)
 
     def fit(a: int, b: int) -> None:
-        _fit_interior(inv, labels, interior, sums, params, r, stride, support, a, b, normals)
+        _fit_interior(inv, interior, sums, params, r, stride, support, a, b, normals)
         _fit_band(inv, labels, rim, band, params, r, stride, support, a, b, normals)
 
     # The band's cost follows the depth edges: smaller pieces keep the threads busy alike.

@@ -6,7 +6,7 @@ and its planes in its own frame and units.
    collapsed, so neither can break the search or the normal estimation; the distinct points
    are normalised into the unit sphere (``ransac.epsilon`` keeps its meaning) and, for the
    search, subsampled to ``ransac.max_points``; missing normals are estimated
-   (:func:`estimate_normals`: Open3D's PCA over ``cloud.normals_knn`` neighbours, oriented as
+   (:func:`cue_normals_from_depth`: Open3D's PCA over ``cloud.normals_knn`` neighbours, oriented as
    ``cloud.orient`` says);
 3. after the search and the refiner, :meth:`CloudInput.fit` refits every plane by least
    squares on all its distinct points, in the cloud's frame and units, turns it to the side
@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from monoplane.algorithm.ransac import refit_and_renumber
+from monoplane.algorithm.plane_refit import refit_and_renumber
 from monoplane.datamodel import CloudResult
 from monoplane.errors import InvalidInput
 from monoplane.geometry.cloud import PlaneCloud, normalised_cloud

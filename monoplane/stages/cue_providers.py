@@ -50,7 +50,11 @@ from monoplane.cues.profile_files import (
 from monoplane.cues.profiles import OnnxProfile
 from monoplane.datamodel import Frame
 from monoplane.errors import ConfigError, InvalidInput
-from monoplane.geometry.normals import NORMALS_CHOICES, fit_method, normals_from_depth
+from monoplane.geometry.normals import (
+    DEFAULT_NORMALS_METHOD,
+    NORMALS_CHOICES,
+    cue_normals_from_depth,
+)
 from monoplane.hookspecs import hookimpl
 from monoplane.models import get_model, require_model
 
@@ -68,9 +72,10 @@ class NormalsFromDepthOptions:
     max_jump: float = param(
         0.05, "relative depth jump between neighbouring pixels that marks a depth edge")
     normals_method: str = param(
-        "auto", "how normals are fitted: 'gated' (per-sample gating near edges), 'box' "
-                "(window sums; a few times faster) or 'auto' ('box' on a sensor's metric "
-                "depth, 'gated' on a network's or a relative depth)")
+        DEFAULT_NORMALS_METHOD,
+        "how normals are fitted: 'gated' (per-sample gating near edges), 'box' (window sums; "
+        "faster) or 'auto' ('box' on a sensor's metric depth, 'gated' on a network's or a "
+        "relative depth)")
 
     def __post_init__(self) -> None:
         if self.normals_method not in NORMALS_CHOICES:
@@ -85,8 +90,8 @@ class NormalsFromDepthOptions:
 
     def normals_options(self) -> dict:
         """Keyword arguments for :func:`~monoplane.geometry.normals.normals_from_depth`, with
-        ``method`` still a choice: resolve it per depth map with
-        :func:`~monoplane.geometry.normals.fit_method`."""
+        ``method`` still a choice: :func:`~monoplane.geometry.normals.cue_normals_from_depth`
+        resolves it per depth map."""
         return {"radius": self.normals_radius or None, "stride": self.normals_stride or None,
                 "max_jump": self.max_jump, "method": self.normals_method}
 
@@ -127,12 +132,10 @@ class GivenCues(CueProvider):
         if frame.normals is not None and not cfg.recompute_normals:
             return use_given_cues(frame)
         # Already float32 and zero wherever the depth is not positive (or not finite).
-        options = cfg.normals_options()
-        options["method"] = fit_method(cfg.normals_method, frame.depth_measured)
-        normals = normals_from_depth(frame.depth, frame.K, **options)
-        return frame.with_(normals=normals, normals_from_depth=True, notes=[
-            *frame.notes, f"normals: estimated from depth (edge-aware inverse-depth fits, "
-                          f"{options['method']})"])
+        normals, note = cue_normals_from_depth(frame.depth, frame.K, cfg.normals_options(),
+                                               frame.depth_measured)
+        return frame.with_(normals=normals, normals_from_depth=True,
+                           notes=[*frame.notes, note])
 
     def needs_cues(self, frame: Frame) -> bool:
         """Also run on complete frames when told to recompute the given normals."""

@@ -27,7 +27,7 @@ from monoplane.datamodel import (
 )
 from monoplane.errors import InvalidInput
 from monoplane.geometry.flatness import noise_floor_deg, normal_spread_deg
-from monoplane.geometry.normals import normals_from_depth
+from monoplane.geometry.normals import DEFAULT_NORMALS_METHOD, fit_method, normals_from_depth
 from monoplane.geometry.plane_matching import (
     consistent_groups,
     fuse_planes,
@@ -263,7 +263,8 @@ class AverageFuser(Fuser):
         ----------
         views : list of Reconstruction
             Per-view planes; ``frame.normals`` (camera frame) or, without them, normals
-            estimated from ``frame.depth``.
+            estimated from ``frame.depth`` with the default cue stage's fit
+            (:func:`~monoplane.geometry.normals.fit_method` of ``"auto"``).
 
         Returns
         -------
@@ -278,7 +279,10 @@ class AverageFuser(Fuser):
             width = rec.frame.width
             normals = rec.frame.normals
             if normals is None:
-                normals = normals_from_depth(rec.frame.depth, rec.frame.K)
+                # The fit the default cue stage would have made, so the test sees the normals
+                # the view was segmented with.
+                method = fit_method(DEFAULT_NORMALS_METHOD, rec.frame.depth_measured)
+                normals = normals_from_depth(rec.frame.depth, rec.frame.K, method=method)
             # The border band scales with the image: the cue blurs over a fixed share of it.
             spread, count = normal_spread_deg(normals, rec.labels, rec.num_planes,
                                               radius=max(1, width // 256),

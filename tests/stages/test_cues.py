@@ -66,6 +66,34 @@ def test_given_keeps_normals_but_orients_them() -> None:
     assert max_angle_deg(recomputed.normals, n) < 0.5
 
 
+def noisy_plane_frame(kind: str) -> Frame:
+    """:func:`plane_frame` with 1 % depth noise, so the box and gated fits differ."""
+    frame, _ = plane_frame()
+    noise = np.random.default_rng(3).normal(1.0, 0.01, frame.depth.shape)
+    return frame.with_(depth=(frame.depth * noise).astype(np.float32), depth_kind=kind)
+
+
+@pytest.mark.parametrize(("kind", "method"), [("metric", "box"), ("relative", "gated")])
+def test_network_cues_without_normals_options_resolve_auto(kind: str, method: str) -> None:
+    # A CueNetwork built without normals_options (the depth-anything plugin's, a third-party
+    # provider's) follows the same "auto" as the built-in providers: box normals on a
+    # sensor's metric depth, gated ones on a relative depth.
+    from monoplane.cues import CueNetwork
+    from monoplane.cues.profile_files import get_profile
+    from monoplane.geometry.normals import normals_from_depth
+
+    frame = noisy_plane_frame(kind)
+    out = CueNetwork(get_profile("midas")).provide(frame)
+    other = "gated" if method == "box" else "box"
+    expected = normals_from_depth(frame.depth, frame.K, method=method)
+    np.testing.assert_array_equal(out.normals, expected)
+    assert not np.array_equal(expected, normals_from_depth(frame.depth, frame.K, method=other))
+    assert out.notes[-1].endswith(f"fits, {method})")
+    given = GivenCues().provide(frame)
+    np.testing.assert_array_equal(given.normals, out.normals)
+    assert given.notes[-1] == out.notes[-1]
+
+
 def test_given_without_depth_is_a_clear_error() -> None:
     frame, _ = plane_frame()
     with pytest.raises(InvalidInput, match="needs a depth map"):

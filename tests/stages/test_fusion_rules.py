@@ -255,3 +255,32 @@ def test_a_fragment_with_a_bad_fit_is_absorbed_by_the_plane_it_lies_on() -> None
                                                      CAMERAS[0].t))[0]
     np.testing.assert_allclose(scene.views[0].planes[2], expected, atol=1e-9)
     np.testing.assert_allclose(np.abs(scene.planes[wall]), [0, 0, 1, 3], atol=1e-6)
+
+
+@pytest.mark.parametrize(("kind", "method"), [("metric", "box"), ("relative", "gated")])
+def test_the_curvature_test_estimates_missing_normals_as_the_cue_stage_does(
+        kind: str, method: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    # A view without normals gets the default cue stage's fit ("auto": box on a sensor's
+    # metric depth, gated otherwise), so the test sees the normals it was segmented with.
+    from monoplane.geometry.normals import normals_from_depth
+    from monoplane.stages import fusers
+
+    seen: list[np.ndarray] = []
+
+    def spread(normals: np.ndarray, *args, **kwargs):
+        seen.append(normals)
+        return real(normals, *args, **kwargs)
+
+    real = fusers.normal_spread_deg
+    monkeypatch.setattr(fusers, "normal_spread_deg", spread)
+    rec = _view(CAMERAS[0], [WALL, FLOOR, Ball((0.9, 0.55, 2.2), 0.4)],
+                [(0, None), (1, None), (2, None)])
+    noise = np.random.default_rng(1).normal(1.0, 0.01, rec.frame.depth.shape)
+    frame = rec.frame.with_(normals=None, depth_kind=kind,
+                            depth=(rec.frame.depth * noise).astype(np.float32))
+    AverageFuser().flat_planes([Reconstruction(frame=frame, labels=rec.labels,
+                                               planes=rec.planes)])
+    other = "gated" if method == "box" else "box"
+    want = normals_from_depth(frame.depth, frame.K, method=method)
+    np.testing.assert_array_equal(seen[0], want)
+    assert not np.array_equal(want, normals_from_depth(frame.depth, frame.K, method=other))

@@ -77,6 +77,19 @@ def test_relative_depth_and_normals_from_a_tiny_model(tmp_path: Path) -> None:
     assert n[0, 2] < 0
 
 
+@pytest.mark.parametrize(("kind", "method"), [("metric", "box"), ("relative", "gated")])
+def test_given_depth_gets_the_default_normals_fit(kind: str, method: str) -> None:
+    # No model runs on a frame with depth; the normals come from that depth with the default
+    # "auto" fit: box on a sensor's metric depth, gated on a relative one.
+    frame, value = ramp_frame()
+    noise = np.random.default_rng(5).normal(1.0, 0.01, value.shape)
+    frame = frame.with_(depth=(100.0 / value * noise).astype(np.float32), depth_kind=kind)
+    out = DepthAnythingCues(DepthAnythingConfig()).provide(frame)
+    assert out.notes[-1].endswith(f"fits, {method})")
+    given = get_registry(get_plugin_manager(autoload=False)).get("cues", "given").cls()
+    np.testing.assert_array_equal(out.normals, given.provide(frame).normals)
+
+
 def test_missing_model_is_a_clear_error(tmp_path: Path) -> None:
     frame, _ = ramp_frame()
     with pytest.raises(InvalidInput, match=r"needs a depth model file \(cues.model ="):
