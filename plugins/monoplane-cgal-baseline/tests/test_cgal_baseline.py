@@ -20,15 +20,20 @@ from monoplane.testing import (  # noqa: E402
 )
 
 
+def _finds_the_box(rec, gt: np.ndarray) -> bool:
+    """Every plane of the box found, every shape on one of them, SC above 0.9."""
+    return (segmentation_scores(rec.labels, gt).sc > 0.9
+            and all(np.abs(rec.planes - plane).max(axis=1).min() < 5e-3 for plane in BOX_PLANES)
+            and all(np.abs(BOX_PLANES - plane).max(axis=1).min() < 5e-3 for plane in rec.planes))
+
+
 def test_finds_the_three_planes_of_an_exact_box() -> None:
     frame, gt = box_frame()
-    rec = cgal_efficient_ransac(frame)
-    # CGAL's unseeded sampling may occasionally cut a sparse far strip of the floor off as a
-    # second shape of the same plane; it never misses or invents a plane.
-    assert 3 <= rec.num_planes <= 4
-    assert segmentation_scores(rec.labels, gt).sc > 0.9
-    for plane in BOX_PLANES:
-        assert np.abs(rec.planes - plane).max(axis=1).min() < 5e-3
+    # CGAL's sampling cannot be seeded. It may cut a sparse far strip of the floor off as a
+    # second shape of the same plane (about 1 call in 6), and it invented a small plane across
+    # the box in 1 call of 300: so 2 of 3 calls must find the box and nothing else.
+    recs = [cgal_efficient_ransac(frame) for _ in range(3)]
+    assert sum(_finds_the_box(rec, gt) for rec in recs) >= 2, [r.num_planes for r in recs]
 
 
 def test_baseline_contract() -> None:
